@@ -1,0 +1,159 @@
+"""Multi-index sets and evaluation of the multivariate chaos basis.
+
+A basis function is a tensor product φ_α(ξ) = Π_k p_{α_k}(ξ_k) of the inputs' 1-D
+orthonormal polynomials. Index sets are (S, n) integer arrays, one row per term, and
+always start with the zero multi-index (the mean term).
+
+- ``tensor_index_set(orders)``: 0 <= α_k <= P_k, S = Π (P_k + 1) (Part I Eq. 27). Rows in
+  C order (last input varies fastest), the same order as :class:`pcmb.sampling.TensorGrid`
+  nodes, so tensor coefficients reshape to (P_1+1, ..., P_n+1).
+- ``total_index_set(n, order)``: |α| <= P, S = (n+P)! / (n! P!) (Part I Eq. 26), graded by
+  total degree.
+- ``hyperbolic_index_set(n, order, q)``: (Σ α_k^q)^(1/q) <= P, a subset of the total set
+  that drops high-order interactions (q = 1 is the total set).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pcmb.polynomials import OrthonormalFamily
+
+__all__ = ["PolynomialBasis", "hyperbolic_index_set", "tensor_index_set", "total_index_set"]
+
+
+def _check_orders(orders: Sequence[int]) -> tuple[int, ...]:
+    orders = tuple(int(p) for p in orders)
+    if not orders:
+        raise ValueError("an index set needs at least one input")
+    if min(orders) < 0:
+        raise ValueError(f"orders must be >= 0, got {orders}")
+    return orders
+
+
+def tensor_index_set(orders: Sequence[int]) -> NDArray[np.int64]:
+    """All α with 0 <= α_k <= orders[k], in C order.
+
+    Returns
+    -------
+    ndarray
+        (S, n) with S = Π (orders[k] + 1).
+
+    Raises
+    ------
+    ValueError
+        If no order is given or one is negative.
+    """
+    orders = _check_orders(orders)
+    grids = np.meshgrid(*[np.arange(p + 1) for p in orders], indexing="ij")
+    return np.stack([g.ravel() for g in grids], axis=1).astype(np.int64)
+
+
+def total_index_set(n: int, order: int) -> NDArray[np.int64]:
+    """All α in n inputs with |α| <= order, by total degree, then ascending lexicographic.
+
+    Returns
+    -------
+    ndarray
+        (S, n) with S = C(n + order, n).
+
+    Raises
+    ------
+    ValueError
+        If n < 1 or order < 0.
+    """
+    if n < 1:
+        raise ValueError(f"an index set needs at least one input, got n={n}")
+    if order < 0:
+        raise ValueError(f"order must be >= 0, got {order}")
+    rows: list[tuple[int, ...]] = []
+    for degree in range(order + 1):
+        # Compositions of `degree` into n parts, via stars and bars.
+        for bars in itertools.combinations(range(degree + n - 1), n - 1):
+            edges = (-1, *bars, degree + n - 1)
+            rows.append(tuple(edges[i + 1] - edges[i] - 1 for i in range(n)))
+    return np.array(rows, dtype=np.int64).reshape(-1, n)
+
+
+def hyperbolic_index_set(n: int, order: int, q: float) -> NDArray[np.int64]:
+    """The α of the total set with q-quasi-norm (Σ α_k^q)^(1/q) <= order, 0 < q <= 1.
+
+    Raises
+    ------
+    ValueError
+        If q is not in (0, 1].
+    """
+    if not 0.0 < q <= 1.0:
+        raise ValueError(f"q must be in (0, 1], got {q}")
+    total = total_index_set(n, order)
+    norm = np.sum(total.astype(float) ** q, axis=1) ** (1.0 / q)
+    # A tolerance keeps the boundary terms that round-off pushes just above `order`.
+    return total[norm <= order * (1.0 + 1e-12)]
+
+
+@dataclass(frozen=True)
+class PolynomialBasis:
+    """The tensor-product orthonormal basis {φ_α} over a multi-index set.
+
+    Attributes
+    ----------
+    families:
+        One 1-D family per input (germ order).
+    multi_index:
+        (S, n) non-negative integers.
+    """
+
+    families: tuple[OrthonormalFamily, ...]
+    multi_index: NDArray[np.int64]
+
+    def __post_init__(self) -> None:
+        index = np.asarray(self.multi_index)
+        if index.ndim != 2 or index.shape[1] != len(self.families):
+            raise ValueError(
+                f"multi_index must be (S, {len(self.families)}), got shape {index.shape}"
+            )
+        if index.size and index.min() < 0:
+            raise ValueError("multi-indices must be non-negative")
+        object.__setattr__(self, "families", tuple(self.families))
+        object.__setattr__(self, "multi_index", index.astype(np.int64))
+
+    @property
+    def size(self) -> int:
+        """Number of terms S."""
+        return self.multi_index.shape[0]
+
+    def evaluate(self, xi: ArrayLike) -> NDArray[np.float64]:
+        """The basis matrix Φ with Φ[i, j] = φ_{α_j}(ξ_i).
+
+        Parameters
+        ----------
+        xi:
+            (M, n) germ points.
+
+        Returns
+        -------
+        ndarray
+            (M, S).
+
+        Raises
+        ------
+        ValueError
+            If xi is not (M, n).
+        """
+        xi = np.asarray(xi, dtype=float)
+        n = len(self.families)
+        if xi.ndim != 2 or xi.shape[1] != n:
+            raise ValueError(f"germ points must be (M, {n}), got shape {xi.shape}")
+        out = np.ones((xi.shape[0], self.size))
+        for k, family in enumerate(self.families):
+            degrees = self.multi_index[:, k]
+            top = int(degrees.max(initial=0))
+            if top == 0:
+                continue
+            out *= family.evaluate(xi[:, k], top)[:, degrees]
+        return out

@@ -1,0 +1,171 @@
+"""Node sets: tensor Gauss grids for collocation, random and quasi-random samples.
+
+Axis convention, used everywhere in pcmb: node arrays are (N, n) — nodes × inputs, in the
+inputs' germ order. Tensor grid nodes are in C order (last input varies fastest), so
+values of shape (N, ...) reshape to (q_1, ..., q_n, ...).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import qmc
+
+from pcmb.basis import tensor_index_set
+from pcmb.inputs import Distribution
+from pcmb.polynomials import GaussRule
+
+__all__ = ["NodeSet", "TensorGrid", "random_nodes"]
+
+SamplingMethod = Literal["montecarlo", "lhs", "sobol"]
+
+
+def _physical(distributions: Sequence[Distribution], germ: NDArray[np.float64]) -> NDArray:
+    return np.column_stack([d.to_physical(germ[:, k]) for k, d in enumerate(distributions)])
+
+
+@dataclass(frozen=True)
+class TensorGrid:
+    """The tensor product of 1-D Gauss rules, q_k = orders[k] + 1 points per input.
+
+    With the tensor basis of the same orders the collocation system is square and
+    interpolation equals pseudo-spectral projection (:func:`pcmb.recovery.project_tensor`).
+
+    Attributes
+    ----------
+    distributions:
+        One per input, germ order.
+    orders:
+        Chaos order P_k per input (anisotropic allowed).
+    """
+
+    distributions: tuple[Distribution, ...]
+    orders: tuple[int, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "distributions", tuple(self.distributions))
+        object.__setattr__(self, "orders", tuple(int(p) for p in self.orders))
+        if len(self.orders) != len(self.distributions):
+            raise ValueError(
+                f"need one order per input: {len(self.distributions)} inputs, "
+                f"{len(self.orders)} orders"
+            )
+        if not self.orders:
+            raise ValueError("a grid needs at least one input")
+        if min(self.orders) < 0:
+            raise ValueError(f"orders must be >= 0, got {self.orders}")
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Points per input, (q_1, ..., q_n)."""
+        return tuple(p + 1 for p in self.orders)
+
+    @property
+    def size(self) -> int:
+        """Number of nodes N = Π q_k."""
+        return int(np.prod(self.shape))
+
+    @cached_property
+    def rules(self) -> tuple[GaussRule, ...]:
+        """The 1-D Gauss rules, one per input."""
+        return tuple(
+            d.family.gauss_rule(q) for d, q in zip(self.distributions, self.shape, strict=True)
+        )
+
+    @cached_property
+    def nodes(self) -> NDArray[np.float64]:
+        """(N, n) germ coordinates ξ of the nodes."""
+        axes = np.meshgrid(*[r.nodes for r in self.rules], indexing="ij")
+        return np.stack([a.ravel() for a in axes], axis=1)
+
+    @cached_property
+    def weights(self) -> NDArray[np.float64]:
+        """(N,) probability weights (products of the 1-D weights), summing to one."""
+        weights = np.ones(())
+        for rule in self.rules:
+            weights = np.multiply.outer(weights, rule.weights)
+        return weights.ravel()
+
+    @cached_property
+    def params(self) -> NDArray[np.float64]:
+        """(N, n) physical values θ = T(ξ) of the nodes."""
+        return _physical(self.distributions, self.nodes)
+
+    @cached_property
+    def multi_index(self) -> NDArray[np.int64]:
+        """(N, n) the tensor index set matching the grid (same C order)."""
+        return tensor_index_set(self.orders)
+
+
+@dataclass(frozen=True)
+class NodeSet:
+    """An arbitrary set of nodes, e.g. random samples.
+
+    Attributes
+    ----------
+    distributions:
+        One per input, germ order.
+    nodes:
+        (N, n) germ coordinates.
+    params:
+        (N, n) physical values.
+    """
+
+    distributions: tuple[Distribution, ...]
+    nodes: NDArray[np.float64]
+    params: NDArray[np.float64]
+
+    @property
+    def size(self) -> int:
+        return self.nodes.shape[0]
+
+
+def random_nodes(
+    distributions: Sequence[Distribution],
+    samples: int,
+    method: SamplingMethod = "montecarlo",
+    seed: int | None = 0,
+) -> NodeSet:
+    """Random or quasi-random nodes for sampling studies and least-squares fits.
+
+    Parameters
+    ----------
+    distributions:
+        The inputs, germ order.
+    samples:
+        Number of nodes N >= 1.
+    method:
+        ``"montecarlo"`` (independent draws), ``"lhs"`` (Latin hypercube) or ``"sobol"``
+        (scrambled Sobol'; N should be a power of two for its balance properties).
+    seed:
+        Seed of the random generator; the same seed gives the same nodes.
+
+    Returns
+    -------
+    NodeSet
+
+    Raises
+    ------
+    ValueError
+        If samples < 1 or the method is unknown.
+    """
+    distributions = tuple(distributions)
+    if samples < 1:
+        raise ValueError(f"samples must be >= 1, got {samples}")
+    n = len(distributions)
+    rng = np.random.default_rng(seed)
+    if method == "montecarlo":
+        germ = np.column_stack([d.sample_germ(samples, rng) for d in distributions])
+    elif method in ("lhs", "sobol"):
+        engine_type = qmc.LatinHypercube if method == "lhs" else qmc.Sobol
+        engine = engine_type(d=n, scramble=True, rng=rng)
+        u = engine.random(samples)
+        germ = np.column_stack([d.family.germ.ppf(u[:, k]) for k, d in enumerate(distributions)])
+    else:
+        raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
+    return NodeSet(distributions, germ, _physical(distributions, germ))
