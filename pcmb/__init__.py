@@ -7,14 +7,39 @@ polynomial families (:mod:`pcmb.polynomials`); a simulator is run at tensor Gaus
 heavy optional modules (h5py, mujoco, matplotlib, dask) load only where used.
 """
 
-from pcmb.basis import PolynomialBasis, hyperbolic_index_set, tensor_index_set, total_index_set
-from pcmb.errors import ConfigError, IllPosedError, ModelError, ModelRunError, PcmbError
-from pcmb.expansion import ChaosExpansion
-from pcmb.inputs import Beta, Distribution, Gamma, Normal, Transformed, Uniform
-from pcmb.kl import KarhunenLoeve, line_covariance, spectral_covariance
-from pcmb.polynomials import GaussRule, Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
-from pcmb.recovery import LeastSquaresFit, fit_largest_stable, fit_least_squares, project_tensor
-from pcmb.sampling import NodeSet, TensorGrid, random_nodes
+import importlib
+from typing import Any
+
+#: Public name -> module that defines it. Loaded on first access (PEP 562), so that
+#: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
+_EXPORTS = {
+    "pcmb.basis": [
+        "PolynomialBasis",
+        "hyperbolic_index_set",
+        "tensor_index_set",
+        "total_index_set",
+    ],
+    "pcmb.errors": ["ConfigError", "IllPosedError", "ModelError", "ModelRunError", "PcmbError"],
+    "pcmb.expansion": ["ChaosExpansion"],
+    "pcmb.inputs": ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform"],
+    "pcmb.kl": ["KarhunenLoeve", "line_covariance", "spectral_covariance"],
+    "pcmb.polynomials": [
+        "GaussRule",
+        "Hermite",
+        "Jacobi",
+        "Laguerre",
+        "Legendre",
+        "OrthonormalFamily",
+    ],
+    "pcmb.recovery": [
+        "LeastSquaresFit",
+        "fit_largest_stable",
+        "fit_least_squares",
+        "project_tensor",
+    ],
+    "pcmb.sampling": ["NodeSet", "TensorGrid", "random_nodes"],
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __version__ = "0.1.0"
 
@@ -42,7 +67,6 @@ __all__ = [
     "TensorGrid",
     "Transformed",
     "Uniform",
-    "__version__",
     "fit_largest_stable",
     "fit_least_squares",
     "hyperbolic_index_set",
@@ -53,3 +77,16 @@ __all__ = [
     "tensor_index_set",
     "total_index_set",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pcmb' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_MODULE_OF])

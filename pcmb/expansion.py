@@ -119,9 +119,14 @@ class ChaosExpansion:
         """E[y], shape (...)."""
         return self.coefficients[self._zero].copy()
 
+    @cached_property
+    def _squares(self) -> NDArray[np.float64]:
+        """(S, P) squared fluctuation coefficients, trailing axes flattened (shared by Sobol')."""
+        return (self._fluctuations**2).reshape(self.multi_index.shape[0], -1)
+
     def variance(self) -> NDArray[np.float64]:
         """Var[y] = Σ_{α≠0} c_α², shape (...)."""
-        return np.einsum("s...,s...->...", self._fluctuations, self._fluctuations)
+        return self._squares.sum(axis=0).reshape(self.shape)
 
     def std(self) -> NDArray[np.float64]:
         """Standard deviation, shape (...)."""
@@ -143,9 +148,8 @@ class ChaosExpansion:
 
     def _sobol(self, masks: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Σ c_α² over each row's mask, divided by the variance: (n, ...)."""
-        squares = (self._fluctuations**2).reshape(self.multi_index.shape[0], -1)
-        partial = masks.astype(float) @ squares
-        variance = squares.sum(axis=0)
+        partial = masks.astype(float) @ self._squares
+        variance = self._squares.sum(axis=0)
         mean_square = self.coefficients[self._zero].reshape(-1) ** 2
         defined = variance > _RELATIVE_NOISE**2 * (variance + mean_square)
         with np.errstate(divide="ignore", invalid="ignore"):

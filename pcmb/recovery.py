@@ -70,12 +70,15 @@ def project_tensor(
     """
     values = _rows(values, grid.size)
     trailing = values.shape[1:]
-    coef = values.reshape(*grid.shape, -1)
-    for axis, (dist, rule, order) in enumerate(
-        zip(grid.distributions, grid.rules, grid.orders, strict=True)
-    ):
+    coef = values.reshape(grid.size, -1)
+    # Axis k of the C-ordered grid is the middle axis of a (left, q_k, right) view:
+    # one batched matmul per axis, each result contiguous for the next.
+    left, right = 1, coef.size
+    for dist, rule, order in zip(grid.distributions, grid.rules, grid.orders, strict=True):
+        right //= rule.nodes.size
         projector = (dist.family.evaluate(rule.nodes, order) * rule.weights[:, None]).T
-        coef = np.moveaxis(np.tensordot(projector, coef, axes=(1, axis)), 0, axis)
+        coef = np.matmul(projector, coef.reshape(left, rule.nodes.size, right))
+        left *= order + 1
     coef = coef.reshape(grid.size, *trailing)
     if multi_index is None:
         return coef

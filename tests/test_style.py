@@ -33,3 +33,11 @@ def test_importing_pcmb_does_not_import_heavy_modules(heavy):
     code = f"import sys, pcmb; print({heavy!r} in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_every_public_name_resolves():
+    import pcmb
+
+    for name in pcmb.__all__:
+        assert getattr(pcmb, name) is not None
+    assert set(pcmb.__all__) == set(pcmb._MODULE_OF)
