@@ -32,7 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
 
-__all__ = ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform"]
+__all__ = ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform", "from_description"]
 
 # Parameter-free families are shared so their cached germ distributions are built once.
 _LEGENDRE = Legendre()
@@ -289,3 +289,27 @@ class Transformed(Distribution):
             "params": {k: float(v) for k, v in self.target.kwds.items()},
             "germ": self.germ,
         }
+
+
+def from_description(description: dict[str, Any]) -> Distribution:
+    """Rebuild a distribution from :meth:`Distribution.describe` output (e.g. read from a file).
+
+    Raises
+    ------
+    ValueError
+        If the description names an unknown distribution or has invalid parameters.
+    """
+    fields = dict(description)
+    kind = fields.pop("dist", None)
+    if kind == "scipy":
+        target = getattr(st, fields["name"])(*fields.get("args", []), **fields.get("params", {}))
+        return Transformed(target, germ=fields.get("germ", "normal"))
+    classes: dict[str, type[Distribution]] = {
+        "uniform": Uniform,
+        "beta": Beta,
+        "normal": Normal,
+        "gamma": Gamma,
+    }
+    if kind not in classes:
+        raise ValueError(f"unknown distribution {kind!r}")
+    return classes[kind](**fields)

@@ -92,3 +92,13 @@ def test_describe_is_json_ready():
 
     for dist in INPUTS:
         assert json.loads(json.dumps(dist.describe()))["dist"] == dist.describe()["dist"]
+
+
+@pytest.mark.parametrize("dist", INPUTS, ids=lambda d: d.describe()["dist"])
+def test_description_round_trip(dist):
+    from pcmb.inputs import from_description
+
+    rebuilt = from_description(dist.describe())
+    xi = np.linspace(-0.9, 0.9, 5)
+    np.testing.assert_array_equal(rebuilt.to_physical(xi), dist.to_physical(xi))
+    assert rebuilt.describe() == dist.describe()
