@@ -1,0 +1,74 @@
+"""Frequency-domain statistics against per-node spectra and Parseval."""
+
+import numpy as np
+import pytest
+from scipy.signal import periodogram as scipy_periodogram
+
+from pcmb.expansion import ChaosExpansion
+from pcmb.inputs import Uniform
+from pcmb.recovery import project_tensor
+from pcmb.sampling import TensorGrid
+from pcmb.spectral import chaos_spectrum, periodogram
+
+TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)
+
+
+def oscillator(stiffness):
+    """Free damped linear oscillator x'' + 0.2 x' + k x = 0, x(0) = 1, x'(0) = 0 (closed form)."""
+    k = np.asarray(stiffness)[:, None]
+    omega = np.sqrt(k - 0.01)
+    t = TIMES[None, :]
+    return np.exp(-0.1 * t) * (np.cos(omega * t) + 0.1 / omega * np.sin(omega * t))
+
+
+@pytest.fixture(scope="module", params=["hann", "boxcar"])
+def study(request):
+    dists = [Uniform(1.0, 4.0)]
+    grid = TensorGrid(dists, [8])
+    values = oscillator(grid.params[:, 0])
+    expansion = ChaosExpansion(project_tensor(grid, values), grid.multi_index, dists)
+    return grid, values, chaos_spectrum(expansion, grid, TIMES, request.param), request.param
+
+
+def test_periodogram_matches_scipy():
+    x = oscillator([2.0, 3.0])
+    for window in ("hann", "boxcar"):
+        fs = 1 / (TIMES[1] - TIMES[0])
+        f_ref, p_ref = scipy_periodogram(x, fs=fs, window=window, detrend=False)
+        f, p = periodogram(x, TIMES, window)
+        np.testing.assert_allclose(f, f_ref)
+        np.testing.assert_allclose(p, p_ref, rtol=1e-12, atol=1e-14 * p_ref.max())
+
+
+def test_mean_and_band_match_quadrature_of_per_node_spectra(study):
+    grid, values, spectrum, window = study
+    _, per_node = periodogram(values, TIMES, window)
+    mean = grid.weights @ per_node
+    std = np.sqrt(grid.weights @ (per_node - mean) ** 2)
+    scale = per_node.max()
+    np.testing.assert_allclose(spectrum.mean, mean, atol=1e-10 * scale)
+    np.testing.assert_allclose(spectrum.std, std, atol=1e-10 * scale)
+    np.testing.assert_allclose(spectrum.psd_expansion.mean(), mean, atol=1e-10 * scale)
+
+
+def test_parseval_holds_for_the_mean_psd(study):
+    grid, values, spectrum, window = study
+    if window != "boxcar":
+        pytest.skip("Parseval in this form holds for the rectangular window")
+    df = spectrum.frequency[1] - spectrum.frequency[0]
+    mean_square = grid.weights @ np.mean(values**2, axis=1)
+    assert np.sum(spectrum.mean) * df == pytest.approx(mean_square, rel=1e-12)
+
+
+def test_psd_samples_at_a_frequency(study):
+    spectrum = study[2]
+    samples = spectrum.sample_psd(0.25, size=200_000)
+    k = int(np.argmin(np.abs(spectrum.frequency - 0.25)))
+    # Monte Carlo mean of the surrogate PSD: standard error ~ std / sqrt(2e5).
+    assert abs(samples.mean() - spectrum.mean[k]) < 5 * spectrum.std[k] / np.sqrt(2e5) + 1e-12
+    assert np.all(samples >= 0)
+
+
+def test_non_uniform_grids_are_rejected():
+    with pytest.raises(ValueError, match="uniform"):
+        periodogram(np.zeros(3), [0.0, 1.0, 3.0])
