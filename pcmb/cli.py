@@ -1,0 +1,189 @@
+"""The ``pcmb`` command line (SPEC §7).
+
+Exit codes: 0 success; 2 invalid config or usage; 3 the model failed at one or more nodes
+(policy abort); 1 anything unexpected. Logs and progress go to stderr; stdout carries only
+requested data (``validate``'s summary, ``inspect``'s report, ``schema``'s JSON).
+
+Heavy modules are imported inside the commands, so ``pcmb --help`` starts fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import sys
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+
+EXIT_OK, EXIT_UNEXPECTED, EXIT_CONFIG, EXIT_MODEL = 0, 1, 2, 3
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pcmb",
+        description="Simulations with error bars: polynomial chaos by stochastic collocation.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="run a study and write its HDF5 result")
+    run.add_argument("config", help="YAML study configuration")
+    run.add_argument("-o", "--output", help="result file (overrides the config's output)")
+    run.add_argument("--jobs", type=int, help="worker processes (default: config, else all cores)")
+    run.add_argument("--backend", choices=["loky", "dask"], help="parallel backend")
+    run.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    validate = commands.add_parser("validate", help="check a config without running anything")
+    validate.add_argument("config")
+
+    inspect = commands.add_parser("inspect", help="summarise a result file")
+    inspect.add_argument("result", help="an HDF5 file written by pcmb run")
+
+    commands.add_parser("schema", help="print the config JSON Schema (for editors)")
+    return parser
+
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+def _summary(config) -> str:
+    from pcmb.study import Study
+
+    study = Study.from_config(config)
+    nodes = study.node_set()
+    lines = [
+        f"config   {config.path}",
+        f"name     {config.name}",
+        f"model    {config.model.kind}, outputs: {', '.join(study.resolve_outputs())}",
+        f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
+        "inputs   (germ order)",
+    ]
+    for name, dist in study.inputs.items():
+        described = ", ".join(f"{k}={v}" for k, v in dist.describe().items() if k != "dist")
+        lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
+    method = config.method
+    if method.kind == "collocation":
+        lines.append(
+            f"method   collocation, {method.basis} basis, orders {study.orders}: "
+            f"{nodes.size} tensor Gauss nodes"
+        )
+    else:
+        lines.append(f"method   {method.kind}, {nodes.size} samples, seed {method.seed}")
+    lines.append(f"runs     {nodes.size} model runs ({config.execution.on_failure} on failure)")
+    lines.append(f"output   {config.output or '(none: give -o)'}")
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    from pcmb.config import load_config
+    from pcmb.errors import ConfigError
+    from pcmb.study import Study
+
+    config = load_config(args.config)
+    output = args.output or config.output
+    if output is None:
+        raise ConfigError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
+    study = Study.from_config(config)
+    if args.jobs is not None:
+        if args.jobs < 1:
+            raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
+        study.jobs = args.jobs
+    if args.backend is not None:
+        study.backend = args.backend
+    provenance = {
+        "config": config.source_text or "",
+        "config_sha256": config.sha256,
+        "command_line": shlex.join(["pcmb", *argv]),
+    }
+    result = study.run(
+        output, resume=args.resume, progress=False if args.quiet else None, provenance=provenance
+    )
+    for warning in result.warnings:
+        _log(f"pcmb: warning: {warning}")
+    _log(f"pcmb: wrote {output} ({result.nodes.shape[0]} nodes, {result.seconds:.2f} s of runs)")
+    return EXIT_OK
+
+
+def _inspect(path: str) -> str:
+    import numpy as np
+
+    from pcmb.errors import ConfigError
+    from pcmb.store import load
+
+    try:
+        result = load(path)
+    except (OSError, ValueError, KeyError) as error:
+        raise ConfigError(f"{path}: not a readable pcmb result file ({error})") from error
+    named_inputs = zip(result.input_names, result.distributions, strict=True)
+    status = np.bincount(result.status.astype(int), minlength=3)
+    lines = [
+        f"file     {path}",
+        f"name     {result.name}",
+        f"method   {result.method}, {result.nodes.shape[0]} nodes: {status[1]} ok, "
+        f"{status[2]} failed, {status[0]} pending; {result.seconds:.2f} s of runs",
+        f"time     {result.times[0]} .. {result.times[-1]}, {result.times.size} points",
+        "inputs   " + ", ".join(f"{n}: {d.describe()['dist']}" for n, d in named_inputs),
+    ]
+    if result.multi_index is not None:
+        lines.append(f"chaos    {result.multi_index.shape[0]} terms")
+    lines.append(f"{'output':<12}{'mean min':>12}{'mean max':>12}{'std min':>12}{'std max':>12}")
+    for name in result.outputs:
+        mean, std = result.mean(name), result.std(name)
+        lines.append(
+            f"{name:<12}{mean.min():>12.4g}{mean.max():>12.4g}{std.min():>12.4g}{std.max():>12.4g}"
+        )
+    lines += [f"warning  {w}" for w in result.warnings]
+    lines += [f"failed   {f}" for f in result.failures]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``pcmb`` command; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exit_:
+        return int(exit_.code or 0)
+    from pcmb.errors import ConfigError, ModelRunError
+
+    try:
+        if args.command == "run":
+            return _run(args, argv)
+        if args.command == "validate":
+            from pcmb.config import load_config
+
+            print(_summary(load_config(args.config)))
+        elif args.command == "inspect":
+            if not Path(args.result).is_file():
+                raise ConfigError(f"{args.result}: no such file")
+            print(_inspect(args.result))
+        elif args.command == "schema":
+            from pcmb.config import config_json_schema
+
+            print(json.dumps(config_json_schema(), indent=2))
+        return EXIT_OK
+    except ConfigError as error:
+        _log(f"pcmb: invalid configuration:\n{error}")
+        return EXIT_CONFIG
+    except ModelRunError as error:
+        _log(f"pcmb: {error}")
+        return EXIT_MODEL
+    except BrokenPipeError:
+        # stdout closed early (e.g. `pcmb schema | head`): not worth a traceback. Point
+        # stdout at devnull so the interpreter's final flush does not fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except KeyboardInterrupt:
+        _log("pcmb: interrupted; finished nodes are kept in the journal (use --resume)")
+        return EXIT_UNEXPECTED
+    except Exception:
+        _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
+        return EXIT_UNEXPECTED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,832 @@
+"""Run a model at every node, in parallel chunks, with failure capture and a resumable journal.
+
+How the work is cut and where it runs
+-------------------------------------
+*Chunks.* The N nodes are cut into contiguous chunks; each chunk is one batched
+``model.simulate`` call. Chunk boundaries depend only on N (or an explicit ``chunk_size``),
+never on the number of workers, the backend or the machine: a batched integrator (one stacked
+``solve_ivp`` per chunk) gives results that depend on the batch composition, and pcmb promises
+bit-identical results for 1 or 2 workers, loky or dask, and after a resume. The default size is
+``ceil(N / 16)`` capped to [1, 256]: 9 to 16 chunks for 16 <= N <= 4096, so two workers stay
+busy to the end (the idle tail is at most one chunk) and progress moves in steps of about 6 %,
+while each chunk stays big enough for batching to pay; the cap bounds the memory of one stacked
+solve (larger N simply gives more chunks of 256).
+
+*In-process or workers.* The first pending chunk always runs in this process, timed. With
+``jobs == 1`` everything runs in-process. Otherwise the rest goes to worker processes only if
+that is estimated to be faster: ``start-up + build + t_rest / workers < t_rest``, where
+``t_rest`` extrapolates the first chunk's time per node to the remaining nodes, ``build`` is
+the measured time to build the model (each worker builds it once) and start-up is about 1 s
+for loky and 3 s for a local dask cluster. Results do not depend on the choice: a chunk's
+values depend only on its nodes. (A model that kills its process during that first in-process
+chunk kills the run; the journal then holds nothing for it.)
+
+*Backends.* ``loky`` uses joblib's reusable loky process pool, ``dask`` a dask.distributed
+cluster (``address``, or a local cluster of ``jobs`` single-threaded worker processes). Both are
+driven through :mod:`concurrent.futures` futures rather than ``joblib.Parallel``: with one
+future per chunk the executor knows exactly which chunks were in flight when a worker died,
+and it journals each chunk the moment it finishes. At most as many chunks as there are worker
+slots are in flight, so a dying worker can only take those down with it.
+
+Failures
+--------
+When a chunk's ``simulate`` raises or returns a wrong shape, all its nodes are re-run one by
+one in the same worker; when it returns non-finite rows, those nodes are (the finite rows are
+kept: a pointwise adapter's rows are independent, and a stacked solver with a non-finite node
+fails the whole call instead of returning biased rows). Each failing node is tried ``retries``
+more times; single-node results that succeed are used.
+
+When a worker dies (segfault, ``os._exit``, killed by the OS) every chunk in flight is a
+suspect: the pool is rebuilt and each suspect is re-run alone; one that dies again is split
+into single nodes, each run alone, so the node that kills its process is named ("worker
+process died (signal 11, SIGSEGV)"), and the campaign goes on. The executor reports failures
+in :class:`RunResult`; what to do about them (abort, regress) is the caller's policy.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, wait
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
+
+import cloudpickle
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pcmb.errors import ConfigError, ConfigProblem, ModelError, PcmbError
+from pcmb.journal import STATUS_FAILED, STATUS_OK, Journal
+
+if TYPE_CHECKING:
+    from pcmb.model import Model
+
+__all__ = ["NodeFailure", "RunResult", "chunk_bounds", "run_nodes"]
+
+TARGET_CHUNKS = 16
+MAX_CHUNK_SIZE = 256
+BACKENDS = ("loky", "dask")
+# Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
+_STARTUP_SECONDS = {"loky": 1.0, "dask": 3.0}
+# Idle loky workers stay up this long, so consecutive runs do not pay the start-up again.
+_LOKY_IDLE_TIMEOUT = 300.0
+_PROGRESS_INTERVAL = 0.1
+
+
+# -- results ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class NodeFailure:
+    """A node whose model run failed.
+
+    Attributes
+    ----------
+    index:
+        The node's index in the full node set.
+    params:
+        The node's values of the uncertain inputs (a tuple for a field input).
+    message:
+        The model's message (exception type and text), ``"non-finite output 'x1' at t=..."``,
+        or ``"worker process died (...)"``.
+    """
+
+    index: int
+    params: dict[str, float | tuple[float, ...]]
+    message: str
+
+    def __str__(self) -> str:
+        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
+        return f"node {self.index} ({values}): {' '.join(self.message.split())}"
+
+
+def _format_value(value: float | tuple[float, ...]) -> str:
+    if isinstance(value, tuple):
+        shown = ", ".join(f"{v:.6g}" for v in value[:3])
+        return f"[{shown}, ... ({len(value)} values)]" if len(value) > 3 else f"[{shown}]"
+    return f"{value:.6g}"
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`run_nodes` returns.
+
+    Attributes
+    ----------
+    values:
+        Output name -> (N, T) float64 values; NaN rows for the nodes that did not succeed.
+    status:
+        (N,) int8 per node: 0 pending, 1 ok, 2 failed (the codes of the output file).
+    failures:
+        The failed nodes, by increasing index.
+    seconds:
+        Wall time of the call.
+    resumed:
+        Number of nodes taken from the journal instead of being run.
+    """
+
+    values: dict[str, NDArray[np.float64]]
+    status: NDArray[np.int8]
+    failures: tuple[NodeFailure, ...]
+    seconds: float
+    resumed: int
+
+
+# -- chunking --------------------------------------------------------------------------------
+
+
+def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int, int]]:
+    """Cut ``n_nodes`` nodes into contiguous chunks ``[start, stop)``.
+
+    The boundaries depend only on ``n_nodes`` and ``chunk_size`` (see the module docstring for
+    why and for the default rule ``min(256, max(1, ceil(n_nodes / 16)))``).
+
+    Parameters
+    ----------
+    n_nodes:
+        N >= 1.
+    chunk_size:
+        Nodes per chunk (the last chunk may be shorter); ``None`` for the default rule.
+
+    Returns
+    -------
+    list of (start, stop) pairs covering ``range(n_nodes)`` in order.
+
+    Raises
+    ------
+    ValueError
+        If ``n_nodes`` or ``chunk_size`` is not a positive integer.
+    """
+    if n_nodes < 1 or (chunk_size is not None and chunk_size < 1):
+        raise ValueError(f"n_nodes and chunk_size must be positive, got {n_nodes}, {chunk_size}")
+    size = chunk_size or min(MAX_CHUNK_SIZE, max(1, math.ceil(n_nodes / TARGET_CHUNKS)))
+    return [(start, min(start + size, n_nodes)) for start in range(0, n_nodes, size)]
+
+
+# -- what runs inside a worker ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Task:
+    """Nodes to run together: one batched call (``batched``) or one call per node."""
+
+    indices: NDArray[np.intp]
+    batched: bool
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """A finished task: (B, n_outputs, T) values, per-node messages ("" = ok), model seconds."""
+
+    values: NDArray[np.float64]
+    messages: tuple[str, ...]
+    seconds: float
+
+
+# One model per thread of each process (a dask worker may run several threads; MuJoCo data is
+# not thread-safe). Building can be expensive (loading a scene), so it happens once per worker.
+_MODEL_CACHE = threading.local()
+
+
+def _cached_model(token: str, factory: Callable[[], Model]) -> tuple[Model, float]:
+    """The model built by ``factory`` in this thread, and the seconds spent building it now."""
+    held = getattr(_MODEL_CACHE, "held", None)
+    if held is not None and held[0] == token:
+        return held[1], 0.0
+    _MODEL_CACHE.held = None  # release the previous model before building the next one
+    start = time.perf_counter()
+    try:
+        model = factory()
+    except PcmbError:
+        raise
+    except Exception as exc:
+        raise ModelError(f"could not build the model: {type(exc).__name__}: {exc}") from exc
+    _MODEL_CACHE.held = (token, model)
+    return model, time.perf_counter() - start
+
+
+def _run_batch(
+    model: Model,
+    params: Mapping[str, NDArray[np.float64]],
+    times: NDArray[np.float64],
+    outputs: Sequence[str],
+) -> tuple[NDArray[np.float64], list[str]]:
+    """One ``simulate`` call: (B, n_outputs, T) values and per-node messages ("" = ok)."""
+    n = len(next(iter(params.values())))
+    values = np.full((n, len(outputs), times.size), np.nan)
+    try:
+        result = model.simulate(params, times)
+    except Exception as exc:  # the model's own failure, whatever its type, is data here
+        return values, [f"{type(exc).__name__}: {exc}"] * n
+    if not isinstance(result, Mapping):
+        return values, [f"simulate returned {type(result).__name__}, expected a mapping"] * n
+    for k, name in enumerate(outputs):
+        if name not in result:
+            return values, [f"the model returned no output {name!r}"] * n
+        try:
+            array = np.asarray(result[name], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            return values, [f"output {name!r} is not a float array ({exc})"] * n
+        if array.shape != (n, times.size):
+            return values, [
+                f"output {name!r} has shape {array.shape}, expected {(n, times.size)}"
+            ] * n
+        values[:, k] = array
+    messages = []
+    for row in values:
+        bad = ~np.isfinite(row)  # (n_outputs, T)
+        if bad.any():
+            j = int(np.flatnonzero(bad.any(axis=0))[0])
+            k = int(np.flatnonzero(bad[:, j])[0])
+            messages.append(f"non-finite output {outputs[k]!r} at t={times[j]:.6g}")
+        else:
+            messages.append("")
+    return values, messages
+
+
+def _execute(
+    token: str,
+    factory: Callable[[], Model],
+    params: Mapping[str, NDArray[np.float64]],
+    times: NDArray[np.float64],
+    outputs: Sequence[str],
+    batched: bool,
+    retries: int,
+) -> _Outcome:
+    """Run one task (in a worker or in-process), narrowing a failed batch down to its nodes."""
+    model, _ = _cached_model(token, factory)
+    # Read-only views: a model that writes into its inputs fails the same way in-process and in
+    # a worker, instead of corrupting the caller's arrays only when run in-process.
+    params = {name: _read_only(array) for name, array in params.items()}
+    times = _read_only(times)
+    start = time.perf_counter()
+    n = len(next(iter(params.values())))
+    if batched and n > 1:
+        values, messages = _run_batch(model, params, times, outputs)
+    else:
+        values = np.full((n, len(outputs), times.size), np.nan)
+        messages = ["not run"] * n
+    # A node without a valid row from the batch (the call failed, or its row is not finite) is
+    # re-run on its own, to name its failure or to succeed alone. The finite rows of a batch
+    # are kept: nodes interact only through a stacked solver's shared step control, and a
+    # non-finite node makes that fail the whole call rather than bias the other rows.
+    for i in [i for i, message in enumerate(messages) if message]:
+        single = {name: array[i : i + 1] for name, array in params.items()}
+        for _ in range(1 + retries):
+            row, (message,) = _run_batch(model, single, times, outputs)
+            if not message:
+                break
+        values[i], messages[i] = row[0], message
+    return _Outcome(values, tuple(messages), time.perf_counter() - start)
+
+
+def _read_only(array: NDArray[np.float64]) -> NDArray[np.float64]:
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
+# -- worker pools ----------------------------------------------------------------------------
+
+
+class _Pool(Protocol):
+    slots: int
+
+    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]: ...
+
+    def death(self, error: BaseException) -> str | None:
+        """A message if ``error`` means the worker running the task died, else None."""
+
+    def rebuild(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+class _LokyPool:
+    """joblib's reusable loky process pool; it stays warm for the next call until idle."""
+
+    def __init__(self, jobs: int) -> None:
+        self.slots = jobs
+        self.rebuild()
+
+    def rebuild(self) -> None:
+        from joblib.externals.loky import get_reusable_executor
+
+        # A broken pool is replaced by a fresh one here.
+        self._executor = get_reusable_executor(max_workers=self.slots, timeout=_LOKY_IDLE_TIMEOUT)
+
+    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
+        return self._executor.submit(fn, *args)
+
+    def death(self, error: BaseException) -> str | None:
+        from joblib.externals.loky.process_executor import TerminatedWorkerError
+
+        if not isinstance(error, TerminatedWorkerError):
+            return None
+        # loky reports e.g. "The exit codes of the workers are {SIGSEGV(-11)}" or "{EXIT(7)}".
+        codes = re.findall(r"([A-Z]+)\((-?\d+)\)", str(error).partition("exit codes")[2])
+        causes = [
+            f"signal {-int(code)}, {name}" if int(code) < 0 else f"exit code {code}"
+            for name, code in codes
+        ]
+        return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
+
+    def close(self) -> None:
+        """Nothing to do: the reusable pool shuts its workers down when idle or at exit."""
+
+
+class _DaskPool:
+    """A dask.distributed cluster: ``address``, or a local cluster that is closed afterwards."""
+
+    def __init__(self, jobs: int | None, workers: int, address: str | None) -> None:
+        import dask
+        import distributed
+
+        self._killed = distributed.KilledWorker
+        self._cluster = None
+        if address is None:
+            # Report a task at its first worker death (dask would try it on 3 more workers,
+            # killing each): the executor's own isolation then names the node.
+            with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+                self._cluster = distributed.LocalCluster(
+                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
+                )
+        try:
+            self._client = distributed.Client(address or self._cluster)
+        except BaseException:
+            if self._cluster is not None:
+                self._cluster.close()
+            raise
+        self.slots = jobs or sum(self._client.nthreads().values()) or 1
+        # pure=False: a re-run of a task must run again, not come back from dask's cache.
+        self._executor = self._client.get_executor(pure=False)
+
+    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
+        return self._executor.submit(fn, *args)
+
+    def death(self, error: BaseException) -> str | None:
+        # dask reschedules a task whose worker died, until its allowed failures are used up.
+        if isinstance(error, self._killed):
+            return "worker process died (dask KilledWorker: see the dask worker logs)"
+        return None
+
+    def rebuild(self) -> None:
+        """Nothing to do: dask's nannies restart dead workers."""
+
+    def close(self) -> None:
+        self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+# -- progress --------------------------------------------------------------------------------
+
+
+class _Progress:
+    """One status line on a stream, rewritten in place: nodes done / total, rate, ETA."""
+
+    def __init__(self, total: int, done: int, stream: TextIO | None) -> None:
+        self._total, self._done, self._stream = total, done, stream
+        self._ran = 0
+        self._start = self._last = time.perf_counter()
+        self._width = 0
+
+    def advance(self, count: int) -> None:
+        self._done += count
+        self._ran += count
+        now = time.perf_counter()
+        if now - self._last >= _PROGRESS_INTERVAL or self._done == self._total:
+            self._last = now
+            self._show(now)
+
+    def _show(self, now: float) -> None:
+        if self._stream is None:
+            return
+        rate = self._ran / max(now - self._start, 1e-9)
+        eta = (self._total - self._done) / rate if rate > 0 else math.inf
+        if math.isfinite(eta):
+            seconds = round(eta)
+            eta_text = f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+        else:
+            eta_text = "?"
+        line = (
+            f"pcmb: {self._done}/{self._total} nodes ({100 * self._done / self._total:.0f}%), "
+            f"{rate:.3g} nodes/s, ETA {eta_text}"
+        )
+        self._stream.write("\r" + line.ljust(self._width))
+        self._stream.flush()
+        self._width = len(line)
+
+    def close(self) -> None:
+        if self._stream is not None and self._width:
+            self._stream.write("\n")
+            self._stream.flush()
+
+
+# -- the campaign ----------------------------------------------------------------------------
+
+
+class _Campaign:
+    """The state of one :func:`run_nodes` call: arguments, results so far, journal, progress."""
+
+    def __init__(
+        self,
+        token: str,
+        factory: Callable[[], Model],
+        params: dict[str, NDArray[np.float64]],
+        times: NDArray[np.float64],
+        outputs: tuple[str, ...],
+        retries: int,
+        journal: Journal | None,
+    ) -> None:
+        self.token, self.factory = token, factory
+        self.params, self.times, self.outputs = params, times, outputs
+        self.retries, self.journal = retries, journal
+        n_nodes = len(next(iter(params.values())))
+        self.values = {name: np.full((n_nodes, times.size), np.nan) for name in outputs}
+        self.status = np.zeros(n_nodes, dtype=np.int8)
+        self.messages: dict[int, str] = {}
+        self.resumed = 0
+        self.progress: _Progress | None = None
+
+    def resume(self, journal: Journal) -> None:
+        """Take the successful nodes from the journal; failed ones will be run again."""
+        indices, values, status = journal.completed()
+        ok = indices[status == STATUS_OK]
+        for name in self.outputs:
+            self.values[name][ok] = values[name][status == STATUS_OK]
+        self.status[ok] = STATUS_OK
+        self.resumed = int(ok.size)
+
+    def plan(self, bounds: Sequence[tuple[int, int]]) -> list[_Task]:
+        """The tasks still to run: whole chunks, or the pending nodes of a partly done chunk.
+
+        A partly done chunk had failed nodes in an earlier run; those are run singly, as they
+        would have been in an uninterrupted run.
+        """
+        tasks = []
+        for start, stop in bounds:
+            pending = start + np.flatnonzero(self.status[start:stop] != STATUS_OK)
+            if pending.size:
+                tasks.append(_Task(pending, batched=pending.size == stop - start))
+        return tasks
+
+    def arguments(self, task: _Task) -> tuple[Any, ...]:
+        """The arguments of :func:`_execute` for ``task``."""
+        if task.batched:  # a contiguous chunk: node i's batch slice is params[name][a:b]
+            start, stop = int(task.indices[0]), int(task.indices[-1]) + 1
+            params = {name: array[start:stop] for name, array in self.params.items()}
+        else:
+            params = {name: array[task.indices] for name, array in self.params.items()}
+        return (
+            self.token,
+            self.factory,
+            params,
+            self.times,
+            self.outputs,
+            task.batched,
+            self.retries,
+        )
+
+    def accept(self, task: _Task, values: NDArray[np.float64], messages: Sequence[str]) -> None:
+        """Store a finished task, journal it at once and advance the progress line."""
+        failed = np.array([bool(m) for m in messages])
+        chunk = {
+            name: np.where(failed[:, None], np.nan, values[:, k])
+            for k, name in enumerate(self.outputs)
+        }
+        for name, column in chunk.items():
+            self.values[name][task.indices] = column
+        self.status[task.indices] = np.where(failed, STATUS_FAILED, STATUS_OK)
+        found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
+        for i in task.indices:
+            self.messages.pop(int(i), None)
+        self.messages.update(found)
+        if self.journal is not None:
+            self.journal.record(task.indices, chunk, self.status[task.indices], found)
+        if self.progress is not None:
+            self.progress.advance(task.indices.size)
+
+    def accept_outcome(self, task: _Task, outcome: _Outcome) -> None:
+        self.accept(task, outcome.values, outcome.messages)
+
+    def accept_death(self, task: _Task, message: str) -> None:
+        n = task.indices.size
+        self.accept(task, np.full((n, len(self.outputs), self.times.size), np.nan), [message] * n)
+
+    def result(self, seconds: float) -> RunResult:
+        failures = tuple(
+            NodeFailure(
+                index=i,
+                params={
+                    name: float(array[i]) if array.ndim == 1 else tuple(map(float, array[i]))
+                    for name, array in self.params.items()
+                },
+                message=self.messages[i],
+            )
+            for i in sorted(self.messages)
+        )
+        return RunResult(
+            values=self.values,
+            status=self.status,
+            failures=failures,
+            seconds=seconds,
+            resumed=self.resumed,
+        )
+
+
+def _run_alone(campaign: _Campaign, pool: _Pool, task: _Task) -> _Outcome | str:
+    """Run ``task`` as the only task in the pool: its outcome, or a death message."""
+    future = pool.submit(_execute, *campaign.arguments(task))
+    error = future.exception()
+    if error is None:
+        return future.result()
+    death = pool.death(error)
+    if death is None:
+        raise error
+    pool.rebuild()
+    return death
+
+
+def _isolate(campaign: _Campaign, pool: _Pool, task: _Task) -> None:
+    """Re-run a task that was in flight when a worker died, alone, down to single nodes."""
+    attempts = 1 + campaign.retries if task.indices.size == 1 else 1
+    for _ in range(attempts):
+        found = _run_alone(campaign, pool, task)
+        if isinstance(found, _Outcome):
+            campaign.accept_outcome(task, found)
+            return
+    if task.indices.size == 1:
+        campaign.accept_death(task, found)
+        return
+    for index in task.indices:
+        _isolate(campaign, pool, _Task(np.array([index]), batched=False))
+
+
+def _run_pooled(campaign: _Campaign, pool: _Pool, tasks: Sequence[_Task]) -> None:
+    """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead workers."""
+    queue = deque(tasks)
+    in_flight: dict[Future[_Outcome], _Task] = {}
+    lost: list[_Task] = []
+    try:
+        while queue or in_flight:
+            # After a death, feed nothing more: let the chunks in flight finish or fail first.
+            while queue and not lost and len(in_flight) < pool.slots:
+                task = queue.popleft()
+                in_flight[pool.submit(_execute, *campaign.arguments(task))] = task
+            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
+            for future in done:
+                task = in_flight.pop(future)
+                error = future.exception()
+                if error is None:
+                    campaign.accept_outcome(task, future.result())
+                elif pool.death(error) is None:
+                    raise error
+                else:
+                    lost.append(task)
+            if lost and not in_flight:
+                pool.rebuild()
+                for task in lost:
+                    _isolate(campaign, pool, task)
+                lost = []
+    finally:
+        for future in in_flight:
+            future.cancel()
+
+
+def _workers_pay(
+    trial_seconds: float,
+    n_trial: int,
+    n_rest: int,
+    build_seconds: float,
+    workers: int,
+    backend: str,
+) -> bool:
+    """Whether workers are estimated to finish the remaining nodes sooner than this process."""
+    if workers < 2 or n_rest == 0:
+        return False
+    serial = trial_seconds / n_trial * n_rest
+    parallel = _STARTUP_SECONDS[backend] + build_seconds + serial / workers
+    return parallel < serial
+
+
+# -- argument checks -------------------------------------------------------------------------
+
+
+def _check_arguments(
+    params: Mapping[str, ArrayLike],
+    times: ArrayLike,
+    outputs: Sequence[str],
+    jobs: int | None,
+    backend: str,
+    address: str | None,
+    chunk_size: int | None,
+    retries: int,
+) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64], tuple[str, ...]]:
+    """Validate the arguments of :func:`run_nodes` as a whole; return them as arrays."""
+    problems: list[ConfigProblem] = []
+
+    def integer_at_least(value: object, minimum: int) -> bool:
+        return (
+            isinstance(value, int | np.integer)
+            and not isinstance(value, bool)
+            and (value >= minimum)
+        )
+
+    arrays: dict[str, NDArray[np.float64]] = {}
+    if not isinstance(params, Mapping) or not params:
+        problems.append(ConfigProblem("params", "must map at least one input name to an array"))
+    else:
+        for name, value in params.items():
+            try:
+                array = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                problems.append(ConfigProblem(f"params.{name}", f"not a float array ({exc})"))
+                continue
+            if array.ndim not in (1, 2) or array.shape[0] == 0:
+                problems.append(
+                    ConfigProblem(f"params.{name}", f"must be (N,) or (N, m), got {array.shape}")
+                )
+            elif not np.isfinite(array).all():
+                bad = np.flatnonzero(~np.isfinite(array.reshape(array.shape[0], -1)).all(1))
+                problems.append(
+                    ConfigProblem(f"params.{name}", f"non-finite values at nodes {bad[:10]}")
+                )
+            else:
+                arrays[name] = array
+        lengths = {name: a.shape[0] for name, a in arrays.items()}
+        if len(set(lengths.values())) > 1:
+            problems.append(
+                ConfigProblem("params", f"inputs have different node counts N: {lengths}")
+            )
+    time_grid = np.asarray(times, dtype=np.float64)
+    if time_grid.ndim != 1 or time_grid.size == 0 or not np.isfinite(time_grid).all():
+        problems.append(ConfigProblem("times", "must be a non-empty finite (T,) array"))
+    if (
+        isinstance(outputs, str)
+        or not outputs
+        or not all(isinstance(o, str) for o in outputs)
+        or len(set(outputs)) != len(outputs)
+    ):
+        problems.append(
+            ConfigProblem("outputs", f"must be a sequence of distinct names, got {outputs!r}")
+        )
+    if jobs is not None and not integer_at_least(jobs, 1):
+        problems.append(ConfigProblem("jobs", f"must be a positive integer, got {jobs!r}"))
+    if backend not in BACKENDS:
+        problems.append(ConfigProblem("backend", f"must be one of {BACKENDS}, got {backend!r}"))
+    elif address is not None and backend != "dask":
+        problems.append(ConfigProblem("address", "is only used with backend 'dask'"))
+    if chunk_size is not None and not integer_at_least(chunk_size, 1):
+        problems.append(
+            ConfigProblem("chunk_size", f"must be a positive integer, got {chunk_size!r}")
+        )
+    if not integer_at_least(retries, 0):
+        problems.append(ConfigProblem("retries", f"must be an integer >= 0, got {retries!r}"))
+    if problems:
+        raise ConfigError(problems, source="run_nodes")
+    return arrays, time_grid, tuple(outputs)
+
+
+def _check_model(model: object, outputs: Sequence[str]) -> None:
+    """Check the protocol and that the model offers every requested output."""
+    offered = getattr(model, "outputs", None)
+    if offered is None or not callable(getattr(model, "simulate", None)):
+        raise ConfigError(
+            [ConfigProblem("model_factory", "must build an object with outputs and simulate()")],
+            source="run_nodes",
+        )
+    missing = [name for name in outputs if name not in offered]
+    if missing:
+        raise ConfigError(
+            [ConfigProblem("outputs", f"the model has no output {missing} (it has {offered})")],
+            source="run_nodes",
+        )
+
+
+def _check_journal(journal: Journal, n_nodes: int, outputs: tuple[str, ...], n_times: int) -> None:
+    found = (journal.n_nodes, tuple(journal.outputs), journal.n_times)
+    if found != (n_nodes, outputs, n_times):
+        raise ConfigError(
+            f"journal {journal.directory} holds (nodes, outputs, times) = {found}, this run "
+            f"has {(n_nodes, outputs, n_times)}; delete it or drop --resume"
+        )
+
+
+# -- the entry point -------------------------------------------------------------------------
+
+
+def run_nodes(
+    model_factory: Callable[[], Model],
+    params: Mapping[str, ArrayLike],
+    times: ArrayLike,
+    outputs: Sequence[str],
+    *,
+    jobs: int | None = None,
+    backend: str = "loky",
+    address: str | None = None,
+    chunk_size: int | None = None,
+    retries: int = 0,
+    journal: Journal | None = None,
+    progress: bool | None = None,
+) -> RunResult:
+    """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
+
+    Parameters
+    ----------
+    model_factory:
+        Picklable callable returning a model (``outputs``, ``simulate(params, times)``); it is
+        called once per worker process (and once in this process).
+    params:
+        Input name -> (N,) values, or (N, m) for a field input; node i is row i.
+    times:
+        (T,) output time grid, passed to the model.
+    outputs:
+        Names of the outputs to keep.
+    jobs:
+        Worker processes (slots); default: all cores (for dask with ``address``: all threads
+        of the cluster). ``1`` runs everything in this process.
+    backend:
+        ``"loky"`` or ``"dask"``.
+    address:
+        Scheduler address of a dask cluster; with ``backend="dask"`` and no address a local
+        cluster of ``jobs`` processes is started and closed.
+    chunk_size:
+        Nodes per chunk; default ``min(256, max(1, ceil(N / 16)))``. Results depend on it
+        (batched integrators), so a journal fingerprint must include an explicit chunk size.
+    retries:
+        How many more times a failed node is tried before it is reported.
+    journal:
+        Persists every finished chunk; its successful nodes are taken instead of being run.
+    progress:
+        Progress line on stderr; default: only when stderr is a terminal.
+
+    Returns
+    -------
+    RunResult
+        (N, T) values per output, (N,) status, the failed nodes, wall time, resumed count.
+
+    Raises
+    ------
+    ConfigError
+        Before anything runs, for invalid arguments, a model without a requested output, or a
+        journal that does not match this run.
+    ModelError
+        If the model cannot be built.
+    """
+    start = time.perf_counter()
+    arrays, time_grid, names = _check_arguments(
+        params, times, outputs, jobs, backend, address, chunk_size, retries
+    )
+    n_nodes = len(next(iter(arrays.values())))
+    try:
+        token = hashlib.sha256(cloudpickle.dumps(model_factory)).hexdigest()
+    except Exception as exc:  # pickling can fail with almost any exception type
+        raise ConfigError(
+            [ConfigProblem("model_factory", f"cannot be sent to worker processes: {exc}")],
+            source="run_nodes",
+        ) from exc
+    if journal is not None:
+        _check_journal(journal, n_nodes, names, time_grid.size)
+    model, build_seconds = _cached_model(token, model_factory)
+    _check_model(model, names)
+    campaign = _Campaign(token, model_factory, arrays, time_grid, names, retries, journal)
+    if journal is not None:
+        campaign.resume(journal)
+    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size))
+    show = sys.stderr.isatty() if progress is None else progress
+    campaign.progress = _Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
+    try:
+        if tasks:
+            trial = _execute(*campaign.arguments(tasks[0]))
+            campaign.accept_outcome(tasks[0], trial)
+            rest = tasks[1:]
+            workers = jobs or _default_workers()
+            n_rest = sum(task.indices.size for task in rest)
+            n_trial = tasks[0].indices.size
+            if _workers_pay(trial.seconds, n_trial, n_rest, build_seconds, workers, backend):
+                pool: _Pool = (
+                    _LokyPool(workers) if backend == "loky" else _DaskPool(jobs, workers, address)
+                )
+                try:
+                    _run_pooled(campaign, pool, rest)
+                finally:
+                    pool.close()
+            else:
+                for task in rest:
+                    campaign.accept_outcome(task, _execute(*campaign.arguments(task)))
+    finally:
+        campaign.progress.close()
+    return campaign.result(time.perf_counter() - start)
+
+
+def _default_workers() -> int:
+    from joblib import cpu_count
+
+    return max(1, cpu_count())

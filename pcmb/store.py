@@ -1,0 +1,219 @@
+"""The result file: one HDF5 file per study (SPEC §5), written atomically.
+
+The only module that imports h5py. Layout::
+
+    /                        attrs: pcmb_version, schema_version, name, config, config_sha256,
+                                    method, created, versions, command_line, seconds,
+                                    warnings (JSON list), failures (JSON list)
+    /time (T,)   /node (N,)   /term (S,)   /input (n,)      dimension scales
+    /inputs                  attrs: names, distributions (JSON)
+    /nodes/germ (N, n)   /nodes/params (N, n)   /nodes/weights (N,)   /nodes/status (N,)
+    /basis/multi_index (S, n)
+    /outputs/<name>/values (N, T)  coefficients (S, T)  mean (T,)  std (T,)
+                    sobol_first (n, T)  sobol_total (n, T)
+
+Every dataset has its dimension scales attached, so
+``xarray.open_dataset(path, group="outputs/x1", engine="h5netcdf")`` shows named dimensions.
+The file is written under a temporary name in the same folder, flushed, fsynced and renamed
+into place: a crash never leaves a truncated file at the output path.
+
+Compression: none. Measured on a study of the default quarter car's size (216 nodes × 301
+times, two outputs plus coefficients; 1.56 MB): gzip+shuffle saved 11 % of the size for 9×
+the write time (7.6 -> 69 ms). Chaos values are dense floating-point data that compress poorly.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import platform
+import tempfile
+from collections.abc import Mapping
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from pcmb.executor import NodeFailure
+from pcmb.expansion import ChaosExpansion
+from pcmb.inputs import from_description
+from pcmb.study import StudyResult
+
+__all__ = ["SCHEMA_VERSION", "load", "write_result"]
+
+SCHEMA_VERSION = 1
+_VERSIONED = ("numpy", "scipy", "h5py", "joblib", "pydantic", "pyyaml", "mujoco")
+
+
+def _versions() -> dict[str, str]:
+    found = {"python": platform.python_version()}
+    for package in _VERSIONED:
+        try:
+            found[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            continue
+    return found
+
+
+def _scale(file: h5py.File, name: str, data: np.ndarray) -> h5py.Dataset:
+    dataset = file.create_dataset(name, data=data)
+    dataset.make_scale(name)
+    return dataset
+
+
+def _attach(dataset: h5py.Dataset, *scales: h5py.Dataset) -> h5py.Dataset:
+    for axis, scale in enumerate(scales):
+        dataset.dims[axis].attach_scale(scale)
+    return dataset
+
+
+def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) -> None:
+    from pcmb import __version__
+
+    n_nodes = result.nodes.shape[0]
+    attrs = file.attrs
+    attrs["pcmb_version"] = __version__
+    attrs["schema_version"] = SCHEMA_VERSION
+    attrs["name"] = result.name
+    attrs["method"] = result.method
+    attrs["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
+    attrs["versions"] = json.dumps(_versions())
+    attrs["seconds"] = result.seconds
+    attrs["warnings"] = json.dumps(list(result.warnings))
+    attrs["failures"] = json.dumps(
+        [{"index": f.index, "params": f.params, "message": f.message} for f in result.failures]
+    )
+    for key in ("config", "config_sha256", "command_line"):
+        attrs[key] = provenance.get(key, "")
+
+    time_ = _scale(file, "time", result.times)
+    node = _scale(file, "node", np.arange(n_nodes))
+    input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
+
+    inputs = file.create_group("inputs")
+    inputs.attrs["names"] = json.dumps(list(result.input_names))
+    inputs.attrs["distributions"] = json.dumps([d.describe() for d in result.distributions])
+
+    nodes = file.create_group("nodes")
+    _attach(nodes.create_dataset("germ", data=result.nodes), node, input_)
+    _attach(nodes.create_dataset("params", data=result.params), node, input_)
+    _attach(nodes.create_dataset("status", data=result.status.astype(np.int8)), node)
+    if result.weights is not None:
+        _attach(nodes.create_dataset("weights", data=result.weights), node)
+
+    index = result.multi_index
+    term = None
+    if index is not None:
+        term = _scale(file, "term", np.arange(index.shape[0]))
+        _attach(file.create_dataset("basis/multi_index", data=index), term, input_)
+
+    # HDF5 lists groups alphabetically: keep the model's output order explicitly.
+    file.create_group("outputs").attrs["names"] = json.dumps(list(result.values))
+    for name, values in result.values.items():
+        group = file.create_group(f"outputs/{name}")
+        _attach(group.create_dataset("values", data=values), node, time_)
+        _attach(group.create_dataset("mean", data=result.mean(name)), time_)
+        _attach(group.create_dataset("std", data=result.std(name)), time_)
+        expansion = result.expansions.get(name)
+        if expansion is not None and term is not None:
+            _attach(group.create_dataset("coefficients", data=expansion.coefficients), term, time_)
+            _attach(
+                group.create_dataset("sobol_first", data=expansion.sobol_first()), input_, time_
+            )
+            _attach(
+                group.create_dataset("sobol_total", data=expansion.sobol_total()), input_, time_
+            )
+
+
+def write_result(
+    path: str | os.PathLike[str], result: StudyResult, *, provenance: Mapping[str, str]
+) -> Path:
+    """Write a study result atomically.
+
+    Parameters
+    ----------
+    path:
+        Destination ``.h5`` file (its folder is created if needed); replaced if it exists.
+    result:
+        What the study produced.
+    provenance:
+        ``config`` (the YAML text), ``config_sha256``, ``command_line`` (any may be absent).
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(handle)
+    try:
+        with h5py.File(temporary, "w") as file:
+            _write(file, result, provenance)
+            file.flush()
+        with open(temporary, "rb") as written:
+            os.fsync(written.fileno())
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _text(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def load(path: str | os.PathLike[str]) -> StudyResult:
+    """Read a result file back: values, expansions and statistics, without knowing the layout.
+
+    Raises
+    ------
+    ValueError
+        If the file is not a pcmb result or was written by a newer schema.
+    """
+    with h5py.File(path, "r") as file:
+        attrs = file.attrs
+        if "schema_version" not in attrs:
+            raise ValueError(f"{path} is not a pcmb result file")
+        if int(attrs["schema_version"]) > SCHEMA_VERSION:
+            raise ValueError(
+                f"{path} has schema version {int(attrs['schema_version'])}; this pcmb reads "
+                f"up to {SCHEMA_VERSION}: upgrade pcmb"
+            )
+        names = tuple(json.loads(_text(file["inputs"].attrs["names"])))
+        dists = tuple(
+            from_description(d) for d in json.loads(_text(file["inputs"].attrs["distributions"]))
+        )
+        index = file["basis/multi_index"][()] if "basis" in file else None
+        values: dict[str, np.ndarray] = {}
+        expansions: dict[str, ChaosExpansion] = {}
+        for name in json.loads(_text(file["outputs"].attrs["names"])):
+            group = file["outputs"][name]
+            values[name] = group["values"][()]
+            if "coefficients" in group and index is not None:
+                expansions[name] = ChaosExpansion(group["coefficients"][()], index, dists, names)
+        failures = tuple(
+            NodeFailure(f["index"], f["params"], f["message"])
+            for f in json.loads(_text(attrs.get("failures", "[]")))
+        )
+        return StudyResult(
+            name=_text(attrs["name"]),
+            method=_text(attrs["method"]),
+            times=file["time"][()],
+            input_names=names,
+            distributions=dists,
+            nodes=file["nodes/germ"][()],
+            params=file["nodes/params"][()],
+            weights=file["nodes/weights"][()] if "weights" in file["nodes"] else None,
+            status=file["nodes/status"][()],
+            values=values,
+            expansions=expansions,
+            failures=failures,
+            warnings=tuple(json.loads(_text(attrs.get("warnings", "[]")))),
+            seconds=float(attrs.get("seconds", 0.0)),
+        )

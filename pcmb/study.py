@@ -1,0 +1,449 @@
+"""The pipeline: nodes -> model runs -> coefficients -> statistics -> one result file.
+
+The command line and the Python API share this one code path::
+
+    import numpy as np, pcmb
+
+    def model(params, times):                       # any per-point simulator
+        return {"y": params["a"] * np.sin(params["w"] * times)}
+
+    study = pcmb.Study(model, {"a": pcmb.Uniform(0.5, 1.5), "w": pcmb.Normal(2.0, 0.1)},
+                       times=np.linspace(0, 10, 201), order=5, outputs=["y"])
+    result = study.run("results/toy.h5")             # or study.run() to keep it in memory
+    result.mean("y"), result.std("y"), result.sobol_total("y")
+
+``Study.from_config(pcmb.config.load_config("configs/quarter_car.yaml"))`` builds the same
+object from a YAML file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pcmb.basis import total_index_set
+from pcmb.errors import ConfigError, ModelRunError
+from pcmb.executor import NodeFailure, run_nodes
+from pcmb.expansion import ChaosExpansion
+from pcmb.inputs import Distribution
+from pcmb.journal import Journal
+from pcmb.model import Model, ObjectModelFactory
+from pcmb.recovery import fit_largest_stable, project_tensor
+from pcmb.sampling import NodeSet, TensorGrid, random_nodes
+
+if TYPE_CHECKING:
+    from pcmb.config import StudyConfig
+
+__all__ = ["Study", "StudyResult"]
+
+Method = Literal["collocation", "montecarlo", "lhs", "sobol"]
+FailurePolicy = Literal["abort", "retry", "regress"]
+_SAMPLING: tuple[str, ...] = ("montecarlo", "lhs", "sobol")
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """Everything a study produced (and everything a result file holds).
+
+    Attributes
+    ----------
+    name, method:
+        The study's name and node method.
+    times:
+        (T,) output grid.
+    input_names, distributions:
+        The n inputs in germ order.
+    nodes, params:
+        (N, n) germ and physical coordinates of the nodes.
+    weights:
+        (N,) quadrature weights (collocation) or ``None`` (sampling).
+    status:
+        (N,) int8: 0 pending, 1 ok, 2 failed.
+    values:
+        Output name -> (N, T) model values (NaN rows for failed nodes).
+    expansions:
+        Output name -> :class:`ChaosExpansion` (empty for sampling without a fit).
+    failures:
+        The failed nodes.
+    warnings:
+        Everything the user must know about the trustworthiness of the numbers.
+    seconds:
+        Wall time of the model runs.
+    """
+
+    name: str
+    method: str
+    times: NDArray[np.float64]
+    input_names: tuple[str, ...]
+    distributions: tuple[Distribution, ...]
+    nodes: NDArray[np.float64]
+    params: NDArray[np.float64]
+    weights: NDArray[np.float64] | None
+    status: NDArray[np.int8]
+    values: dict[str, NDArray[np.float64]]
+    expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
+    failures: tuple[NodeFailure, ...] = ()
+    warnings: tuple[str, ...] = ()
+    seconds: float = 0.0
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(self.values)
+
+    @property
+    def multi_index(self) -> NDArray[np.int64] | None:
+        """(S, n) the chaos terms, or ``None`` without an expansion."""
+        first = next(iter(self.expansions.values()), None)
+        return None if first is None else first.multi_index
+
+    def _ok_values(self, name: str) -> NDArray[np.float64]:
+        return self.values[name][self.status == 1]
+
+    def mean(self, name: str) -> NDArray[np.float64]:
+        """(T,) mean of an output: from the expansion, else the sample mean."""
+        if name in self.expansions:
+            return self.expansions[name].mean()
+        return self._ok_values(name).mean(axis=0)
+
+    def std(self, name: str) -> NDArray[np.float64]:
+        """(T,) standard deviation: from the expansion, else the sample std (ddof 1)."""
+        if name in self.expansions:
+            return self.expansions[name].std()
+        return self._ok_values(name).std(axis=0, ddof=1)
+
+    def sobol_first(self, name: str) -> NDArray[np.float64]:
+        """(n, T) first-order Sobol' indices (needs an expansion)."""
+        return self.expansions[name].sobol_first()
+
+    def sobol_total(self, name: str) -> NDArray[np.float64]:
+        """(n, T) total Sobol' indices (needs an expansion)."""
+        return self.expansions[name].sobol_total()
+
+
+def _check_inputs(inputs: Mapping[str, Distribution]) -> dict[str, Distribution]:
+    if not inputs:
+        raise ConfigError("a study needs at least one input")
+    for name, dist in inputs.items():
+        if not isinstance(dist, Distribution):
+            raise ConfigError(f"input {name!r} must be a pcmb distribution, got {dist!r}")
+    return dict(inputs)
+
+
+class Study:
+    """A collocation (or sampling) study of a model.
+
+    Parameters
+    ----------
+    model:
+        A model factory (a picklable callable returning a model, as built from a config),
+        a model class (constructed with ``params``), a model object, or a per-point
+        function ``f(params: dict, times) -> dict``.
+    inputs:
+        Ordered mapping input name -> distribution; the order is the germ order.
+    times:
+        (T,) output grid.
+    order:
+        Chaos order, one for all inputs or a mapping input -> order.
+    basis:
+        ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P).
+    method:
+        ``"collocation"`` (tensor Gauss nodes) or a sampling method ``"montecarlo"``,
+        ``"lhs"``, ``"sobol"`` (with ``samples`` and ``seed``; ``fit="regression"`` adds a
+        least-squares chaos fit of total order ``order``).
+    outputs:
+        Outputs to keep (default: all the model declares).
+    params:
+        Nominal parameters for a model class or function (ignored for a factory).
+    name:
+        Free text stored in the result.
+    jobs, backend, address, chunk_size:
+        Execution settings (see :func:`pcmb.executor.run_nodes`).
+    on_failure, retries:
+        Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
+        node), ``"retry"`` (re-run failed nodes ``retries`` times, then abort) or
+        ``"regress"`` (least-squares refit on the surviving nodes, recorded as a warning).
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        inputs: Mapping[str, Distribution],
+        times: ArrayLike,
+        *,
+        order: int | Mapping[str, int] = 3,
+        basis: Literal["tensor", "total"] = "tensor",
+        method: Method = "collocation",
+        samples: int | None = None,
+        seed: int = 0,
+        fit: Literal["none", "regression"] = "none",
+        outputs: Sequence[str] | None = None,
+        params: Mapping[str, Any] | None = None,
+        name: str = "study",
+        jobs: int | None = None,
+        backend: str = "loky",
+        address: str | None = None,
+        chunk_size: int | None = None,
+        on_failure: FailurePolicy = "abort",
+        retries: int = 1,
+    ):
+        self.inputs = _check_inputs(inputs)
+        self.times = np.asarray(times, dtype=float)
+        if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
+            raise ConfigError("times must be a non-empty increasing 1-D grid")
+        self.order = order
+        self.basis = basis
+        self.method = method
+        self.samples = samples
+        self.seed = seed
+        self.fit = fit
+        self.name = name
+        self.jobs, self.backend, self.address = jobs, backend, address
+        self.chunk_size = chunk_size
+        self.on_failure, self.retries = on_failure, retries
+        self.model_factory: Callable[[], Model] = (
+            model
+            if _is_factory(model)
+            else ObjectModelFactory(model, dict(params or {}), _tuple(outputs))
+        )
+        self.outputs = _tuple(outputs)
+        self.fingerprint_extra = ""
+        if method in _SAMPLING and samples is None:
+            raise ConfigError(f"method {method!r} needs a number of samples")
+        if method not in ("collocation", *_SAMPLING):
+            raise ConfigError(f"unknown method {method!r}")
+
+    # -- construction from a config -----------------------------------------------------------
+
+    @classmethod
+    def from_config(cls, config: StudyConfig) -> Study:
+        """The study a validated config describes (same code path as ``pcmb run``)."""
+        method = config.method
+        execution = config.execution
+        study = cls(
+            config.model_factory(),
+            dict(zip(config.input_names, config.distributions, strict=True)),
+            config.times,
+            order=dict(zip(config.input_names, config.orders, strict=True))
+            if config.orders is not None
+            else 0,
+            basis=method.basis,
+            method=method.kind,
+            samples=method.samples,
+            seed=method.seed,
+            fit=method.fit,
+            outputs=config.output_names,
+            name=config.name,
+            jobs=execution.jobs,
+            backend=execution.backend,
+            address=execution.address,
+            chunk_size=execution.chunk_size,
+            on_failure=execution.on_failure,
+            retries=execution.retries,
+        )
+        study.fingerprint_extra = config.sha256
+        return study
+
+    # -- nodes --------------------------------------------------------------------------------
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(self.inputs)
+
+    @property
+    def orders(self) -> tuple[int, ...]:
+        """Chaos order per input, germ order."""
+        if isinstance(self.order, Mapping):
+            missing = set(self.inputs) - set(self.order)
+            if missing:
+                raise ConfigError(f"no order given for input(s) {sorted(missing)}")
+            return tuple(int(self.order[name]) for name in self.inputs)
+        return (int(self.order),) * len(self.inputs)
+
+    def node_set(self) -> TensorGrid | NodeSet:
+        """The nodes this study runs: a tensor Gauss grid or random samples."""
+        dists = tuple(self.inputs.values())
+        if self.method == "collocation":
+            return TensorGrid(dists, self.orders)
+        return random_nodes(dists, int(self.samples or 0), self.method, self.seed)
+
+    def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> str:
+        """Hash of everything that changes the results (for the resume journal)."""
+        digest = hashlib.sha256()
+        for array in (nodes.params, self.times):
+            digest.update(np.ascontiguousarray(array).tobytes())
+        digest.update(json.dumps([list(outputs), self.chunk_size, self.fingerprint_extra]).encode())
+        return digest.hexdigest()
+
+    # -- running ------------------------------------------------------------------------------
+
+    def resolve_outputs(self) -> tuple[str, ...]:
+        """The outputs to keep: the requested ones, checked against the model."""
+        model = self.model_factory()
+        declared = tuple(model.outputs)
+        if self.outputs is None:
+            return declared
+        unknown = [name for name in self.outputs if name not in declared]
+        if unknown:
+            raise ConfigError(f"the model has no output(s) {unknown}; it has {list(declared)}")
+        return self.outputs
+
+    def run(
+        self,
+        output: str | Path | None = None,
+        *,
+        resume: bool = False,
+        progress: bool | None = None,
+        provenance: Mapping[str, str] | None = None,
+    ) -> StudyResult:
+        """Run the model at every node and recover the statistics.
+
+        Parameters
+        ----------
+        output:
+            Result file (HDF5, written atomically); ``None`` keeps the result in memory
+            and journals nothing.
+        resume:
+            Continue from the journal ``<output>.journal`` of an interrupted run.
+        progress:
+            Progress bar on stderr (default: when stderr is a terminal).
+        provenance:
+            Extra attributes for the file (config text, command line).
+
+        Raises
+        ------
+        ConfigError
+            Bad settings, or an unfinished journal exists and ``resume`` is False.
+        ModelRunError
+            Nodes failed and the policy does not allow going on; the journal is kept.
+        """
+        nodes = self.node_set()
+        outputs = self.resolve_outputs()
+        journal = None
+        if output is not None:
+            journal_dir = Path(f"{output}.journal")
+            if Journal.exists(journal_dir) and not resume:
+                raise ConfigError(
+                    f"{journal_dir} holds the finished nodes of an interrupted run: "
+                    "continue with --resume, or delete it to start over"
+                )
+            journal = Journal(
+                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, self.times.size
+            )
+        start = time.perf_counter()
+        runs = run_nodes(
+            self.model_factory,
+            dict(zip(self.input_names, nodes.params.T, strict=True)),
+            self.times,
+            outputs,
+            jobs=self.jobs,
+            backend=self.backend,
+            address=self.address,
+            chunk_size=self.chunk_size,
+            retries=self.retries if self.on_failure == "retry" else 0,
+            journal=journal,
+            progress=progress,
+        )
+        seconds = time.perf_counter() - start
+        if runs.failures and self.on_failure != "regress":
+            kept = f"; finished nodes are kept in {journal.directory}" if journal else ""
+            raise ModelRunError(
+                runs.failures,
+                f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
+                f"(on_failure: {self.on_failure}){kept}:",
+            )
+        result = self._recover(nodes, runs.values, runs.status, runs.failures, seconds)
+        if output is not None:
+            from pcmb.store import write_result  # h5py only when a file is written
+
+            write_result(output, result, provenance=provenance or {})
+            if journal is not None:
+                journal.remove()
+        return result
+
+    # -- recovery -----------------------------------------------------------------------------
+
+    def _projection_index(self, grid: TensorGrid) -> NDArray[np.int64]:
+        """The terms recovered from a complete grid: the tensor set, or |α| <= P inside it."""
+        if self.basis == "tensor":
+            return grid.multi_index
+        index = total_index_set(len(self.inputs), max(self.orders))
+        return index[np.all(index <= np.array(self.orders), axis=1)]
+
+    def _recover(
+        self,
+        nodes: TensorGrid | NodeSet,
+        values: dict[str, NDArray[np.float64]],
+        status: NDArray[np.int8],
+        failures: tuple[NodeFailure, ...],
+        seconds: float,
+    ) -> StudyResult:
+        dists = tuple(self.inputs.values())
+        names = self.input_names
+        ok = status == 1
+        warnings: list[str] = []
+        expansions: dict[str, ChaosExpansion] = {}
+        if failures:
+            warnings.append(
+                f"{len(failures)} of {nodes.size} node(s) failed and were left out "
+                f"(on_failure: regress): " + "; ".join(str(f) for f in failures)
+            )
+        if isinstance(nodes, TensorGrid) and not failures:
+            index = self._projection_index(nodes)
+            for name, y in values.items():
+                coefficients = project_tensor(nodes, y, index)
+                expansions[name] = ChaosExpansion(coefficients, index, dists, names)
+        elif isinstance(nodes, TensorGrid) or self.fit == "regression":
+            # An incomplete grid is no quadrature rule: refit by least squares instead.
+            max_order = max(self.orders)
+            weights = nodes.weights[ok] if isinstance(nodes, TensorGrid) else None
+            worst_loo = 0.0
+            for name, y in values.items():
+                index, fit = fit_largest_stable(dists, nodes.nodes[ok], y[ok], max_order, weights)
+                expansions[name] = ChaosExpansion(fit.coefficients, index, dists, names)
+                worst_loo = max(worst_loo, float(np.nanmax(fit.loo_error, initial=0.0)))
+            order = int(index.sum(axis=1).max())
+            warnings.append(
+                f"least-squares chaos of total order {order} ({index.shape[0]} terms, asked "
+                f"{max_order}) on {int(ok.sum())} nodes; worst relative leave-one-out error "
+                f"{worst_loo:.3g}"
+            )
+        return StudyResult(
+            name=self.name,
+            method=self.method,
+            times=self.times,
+            input_names=names,
+            distributions=dists,
+            nodes=nodes.nodes,
+            params=nodes.params,
+            weights=nodes.weights if isinstance(nodes, TensorGrid) else None,
+            status=status,
+            values=values,
+            expansions=expansions,
+            failures=failures,
+            warnings=tuple(warnings),
+            seconds=seconds,
+        )
+
+
+def _is_factory(model: Any) -> bool:
+    """Whether ``model`` is one of pcmb's model factories (as built from a config)."""
+    from pcmb.model import CommandModelFactory, PythonModelFactory
+
+    factories: tuple[type, ...] = (PythonModelFactory, CommandModelFactory, ObjectModelFactory)
+    mujoco = sys.modules.get("pcmb.mujoco_model")  # a MuJoCo factory exists only once imported
+    if mujoco is not None:
+        factories += (mujoco.MujocoModelFactory,)
+    return isinstance(model, factories)
+
+
+def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
+    return None if values is None else tuple(values)

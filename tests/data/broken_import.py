@@ -1,0 +1,3 @@
+"""A model file whose import fails."""
+
+raise RuntimeError("this module cannot be imported")

@@ -1,0 +1,122 @@
+"""The command line: run, validate, inspect, schema, exit codes, resume after SIGKILL."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from pipeline_fixtures import write_study
+
+import pcmb
+from pcmb.cli import main
+
+
+def test_run_writes_a_complete_result(tmp_path, capsys):
+    config = write_study(tmp_path)
+    out = tmp_path / "explicit.h5"
+    assert main(["run", str(config), "-o", str(out), "--quiet"]) == 0
+    result = pcmb.load(out)
+    # y = a t + b², a ~ U[1, 3], b ~ N(0, 1): E y = 2t + 1.
+    np.testing.assert_allclose(result.mean("y"), 2 * result.times + 1, atol=1e-12)
+    captured = capsys.readouterr()
+    assert captured.out == "" and "wrote" in captured.err
+    assert not (tmp_path / "explicit.h5.journal").exists()
+
+
+def test_output_from_the_config_and_inspect(tmp_path, capsys):
+    config = write_study(tmp_path)
+    assert main(["run", str(config), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["inspect", str(tmp_path / "out.h5")]) == 0
+    report = capsys.readouterr().out
+    assert "16 ok, 0 failed" in report and "y" in report and "16 terms" in report
+
+
+def test_validate_prints_a_summary_and_runs_nothing(tmp_path, capsys):
+    config = write_study(tmp_path)
+    assert main(["validate", str(config)]) == 0
+    summary = capsys.readouterr().out
+    assert "16 tensor Gauss nodes" in summary and "uniform(low=1.0, high=3.0)" in summary
+    assert not (tmp_path / "out.h5").exists()
+
+
+def test_schema_is_json(capsys):
+    assert main(["schema"]) == 0
+    schema = json.loads(capsys.readouterr().out)
+    assert "properties" in schema or "$defs" in schema
+
+
+def test_invalid_config_exits_2_without_traceback_or_file(tmp_path, capsys):
+    config = write_study(tmp_path)
+    config.write_text(config.read_text().replace("high: 3.0", "high: 0.5"))
+    assert main(["run", str(config)]) == 2
+    err = capsys.readouterr().err
+    assert "inputs.a" in err and "Traceback" not in err
+    assert not (tmp_path / "out.h5").exists()
+
+
+def test_usage_errors_exit_2(capsys):
+    assert main(["run"]) == 2
+    assert main(["inspect", "/nonexistent.h5"]) == 2
+    assert main(["frobnicate"]) == 2
+
+
+def test_model_failure_exits_3_naming_the_nodes(tmp_path, capsys):
+    config = write_study(tmp_path, extra_params=", fail_above: 2.5")
+    assert main(["run", str(config), "--quiet"]) == 3
+    err = capsys.readouterr().err
+    assert "blew up at a=2.86" in err and "node 12 (a=2.86" in err
+    assert not (tmp_path / "out.h5").exists()
+    # Finished nodes are not lost: the journal stays, and a plain re-run refuses to clobber it.
+    assert (tmp_path / "out.h5.journal").is_dir()
+    assert main(["run", str(config), "--quiet"]) == 2
+    assert "--resume" in capsys.readouterr().err
+
+
+def test_regress_policy_records_the_failures(tmp_path):
+    config = write_study(
+        tmp_path, extra_params=", fail_above: 2.5", execution="jobs: 1, on_failure: regress"
+    )
+    assert main(["run", str(config), "--quiet"]) == 0
+    result = pcmb.load(tmp_path / "out.h5")
+    assert np.sum(result.status == 2) == 4
+    assert any("left out" in w for w in result.warnings)
+
+
+@pytest.mark.slow
+def test_sigkill_then_resume_gives_identical_results(tmp_path):
+    """Kill a real `pcmb run` mid-way; --resume runs only the rest and matches a clean run."""
+    config = write_study(
+        tmp_path, order=7, extra_params=", delay: 0.02", execution="jobs: 1, chunk_size: 4"
+    )
+    out = tmp_path / "out.h5"
+    journal = tmp_path / "out.h5.journal"
+    command = [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"]
+    process = subprocess.Popen(command, cwd=tmp_path, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while len(list(journal.glob("record-*.npz"))) < 3:
+        assert process.poll() is None, "the run ended before it could be killed"
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait()
+    assert not out.exists()
+    done_before = len(list(journal.glob("record-*.npz")))
+    assert 3 <= done_before < 16  # 64 nodes in chunks of 4
+
+    assert main(["run", str(config), "--resume", "--quiet"]) == 0
+    resumed = pcmb.load(out)
+    assert not journal.exists()
+
+    clean = tmp_path / "clean.h5"
+    assert main(["run", str(config), "-o", str(clean), "--quiet"]) == 0
+    reference = pcmb.load(clean)
+    for name in ("y", "z"):
+        np.testing.assert_array_equal(resumed.values[name], reference.values[name])
+        np.testing.assert_array_equal(
+            resumed.expansions[name].coefficients, reference.expansions[name].coefficients
+        )

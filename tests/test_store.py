@@ -1,0 +1,102 @@
+"""The result file: SPEC §5 layout, round trip, named dimensions, atomic writes."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb import store
+
+INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Beta(2.0, 3.0, -1.0, 1.0)}
+TIMES = np.linspace(0.0, 1.0, 4)
+
+
+def model(params, times):
+    return {"y": params["a"] * times + params["b"] ** 3, "w": np.cos(params["a"] * times)}
+
+
+model.outputs = ("y", "w")
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    path = tmp_path_factory.mktemp("store") / "sub" / "result.h5"
+    study = pcmb.Study(model, INPUTS, TIMES, order=3, params={"a": 2.0, "b": 0.0}, jobs=1)
+    result = study.run()
+    store.write_result(path, result, provenance={"config": "name: x\n", "config_sha256": "abc"})
+    return path, result
+
+
+def test_layout_follows_the_spec(written):
+    path = written[0]
+    with h5py.File(path) as f:
+        assert f.attrs["schema_version"] == store.SCHEMA_VERSION
+        assert f.attrs["config"] == "name: x\n" and f.attrs["config_sha256"] == "abc"
+        assert "numpy" in json.loads(f.attrs["versions"])
+        assert f["time"].shape == (4,)
+        assert json.loads(f["inputs"].attrs["names"]) == ["a", "b"]
+        assert f["nodes/germ"].shape == f["nodes/params"].shape == (16, 2)
+        assert f["nodes/weights"][()].sum() == pytest.approx(1.0)
+        assert f["nodes/status"].dtype == np.int8
+        assert f["basis/multi_index"].shape == (16, 2)
+        for name in ("y", "w"):
+            group = f[f"outputs/{name}"]
+            assert group["values"].shape == (16, 4)
+            assert group["coefficients"].shape == (16, 4)
+            assert group["mean"].shape == group["std"].shape == (4,)
+            assert group["sobol_first"].shape == group["sobol_total"].shape == (2, 4)
+
+
+def test_round_trip_through_load(written):
+    path, result = written
+    loaded = pcmb.load(path)
+    assert loaded.input_names == ("a", "b") and loaded.method == "collocation"
+    for name in ("y", "w"):
+        np.testing.assert_array_equal(loaded.values[name], result.values[name])
+        np.testing.assert_array_equal(loaded.mean(name), result.mean(name))
+        np.testing.assert_array_equal(loaded.sobol_total(name), result.sobol_total(name))
+    np.testing.assert_array_equal(
+        loaded.distributions[1].to_physical([0.3]), INPUTS["b"].to_physical([0.3])
+    )
+
+
+def test_xarray_sees_named_dimensions(written):
+    xarray = pytest.importorskip("xarray")
+    path, result = written
+    with xarray.open_dataset(path, group="outputs/y", engine="h5netcdf") as ds:
+        assert ds["values"].dims == ("node", "time")
+        assert ds["coefficients"].dims == ("term", "time")
+        assert ds["sobol_first"].dims == ("input", "time")
+        np.testing.assert_array_equal(ds["mean"].values, result.mean("y"))
+
+
+def test_a_failed_write_leaves_nothing_behind(written, tmp_path, monkeypatch):
+    _, result = written
+    target = tmp_path / "crash.h5"
+
+    def explode(*args):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(store, "_write", explode)
+    with pytest.raises(RuntimeError, match="disk full"):
+        store.write_result(target, result, provenance={})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_existing_file_is_replaced_whole(written, tmp_path):
+    _, result = written
+    target = tmp_path / "again.h5"
+    target.write_bytes(b"old contents")
+    store.write_result(target, result, provenance={})
+    assert pcmb.load(target).outputs == ("y", "w")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["again.h5"]
+
+
+def test_load_refuses_other_files(tmp_path):
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w") as f:
+        f["x"] = 1
+    with pytest.raises(ValueError, match="not a pcmb result"):
+        pcmb.load(other)
