@@ -36,6 +36,7 @@ _EXPORTS = {
         "as_model",
         "load_entry",
     ],
+    "pcmb.mujoco_model": ["MujocoModel", "MujocoModelFactory"],
     "pcmb.polynomials": [
         "GaussRule",
         "Hermite",
@@ -79,6 +80,8 @@ __all__ = [
     "Model",
     "ModelError",
     "ModelRunError",
+    "MujocoModel",
+    "MujocoModelFactory",
     "NodeFailure",
     "NodeSet",
     "Normal",

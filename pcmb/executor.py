@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import re
 import sys
 import threading
@@ -308,6 +309,10 @@ class _Pool(Protocol):
     def close(self) -> None: ...
 
 
+#: Environment variables that cap native thread pools in worker processes.
+_THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 class _LokyPool:
     """joblib's reusable loky process pool; it stays warm for the next call until idle."""
 
@@ -318,8 +323,14 @@ class _LokyPool:
     def rebuild(self) -> None:
         from joblib.externals.loky import get_reusable_executor
 
-        # A broken pool is replaced by a fresh one here.
-        self._executor = get_reusable_executor(max_workers=self.slots, timeout=_LOKY_IDLE_TIMEOUT)
+        # A broken pool is replaced by a fresh one here. Each worker gets its share of the cores
+        # for native thread pools (BLAS, OpenMP, MuJoCo's threads), as joblib.Parallel does,
+        # so that `slots` workers do not each start one thread per core.
+        share = str(max(1, (os.cpu_count() or 1) // self.slots))
+        env = {name: share for name in _THREAD_LIMITS}
+        self._executor = get_reusable_executor(
+            max_workers=self.slots, timeout=_LOKY_IDLE_TIMEOUT, env=env
+        )
 
     def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
         return self._executor.submit(fn, *args)
