@@ -13,6 +13,7 @@ from typing import Any
 #: Public name -> module that defines it. Loaded on first access (PEP 562), so that
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
+    "pcmb.batched_ivp": ["StackedODEModel", "solve_projected", "solve_stacked"],
     "pcmb.basis": [
         "PolynomialBasis",
         "RunResult",
@@ -90,6 +91,7 @@ __all__ = [
     "PointwiseModel",
     "PolynomialBasis",
     "RunResult",
+    "StackedODEModel",
     "Study",
     "StudyConfig",
     "StudyResult",
@@ -110,6 +112,8 @@ __all__ = [
     "project_tensor",
     "random_nodes",
     "run_nodes",
+    "solve_projected",
+    "solve_stacked",
     "spectral_covariance",
     "tensor_index_set",
     "total_index_set",

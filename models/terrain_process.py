@@ -1,0 +1,53 @@
+"""The two-mode periodic terrain process of the uncertain-terrain case (SPEC §8.3, Part II Eq. 11).
+
+Not a model: the profile shared by ``quarter_car.py`` (the car drives over it) and
+``oscillator.py`` (its zero-mean part, seen in time, drives the oscillator). Model files import
+it as a sibling module; pcmb puts a model file's folder on ``sys.path`` while loading it.
+
+The random part of the profile at distance s is
+
+    A1 (ξ11 cos(s/L1) + ξ12 sin(s/L1)) + A2 (ξ21 cos(s/L2) + ξ22 sin(s/L2)),
+
+with ξ independent standard normal germs: its covariance A1² cos(Δs/L1) + A2² cos(Δs/L2)
+(Part II Eq. 12) has exactly these two eigenpairs, so the four germs are the whole
+Karhunen–Loève expansion, not a truncation of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+# Part II Eq. 16: a period D = 100 m; correlation lengths L_n = D / (2π n) for n = 3 and 7.
+PERIOD = 100.0
+L1_DEFAULT = PERIOD / (6 * np.pi)  # ≈ 5.3 m
+L2_DEFAULT = PERIOD / (14 * np.pi)  # ≈ 2.3 m
+
+GERMS = ("xi11", "xi12", "xi21", "xi22")
+
+
+def random_profile(
+    s: float | NDArray[np.float64], p: Mapping[str, NDArray[np.float64]]
+) -> NDArray[np.float64]:
+    """Zero-mean random part of the profile at distance ``s``.
+
+    Parameters
+    ----------
+    s:
+        Distance travelled, a scalar or (B,) (one value per node).
+    p:
+        (B,) arrays ``A1``, ``A2``, ``L1``, ``L2`` and the germs ``xi11``, ``xi12``,
+        ``xi21``, ``xi22``.
+
+    Returns
+    -------
+    NDArray
+        Profile height, (B,).
+    """
+    phase1 = s / p["L1"]
+    phase2 = s / p["L2"]
+    return p["A1"] * (p["xi11"] * np.cos(phase1) + p["xi12"] * np.sin(phase1)) + p["A2"] * (
+        p["xi21"] * np.cos(phase2) + p["xi22"] * np.sin(phase2)
+    )
