@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import gaussian_kde
 
 from pcmb.basis import PolynomialBasis
 from pcmb.inputs import Distribution
@@ -230,6 +229,8 @@ class ChaosExpansion:
             raise ValueError(
                 f"pdf needs a scalar output, got trailing shape {self.shape}: index it"
             )
+        from scipy.stats import gaussian_kde  # deferred: scipy.stats is slow to import
+
         samples = self.sample(size, seed)
         if not np.ptp(samples) > 0:
             raise ValueError("the output does not vary: its distribution is a point mass")

@@ -27,7 +27,6 @@ from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
-import scipy.stats as st
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
@@ -37,6 +36,13 @@ __all__ = ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform", 
 # Parameter-free families are shared so their cached germ distributions are built once.
 _LEGENDRE = Legendre()
 _HERMITE = Hermite()
+
+
+def _stats() -> Any:
+    """scipy.stats, imported on first use: 1.3 s that a collocation run never needs."""
+    import scipy.stats
+
+    return scipy.stats
 
 
 def _require(condition: bool, message: str) -> None:
@@ -120,7 +126,7 @@ class Uniform(_Affine):
 
     @cached_property
     def physical(self) -> Any:
-        return st.uniform(loc=self.low, scale=self.high - self.low)
+        return _stats().uniform(loc=self.low, scale=self.high - self.low)
 
     @property
     def _shift_scale(self) -> tuple[float, float]:
@@ -156,7 +162,7 @@ class Beta(_Affine):
 
     @cached_property
     def physical(self) -> Any:
-        return st.beta(self.alpha, self.beta, loc=self.low, scale=self.high - self.low)
+        return _stats().beta(self.alpha, self.beta, loc=self.low, scale=self.high - self.low)
 
     @property
     def _shift_scale(self) -> tuple[float, float]:
@@ -189,7 +195,7 @@ class Normal(_Affine):
 
     @cached_property
     def physical(self) -> Any:
-        return st.norm(loc=self.mean, scale=self.std)
+        return _stats().norm(loc=self.mean, scale=self.std)
 
     @property
     def _shift_scale(self) -> tuple[float, float]:
@@ -218,7 +224,7 @@ class Gamma(_Affine):
 
     @cached_property
     def physical(self) -> Any:
-        return st.gamma(self.shape, loc=self.loc, scale=self.scale)
+        return _stats().gamma(self.shape, loc=self.loc, scale=self.scale)
 
     @property
     def _shift_scale(self) -> tuple[float, float]:
@@ -256,7 +262,7 @@ class Transformed(Distribution):
 
     def __post_init__(self) -> None:
         _require(
-            isinstance(getattr(self.target, "dist", None), st.rv_continuous),
+            isinstance(getattr(self.target, "dist", None), _stats().rv_continuous),
             f"target must be a frozen continuous scipy.stats distribution, got {self.target!r}",
         )
         _require(self.germ in _GERMS, f"germ must be 'uniform' or 'normal', got {self.germ!r}")
@@ -302,7 +308,9 @@ def from_description(description: dict[str, Any]) -> Distribution:
     fields = dict(description)
     kind = fields.pop("dist", None)
     if kind == "scipy":
-        target = getattr(st, fields["name"])(*fields.get("args", []), **fields.get("params", {}))
+        target = getattr(_stats(), fields["name"])(
+            *fields.get("args", []), **fields.get("params", {})
+        )
         return Transformed(target, germ=fields.get("germ", "normal"))
     classes: dict[str, type[Distribution]] = {
         "uniform": Uniform,

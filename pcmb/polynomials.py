@@ -32,11 +32,14 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.special as sp
-import scipy.stats as st
 from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    import scipy.stats as st
 
 __all__ = ["GaussRule", "Hermite", "Jacobi", "Laguerre", "Legendre", "OrthonormalFamily"]
 
@@ -151,6 +154,8 @@ class Legendre(OrthonormalFamily):
 
     @cached_property
     def germ(self) -> st.rv_continuous:
+        import scipy.stats as st  # deferred: 1.3 s of import that collocation never needs
+
         return st.uniform(loc=-1.0, scale=2.0)
 
 
@@ -187,6 +192,8 @@ class Jacobi(OrthonormalFamily):
 
     @cached_property
     def germ(self) -> st.rv_continuous:
+        import scipy.stats as st
+
         return st.beta(self.beta + 1.0, self.alpha + 1.0, loc=-1.0, scale=2.0)
 
 
@@ -204,6 +211,8 @@ class Hermite(OrthonormalFamily):
 
     @cached_property
     def germ(self) -> st.rv_continuous:
+        import scipy.stats as st
+
         return st.norm()
 
 
@@ -228,4 +237,6 @@ class Laguerre(OrthonormalFamily):
 
     @cached_property
     def germ(self) -> st.rv_continuous:
+        import scipy.stats as st
+
         return st.gamma(self.alpha + 1.0)

@@ -14,7 +14,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import qmc
 
 from pcmb.basis import tensor_index_set
 from pcmb.inputs import Distribution
@@ -162,6 +161,8 @@ def random_nodes(
     if method == "montecarlo":
         germ = np.column_stack([d.sample_germ(samples, rng) for d in distributions])
     elif method in ("lhs", "sobol"):
+        from scipy.stats import qmc  # deferred: scipy.stats is slow to import
+
         engine_type = qmc.LatinHypercube if method == "lhs" else qmc.Sobol
         engine = engine_type(d=n, scramble=True, rng=rng)
         u = engine.random(samples)

@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import get_window
 
 from pcmb.expansion import ChaosExpansion
 from pcmb.recovery import project_tensor
@@ -49,6 +48,8 @@ def _transform(
     values: NDArray[np.float64], times: ArrayLike, window: str
 ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64]]:
     """Frequencies (F,), windowed transforms (..., F) and the density scale s(f) (F,)."""
+    from scipy.signal import get_window  # deferred: scipy.signal takes ~1 s to import
+
     dt = _step(times)
     n_times = values.shape[-1]
     taper = get_window(window, n_times, fftbins=True)
