@@ -470,6 +470,11 @@ class StackedODEModel(ABC):
     _positive: ClassVar[frozenset[str]] = frozenset()
     _nonnegative: ClassVar[frozenset[str]] = frozenset()
     initial_time: ClassVar[float] = 0.0
+    #: Nodes per ``simulate`` call the executor should use (model protocol hint). A stacked
+    #: solve costs a per-step Python overhead for the whole batch plus a small per-node
+    #: share; measured on the quarter car (2,200 steps): 0.24 s for 1 node, 0.52 s for 216.
+    #: At ~128 nodes the two are comparable, so larger chunks stop paying.
+    chunk_size: ClassVar[int] = 128
 
     def __init__(
         self,

@@ -6,7 +6,9 @@ How the work is cut and where it runs
 ``model.simulate`` call. Chunk boundaries depend only on N (or an explicit ``chunk_size``),
 never on the number of workers, the backend or the machine: a batched integrator (one stacked
 ``solve_ivp`` per chunk) gives results that depend on the batch composition, and pcmb promises
-bit-identical results for 1 or 2 workers, loky or dask, and after a resume. The default size is
+bit-identical results for 1 or 2 workers, loky or dask, and after a resume. A model may state
+the ``chunk_size`` it prefers (stacked integrators do: their per-call cost is high). Otherwise
+the default size is
 ``ceil(N / 16)`` capped to [1, 256]: 9 to 16 chunks for 16 <= N <= 4096, so two workers stay
 busy to the end (the idle tail is at most one chunk) and progress moves in steps of about 6 %,
 while each chunk stays big enough for batching to pay; the cap bounds the memory of one stacked
@@ -810,7 +812,10 @@ def run_nodes(
     campaign = _Campaign(token, model_factory, arrays, time_grid, names, retries, journal)
     if journal is not None:
         campaign.resume(journal)
-    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size))
+    # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
+    # boundaries depend on N, the config and the model class only, never on jobs or backend.
+    preferred = getattr(model, "chunk_size", None)
+    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or preferred))
     show = sys.stderr.isatty() if progress is None else progress
     campaign.progress = _Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
     try:

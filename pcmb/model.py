@@ -102,7 +102,10 @@ class Model(Protocol):
     A model may also have ``parameters: Mapping[str, float]``, the nominal value of every
     named parameter; the config validator then checks uncertain inputs against it. A model
     may have ``check_times(times)`` raising :class:`~pcmb.errors.ConfigError` when it
-    cannot produce the grid; the config validator calls it before anything runs.
+    cannot produce the grid; the config validator calls it before anything runs. A model
+    whose ``simulate`` has a large per-call cost (a stacked integrator steps once for the
+    whole batch) may state ``chunk_size: int``, the nodes per call it prefers; the executor
+    uses it unless the config sets ``execution.chunk_size``.
     """
 
     outputs: tuple[str, ...]

@@ -94,6 +94,12 @@ class Ramp:
         """Hook for the failing variants; the plain ramp never fails."""
 
 
+class PreferringRamp(Ramp):
+    """A ramp that states the chunk size it prefers (model protocol hint)."""
+
+    chunk_size = 5
+
+
 class RaisingRamp(Ramp):
     """Raises when a node with ``a`` in ``bad`` is in the batch."""
 

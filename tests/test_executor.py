@@ -104,6 +104,14 @@ def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     assert (pooled.values["pid"][first_stop:] != os.getpid()).all()
 
 
+def test_a_model_preferred_chunk_size_is_used_unless_the_config_sets_one() -> None:
+    params = ramp_params(12)
+    preferred = run_nodes(em.PreferringRamp, params, TIMES, ["batch_size"], jobs=1)
+    np.testing.assert_array_equal(preferred.values["batch_size"][:, 0], [5] * 10 + [2] * 2)
+    explicit = run_nodes(em.PreferringRamp, params, TIMES, ["batch_size"], jobs=1, chunk_size=4)
+    np.testing.assert_array_equal(explicit.values["batch_size"][:, 0], [4] * 12)
+
+
 def test_small_work_stays_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
     # With start-up costlier than any possible gain, the timed first chunk decides: in-process.
     monkeypatch.setattr(executor, "_STARTUP_SECONDS", {"loky": 1e9, "dask": 1e9})
