@@ -23,7 +23,8 @@ for loky and 3 s for a local dask cluster. Results do not depend on the choice: 
 values depend only on its nodes. (A model that kills its process during that first in-process
 chunk kills the run; the journal then holds nothing for it.)
 
-*Backends.* ``loky`` uses joblib's reusable loky process pool, ``dask`` a dask.distributed
+*Backends.* ``loky`` uses a private loky process pool (joblib's process backend; private so a
+user's later ``joblib.Parallel`` is not disturbed), ``dask`` a dask.distributed
 cluster (``address``, or a local cluster of ``jobs`` single-threaded worker processes). Both are
 driven through :mod:`concurrent.futures` futures rather than ``joblib.Parallel``: with one
 future per chunk the executor knows exactly which chunks were in flight when a worker died,
@@ -78,7 +79,6 @@ BACKENDS = ("loky", "dask")
 # Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
 _STARTUP_SECONDS = {"loky": 1.0, "dask": 3.0}
 # Idle loky workers stay up this long, so consecutive runs do not pay the start-up again.
-_LOKY_IDLE_TIMEOUT = 300.0
 _PROGRESS_INTERVAL = 0.1
 
 
@@ -316,22 +316,28 @@ _THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 class _LokyPool:
-    """joblib's reusable loky process pool; it stays warm for the next call until idle."""
+    """A private loky process pool (joblib's process backend), shut down after the campaign.
+
+    Private rather than joblib's global reusable pool: sharing that singleton breaks a later
+    ``joblib.Parallel`` in the user's process, which expects the pool to be set up its own way.
+    """
 
     def __init__(self, jobs: int) -> None:
         self.slots = jobs
+        self._executor: Any = None
         self.rebuild()
 
     def rebuild(self) -> None:
-        from joblib.externals.loky import get_reusable_executor
+        from joblib.externals.loky import ProcessPoolExecutor
 
         # A broken pool is replaced by a fresh one here. Each worker gets its share of the cores
         # for native thread pools (BLAS, OpenMP, MuJoCo's threads), as joblib.Parallel does,
         # so that `slots` workers do not each start one thread per core.
         share = str(max(1, (os.cpu_count() or 1) // self.slots))
-        env = {name: share for name in _THREAD_LIMITS}
-        self._executor = get_reusable_executor(
-            max_workers=self.slots, timeout=_LOKY_IDLE_TIMEOUT, env=env
+        if self._executor is not None:
+            self._executor.shutdown(wait=False, kill_workers=True)
+        self._executor = ProcessPoolExecutor(
+            max_workers=self.slots, env={name: share for name in _THREAD_LIMITS}
         )
 
     def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
@@ -351,7 +357,7 @@ class _LokyPool:
         return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
 
     def close(self) -> None:
-        """Nothing to do: the reusable pool shuts its workers down when idle or at exit."""
+        self._executor.shutdown(wait=True)
 
 
 class _DaskPool:

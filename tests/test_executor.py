@@ -112,6 +112,14 @@ def test_a_model_preferred_chunk_size_is_used_unless_the_config_sets_one() -> No
     np.testing.assert_array_equal(explicit.values["batch_size"][:, 0], [4] * 12)
 
 
+@pytest.mark.usefixtures("workers_always")
+def test_joblib_parallel_still_works_after_a_pooled_run() -> None:
+    import joblib
+
+    run_nodes(em.Ramp, ramp_params(24), TIMES, ["y"], jobs=2)
+    assert joblib.Parallel(n_jobs=2)(joblib.delayed(abs)(-k) for k in range(4)) == [0, 1, 2, 3]
+
+
 def test_small_work_stays_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
     # With start-up costlier than any possible gain, the timed first chunk decides: in-process.
     monkeypatch.setattr(executor, "_STARTUP_SECONDS", {"loky": 1e9, "dask": 1e9})
