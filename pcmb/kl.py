@@ -123,6 +123,7 @@ class KarhunenLoeve:
         points: int = 200,
         terms: int | None = None,
         energy: float = 0.99,
+        ratio: float | None = None,
     ) -> KarhunenLoeve:
         """Solve the KL eigenproblem of ``kernel`` on ``domain`` by Nyström.
 
@@ -139,6 +140,9 @@ class KarhunenLoeve:
         energy:
             Keep the fewest terms whose eigenvalues capture this fraction of the total
             variance ∫ R(x, x) dx.
+        ratio:
+            Instead of ``energy``: keep every term with λ_k >= ratio · λ_1, i.e. stop where
+            λ_{n+1} / λ_1 < ratio (overridden by ``terms``).
 
         Raises
         ------
@@ -153,6 +157,8 @@ class KarhunenLoeve:
             raise ValueError(f"points must be >= 2, got {points}")
         if not 0.0 < energy <= 1.0:
             raise ValueError(f"energy must be in (0, 1], got {energy}")
+        if ratio is not None and not 0.0 < ratio <= 1.0:
+            raise ValueError(f"ratio must be in (0, 1], got {ratio}")
         x, w = sp.roots_legendre(points)
         nodes = 0.5 * (b - a) * x + 0.5 * (a + b)
         weights = 0.5 * (b - a) * w
@@ -168,7 +174,9 @@ class KarhunenLoeve:
             )
         total = float(weights @ np.diag(matrix))
         positive = int(np.sum(values > ZERO_RATIO * values[0]))
-        if terms is None:
+        if terms is None and ratio is not None:
+            terms = int(np.sum(values[:positive] >= ratio * values[0] * (1.0 - 1e-12)))
+        elif terms is None:
             captured = np.cumsum(values[:positive]) / total
             terms = int(np.searchsorted(captured, energy * (1.0 - 1e-12)) + 1)
         if not 1 <= terms <= positive:

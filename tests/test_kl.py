@@ -71,6 +71,15 @@ def test_truncation_by_energy_picks_the_fewest_terms():
     assert kl.captured_energy >= 0.9 > fewer.captured_energy
 
 
+def test_truncation_by_eigenvalue_ratio():
+    kl = KarhunenLoeve.from_covariance(terrain_kernel, (0.0, D), points=120, ratio=0.5)
+    # λ = D·A1²/2 (twice) and D·A2²/2 = λ_1 / 4 (twice): only the first pair passes 0.5.
+    assert kl.terms == 2
+    assert KarhunenLoeve.from_covariance(terrain_kernel, (0.0, D), ratio=0.2).terms == 4
+    with pytest.raises(ValueError, match="ratio"):
+        KarhunenLoeve.from_covariance(terrain_kernel, (0.0, D), ratio=0.0)
+
+
 def test_covariance_from_a_continuous_spectrum():
     """Exponential covariance σ² e^{-|τ|/ℓ} has the one-sided PSD (2σ²ℓ/π) / (1 + (ωℓ)²)."""
     sigma2, ell = 2.0, 0.5
