@@ -14,6 +14,7 @@ from typing import Any
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
     "pcmb.batched_ivp": ["StackedODEModel", "solve_projected", "solve_stacked"],
+    "pcmb.analysis": ["AnalysisSettings", "analyse"],
     "pcmb.basis": [
         "PolynomialBasis",
         "RunResult",
@@ -23,6 +24,7 @@ _EXPORTS = {
         "tensor_index_set",
         "total_index_set",
     ],
+    "pcmb.comparison": ["compare"],
     "pcmb.config": ["StudyConfig", "config_json_schema", "load_config", "validate_config"],
     "pcmb.errors": ["ConfigError", "IllPosedError", "ModelError", "ModelRunError", "PcmbError"],
     "pcmb.executor": ["NodeFailure", "RunResult", "run_nodes"],
@@ -52,6 +54,7 @@ _EXPORTS = {
         "fit_least_squares",
         "project_tensor",
     ],
+    "pcmb.report": ["write_report"],
     "pcmb.sampling": ["NodeSet", "TensorGrid", "random_nodes"],
     "pcmb.store": ["load"],
     "pcmb.spectral": ["ChaosSpectrum", "chaos_spectrum", "periodogram"],
@@ -62,6 +65,7 @@ _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in nam
 __version__ = "0.1.0"
 
 __all__ = [
+    "AnalysisSettings",
     "Beta",
     "ChaosExpansion",
     "ChaosSpectrum",
@@ -98,8 +102,10 @@ __all__ = [
     "TensorGrid",
     "Transformed",
     "Uniform",
+    "analyse",
     "as_model",
     "chaos_spectrum",
+    "compare",
     "config_json_schema",
     "fit_largest_stable",
     "fit_least_squares",
@@ -118,6 +124,7 @@ __all__ = [
     "tensor_index_set",
     "total_index_set",
     "validate_config",
+    "write_report",
 ]
 
 

@@ -2,7 +2,8 @@
 
 Exit codes: 0 success; 2 invalid config or usage; 3 the model failed at one or more nodes
 (policy abort); 1 anything unexpected. Logs and progress go to stderr; stdout carries only
-requested data (``validate``'s summary, ``inspect``'s report, ``schema``'s JSON).
+requested data (``validate``'s summary, ``inspect``'s report, ``compare``'s table,
+``schema``'s JSON); ``report`` writes files and says where on stderr.
 
 Heavy modules are imported inside the commands, so ``pcmb --help`` starts fast.
 """
@@ -41,6 +42,24 @@ def _parser() -> argparse.ArgumentParser:
 
     inspect = commands.add_parser("inspect", help="summarise a result file")
     inspect.add_argument("result", help="an HDF5 file written by pcmb run")
+
+    report = commands.add_parser("report", help="write figures and an index page of a result")
+    report.add_argument("result", help="an HDF5 file written by pcmb run")
+    report.add_argument(
+        "--compare",
+        nargs="+",
+        default=[],
+        metavar="OTHER.h5",
+        help="results of the same model on the same grid to overlay (e.g. Monte Carlo)",
+    )
+    report.add_argument("-o", "--output", help="folder for the report (default: RESULT_report/)")
+
+    compare = commands.add_parser(
+        "compare", help="differences of mean and std over time between results"
+    )
+    compare.add_argument("reference", help="the result the others are compared with")
+    compare.add_argument("others", nargs="+", metavar="OTHER", help="results to compare")
+    compare.add_argument("-o", "--output", help="folder for overlay figures (default: none)")
 
     commands.add_parser("schema", help="print the config JSON Schema (for editors)")
     return parser
@@ -108,16 +127,54 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return EXIT_OK
 
 
-def _inspect(path: str) -> str:
-    import numpy as np
-
+def _load(path: str):
+    """A result file, or a ConfigError naming why it cannot be read."""
     from pcmb.errors import ConfigError
     from pcmb.store import load
 
+    if not Path(path).is_file():
+        raise ConfigError(f"{path}: no such file")
     try:
-        result = load(path)
+        return load(path)
     except (OSError, ValueError, KeyError) as error:
         raise ConfigError(f"{path}: not a readable pcmb result file ({error})") from error
+
+
+def _report(args: argparse.Namespace) -> int:
+    from pcmb.report import write_report
+
+    result = _load(args.result)
+    others = [_load(path) for path in args.compare]
+    folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
+    written = write_report(result, folder, source=args.result, comparisons=others)
+    _log(f"pcmb: wrote {len(written) - 1} figures and {written[-1]}")
+    return EXIT_OK
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from pcmb.comparison import compare, method_label
+
+    reference = _load(args.reference)
+    others = [_load(path) for path in args.others]
+    names = [f"{path}: {method_label(r)}" for path, r in zip(args.others, others, strict=True)]
+    own = f"{args.reference}: {method_label(reference)}"
+    tables = [
+        compare(reference, other, labels=(own, name)).table()
+        for other, name in zip(others, names, strict=True)
+    ]
+    print("\n\n".join(tables))
+    if args.output:
+        from pcmb.report import write_comparison_figures
+
+        written = write_comparison_figures(reference, others, args.output, labels=args.others)
+        _log(f"pcmb: wrote {len(written)} figures to {args.output}")
+    return EXIT_OK
+
+
+def _inspect(path: str) -> str:
+    import numpy as np
+
+    result = _load(path)
     named_inputs = zip(result.input_names, result.distributions, strict=True)
     status = np.bincount(result.status.astype(int), minlength=3)
     lines = [
@@ -135,6 +192,16 @@ def _inspect(path: str) -> str:
         mean, std = result.mean(name), result.std(name)
         lines.append(
             f"{name:<12}{mean.min():>12.4g}{mean.max():>12.4g}{std.min():>12.4g}{std.max():>12.4g}"
+        )
+    if result.nominal_params:
+        nominal = ", ".join(f"{k}={v:.6g}" for k, v in result.nominal_params.items())
+        lines.append(f"nominal  {nominal} ({'stored' if result.nominal else 'failed'})")
+    if result.analysis is not None:
+        spectra = [n for n, a in result.analysis.outputs.items() if a.spectrum is not None]
+        first = next(iter(result.analysis.outputs.values()), None)
+        times = "" if first is None else ", ".join(f"{t:g}" for t in first.pdf.at)
+        lines.append(
+            f"analysis quantile bands, PDFs at t = {times}; spectra: {', '.join(spectra) or 'none'}"
         )
     lines += [f"warning  {w}" for w in result.warnings]
     lines += [f"failed   {f}" for f in result.failures]
@@ -158,9 +225,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             print(_summary(load_config(args.config)))
         elif args.command == "inspect":
-            if not Path(args.result).is_file():
-                raise ConfigError(f"{args.result}: no such file")
             print(_inspect(args.result))
+        elif args.command == "report":
+            return _report(args)
+        elif args.command == "compare":
+            return _compare(args)
         elif args.command == "schema":
             from pcmb.config import config_json_schema
 

@@ -54,6 +54,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from pcmb import inputs
+from pcmb.analysis import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.model import (
     CommandModel,
@@ -65,6 +66,7 @@ from pcmb.model import (
 )
 
 __all__ = [
+    "AnalysisSpec",
     "CommandModelSpec",
     "ExecutionSpec",
     "MethodSpec",
@@ -295,10 +297,10 @@ def _identifier(value: str) -> str:
     return value
 
 
-def _unique(values: list[str]) -> list[str]:
+def _unique(values: list[Any]) -> list[Any]:
     repeated = sorted({v for v in values if values.count(v) > 1})
     if repeated:
-        raise ValueError(f"names listed twice: {', '.join(repeated)}")
+        raise ValueError(f"listed twice: {', '.join(map(str, repeated))}")
     return values
 
 
@@ -323,6 +325,10 @@ def _count(**bounds: int) -> Any:
 
 Real = Annotated[float, BeforeValidator(_reject_text_and_bool("a number"))]
 PositiveReal = Annotated[float, Field(gt=0), BeforeValidator(_reject_text_and_bool("a number"))]
+NonNegativeReal = Annotated[float, Field(ge=0), BeforeValidator(_reject_text_and_bool("a number"))]
+Probability = Annotated[
+    float, Field(gt=0, lt=1), BeforeValidator(_reject_text_and_bool("a number"))
+]
 NonNegativeInt = _count(ge=0)
 PositiveInt = _count(ge=1)
 Axis = _count(ge=0, le=2)
@@ -696,6 +702,43 @@ class ExecutionSpec(_Spec):
         return address
 
 
+def _window(value: str) -> str:
+    problem = window_problem(value)
+    if problem is not None:
+        raise ValueError(problem)
+    return value
+
+
+class AnalysisSpec(_Spec):
+    """What to compute beyond mean, std and Sobol' indices (see :mod:`pcmb.analysis`)."""
+
+    psd: Annotated[list[Name], AfterValidator(_unique)] | None = Field(
+        default=None, description="outputs whose PSD is stored (default: all; [] for none)"
+    )
+    window: Annotated[str, AfterValidator(_window)] = Field(
+        default="hann", description="scipy.signal window of every spectrum"
+    )
+    pdf_times: list[Real] | None = Field(
+        default=None, description="times of the stored PDFs (default: the final time)"
+    )
+    pdf_freqs: list[NonNegativeReal] | None = Field(
+        default=None, description="frequencies (Hz) of the PSD PDFs (default: the PSD peak)"
+    )
+    quantiles: Annotated[list[Probability], AfterValidator(_unique)] = Field(
+        default_factory=lambda: [0.05, 0.95], description="levels of the quantile bands"
+    )
+    samples: _count(ge=MIN_SAMPLES) = Field(
+        default=100_000, description="surrogate draws for PDFs and quantiles"
+    )
+    seed: NonNegativeInt = 0
+    units: dict[Name, str] = Field(default_factory=dict, description="output -> unit, for figures")
+    time_unit: str = Field(default="", description="unit of time, for figures")
+
+    def settings(self) -> AnalysisSettings:
+        """The :class:`pcmb.analysis.AnalysisSettings` this section describes."""
+        return AnalysisSettings(**self.model_dump())
+
+
 class StudyConfig(_Spec):
     """A validated study configuration (SPEC §4).
 
@@ -711,6 +754,9 @@ class StudyConfig(_Spec):
     )
     method: MethodSpec
     execution: ExecutionSpec = Field(default_factory=ExecutionSpec)
+    analysis: AnalysisSpec | None = Field(
+        default=None, description="quantile bands, PDFs and spectra to store"
+    )
     output: Annotated[str, AfterValidator(_h5_path)] | None = Field(
         default=None, description="result file, relative to the current directory"
     )
@@ -764,6 +810,11 @@ class StudyConfig(_Spec):
         if isinstance(order, int):
             return (order,) * len(self.inputs)
         return tuple(order[name] for name in self.inputs)
+
+    @property
+    def analysis_settings(self) -> AnalysisSettings | None:
+        """The analysis to run after recovery (``None`` without an ``analysis:`` section)."""
+        return None if self.analysis is None else self.analysis.settings()
 
     @property
     def output_names(self) -> tuple[str, ...] | None:
@@ -1079,6 +1130,9 @@ def _model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                     f"inputs.{name}",
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
+    if config.analysis is not None:
+        kept = config.output_names or tuple(model.outputs)
+        yield from config.analysis.settings().problems(config.times, kept)
     check_times = getattr(model, "check_times", None)
     if callable(check_times):
         try:

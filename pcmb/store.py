@@ -11,6 +11,17 @@ The only module that imports h5py. Layout::
     /basis/multi_index (S, n)
     /outputs/<name>/values (N, T)  coefficients (S, T)  mean (T,)  std (T,)
                     sobol_first (n, T)  sobol_total (n, T)
+                    nominal (T,)       the deterministic run at the nominal parameters
+                                       (their values: /inputs attrs nominal, JSON)
+
+With an analysis (root attrs ``analysis``: its settings as JSON; see :mod:`pcmb.analysis`)::
+
+    /quantile (Q,)                                  dimension scale: the levels
+    /outputs/<name>/quantiles (Q, T)
+    /outputs/<name>/pdf/pdf_time (P,)  point (G,)  value (P, G)  density (P, G)  bandwidth (P,)
+    /outputs/<name>/spectrum/frequency (F,)  mean (F,)  std (F,)  nominal (F,)
+                                             attrs window, units ("<output unit>^2/Hz")
+    /outputs/<name>/spectrum/pdf/pdf_frequency (Fp,)  point (G,)  value (Fp, G)  density
 
 Every dataset has its dimension scales attached, so
 ``xarray.open_dataset(path, group="outputs/x1", engine="h5netcdf")`` shows named dimensions.
@@ -37,6 +48,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from pcmb.analysis import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.executor import NodeFailure
 from pcmb.expansion import ChaosExpansion
 from pcmb.inputs import from_description
@@ -70,6 +82,64 @@ def _attach(dataset: h5py.Dataset, *scales: h5py.Dataset) -> h5py.Dataset:
     return dataset
 
 
+def _write_density(group: h5py.Group, at_name: str, density: Density) -> None:
+    at = _scale(group, at_name, density.at)
+    point = _scale(group, "point", np.arange(density.value.shape[1]))
+    _attach(group.create_dataset("value", data=density.value), at, point)
+    _attach(group.create_dataset("density", data=density.density), at, point)
+    _attach(group.create_dataset("bandwidth", data=density.bandwidth), at)
+
+
+def _read_density(group: h5py.Group, at_name: str) -> Density:
+    return Density(
+        group[at_name][()], group["value"][()], group["density"][()], group["bandwidth"][()]
+    )
+
+
+def _write_analysis(
+    file: h5py.File, output: h5py.Group, analysis: OutputAnalysis, time_: h5py.Dataset, unit: str
+) -> None:
+    _attach(output.create_dataset("quantiles", data=analysis.quantiles), file["quantile"], time_)
+    _write_density(output.create_group("pdf"), "pdf_time", analysis.pdf)
+    spectrum = analysis.spectrum
+    if spectrum is None:
+        return
+    group = output.create_group("spectrum")
+    group.attrs["window"] = spectrum.window
+    group.attrs["units"] = f"({unit})^2/Hz" if unit else "(output unit)^2/Hz"
+    frequency = _scale(group, "frequency", spectrum.frequency)
+    for key in ("mean", "std", "nominal"):
+        if getattr(spectrum, key) is not None:
+            _attach(group.create_dataset(key, data=getattr(spectrum, key)), frequency)
+    if spectrum.pdf is not None:
+        _write_density(group.create_group("pdf"), "pdf_frequency", spectrum.pdf)
+
+
+def _read_analysis(file: h5py.File, names: list[str]) -> Analysis | None:
+    if "analysis" not in file.attrs:
+        return None
+    outputs = {}
+    for name in names:
+        group = file["outputs"][name]
+        spectrum = None
+        if "spectrum" in group:
+            part = group["spectrum"]
+            spectrum = Spectrum(
+                frequency=part["frequency"][()],
+                mean=part["mean"][()],
+                std=part["std"][()],
+                nominal=part["nominal"][()] if "nominal" in part else None,
+                window=_text(part.attrs["window"]),
+                pdf=_read_density(part["pdf"], "pdf_frequency") if "pdf" in part else None,
+            )
+        outputs[name] = OutputAnalysis(
+            quantiles=group["quantiles"][()],
+            pdf=_read_density(group["pdf"], "pdf_time"),
+            spectrum=spectrum,
+        )
+    return Analysis(AnalysisSettings.from_description(_text(file.attrs["analysis"])), outputs)
+
+
 def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) -> None:
     from pcmb import __version__
 
@@ -96,6 +166,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     inputs = file.create_group("inputs")
     inputs.attrs["names"] = json.dumps(list(result.input_names))
     inputs.attrs["distributions"] = json.dumps([d.describe() for d in result.distributions])
+    inputs.attrs["nominal"] = json.dumps(result.nominal_params)
 
     nodes = file.create_group("nodes")
     _attach(nodes.create_dataset("germ", data=result.nodes), node, input_)
@@ -109,6 +180,11 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     if index is not None:
         term = _scale(file, "term", np.arange(index.shape[0]))
         _attach(file.create_dataset("basis/multi_index", data=index), term, input_)
+
+    analysis = result.analysis
+    if analysis is not None:
+        attrs["analysis"] = json.dumps(analysis.settings.describe())
+        _scale(file, "quantile", np.array(analysis.settings.quantiles, dtype=float))
 
     # HDF5 lists groups alphabetically: keep the model's output order explicitly.
     file.create_group("outputs").attrs["names"] = json.dumps(list(result.values))
@@ -126,6 +202,11 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
             _attach(
                 group.create_dataset("sobol_total", data=expansion.sobol_total()), input_, time_
             )
+        if name in result.nominal:
+            _attach(group.create_dataset("nominal", data=result.nominal[name]), time_)
+        if analysis is not None:
+            unit = analysis.settings.units.get(name, "")
+            _write_analysis(file, group, analysis.outputs[name], time_, unit)
 
 
 def write_result(
@@ -192,11 +273,15 @@ def load(path: str | os.PathLike[str]) -> StudyResult:
         index = file["basis/multi_index"][()] if "basis" in file else None
         values: dict[str, np.ndarray] = {}
         expansions: dict[str, ChaosExpansion] = {}
-        for name in json.loads(_text(file["outputs"].attrs["names"])):
+        nominal: dict[str, np.ndarray] = {}
+        outputs = json.loads(_text(file["outputs"].attrs["names"]))
+        for name in outputs:
             group = file["outputs"][name]
             values[name] = group["values"][()]
             if "coefficients" in group and index is not None:
                 expansions[name] = ChaosExpansion(group["coefficients"][()], index, dists, names)
+            if "nominal" in group:
+                nominal[name] = group["nominal"][()]
         failures = tuple(
             NodeFailure(f["index"], f["params"], f["message"])
             for f in json.loads(_text(attrs.get("failures", "[]")))
@@ -216,4 +301,7 @@ def load(path: str | os.PathLike[str]) -> StudyResult:
             failures=failures,
             warnings=tuple(json.loads(_text(attrs.get("warnings", "[]")))),
             seconds=float(attrs.get("seconds", 0.0)),
+            nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
+            nominal=nominal,
+            analysis=_read_analysis(file, outputs),
         )

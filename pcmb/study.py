@@ -14,10 +14,17 @@ The command line and the Python API share this one code path::
 
 ``Study.from_config(pcmb.config.load_config("configs/quarter_car.yaml"))`` builds the same
 object from a YAML file.
+
+Besides the statistics, every run stores the deterministic run at the nominal parameters
+(``result.nominal``; for a nonlinear model the mean differs from it) and, when asked for
+(``analysis=``, the config's ``analysis:``), quantile bands, PDFs and spectra
+(:mod:`pcmb.analysis`). ``study.replace(method="montecarlo", samples=2000)`` is the same
+study by Monte Carlo, to check the chaos against.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import sys
@@ -30,6 +37,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.analysis import Analysis, AnalysisSettings, analyse
 from pcmb.basis import total_index_set
 from pcmb.errors import ConfigError, ModelRunError
 from pcmb.executor import NodeFailure, run_nodes
@@ -78,6 +86,13 @@ class StudyResult:
         Everything the user must know about the trustworthiness of the numbers.
     seconds:
         Wall time of the model runs.
+    nominal_params:
+        Input name -> the value used in the deterministic nominal run.
+    nominal:
+        Output name -> (T,) the deterministic run at the nominal parameters (empty if it
+        failed: see ``warnings``). For a nonlinear model it differs from the mean.
+    analysis:
+        Quantile bands, PDFs and spectra (:func:`pcmb.analysis.analyse`), when requested.
     """
 
     name: str
@@ -94,6 +109,9 @@ class StudyResult:
     failures: tuple[NodeFailure, ...] = ()
     warnings: tuple[str, ...] = ()
     seconds: float = 0.0
+    nominal_params: dict[str, float] = field(default_factory=dict)
+    nominal: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    analysis: Analysis | None = None
 
     @property
     def outputs(self) -> tuple[str, ...]:
@@ -171,6 +189,19 @@ class Study:
         Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
         node), ``"retry"`` (re-run failed nodes ``retries`` times, then abort) or
         ``"regress"`` (least-squares refit on the surviving nodes, recorded as a warning).
+    nominal:
+        Values of the uncertain inputs for the deterministic nominal run. An input not
+        given here takes its value in ``params`` when there is one (for a config: the
+        ``model.params`` value), else its distribution's mean.
+    analysis:
+        Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
+        can still be computed later from the result with :func:`pcmb.analysis.analyse`).
+
+    Raises
+    ------
+    ConfigError
+        Bad settings (no inputs, a non-increasing grid, a sampling method without samples,
+        an unknown method, a nominal value for an unknown input).
     """
 
     def __init__(
@@ -194,6 +225,8 @@ class Study:
         chunk_size: int | None = None,
         on_failure: FailurePolicy = "abort",
         retries: int = 1,
+        nominal: Mapping[str, float] | None = None,
+        analysis: AnalysisSettings | None = None,
     ):
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
@@ -215,7 +248,13 @@ class Study:
             else ObjectModelFactory(model, dict(params or {}), _tuple(outputs))
         )
         self.outputs = _tuple(outputs)
+        self.params = dict(params or {})
+        self.nominal = dict(nominal or {})
+        self.analysis = analysis
         self.fingerprint_extra = ""
+        unknown = sorted(set(self.nominal) - set(self.inputs))
+        if unknown:
+            raise ConfigError(f"nominal values given for unknown input(s) {unknown}")
         if method in _SAMPLING and samples is None:
             raise ConfigError(f"method {method!r} needs a number of samples")
         if method not in ("collocation", *_SAMPLING):
@@ -248,8 +287,53 @@ class Study:
             chunk_size=execution.chunk_size,
             on_failure=execution.on_failure,
             retries=execution.retries,
+            nominal={
+                name: float(config.model.params[name])
+                for name in config.input_names
+                if name in config.model.params
+            },
+            analysis=config.analysis_settings,
         )
         study.fingerprint_extra = config.sha256
+        return study
+
+    def replace(self, **changes: Any) -> Study:
+        """A copy of this study with some constructor arguments changed, checked again.
+
+        For example the Monte Carlo twin of a collocation study,
+        ``study.replace(method="montecarlo", samples=2000, seed=1)``, runs the same model,
+        inputs, grid, executor and analysis.
+
+        Raises
+        ------
+        ConfigError
+            If an argument is unknown or the changed study is invalid.
+        """
+        arguments = {
+            "inputs": self.inputs,
+            "times": self.times,
+            "order": self.order,
+            "basis": self.basis,
+            "method": self.method,
+            "samples": self.samples,
+            "seed": self.seed,
+            "fit": self.fit,
+            "outputs": self.outputs,
+            "name": self.name,
+            "jobs": self.jobs,
+            "backend": self.backend,
+            "address": self.address,
+            "chunk_size": self.chunk_size,
+            "on_failure": self.on_failure,
+            "retries": self.retries,
+            "nominal": self.nominal_params(),
+            "analysis": self.analysis,
+        }
+        unknown = sorted(set(changes) - set(arguments))
+        if unknown:
+            raise ConfigError(f"Study.replace: unknown argument(s) {unknown}")
+        study = Study(self.model_factory, **{**arguments, **changes})
+        study.fingerprint_extra = self.fingerprint_extra
         return study
 
     # -- nodes --------------------------------------------------------------------------------
@@ -267,6 +351,18 @@ class Study:
                 raise ConfigError(f"no order given for input(s) {sorted(missing)}")
             return tuple(int(self.order[name]) for name in self.inputs)
         return (int(self.order),) * len(self.inputs)
+
+    def nominal_params(self) -> dict[str, float]:
+        """Values of the uncertain inputs in the nominal run: given, else ``params``, else mean."""
+        values = {}
+        for name, dist in self.inputs.items():
+            if name in self.nominal:
+                values[name] = float(self.nominal[name])
+            elif name in self.params:
+                values[name] = float(self.params[name])
+            else:
+                values[name] = float(dist.physical.mean())
+        return values
 
     def node_set(self) -> TensorGrid | NodeSet:
         """The nodes this study runs: a tensor Gauss grid or random samples."""
@@ -327,6 +423,8 @@ class Study:
         """
         nodes = self.node_set()
         outputs = self.resolve_outputs()
+        if self.analysis is not None:
+            self.analysis.check(self.times, outputs)
         journal = None
         if output is not None:
             journal_dir = Path(f"{output}.journal")
@@ -361,6 +459,9 @@ class Study:
                 f"(on_failure: {self.on_failure}){kept}:",
             )
         result = self._recover(nodes, runs.values, runs.status, runs.failures, seconds)
+        result = self._with_nominal(result, outputs)
+        if self.analysis is not None:
+            result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -368,6 +469,28 @@ class Study:
             if journal is not None:
                 journal.remove()
         return result
+
+    def _with_nominal(self, result: StudyResult, outputs: Sequence[str]) -> StudyResult:
+        """The result with the deterministic run at the nominal parameters added.
+
+        It is not part of any statistic, so a failure is recorded as a warning, not raised.
+        """
+        params = self.nominal_params()
+        run = run_nodes(
+            self.model_factory,
+            {name: np.array([value]) for name, value in params.items()},
+            self.times,
+            outputs,
+            jobs=1,
+            progress=False,
+        )
+        if run.failures:
+            message = f"the nominal run failed, so none is stored: {run.failures[0].message}"
+            return dataclasses.replace(
+                result, nominal_params=params, warnings=(*result.warnings, message)
+            )
+        nominal = {name: values[0] for name, values in run.values.items()}
+        return dataclasses.replace(result, nominal_params=params, nominal=nominal)
 
     # -- recovery -----------------------------------------------------------------------------
 

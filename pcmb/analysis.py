@@ -1,0 +1,652 @@
+"""What people look at: quantile bands, PDFs at chosen times, and spectra with error bars.
+
+:func:`analyse` turns a :class:`~pcmb.study.StudyResult` into an :class:`Analysis`, computed
+from the runs and expansions alone (so a result read back from its file gives the same
+numbers):
+
+- **quantile bands** over time, (Q, T) per output, from the first QUANTILE_DRAWS surrogate
+  draws (or the runs);
+- **PDFs at chosen times**: a Gaussian KDE (Scott's bandwidth) of ``samples`` surrogate
+  draws when the output has a chaos expansion, else of the model runs themselves
+  (sampling methods); each time is taken at the nearest grid point;
+- **spectra** (one-sided PSD, :mod:`pcmb.spectral` conventions: y² per Hz, window
+  ``window``, mean not removed): on a tensor collocation grid, the mean PSD is exact from
+  the coefficient spectra (Σ|ĉ_α|²) and the band is the quadrature of the per-node PSDs
+  (:func:`pcmb.spectral.chaos_spectrum`); for sampling methods, the sample mean and
+  standard deviation (ddof 1) of the per-run periodograms, same window and scaling. The
+  PSD's PDF at chosen frequencies comes from the surrogate PSD (chaos) or the per-run
+  periodograms (sampling), with a KDE reflected at zero because a PSD is never negative.
+- the **nominal** spectrum: the periodogram of the deterministic run at nominal parameters.
+
+Every input draw uses one seeded generator, so the same settings give the same numbers.
+All surrogate values at those draws (every output, time and frequency asked for) come from
+one pass over the basis matrix, its costly part.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.basis import PolynomialBasis
+from pcmb.errors import ConfigError, ConfigProblem
+from pcmb.sampling import TensorGrid
+from pcmb.spectral import chaos_spectrum, periodogram
+
+if TYPE_CHECKING:
+    from pcmb.study import StudyResult
+
+__all__ = [
+    "Analysis",
+    "AnalysisSettings",
+    "Density",
+    "OutputAnalysis",
+    "Spectrum",
+    "analyse",
+    "draws_are_runs",
+    "is_uniform_grid",
+    "kernel_density",
+    "nearest_indices",
+    "output_draws",
+    "psd_draws",
+    "psd_draws_are_runs",
+    "spectrum",
+    "tensor_grid_of",
+]
+
+#: Fewest surrogate draws allowed for PDFs and quantiles.
+MIN_SAMPLES = 100
+#: Points at which every PDF is tabulated.
+DENSITY_POINTS = 256
+#: Surrogate values held in memory at once while computing quantile bands (32 MB).
+_BLOCK_VALUES = 4_000_000
+#: Fewest cells of the binned kernel density estimate.
+_BINS = 4096
+#: Most cells (8 MB): reached only by far outliers, where the binning error grows.
+_MAX_BINS = 1 << 20
+#: Surrogate draws for quantile bands: the standard error of a 5 % quantile is then
+#: sqrt(0.05 · 0.95 / 20 000) = 0.0015 in probability, far below what a band plot shows.
+QUANTILE_DRAWS = 20_000
+#: A spread below this fraction of the magnitude is round-off: the law is a point mass.
+_RELATIVE_SPREAD = 1e-12
+
+
+def is_uniform_grid(times: NDArray[np.float64]) -> bool:
+    """Whether ``times`` is a uniform grid of at least two points (what a PSD needs)."""
+    if times.size < 2:
+        return False
+    steps = np.diff(times)
+    return bool(steps[0] > 0 and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0))
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """What to compute beyond mean, std and Sobol' indices (the config's ``analysis:``).
+
+    Attributes
+    ----------
+    psd:
+        Outputs whose spectrum is computed; ``None``: every output (when the time grid is
+        uniform), ``()``: none.
+    window:
+        :func:`scipy.signal.get_window` name used for every spectrum.
+    pdf_times:
+        Times at which PDFs are tabulated; ``None``: the final time.
+    pdf_freqs:
+        Frequencies (Hz) at which the PSD's PDF is tabulated; ``None``: each spectrum's
+        highest peak above f = 0.
+    quantiles:
+        Probability levels of the quantile bands, each in (0, 1).
+    samples:
+        Surrogate draws for PDFs and quantiles.
+    seed:
+        Seed of those draws.
+    units:
+        Output name -> unit text, for figure labels.
+    time_unit:
+        Unit of time, for figure labels.
+
+    Raises
+    ------
+    ConfigError
+        If a value is impossible (key path ``analysis.<key>`` in the message).
+    """
+
+    psd: tuple[str, ...] | None = None
+    window: str = "hann"
+    pdf_times: tuple[float, ...] | None = None
+    pdf_freqs: tuple[float, ...] | None = None
+    quantiles: tuple[float, ...] = (0.05, 0.95)
+    samples: int = 100_000
+    seed: int = 0
+    units: Mapping[str, str] = field(default_factory=dict)
+    time_unit: str = ""
+
+    def __post_init__(self) -> None:
+        for key in ("psd", "pdf_times", "pdf_freqs"):
+            value = getattr(self, key)
+            if value is not None:
+                object.__setattr__(self, key, tuple(value))
+        object.__setattr__(self, "quantiles", tuple(float(q) for q in self.quantiles))
+        object.__setattr__(self, "units", dict(self.units))
+        problems = []
+        if any(not 0.0 < q < 1.0 for q in self.quantiles):
+            problems.append(("analysis.quantiles", f"each must be in (0, 1), got {self.quantiles}"))
+        if len(set(self.quantiles)) != len(self.quantiles):
+            problems.append(("analysis.quantiles", f"a level is listed twice: {self.quantiles}"))
+        if self.samples < MIN_SAMPLES:
+            problems.append(("analysis.samples", f"need >= {MIN_SAMPLES}, got {self.samples}"))
+        if any(f < 0 for f in self.pdf_freqs or ()):
+            problems.append(("analysis.pdf_freqs", f"must be >= 0, got {self.pdf_freqs}"))
+        window = window_problem(self.window)
+        if window is not None:
+            problems.append(("analysis.window", window))
+        _raise(problems)
+
+    def problems(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[tuple[str, str]]:
+        """What does not fit a study's time grid and outputs, as (key path, message).
+
+        An unknown output, a PDF time outside the grid, a spectrum on a non-uniform grid,
+        a frequency above the grid's Nyquist frequency.
+        """
+        found = []
+        for key, names in (("psd", self.psd or ()), ("units", self.units)):
+            for i, name in enumerate(names):
+                if name not in outputs:
+                    where = f"analysis.{key}[{i}]" if key == "psd" else f"analysis.units.{name}"
+                    found.append((where, f"{name!r} is not an output ({', '.join(outputs)})"))
+        for i, t in enumerate(self.pdf_times or ()):
+            if not times[0] <= t <= times[-1]:
+                found.append(
+                    (f"analysis.pdf_times[{i}]", f"{t} is outside [{times[0]}, {times[-1]}]")
+                )
+        if self.psd and not is_uniform_grid(times):
+            found.append(("analysis.psd", "a spectrum needs a uniform time grid of >= 2 points"))
+        elif is_uniform_grid(times):
+            nyquist = 0.5 / (times[1] - times[0])
+            for i, f in enumerate(self.pdf_freqs or ()):
+                if f > nyquist:
+                    found.append(
+                        (
+                            f"analysis.pdf_freqs[{i}]",
+                            f"{f} Hz is above the Nyquist frequency {nyquist:g} Hz of the grid",
+                        )
+                    )
+        return found
+
+    def check(self, times: NDArray[np.float64], outputs: Sequence[str]) -> None:
+        """Check the settings against a study's time grid and outputs, before it runs.
+
+        Raises
+        ------
+        ConfigError
+            With every problem :meth:`problems` finds.
+        """
+        _raise(self.problems(times, outputs))
+
+    def spectrum_outputs(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[str]:
+        """The outputs that get a spectrum."""
+        if self.psd is None:
+            return list(outputs) if is_uniform_grid(times) else []
+        return [name for name in outputs if name in self.psd]
+
+    def describe(self) -> dict[str, Any]:
+        """A JSON-able description (stored in the result file)."""
+        return {
+            "psd": None if self.psd is None else list(self.psd),
+            "window": self.window,
+            "pdf_times": None if self.pdf_times is None else list(self.pdf_times),
+            "pdf_freqs": None if self.pdf_freqs is None else list(self.pdf_freqs),
+            "quantiles": list(self.quantiles),
+            "samples": self.samples,
+            "seed": self.seed,
+            "units": dict(self.units),
+            "time_unit": self.time_unit,
+        }
+
+    @classmethod
+    def from_description(cls, description: str | Mapping[str, Any]) -> AnalysisSettings:
+        """Settings from :meth:`describe`'s output (or its JSON text)."""
+        data = json.loads(description) if isinstance(description, str) else dict(description)
+        return cls(**data)
+
+
+def window_problem(window: str) -> str | None:
+    """Why ``window`` is not a :func:`scipy.signal.get_window` name, or ``None``."""
+    from scipy.signal import get_window
+
+    try:
+        get_window(window, 8, fftbins=True)
+    except (ValueError, TypeError) as error:
+        return f"{window!r} is not a scipy window ({error})"
+    return None
+
+
+def _raise(problems: Sequence[tuple[str, str]]) -> None:
+    if problems:
+        raise ConfigError([ConfigProblem(path, message) for path, message in problems])
+
+
+@dataclass(frozen=True)
+class Density:
+    """Densities of a scalar quantity at several locations (times or frequencies).
+
+    Attributes
+    ----------
+    at:
+        (P,) the times or frequencies (grid points actually used).
+    value:
+        (P, G) where each density is tabulated.
+    density:
+        (P, G) the densities; an all-NaN row means a point mass at ``value[p, 0]``.
+    bandwidth:
+        (P,) the kernel bandwidths (NaN for a point mass).
+    """
+
+    at: NDArray[np.float64]
+    value: NDArray[np.float64]
+    density: NDArray[np.float64]
+    bandwidth: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """PSD statistics of one output, (F,) arrays.
+
+    Attributes
+    ----------
+    frequency:
+        In Hz (cycles per unit of time).
+    mean, std:
+        Mean PSD and the PSD's standard deviation, output unit² per Hz.
+    nominal:
+        PSD of the nominal run (``None`` without one).
+    window:
+        The window used.
+    pdf:
+        PDFs of the PSD at chosen frequencies.
+    """
+
+    frequency: NDArray[np.float64]
+    mean: NDArray[np.float64]
+    std: NDArray[np.float64]
+    nominal: NDArray[np.float64] | None
+    window: str
+    pdf: Density | None = None
+
+
+@dataclass(frozen=True)
+class OutputAnalysis:
+    """Derived statistics of one output.
+
+    Attributes
+    ----------
+    quantiles:
+        (Q, T) quantile bands at :attr:`AnalysisSettings.quantiles`.
+    pdf:
+        PDFs at the chosen times.
+    spectrum:
+        Frequency-domain statistics, or ``None``.
+    """
+
+    quantiles: NDArray[np.float64]
+    pdf: Density
+    spectrum: Spectrum | None = None
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """The settings and, per output, the derived statistics."""
+
+    settings: AnalysisSettings
+    outputs: dict[str, OutputAnalysis]
+
+
+def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
+    """The tensor Gauss grid a collocation result was computed on (``None`` otherwise)."""
+    if result.weights is None:
+        return None
+    sizes = [np.unique(column).size for column in result.nodes.T]
+    grid = TensorGrid(result.distributions, [q - 1 for q in sizes])
+    if grid.size != result.nodes.shape[0] or not np.allclose(grid.nodes, result.nodes):
+        return None
+    return grid
+
+
+def kernel_density(
+    samples: NDArray[np.float64], *, nonnegative: bool = False, bandwidth: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """Gaussian kernel density of (M,) samples, tabulated on DENSITY_POINTS points.
+
+    The bandwidth h is ``bandwidth``, by default Scott's σ M^(-1/5) (as
+    :class:`scipy.stats.gaussian_kde`); pass another density's h to smooth two alike. The
+    sum of kernels is computed by linear binning on at least 60 cells per bandwidth and an
+    FFT convolution (Silverman's algorithm): O(M) instead of O(M G), with a binning error
+    below 1e-3 of the peak density. The table spans the samples plus three bandwidths on
+    each side. With ``nonnegative`` the kernel mass below zero is reflected back, as a PSD
+    is never negative.
+
+    Returns
+    -------
+    value, density, bandwidth
+        (G,) points and densities, and h; the densities (and h) are NaN when the samples do
+        not vary (a point mass at ``value[0]``).
+    """
+    from scipy.signal import fftconvolve  # deferred: scipy.signal takes ~1 s to import
+
+    samples = np.asarray(samples, dtype=float)
+    samples = samples[np.isfinite(samples)]
+    if samples.size < 2 or not np.ptp(samples) > _RELATIVE_SPREAD * np.max(np.abs(samples)):
+        value = np.full(DENSITY_POINTS, samples[0] if samples.size else np.nan)
+        return value, np.full(DENSITY_POINTS, np.nan), float("nan")
+    if bandwidth is None:
+        bandwidth = float(np.std(samples, ddof=1)) * samples.size ** (-0.2)
+    low = samples.min() - 3.0 * bandwidth
+    if nonnegative:
+        low = max(low, 0.0)
+    value = np.linspace(low, samples.max() + 3.0 * bandwidth, DENSITY_POINTS)
+    # Points mirrored at zero carry the reflected kernel mass.
+    data = np.concatenate([samples, -samples]) if nonnegative else samples
+    margin = 6.0 * bandwidth  # the kernel is below 1e-8 of its peak beyond 6 bandwidths
+    start, stop = min(data.min(), value[0]) - margin, max(data.max(), value[-1]) + margin
+    cells = int(np.clip(np.ceil(60.0 * (stop - start) / bandwidth), _BINS, _MAX_BINS))
+    step = (stop - start) / cells
+    position = (data - start) / step
+    left = np.floor(position).astype(np.int64)
+    right_share = position - left
+    counts = np.bincount(left, 1.0 - right_share, cells + 2)
+    counts += np.bincount(left + 1, right_share, cells + 2)
+    half = int(np.ceil(margin / step))
+    offsets = np.arange(-half, half + 1) * step
+    kernel = np.exp(-0.5 * (offsets / bandwidth) ** 2) / (bandwidth * np.sqrt(2.0 * np.pi))
+    smooth = fftconvolve(counts, kernel, mode="same") / samples.size
+    density = np.interp(value, start + step * np.arange(cells + 2), smooth)
+    # FFT round-off can dip below zero in the tails.
+    return value, np.maximum(density, 0.0), bandwidth
+
+
+def _density_table(at: NDArray[np.float64], columns: NDArray, *, nonnegative: bool) -> Density:
+    """KDEs of each column of (M, P) samples, at the P locations ``at``."""
+    tables = [kernel_density(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
+    value = np.array([t[0] for t in tables]).reshape(at.size, DENSITY_POINTS)
+    density = np.array([t[1] for t in tables]).reshape(at.size, DENSITY_POINTS)
+    bandwidth = np.array([t[2] for t in tables], dtype=float).reshape(at.size)
+    return Density(np.asarray(at, dtype=float), value, density, bandwidth)
+
+
+def nearest_indices(grid: NDArray[np.float64], points: Sequence[float]) -> NDArray[np.int64]:
+    """Index of the grid point nearest each point, (P,)."""
+    return np.array([int(np.argmin(np.abs(grid - p))) for p in points], dtype=np.int64)
+
+
+def _germ_draws(result: StudyResult, settings: AnalysisSettings) -> NDArray[np.float64]:
+    """(samples, n) germ draws from the settings' seed, shared by every output."""
+    rng = np.random.default_rng(settings.seed)
+    return np.column_stack([d.sample_germ(settings.samples, rng) for d in result.distributions])
+
+
+def _block_rows(terms: int) -> int:
+    """Draws per block so that a block of the basis matrix stays near _BLOCK_VALUES."""
+    return max(1, _BLOCK_VALUES // max(terms, 1))
+
+
+class _Surrogates:
+    """Surrogate values of many (S, K) coefficient columns at the same germ draws.
+
+    Evaluating the basis matrix is the costly part, so all requests on the same basis
+    are evaluated together, one block of draws at a time.
+    """
+
+    def __init__(self, xi: NDArray[np.float64]):
+        self.xi = xi
+        self._requests: list[tuple[Any, PolynomialBasis, NDArray[np.float64]]] = []
+
+    def add(self, key: Any, basis: PolynomialBasis, columns: NDArray[np.float64]) -> None:
+        self._requests.append((key, basis, np.asarray(columns, dtype=float)))
+
+    def evaluate(self) -> dict[Any, NDArray[np.float64]]:
+        """Key -> (M, K) values."""
+        groups: dict[bytes, list[tuple[Any, PolynomialBasis, NDArray[np.float64]]]] = {}
+        for request in self._requests:
+            groups.setdefault(request[1].multi_index.tobytes(), []).append(request)
+        found = {}
+        for requests in groups.values():
+            basis = requests[0][1]
+            columns = np.concatenate([r[2] for r in requests], axis=1)
+            values = np.empty((self.xi.shape[0], columns.shape[1]))
+            rows = _block_rows(basis.size)
+            for start in range(0, self.xi.shape[0], rows):
+                block = slice(start, start + rows)
+                values[block] = basis.evaluate(self.xi[block]) @ columns
+            offsets = np.cumsum([0, *(r[2].shape[1] for r in requests)])
+            for (key, _, _), low, high in zip(requests, offsets[:-1], offsets[1:], strict=True):
+                found[key] = values[:, low:high]
+        return found
+
+
+class _PsdSource:
+    """The PSD of one output: chaos on a tensor grid, else per-run periodograms."""
+
+    def __init__(self, result: StudyResult, name: str, settings: AnalysisSettings):
+        expansion = result.expansions.get(name)
+        grid = tensor_grid_of(result)
+        self.chaos = self.per_run = self.basis = None
+        if grid is not None and expansion is not None:
+            self.chaos = chaos_spectrum(expansion, grid, result.times, settings.window)
+            self.basis = expansion.basis
+            self.frequency, self.mean, self.std = (
+                self.chaos.frequency,
+                self.chaos.mean,
+                self.chaos.std,
+            )
+        else:
+            ok = result.values[name][result.status == 1]
+            self.frequency, self.per_run = periodogram(ok, result.times, settings.window)
+            self.mean, self.std = self.per_run.mean(axis=0), self.per_run.std(axis=0, ddof=1)
+
+    def bins(self, frequencies: Sequence[float] | None) -> NDArray[np.int64]:
+        """Bins nearest ``frequencies``; ``None``: the highest peak above f = 0 (the DC bin
+        holds the offset, not a vibration)."""
+        if frequencies is None:
+            return np.array([1 + int(np.argmax(self.mean[1:])) if self.mean.size > 1 else 0])
+        return nearest_indices(self.frequency, frequencies)
+
+    def request(self, surrogates: _Surrogates, key: Any, bins: NDArray[np.int64]) -> None:
+        """Ask for the surrogate's Re and Im of Ŷ(f, ξ) at ``bins`` (chaos only)."""
+        spectra = self.chaos.spectra[:, bins]
+        surrogates.add(key, self.basis, np.concatenate([spectra.real, spectra.imag], axis=1))
+
+    def draws(self, bins: NDArray[np.int64], parts: NDArray | None) -> NDArray[np.float64]:
+        """(M, P) PSD draws: per run, or s(f) |Ŷ(f, ξ)|² from the requested parts."""
+        if self.chaos is None:
+            return self.per_run[:, bins]
+        real, imaginary = parts[:, : bins.size], parts[:, bins.size :]
+        return self.chaos.scale[bins] * (real**2 + imaginary**2)
+
+    def spectrum(self, result: StudyResult, name: str, settings: AnalysisSettings, pdf: Density):
+        nominal = result.nominal.get(name)
+        psd = None if nominal is None else periodogram(nominal, result.times, settings.window)[1]
+        return Spectrum(self.frequency, self.mean, self.std, psd, settings.window, pdf)
+
+
+def output_draws(
+    result: StudyResult, name: str, times: Sequence[float], settings: AnalysisSettings
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Draws of an output at the grid times nearest ``times``.
+
+    Surrogate values at ``settings.samples`` random inputs when the output has a chaos
+    expansion, else the model runs themselves (see :func:`draws_are_runs`).
+
+    Returns
+    -------
+    at, draws
+        (P,) the grid times used and (M, P) the draws.
+    """
+    indices = nearest_indices(result.times, times)
+    expansion = result.expansions.get(name)
+    if expansion is None:
+        return result.times[indices], result.values[name][result.status == 1][:, indices]
+    surrogates = _Surrogates(_germ_draws(result, settings))
+    surrogates.add(name, expansion.basis, expansion.coefficients[:, indices])
+    return result.times[indices], surrogates.evaluate()[name]
+
+
+def draws_are_runs(result: StudyResult, name: str) -> bool:
+    """Whether :func:`output_draws` returns the model runs (sampling without a chaos fit)."""
+    return name not in result.expansions
+
+
+def _psd_draws(
+    source: _PsdSource, result: StudyResult, settings: AnalysisSettings, bins: NDArray[np.int64]
+) -> NDArray[np.float64]:
+    """(M, P) PSD draws of one source at ``bins``."""
+    parts = None
+    if source.chaos is not None:
+        surrogates = _Surrogates(_germ_draws(result, settings))
+        source.request(surrogates, "psd", bins)
+        parts = surrogates.evaluate()["psd"]
+    return source.draws(bins, parts)
+
+
+def psd_draws(
+    result: StudyResult, name: str, frequencies: Sequence[float], settings: AnalysisSettings
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Draws of an output's PSD at the frequency bins nearest ``frequencies``.
+
+    The surrogate PSD at ``settings.samples`` random inputs on a collocation grid, else the
+    per-run periodograms (see :func:`psd_draws_are_runs`).
+
+    Returns
+    -------
+    at, draws
+        (P,) the bin frequencies used and (M, P) the draws.
+
+    Raises
+    ------
+    ValueError
+        If the time grid is not uniform.
+    """
+    source = _PsdSource(result, name, settings)
+    bins = source.bins(frequencies)
+    return source.frequency[bins], _psd_draws(source, result, settings, bins)
+
+
+def psd_draws_are_runs(result: StudyResult, name: str) -> bool:
+    """Whether :func:`psd_draws` returns per-run periodograms (no collocation expansion)."""
+    return tensor_grid_of(result) is None or name not in result.expansions
+
+
+def spectrum(
+    result: StudyResult,
+    name: str,
+    settings: AnalysisSettings,
+    frequencies: Sequence[float] | None = None,
+) -> Spectrum:
+    """PSD statistics of one output, with PDFs of the PSD at ``frequencies``.
+
+    Parameters
+    ----------
+    frequencies:
+        Where to tabulate the PSD's PDF; default ``settings.pdf_freqs``, else the highest
+        peak of the mean PSD above f = 0.
+
+    Raises
+    ------
+    ValueError
+        If the time grid is not uniform.
+    """
+    source = _PsdSource(result, name, settings)
+    bins = source.bins(settings.pdf_freqs if frequencies is None else frequencies)
+    draws = _psd_draws(source, result, settings, bins)
+    pdf = _density_table(source.frequency[bins], draws, nonnegative=True)
+    return source.spectrum(result, name, settings, pdf)
+
+
+def _quantile_bands(
+    result: StudyResult, xi: NDArray[np.float64], levels: Sequence[float]
+) -> dict[str, NDArray[np.float64]]:
+    """Output -> (Q, T) quantiles over time; the basis matrix of the draws is evaluated once
+    per basis and the values in time blocks that bound memory."""
+    bands = {}
+    phis: dict[bytes, NDArray[np.float64]] = {}
+    n_times = result.times.size
+    block = max(1, _BLOCK_VALUES // xi.shape[0])
+    for name in result.outputs:
+        expansion = result.expansions.get(name)
+        if expansion is None:
+            runs = result.values[name][result.status == 1]
+            bands[name] = np.quantile(runs, levels, axis=0).reshape(len(levels), n_times)
+            continue
+        key = expansion.multi_index.tobytes()
+        if key not in phis:
+            phis[key] = expansion.basis.evaluate(xi)
+        parts = [
+            np.quantile(
+                phis[key] @ expansion.coefficients[:, start : start + block], levels, axis=0
+            )
+            for start in range(0, n_times, block)
+        ]
+        bands[name] = np.concatenate(parts, axis=1).reshape(len(levels), n_times)
+    return bands
+
+
+def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> Analysis:
+    """Quantile bands, PDFs and spectra of every output of a result.
+
+    Parameters
+    ----------
+    result:
+        A study result (from :meth:`pcmb.Study.run` or :func:`pcmb.load`).
+    settings:
+        What to compute (default :class:`AnalysisSettings`).
+
+    Returns
+    -------
+    Analysis
+
+    Raises
+    ------
+    ConfigError
+        If the settings do not fit the result (see :meth:`AnalysisSettings.check`).
+    """
+    settings = settings or AnalysisSettings()
+    times = result.times
+    settings.check(times, result.outputs)
+    xi = _germ_draws(result, settings)
+    indices = nearest_indices(times, settings.pdf_times or (times[-1],))
+    sources = {
+        name: _PsdSource(result, name, settings)
+        for name in settings.spectrum_outputs(times, result.outputs)
+    }
+    bins = {name: source.bins(settings.pdf_freqs) for name, source in sources.items()}
+    # Every surrogate draw of every output in one pass over the basis matrix.
+    surrogates = _Surrogates(xi)
+    for name, expansion in result.expansions.items():
+        surrogates.add(("time", name), expansion.basis, expansion.coefficients[:, indices])
+    for name, source in sources.items():
+        if source.chaos is not None:
+            source.request(surrogates, ("psd", name), bins[name])
+    drawn = surrogates.evaluate()
+    bands = _quantile_bands(result, xi[:QUANTILE_DRAWS], settings.quantiles)
+    outputs = {}
+    for name in result.outputs:
+        at_times = drawn.get(("time", name))
+        if at_times is None:
+            at_times = result.values[name][result.status == 1][:, indices]
+        spectrum_ = None
+        if name in sources:
+            source, k = sources[name], bins[name]
+            psd = source.draws(k, drawn.get(("psd", name)))
+            pdf = _density_table(source.frequency[k], psd, nonnegative=True)
+            spectrum_ = source.spectrum(result, name, settings, pdf)
+        outputs[name] = OutputAnalysis(
+            quantiles=bands[name],
+            pdf=_density_table(times[indices], at_times, nonnegative=False),
+            spectrum=spectrum_,
+        )
+    return Analysis(settings, outputs)

@@ -1,0 +1,645 @@
+"""Figures and an index page for a result file: simulations with error bars, to look at.
+
+:func:`write_report` writes, for every output of a study, PNG figures
+
+- ``<output>_time.png``: mean ± 1σ and the quantile band over time, the deterministic run
+  at the nominal parameters, and the mean ± 1σ of every comparison result;
+- ``<output>_pdf.png``: PDFs at the analysis times (KDE of surrogate draws), with the
+  comparisons' histograms (sampled results) or KDEs (chaos results);
+- ``<output>_sobol.png``: first-order (stacked) and total Sobol' indices over time (when the
+  output has a chaos expansion);
+- ``<output>_psd.png``: mean PSD with its ±1σ band, the nominal PSD, the comparisons' mean
+  PSDs (when the output has a spectrum);
+- ``<output>_psd_pdf.png``: PDFs of the PSD at the analysis frequencies;
+- ``<output>_compare.png``: means and standard deviations of the result and each
+  comparison overlaid (the papers' Fig. 6 and 13);
+
+and an ``index.html`` that shows them with the key numbers (runs, wall time, warnings,
+largest differences). A result without a stored analysis is analysed with the default
+:class:`~pcmb.analysis.AnalysisSettings`; comparisons use the same window, times and
+frequencies as the result.
+
+This is the only module that imports matplotlib (object-oriented API and the Agg canvas:
+no pyplot, no global backend switch).
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.analysis import (
+    Analysis,
+    AnalysisSettings,
+    Density,
+    analyse,
+    draws_are_runs,
+    kernel_density,
+    output_draws,
+    psd_draws,
+    psd_draws_are_runs,
+    spectrum,
+)
+from pcmb.comparison import Comparison, compare, method_label
+from pcmb.errors import ConfigError
+from pcmb.study import StudyResult
+
+__all__ = [
+    "DPI",
+    "PANELS_PER_ROW",
+    "ROW_HEIGHT",
+    "WIDTH",
+    "figure_pixels",
+    "write_comparison_figures",
+    "write_report",
+]
+
+#: Figure width and height of one row of panels, in inches, and resolution.
+WIDTH, ROW_HEIGHT, DPI = 10.0, 4.5, 100
+#: Panels side by side before a figure wraps to another row.
+PANELS_PER_ROW = 3
+#: PSD plots show frequencies up to where mean + std falls below this fraction of its peak.
+_PSD_FLOOR = 1e-6
+#: Histogram bins of sampled comparisons.
+_BINS = 40
+_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+
+
+def figure_pixels(panels: int) -> tuple[int, int]:
+    """(width, height) in pixels of a figure with ``panels`` panels."""
+    rows = -(-max(panels, 1) // PANELS_PER_ROW)
+    return int(WIDTH * DPI), int(ROW_HEIGHT * rows * DPI)
+
+
+def _matplotlib() -> tuple[Any, Any]:
+    """The Figure class and the Agg canvas, imported on first use.
+
+    Raises
+    ------
+    ConfigError
+        If matplotlib is not installed.
+    """
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise ConfigError(
+            "figures need matplotlib: install it with pip install 'pcmb[plot]'"
+        ) from None
+    return Figure, FigureCanvasAgg
+
+
+@dataclass(frozen=True)
+class _Labels:
+    """Axis texts with units where the analysis settings know them."""
+
+    settings: AnalysisSettings
+
+    def time(self) -> str:
+        unit = self.settings.time_unit
+        return f"time [{unit}]" if unit else "time"
+
+    def frequency_unit(self) -> str:
+        unit = self.settings.time_unit
+        if unit in ("s", "sec", "second", "seconds"):
+            return "Hz"
+        return f"1/{unit}" if unit else "cycles per unit time"
+
+    def frequency(self) -> str:
+        return f"frequency [{self.frequency_unit()}]"
+
+    def output(self, name: str) -> str:
+        unit = self.settings.units.get(name, "")
+        return f"{name} [{unit}]" if unit else name
+
+    def psd_unit(self, name: str) -> str:
+        unit = self.settings.units.get(name, "")
+        per = "Hz" if self.frequency_unit() == "Hz" else "frequency unit"
+        return f"{unit}²/{per}" if unit else f"unit²/{per}"
+
+    def psd(self, name: str) -> str:
+        return f"PSD of {name} [{self.psd_unit(name)}]"
+
+
+class _Canvas:
+    """Creates figures of the report's sizes and saves them."""
+
+    def __init__(self, directory: Path):
+        self.directory = directory
+        self.figure_class, self.canvas_class = _matplotlib()
+        self.written: list[Path] = []
+
+    def figure(self, panels: int) -> tuple[Any, list[Any]]:
+        width, height = figure_pixels(panels)
+        figure = self.figure_class(figsize=(width / DPI, height / DPI), dpi=DPI)
+        self.canvas_class(figure)
+        figure.set_layout_engine("constrained")
+        rows = -(-panels // PANELS_PER_ROW)
+        columns = min(panels, PANELS_PER_ROW)
+        axes = figure.subplots(rows, columns, squeeze=False).ravel()
+        for extra in axes[panels:]:
+            extra.set_visible(False)
+        return figure, list(axes[:panels])
+
+    def save(self, figure: Any, name: str) -> Path:
+        """Save as a 256-colour PNG: a third of the size of Agg's RGBA output, and the
+        difference is invisible on line plots."""
+        from PIL import Image  # matplotlib's own dependency
+
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png", dpi=DPI)
+        image = Image.open(buffer).convert("RGB")
+        path = self.directory / name
+        image.quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
+        self.written.append(path)
+        return path
+
+
+@dataclass(frozen=True)
+class _Other:
+    """A comparison result with its label and color."""
+
+    label: str
+    result: StudyResult
+    color: str
+
+
+def _legend(figure: Any, panels: Sequence[Any]) -> None:
+    """One legend for the figure, below the panels: it never hides a curve.
+
+    Every panel draws the same kinds of curves, so the labels are collected once.
+    """
+    entries: dict[str, Any] = {}
+    for axes in panels:
+        for handle, label in zip(*axes.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    if entries:
+        figure.legend(
+            list(entries.values()),
+            list(entries),
+            loc="outside lower center",
+            ncols=min(len(entries), 3),
+            fontsize="small",
+            frameon=False,
+        )
+
+
+def _time_figure(
+    canvas: _Canvas,
+    result: StudyResult,
+    name: str,
+    analysis: Analysis,
+    others: Sequence[_Other],
+    labels: _Labels,
+) -> Path:
+    figure, (axes,) = canvas.figure(1)
+    times, mean, std = result.times, result.mean(name), result.std(name)
+    axes.fill_between(
+        times, mean - std, mean + std, color=_COLORS[0], alpha=0.3, lw=0, label="mean ± 1σ"
+    )
+    axes.plot(times, mean, color=_COLORS[0], lw=1.8, label=f"mean: {method_label(result)}")
+    levels = analysis.settings.quantiles
+    bands = analysis.outputs[name].quantiles
+    names = f"quantiles {', '.join(f'{q:.0%}' for q in levels)}"
+    for i, band in enumerate(bands):
+        axes.plot(times, band, color=_COLORS[0], lw=0.9, ls=":", label=names if i == 0 else None)
+    if name in result.nominal:
+        axes.plot(times, result.nominal[name], color="black", lw=1.2, ls="--", label="nominal run")
+    for other in others:
+        o_mean, o_std = other.result.mean(name), other.result.std(name)
+        axes.plot(times, o_mean, color=other.color, lw=1.2, label=f"mean: {other.label}")
+        axes.plot(
+            times, o_mean + o_std, color=other.color, lw=1.0, ls="-.", label=f"± 1σ: {other.label}"
+        )
+        axes.plot(times, o_mean - o_std, color=other.color, lw=1.0, ls="-.")
+    axes.set_xlabel(labels.time())
+    axes.set_ylabel(labels.output(name))
+    axes.set_title(f"{name}: mean with error bars")
+    axes.set_xlim(times[0], times[-1])
+    _legend(figure, [axes])
+    return canvas.save(figure, f"{name}_time.png")
+
+
+def _plot_density(axes: Any, density: Density, row: int, color: str, label: str) -> None:
+    value, table = density.value[row], density.density[row]
+    if np.all(np.isnan(table)):
+        axes.axvline(value[0], color=color, lw=2.0, label=f"{label} (point mass)")
+    else:
+        axes.plot(value, table, color=color, lw=1.8, label=label)
+
+
+def _bandwidth_note(density: Density, row: int) -> str:
+    h = density.bandwidth[row]
+    return "" if np.isnan(h) else f" (KDE h = {h:.2g})"
+
+
+def _plot_other_draws(
+    axes: Any, draws: NDArray, is_runs: bool, other: _Other, *, nonnegative: bool, bandwidth: float
+) -> None:
+    """A sampled comparison as a histogram; a chaos comparison as its KDE with the same
+    bandwidth as the result's, so that the two curves are smoothed alike."""
+    draws = draws[np.isfinite(draws)]
+    if is_runs:
+        axes.hist(
+            draws,
+            bins=_BINS,
+            density=True,
+            histtype="step",
+            color=other.color,
+            lw=1.3,
+            label=other.label,
+        )
+        return
+    h = None if np.isnan(bandwidth) else bandwidth
+    value, density, _ = kernel_density(draws, nonnegative=nonnegative, bandwidth=h)
+    axes.plot(value, density, color=other.color, lw=1.3, ls="--", label=other.label)
+
+
+def _pdf_figure(
+    canvas: _Canvas,
+    result: StudyResult,
+    name: str,
+    analysis: Analysis,
+    others: Sequence[_Other],
+    labels: _Labels,
+) -> Path:
+    pdf = analysis.outputs[name].pdf
+    figure, panels = canvas.figure(pdf.at.size)
+    source = "surrogate" if not draws_are_runs(result, name) else "runs"
+    for row, (axes, at) in enumerate(zip(panels, pdf.at, strict=True)):
+        _plot_density(axes, pdf, row, _COLORS[0], f"{method_label(result)}, {source}")
+        for other in others:
+            _, draws = output_draws(other.result, name, [at], analysis.settings)
+            is_runs = draws_are_runs(other.result, name)
+            h = pdf.bandwidth[row]
+            _plot_other_draws(axes, draws[:, 0], is_runs, other, nonnegative=False, bandwidth=h)
+        if name in result.nominal:
+            k = int(np.argmin(np.abs(result.times - at)))
+            axes.axvline(result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal")
+        axes.set_xlabel(labels.output(name))
+        axes.set_ylabel("probability density")
+        axes.set_title(f"{name} at t = {at:.4g}{_bandwidth_note(pdf, row)}")
+    _legend(figure, panels)
+    return canvas.save(figure, f"{name}_pdf.png")
+
+
+def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labels) -> Path | None:
+    if name not in result.expansions or len(result.input_names) < 2:
+        return None  # with one input both indices are 1 wherever the output varies
+    figure, (first_axes, total_axes) = canvas.figure(2)
+    times = result.times
+    first, total = result.sobol_first(name), result.sobol_total(name)
+    colors = [_COLORS[i % len(_COLORS)] for i in range(len(result.input_names))]
+    # Where the output does not vary the indices are NaN: nothing is stacked there.
+    first_axes.stackplot(
+        times, np.nan_to_num(first), labels=result.input_names, colors=colors, alpha=0.75
+    )
+    for k, input_name in enumerate(result.input_names):
+        total_axes.plot(times, total[k], color=colors[k], lw=1.6, label=input_name)
+    first_axes.set_title(f"{name}: first-order Sobol' indices (stacked)")
+    total_axes.set_title(f"{name}: total Sobol' indices")
+    for axes in (first_axes, total_axes):
+        axes.set_xlabel(labels.time())
+        axes.set_ylabel("share of the variance")
+        axes.set_ylim(0.0, 1.05)
+        axes.set_xlim(times[0], times[-1])
+    _legend(figure, [first_axes, total_axes])
+    return canvas.save(figure, f"{name}_sobol.png")
+
+
+def _psd_limits(mean: NDArray, std: NDArray, frequency: NDArray, keep: Sequence[float]) -> tuple:
+    """x limit where mean + std stays above _PSD_FLOOR of its peak, and y limits."""
+    upper = mean + std
+    peak = float(np.max(upper))
+    above = np.flatnonzero(upper > _PSD_FLOOR * peak)
+    f_max = max([frequency[above[-1]] if above.size else frequency[-1], *keep])
+    f_max = min(1.1 * f_max, frequency[-1]) if f_max > 0 else frequency[-1]
+    return f_max, (_PSD_FLOOR * peak * 0.1, peak * 3.0)
+
+
+def _psd_figure(
+    canvas: _Canvas,
+    result: StudyResult,
+    name: str,
+    analysis: Analysis,
+    others: Sequence[_Other],
+    labels: _Labels,
+) -> Path | None:
+    spec = analysis.outputs[name].spectrum
+    if spec is None or not np.max(spec.mean) > 0:
+        return None
+    figure, (axes,) = canvas.figure(1)
+    f_max, (low, high) = _psd_limits(spec.mean, spec.std, spec.frequency, spec.pdf.at)
+    # A log axis cannot show mean - σ <= 0: the band is drawn from the floor.
+    lower = np.clip(spec.mean - spec.std, low, None)
+    axes.fill_between(
+        spec.frequency,
+        lower,
+        spec.mean + spec.std,
+        color=_COLORS[0],
+        alpha=0.3,
+        lw=0,
+        label="mean ± 1σ (lower edge clipped at the axis)",
+    )
+    axes.plot(spec.frequency, spec.mean, color=_COLORS[0], lw=1.6, label="mean PSD")
+    if spec.nominal is not None:
+        axes.plot(
+            spec.frequency, spec.nominal, color="black", ls="--", lw=1.1, label="nominal run PSD"
+        )
+    for other in others:
+        theirs = spectrum(other.result, name, analysis.settings, frequencies=spec.pdf.at)
+        axes.plot(
+            theirs.frequency, theirs.mean, color=other.color, lw=1.2, label=f"mean: {other.label}"
+        )
+        axes.plot(
+            theirs.frequency,
+            theirs.mean + theirs.std,
+            color=other.color,
+            lw=0.9,
+            ls="-.",
+            label=f"mean + 1σ: {other.label}",
+        )
+    for f in spec.pdf.at:
+        axes.axvline(f, color="grey", lw=0.8, ls=":")
+    axes.set_yscale("log")
+    axes.set_xlim(0.0, f_max)
+    axes.set_ylim(low, high)
+    axes.set_xlabel(labels.frequency())
+    axes.set_ylabel(labels.psd(name))
+    axes.set_title(
+        f"{name}: power spectral density ({spec.window} window, one-sided); "
+        "dotted: frequencies of the PSD PDFs"
+    )
+    _legend(figure, [axes])
+    return canvas.save(figure, f"{name}_psd.png")
+
+
+def _psd_pdf_figure(
+    canvas: _Canvas,
+    result: StudyResult,
+    name: str,
+    analysis: Analysis,
+    others: Sequence[_Other],
+    labels: _Labels,
+) -> Path | None:
+    spec = analysis.outputs[name].spectrum
+    if spec is None or spec.pdf is None:
+        return None
+    figure, panels = canvas.figure(spec.pdf.at.size)
+    source = "runs" if psd_draws_are_runs(result, name) else "surrogate"
+    unit, per = labels.psd_unit(name), labels.frequency_unit()
+    per = per if per == "Hz" else ""
+    for row, (axes, at) in enumerate(zip(panels, spec.pdf.at, strict=True)):
+        _plot_density(axes, spec.pdf, row, _COLORS[0], f"{method_label(result)}, {source}")
+        for other in others:
+            _, draws = psd_draws(other.result, name, [at], analysis.settings)
+            is_runs = psd_draws_are_runs(other.result, name)
+            h = spec.pdf.bandwidth[row]
+            _plot_other_draws(axes, draws[:, 0], is_runs, other, nonnegative=True, bandwidth=h)
+        if spec.nominal is not None:
+            k = int(np.argmin(np.abs(spec.frequency - at)))
+            axes.axvline(spec.nominal[k], color="black", ls="--", lw=1.0, label="nominal")
+        axes.set_xlabel(f"PSD at {at:.4g} {per} [{unit}]")
+        axes.set_ylabel("probability density")
+        axes.set_title(f"{name}: PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
+        axes.ticklabel_format(axis="both", style="sci", scilimits=(-3, 4))
+    _legend(figure, panels)
+    return canvas.save(figure, f"{name}_psd_pdf.png")
+
+
+def _compare_figure(
+    canvas: _Canvas,
+    result: StudyResult,
+    name: str,
+    others: Sequence[_Other],
+    comparisons: Sequence[Comparison],
+    labels: _Labels,
+) -> Path | None:
+    if not others:
+        return None
+    figure, (mean_axes, std_axes) = canvas.figure(2)
+    times = result.times
+    mean_axes.plot(times, result.mean(name), color=_COLORS[0], lw=1.8, label=method_label(result))
+    std_axes.plot(times, result.std(name), color=_COLORS[0], lw=1.8, label=method_label(result))
+    for other in others:
+        mean_axes.plot(
+            times, other.result.mean(name), color=other.color, ls="--", label=other.label
+        )
+        std_axes.plot(times, other.result.std(name), color=other.color, ls="--", label=other.label)
+    worst = max(comparisons, key=lambda c: c.differences[name].mean_max).differences[name]
+    unit = labels.settings.units.get(name, "")
+    unit = f" {unit}" if unit else ""
+    mean_axes.set_title(f"mean of {name} (largest |Δ| {worst.mean_max:.3g}{unit})")
+    std_axes.set_title(f"std of {name} (largest |Δ| {worst.std_max:.3g}{unit})")
+    mean_axes.set_ylabel(labels.output(name))
+    std_axes.set_ylabel(labels.output(name))
+    for axes in (mean_axes, std_axes):
+        axes.set_xlabel(labels.time())
+        axes.set_xlim(times[0], times[-1])
+    _legend(figure, [mean_axes, std_axes])
+    return canvas.save(figure, f"{name}_compare.png")
+
+
+def _index_page(
+    result: StudyResult,
+    source: str,
+    others: Sequence[_Other],
+    comparisons: Sequence[Comparison],
+    figures: dict[str, list[Path]],
+    directory: Path,
+) -> str:
+    e = html.escape
+    status = np.bincount(result.status.astype(int), minlength=3)
+    rows = [
+        f"<tr><th>file</th><td>{e(source)}</td></tr>",
+        f"<tr><th>method</th><td>{e(method_label(result))}</td></tr>",
+        f"<tr><th>runs</th><td>{status[1]} ok, {status[2]} failed, {status[0]} pending</td></tr>",
+        f"<tr><th>wall time of the runs</th><td>{result.seconds:.3g} s</td></tr>",
+        "<tr><th>inputs</th><td>"
+        + ", ".join(
+            e(f"{n} ~ {d.describe()['dist']}")
+            for n, d in zip(result.input_names, result.distributions, strict=True)
+        )
+        + "</td></tr>",
+    ]
+    if result.nominal_params:
+        nominal = ", ".join(f"{k} = {v:.6g}" for k, v in result.nominal_params.items())
+        rows.append(f"<tr><th>nominal run</th><td>{e(nominal)}</td></tr>")
+    for other in others:
+        rows.append(
+            f"<tr><th>compared with</th><td>{e(other.label)}, "
+            f"{other.result.seconds:.3g} s of runs</td></tr>"
+        )
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>pcmb report: {e(result.name)}</title>",
+        "<style>body{font-family:sans-serif;max-width:1040px;margin:auto}"
+        "table{border-collapse:collapse}th,td{border:1px solid #ccc;padding:3px 8px;"
+        "text-align:left}td.num{text-align:right}.warn{color:#a00}img{max-width:100%}</style>",
+        "</head><body>",
+        f"<h1>{e(result.name)}</h1>",
+        "<table>",
+        *rows,
+        "</table>",
+    ]
+    if result.warnings:
+        parts.append("<h2>Warnings</h2><ul>")
+        parts += [f'<li class="warn">{e(w)}</li>' for w in result.warnings]
+        parts.append("</ul>")
+    header = "<tr><th>output</th><th>mean range</th><th>largest std</th>"
+    header += "".join(
+        f"<th>vs {e(o.label)}: max |Δmean| (rel)</th><th>max |Δstd| (rel)</th>"
+        "<th>departs at</th><th>verdict</th>"
+        for o in others
+    )
+    parts += ["<h2>Key numbers</h2>", "<table>", header + "</tr>"]
+    for name in result.outputs:
+        mean, std = result.mean(name), result.std(name)
+        cells = [
+            f"<td>{e(name)}</td>",
+            f'<td class="num">{mean.min():.4g} .. {mean.max():.4g}</td>',
+            f'<td class="num">{np.nanmax(std):.4g}</td>',
+        ]
+        for comparison in comparisons:
+            d = comparison.differences.get(name)
+            if d is None:
+                cells.append("<td></td><td></td><td></td><td>not in both</td>")
+                continue
+            cells += [
+                f'<td class="num">{d.mean_max:.3g} ({d.mean_relative:.2g})</td>',
+                f'<td class="num">{d.std_max:.3g} ({d.std_relative:.2g})</td>',
+                f'<td class="num">{"" if np.isnan(d.departure) else f"{d.departure:.4g}"}</td>',
+                f"<td>{e(d.verdict())}</td>",
+            ]
+        parts.append("<tr>" + "".join(cells) + "</tr>")
+    parts.append("</table>")
+    if comparisons:
+        parts.append(
+            "<p>rel: relative to the largest standard deviation of this result. departs at: "
+            "the first time the mean or std leaves 4 standard errors of the sampling noise; "
+            "verdict: whether they stay within it at every time.</p>"
+        )
+        parts += [f"<pre>{e(c.table())}</pre>" for c in comparisons]
+    for name, paths in figures.items():
+        parts.append(f"<h2>{e(name)}</h2>")
+        for path in paths:
+            relative = os.path.relpath(path, directory)
+            parts.append(f'<p><img src="{e(relative)}" alt="{e(path.stem)}"></p>')
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def _others(
+    result: StudyResult, comparisons: Sequence[StudyResult], labels: Sequence[str] | None
+) -> tuple[list[_Other], list[Comparison]]:
+    """The comparison results with labels and colors, and their differences to ``result``."""
+    names = list(labels) if labels is not None else [method_label(c) for c in comparisons]
+    if len(names) != len(comparisons):
+        raise ConfigError(f"{len(comparisons)} comparisons but {len(names)} labels")
+    others = [
+        _Other(label, other, _COLORS[1 + i % (len(_COLORS) - 1)])
+        for i, (label, other) in enumerate(zip(names, comparisons, strict=True))
+    ]
+    found = [compare(result, o.result, labels=(method_label(result), o.label)) for o in others]
+    return others, found
+
+
+def _shared(
+    name: str, others: Sequence[_Other], found: Sequence[Comparison]
+) -> tuple[list[_Other], list[Comparison]]:
+    """The comparisons that have output ``name``."""
+    pairs = [(o, c) for o, c in zip(others, found, strict=True) if name in o.result.outputs]
+    return [o for o, _ in pairs], [c for _, c in pairs]
+
+
+def write_comparison_figures(
+    reference: StudyResult,
+    comparisons: Sequence[StudyResult],
+    directory: str | os.PathLike[str],
+    *,
+    labels: Sequence[str] | None = None,
+) -> list[Path]:
+    """Write ``<output>_compare.png`` (means and stds overlaid) for every shared output.
+
+    Raises
+    ------
+    ConfigError
+        If matplotlib is missing, or a comparison has another time grid or no shared output.
+    """
+    directory = Path(directory)
+    canvas = _Canvas(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    others, found = _others(reference, comparisons, labels)
+    settings = reference.analysis.settings if reference.analysis else AnalysisSettings()
+    for name in reference.outputs:
+        shared, matched = _shared(name, others, found)
+        if shared:
+            _compare_figure(canvas, reference, name, shared, matched, _Labels(settings))
+    return canvas.written
+
+
+def write_report(
+    result: StudyResult,
+    directory: str | os.PathLike[str],
+    *,
+    source: str = "",
+    comparisons: Sequence[StudyResult] = (),
+    labels: Sequence[str] | None = None,
+) -> list[Path]:
+    """Write the figures and ``index.html`` of a result into ``directory``.
+
+    Parameters
+    ----------
+    result:
+        The study to show (its stored analysis, else a default one).
+    directory:
+        Created if needed; existing figures of the same names are replaced.
+    source:
+        Where the result came from (shown on the page).
+    comparisons:
+        Results of the same model on the same time grid (e.g. a Monte Carlo run), overlaid.
+    labels:
+        Names of the comparisons (default: how each was computed).
+
+    Returns
+    -------
+    list of Path
+        The files written, ``index.html`` last.
+
+    Raises
+    ------
+    ConfigError
+        If matplotlib is missing, or a comparison has another time grid or no shared output.
+    """
+    directory = Path(directory)
+    canvas = _Canvas(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    analysis = result.analysis or analyse(result)
+    others, found = _others(result, comparisons, labels)
+    text = _Labels(analysis.settings)
+    figures: dict[str, list[Path]] = {}
+    for name in result.outputs:
+        shared, matched = _shared(name, others, found)
+        drawn = [
+            _time_figure(canvas, result, name, analysis, shared, text),
+            _pdf_figure(canvas, result, name, analysis, shared, text),
+            _sobol_figure(canvas, result, name, text),
+            _psd_figure(canvas, result, name, analysis, shared, text),
+            _psd_pdf_figure(canvas, result, name, analysis, shared, text),
+            _compare_figure(canvas, result, name, shared, matched, text),
+        ]
+        figures[name] = [path for path in drawn if path is not None]
+    index = directory / "index.html"
+    index.write_text(
+        _index_page(result, source, others, found, figures, directory), encoding="utf-8"
+    )
+    return [*canvas.written, index]
