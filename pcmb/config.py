@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import scipy.stats
 import yaml
 from numpy.typing import NDArray
 from pydantic import (
@@ -428,6 +427,8 @@ class ScipySpec(_InputSpec):
     germ: Literal["uniform", "normal"] = "normal"
 
     def _build(self) -> inputs.Distribution:
+        import scipy.stats  # deferred: ~1 s of import that only this input kind needs
+
         law = getattr(scipy.stats, self.name, None) if not self.name.startswith("_") else None
         if not isinstance(law, scipy.stats.rv_continuous):
             raise ValueError(f"scipy.stats has no continuous distribution named {self.name!r}")

@@ -8,7 +8,7 @@ from pcmb.expansion import ChaosExpansion
 from pcmb.inputs import Uniform
 from pcmb.recovery import project_tensor
 from pcmb.sampling import TensorGrid
-from pcmb.spectral import chaos_spectrum, periodogram
+from pcmb.spectral import WINDOWS, chaos_spectrum, periodogram
 
 TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)
 
@@ -32,7 +32,7 @@ def study(request):
 
 def test_periodogram_matches_scipy():
     x = oscillator([2.0, 3.0])
-    for window in ("hann", "boxcar"):
+    for window in WINDOWS:
         fs = 1 / (TIMES[1] - TIMES[0])
         f_ref, p_ref = scipy_periodogram(x, fs=fs, window=window, detrend=False)
         f, p = periodogram(x, TIMES, window)
@@ -72,6 +72,8 @@ def test_psd_samples_at_a_frequency(study):
     assert np.all(samples >= 0)
 
 
-def test_non_uniform_grids_are_rejected():
+def test_non_uniform_grids_and_unknown_windows_are_rejected():
     with pytest.raises(ValueError, match="uniform"):
         periodogram(np.zeros(3), [0.0, 1.0, 3.0])
+    with pytest.raises(ValueError, match="unknown window 'kaiser'"):
+        periodogram(np.zeros(3), [0.0, 1.0, 2.0], "kaiser")
