@@ -86,7 +86,7 @@ class Distribution(ABC):
 
     def sample_germ(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """(size,) independent germ samples."""
-        return self.family.germ.rvs(size=size, random_state=rng)
+        return self.family.sample(size, rng)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """(size,) independent samples of θ (drawn through the germ, as Monte Carlo does)."""

@@ -84,6 +84,11 @@ class OrthonormalFamily(ABC):
     def germ(self) -> st.rv_continuous:
         """The germ's distribution (frozen scipy.stats object): sampling, cdf, ppf."""
 
+    @abstractmethod
+    def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        """(size,) independent germ draws with numpy's generator (the same draws as the
+        scipy.stats germ's ``rvs``, without importing scipy.stats)."""
+
     @property
     def support(self) -> tuple[float, float]:
         """Closed support of the germ."""
@@ -152,6 +157,9 @@ class Legendre(OrthonormalFamily):
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return sp.roots_legendre(q)
 
+    def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        return -1.0 + 2.0 * rng.uniform(0.0, 1.0, size)
+
     @cached_property
     def germ(self) -> st.rv_continuous:
         import scipy.stats as st  # deferred: 1.3 s of import that collocation never needs
@@ -190,6 +198,9 @@ class Jacobi(OrthonormalFamily):
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return sp.roots_jacobi(q, self.alpha, self.beta)
 
+    def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        return -1.0 + 2.0 * rng.beta(self.beta + 1.0, self.alpha + 1.0, size)
+
     @cached_property
     def germ(self) -> st.rv_continuous:
         import scipy.stats as st
@@ -208,6 +219,9 @@ class Hermite(OrthonormalFamily):
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return sp.roots_hermitenorm(q)
+
+    def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        return rng.standard_normal(size)
 
     @cached_property
     def germ(self) -> st.rv_continuous:
@@ -234,6 +248,9 @@ class Laguerre(OrthonormalFamily):
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return sp.roots_genlaguerre(q, self.alpha)
+
+    def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        return rng.standard_gamma(self.alpha + 1.0, size)
 
     @cached_property
     def germ(self) -> st.rv_continuous:
