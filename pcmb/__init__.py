@@ -17,9 +17,6 @@ _EXPORTS = {
     "pcmb.analysis": ["AnalysisSettings", "analyse"],
     "pcmb.basis": [
         "PolynomialBasis",
-        "RunResult",
-        "Study",
-        "StudyResult",
         "hyperbolic_index_set",
         "tensor_index_set",
         "total_index_set",

@@ -10,10 +10,13 @@ numbers):
   draws when the output has a chaos expansion, else of the model runs themselves
   (sampling methods); each time is taken at the nearest grid point;
 - **spectra** (one-sided PSD, :mod:`pcmb.spectral` conventions: y² per Hz, window
-  ``window``, mean not removed): on a tensor collocation grid, the mean PSD is exact from
-  the coefficient spectra (Σ|ĉ_α|²) and the band is the quadrature of the per-node PSDs
-  (:func:`pcmb.spectral.chaos_spectrum`); for sampling methods, the sample mean and
-  standard deviation (ddof 1) of the per-run periodograms, same window and scaling. The
+  ``window``, mean not removed): on a tensor collocation grid, the mean PSD comes from
+  the coefficient spectra (Σ|ĉ_α|², equal to the quadrature of the per-node PSDs) and the
+  band is the collocation estimate of the PSD's std — the PSD treated as one more output
+  and integrated by the grid's Gauss rule (:func:`pcmb.spectral.chaos_spectrum`); it is not
+  the exact std of the squared surrogate, which the PSD PDFs sample. For sampling methods:
+  the sample mean and standard deviation (ddof 1) of the per-run periodograms, same window
+  and scaling. The
   PSD's PDF at chosen frequencies comes from the surrogate PSD (chaos) or the per-run
   periodograms (sampling), with a KDE reflected at zero because a PSD is never negative.
 - the **nominal** spectrum: the periodogram of the deterministic run at nominal parameters.

@@ -77,7 +77,7 @@ def _summary(config) -> str:
     lines = [
         f"config   {config.path}",
         f"name     {config.name}",
-        f"model    {config.model.kind}, outputs: {', '.join(study.resolve_outputs())}",
+        f"model    {config.model.kind}, outputs: {', '.join(study.check_model())}",
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]
@@ -113,6 +113,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         study.jobs = args.jobs
     if args.backend is not None:
         study.backend = args.backend
+        if args.backend != "dask":
+            study.address = None  # a scheduler address only means something to dask
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,

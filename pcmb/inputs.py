@@ -80,6 +80,10 @@ class Distribution(ABC):
     def describe(self) -> dict[str, Any]:
         """A JSON-able description, e.g. ``{"dist": "uniform", "low": 0.0, "high": 1.0}``."""
 
+    def expectation(self) -> float:
+        """E[θ]."""
+        return float(self.physical.mean())
+
     def pdf(self, theta: ArrayLike) -> NDArray[np.float64]:
         """Density of θ."""
         return self.physical.pdf(np.asarray(theta, dtype=float))
@@ -107,6 +111,11 @@ class _Affine(Distribution):
     def to_germ(self, theta: ArrayLike) -> NDArray[np.float64]:
         shift, scale = self._shift_scale
         return (np.asarray(theta, dtype=float) - shift) / scale
+
+    def expectation(self) -> float:
+        # E[ξ] is the recurrence coefficient a_0 (p_1 ∝ ξ - a_0 is orthogonal to 1): no scipy.
+        shift, scale = self._shift_scale
+        return float(shift + scale * self.family.recurrence(1)[0][0])
 
 
 @dataclass(frozen=True)

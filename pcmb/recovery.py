@@ -155,10 +155,12 @@ def fit_least_squares(
     trailing = values.shape[1:]
     rhs = values.reshape(n_nodes, -1)
     matrix = basis.evaluate(nodes)
+    share = np.full((n_nodes, 1), 1.0 / n_nodes)
     if weights is not None:
-        root = np.sqrt(np.asarray(weights, dtype=float))[:, None]
-        matrix, rhs = matrix * root, rhs * root
-    q, r = np.linalg.qr(matrix)
+        share = np.asarray(weights, dtype=float)[:, None] / np.sum(weights)
+    root = np.sqrt(share)
+    weighted, scaled = matrix * root, rhs * root
+    q, r = np.linalg.qr(weighted)
     singular = np.linalg.svd(r, compute_uv=False)
     condition = float(singular[0] / singular[-1]) if singular[-1] > 0 else np.inf
     if not condition <= max_condition:
@@ -167,12 +169,14 @@ def fit_least_squares(
             f" > {max_condition:.3g}) with {n_nodes} nodes and {n_terms} terms: use fewer terms"
             " or more, better spread nodes"
         )
-    coefficients = np.linalg.solve(r, q.T @ rhs)
+    coefficients = np.linalg.solve(r, q.T @ scaled)
+    # Leave-one-out residuals of the weighted fit, (y_i - ŷ_i) / (1 - h_i), in the units of
+    # y, averaged with the same weights and relative to the weighted variance of y.
     residual = rhs - matrix @ coefficients
     leverage = np.einsum("ij,ij->i", q, q)
     with np.errstate(divide="ignore", invalid="ignore"):
-        loo = np.mean((residual / (1.0 - leverage)[:, None]) ** 2, axis=0)
-        spread = np.var(rhs, axis=0)
+        loo = np.sum(share * (residual / (1.0 - leverage)[:, None]) ** 2, axis=0)
+        spread = np.sum(share * (rhs - np.sum(share * rhs, axis=0)) ** 2, axis=0)
         loo_error = np.where(spread > 0, loo / spread, np.nan)
     return LeastSquaresFit(
         coefficients=coefficients.reshape(n_terms, *trailing),
@@ -188,13 +192,16 @@ def fit_largest_stable(
     max_order: int,
     weights: ArrayLike | None = None,
     *,
+    orders: Sequence[int] | None = None,
     max_condition: float = MAX_CONDITION,
 ) -> tuple[NDArray[np.int64], LeastSquaresFit]:
     """The highest total-degree least-squares fit (order <= max_order) that is well posed.
 
     Used by the ``regress`` failure policy: a grid with failed nodes is refitted on the
     survivors with a basis small enough to have ``OVERSAMPLING`` nodes per term and a
-    condition number below ``max_condition``.
+    condition number below ``max_condition``. ``orders`` caps the degree per input (an
+    anisotropic grid with q_k points cannot resolve degree q_k in input k: those columns
+    would be aliased or, for q_k = 1, zero).
 
     Returns
     -------
@@ -210,8 +217,11 @@ def fit_largest_stable(
     nodes = np.asarray(nodes, dtype=float)
     families = tuple(d.family for d in distributions)
     last_problem = "no nodes"
+    caps = None if orders is None else np.asarray(orders)
     for order in range(max_order, -1, -1):
         index = total_index_set(len(distributions), order)
+        if caps is not None:
+            index = index[np.all(index <= caps, axis=1)]
         if nodes.shape[0] < OVERSAMPLING * index.shape[0] and order > 0:
             continue
         try:

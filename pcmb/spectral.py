@@ -8,7 +8,10 @@ of every realisation. The power spectral density at ξ is s(f) |Ŷ(f, ξ)|², so
   (orthonormality);
 - the **PSD band** (±1σ) comes from the PSD's own chaos expansion: PSD(f, ξ) is evaluated
   at the collocation nodes and projected like any other output — on a tensor grid this
-  equals the quadrature of the per-node PSDs, Var = Σ_i w_i (PSD_i - mean)²;
+  equals the quadrature of the per-node PSDs, Var = Σ_i w_i (PSD_i - mean)². It is the
+  collocation estimate of the model's PSD spread, not the exact variance of the squared
+  surrogate (a degree-4P integrand the (P+1)-point rule does not integrate exactly); the
+  two differ by the truncation error and agree as the order grows;
 - the **PDF of the PSD at a frequency** comes from sampling ξ through the coefficient
   spectra (the exact surrogate PSD, not its projection).
 

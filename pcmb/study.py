@@ -26,20 +26,21 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import inspect
 import json
 import sys
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis import Analysis, AnalysisSettings, analyse
 from pcmb.basis import total_index_set
-from pcmb.errors import ConfigError, ModelRunError
+from pcmb.errors import ConfigError, IllPosedError, ModelRunError
 from pcmb.executor import NodeFailure, run_nodes
 from pcmb.expansion import ChaosExpansion
 from pcmb.inputs import Distribution
@@ -242,23 +243,35 @@ class Study:
         self.jobs, self.backend, self.address = jobs, backend, address
         self.chunk_size = chunk_size
         self.on_failure, self.retries = on_failure, retries
+        self.params = dict(params or {})
+        if _is_function(model):
+            # A per-point function receives every parameter by name: uncertain inputs it was
+            # not given a nominal value for start at their mean (used by the nominal run).
+            self.params = {
+                **{name: dist.expectation() for name, dist in self.inputs.items()},
+                **self.params,
+            }
         self.model_factory: Callable[[], Model] = (
-            model
-            if _is_factory(model)
-            else ObjectModelFactory(model, dict(params or {}), _tuple(outputs))
+            model if _is_factory(model) else ObjectModelFactory(model, self.params, _tuple(outputs))
         )
         self.outputs = _tuple(outputs)
-        self.params = dict(params or {})
         self.nominal = dict(nominal or {})
         self.analysis = analysis
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
             raise ConfigError(f"nominal values given for unknown input(s) {unknown}")
-        if method in _SAMPLING and samples is None:
-            raise ConfigError(f"method {method!r} needs a number of samples")
-        if method not in ("collocation", *_SAMPLING):
-            raise ConfigError(f"unknown method {method!r}")
+        choices = {
+            "method": (method, ("collocation", *_SAMPLING)),
+            "basis": (basis, ("tensor", "total")),
+            "fit": (fit, ("none", "regression")),
+            "on_failure": (on_failure, ("abort", "retry", "regress")),
+        }
+        for key, (value, allowed) in choices.items():
+            if value not in allowed:
+                raise ConfigError(f"{key} must be one of {', '.join(allowed)}, got {value!r}")
+        if method in _SAMPLING and (samples is None or samples < 2):
+            raise ConfigError(f"method {method!r} needs at least 2 samples, got {samples}")
 
     # -- construction from a config -----------------------------------------------------------
 
@@ -326,12 +339,15 @@ class Study:
             "chunk_size": self.chunk_size,
             "on_failure": self.on_failure,
             "retries": self.retries,
-            "nominal": self.nominal_params(),
+            "params": self.params,
+            "nominal": self.nominal,
             "analysis": self.analysis,
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
             raise ConfigError(f"Study.replace: unknown argument(s) {unknown}")
+        if "inputs" in changes and "nominal" not in changes:
+            arguments["nominal"] = {k: v for k, v in self.nominal.items() if k in changes["inputs"]}
         study = Study(self.model_factory, **{**arguments, **changes})
         study.fingerprint_extra = self.fingerprint_extra
         return study
@@ -361,7 +377,7 @@ class Study:
             elif name in self.params:
                 values[name] = float(self.params[name])
             else:
-                values[name] = float(dist.physical.mean())
+                values[name] = dist.expectation()
         return values
 
     def node_set(self) -> TensorGrid | NodeSet:
@@ -377,20 +393,35 @@ class Study:
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
         digest.update(json.dumps([list(outputs), self.chunk_size, self.fingerprint_extra]).encode())
+        # The model and its fixed parameters (entry, params, or the pickled object itself).
+        digest.update(cloudpickle.dumps(self.model_factory))
         return digest.hexdigest()
 
     # -- running ------------------------------------------------------------------------------
 
-    def resolve_outputs(self) -> tuple[str, ...]:
-        """The outputs to keep: the requested ones, checked against the model."""
+    def check_model(self) -> tuple[str, ...]:
+        """Build the model once, check it against the study, and return the outputs to keep.
+
+        Raises
+        ------
+        ConfigError
+            A requested output the model lacks, or an uncertain input that names none of the
+            model's parameters (when the model lists them) — before anything runs.
+        """
         model = self.model_factory()
         declared = tuple(model.outputs)
-        if self.outputs is None:
-            return declared
-        unknown = [name for name in self.outputs if name not in declared]
+        unknown = [name for name in self.outputs or () if name not in declared]
         if unknown:
             raise ConfigError(f"the model has no output(s) {unknown}; it has {list(declared)}")
-        return self.outputs
+        parameters = getattr(model, "parameters", None)
+        if parameters is not None:
+            strangers = [name for name in self.inputs if name not in parameters]
+            if strangers:
+                raise ConfigError(
+                    f"input(s) {strangers} name no parameter of the model; "
+                    f"it has {sorted(parameters)}"
+                )
+        return declared if self.outputs is None else self.outputs
 
     def run(
         self,
@@ -422,13 +453,15 @@ class Study:
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
         nodes = self.node_set()
-        outputs = self.resolve_outputs()
+        outputs = self.check_model()
         if self.analysis is not None:
             self.analysis.check(self.times, outputs)
         journal = None
+        fresh_journal = False
         if output is not None:
             journal_dir = Path(f"{output}.journal")
-            if Journal.exists(journal_dir) and not resume:
+            fresh_journal = not Journal.exists(journal_dir)
+            if not fresh_journal and not resume:
                 raise ConfigError(
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
@@ -436,21 +469,25 @@ class Study:
             journal = Journal(
                 journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, self.times.size
             )
-        start = time.perf_counter()
-        runs = run_nodes(
-            self.model_factory,
-            dict(zip(self.input_names, nodes.params.T, strict=True)),
-            self.times,
-            outputs,
-            jobs=self.jobs,
-            backend=self.backend,
-            address=self.address,
-            chunk_size=self.chunk_size,
-            retries=self.retries if self.on_failure == "retry" else 0,
-            journal=journal,
-            progress=progress,
-        )
-        seconds = time.perf_counter() - start
+        try:
+            runs = run_nodes(
+                self.model_factory,
+                dict(zip(self.input_names, nodes.params.T, strict=True)),
+                self.times,
+                outputs,
+                jobs=self.jobs,
+                backend=self.backend,
+                address=self.address,
+                chunk_size=self.chunk_size,
+                retries=self.retries if self.on_failure == "retry" else 0,
+                journal=journal,
+                progress=progress,
+            )
+        except ConfigError:
+            # Rejected before any node ran: leave nothing behind (a journal would block a rerun).
+            if journal is not None and fresh_journal:
+                journal.remove()
+            raise
         if runs.failures and self.on_failure != "regress":
             kept = f"; finished nodes are kept in {journal.directory}" if journal else ""
             raise ModelRunError(
@@ -458,7 +495,7 @@ class Study:
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
                 f"(on_failure: {self.on_failure}){kept}:",
             )
-        result = self._recover(nodes, runs.values, runs.status, runs.failures, seconds)
+        result = self._recover(nodes, runs.values, runs.status, runs.failures, runs.seconds)
         result = self._with_nominal(result, outputs)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
@@ -525,20 +562,34 @@ class Study:
                 coefficients = project_tensor(nodes, y, index)
                 expansions[name] = ChaosExpansion(coefficients, index, dists, names)
         elif isinstance(nodes, TensorGrid) or self.fit == "regression":
-            # An incomplete grid is no quadrature rule: refit by least squares instead.
+            # An incomplete grid is no quadrature rule: refit by least squares instead, all
+            # outputs at once (one basis, one factorisation).
             max_order = max(self.orders)
             weights = nodes.weights[ok] if isinstance(nodes, TensorGrid) else None
-            worst_loo = 0.0
-            for name, y in values.items():
-                index, fit = fit_largest_stable(dists, nodes.nodes[ok], y[ok], max_order, weights)
-                expansions[name] = ChaosExpansion(fit.coefficients, index, dists, names)
-                worst_loo = max(worst_loo, float(np.nanmax(fit.loo_error, initial=0.0)))
+            caps = self.orders if isinstance(nodes, TensorGrid) else None
+            stacked = np.stack([y[ok] for y in values.values()], axis=1)
+            try:
+                index, fit = fit_largest_stable(
+                    dists, nodes.nodes[ok], stacked, max_order, weights, orders=caps
+                )
+            except IllPosedError as error:
+                message = f"on_failure regress could not refit: {error}:"
+                raise ModelRunError(failures, message) from error
+            for k, name in enumerate(values):
+                expansions[name] = ChaosExpansion(fit.coefficients[:, k], index, dists, names)
             order = int(index.sum(axis=1).max())
             warnings.append(
                 f"least-squares chaos of total order {order} ({index.shape[0]} terms, asked "
                 f"{max_order}) on {int(ok.sum())} nodes; worst relative leave-one-out error "
-                f"{worst_loo:.3g}"
+                f"{float(np.nanmax(fit.loo_error, initial=0.0)):.3g}"
             )
+        if self.method == "collocation":
+            flat = [name for name, order in zip(names, self.orders, strict=True) if order == 0]
+            if flat:
+                warnings.append(
+                    f"input(s) {flat} have order 0: each is held at its single Gauss node and "
+                    "contributes no variance"
+                )
         return StudyResult(
             name=self.name,
             method=self.method,
@@ -566,6 +617,16 @@ def _is_factory(model: Any) -> bool:
     if mujoco is not None:
         factories += (mujoco.MujocoModelFactory,)
     return isinstance(model, factories)
+
+
+def _is_function(model: Any) -> bool:
+    """A plain per-point function (not a class, a model object or a factory)."""
+    return (
+        callable(model)
+        and not inspect.isclass(model)
+        and not hasattr(model, "simulate")
+        and not _is_factory(model)
+    )
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

@@ -102,3 +102,8 @@ def test_description_round_trip(dist):
     xi = np.linspace(-0.9, 0.9, 5)
     np.testing.assert_array_equal(rebuilt.to_physical(xi), dist.to_physical(xi))
     assert rebuilt.describe() == dist.describe()
+
+
+@pytest.mark.parametrize("dist", INPUTS, ids=lambda d: d.describe()["dist"])
+def test_expectation_matches_scipy(dist):
+    assert dist.expectation() == pytest.approx(float(dist.physical.mean()), rel=1e-12, abs=1e-14)

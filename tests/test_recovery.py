@@ -110,3 +110,15 @@ def test_largest_stable_fit_on_surviving_grid_nodes():
     # The response is a degree-2 polynomial: the refit is exact.
     exact = project_tensor(grid, values, index)
     np.testing.assert_allclose(fit.coefficients, exact, atol=1e-10)
+
+
+def test_weighted_loo_error_does_not_depend_on_an_offset():
+    """The relative LOO error is a property of the fit's shape error, not of the data's level."""
+    dists = [Uniform(-1.0, 1.0)]
+    grid = TensorGrid(dists, [7])
+    basis = PolynomialBasis((dists[0].family,), total_index_set(1, 2))
+    y = np.abs(grid.nodes[:, 0])
+    plain = fit_least_squares(basis, grid.nodes, y, grid.weights).loo_error
+    shifted = fit_least_squares(basis, grid.nodes, y + 5.0, grid.weights).loo_error
+    assert plain == pytest.approx(shifted, rel=1e-9)
+    assert plain > 1e-3  # |x| is not a quadratic

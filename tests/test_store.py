@@ -100,3 +100,16 @@ def test_load_refuses_other_files(tmp_path):
         f["x"] = 1
     with pytest.raises(ValueError, match="not a pcmb result"):
         pcmb.load(other)
+
+
+def test_the_file_mode_follows_the_umask(written, tmp_path):
+    import os
+    import stat
+
+    _, result = written
+    umask = os.umask(0o022)
+    try:
+        target = store.write_result(tmp_path / "mode.h5", result, provenance={})
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(target.stat().st_mode) == 0o644

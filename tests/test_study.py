@@ -1,5 +1,7 @@
 """The study pipeline from Python: statistics against closed forms, failure policies."""
 
+from typing import ClassVar
+
 import numpy as np
 import pytest
 
@@ -121,3 +123,83 @@ def test_bad_study_settings_are_config_errors():
         pcmb.Study(pointwise, INPUTS, TIMES, method="montecarlo")
     with pytest.raises(ConfigError, match="no order given"):
         pcmb.Study(pointwise, INPUTS, TIMES, order={"a": 2}).node_set()
+
+
+def test_regress_respects_anisotropic_orders():
+    """On a grid with q_b = 2 the refit must not ask for b² (it would be aliased)."""
+
+    def model(params, times):
+        if params["a"] > 2.8:
+            raise RuntimeError("diverged")
+        return {"y": params["a"] ** 2 + params["b"] + 0 * times}
+
+    model.outputs = ("y",)
+    # 5 x 2 nodes, 2 fail: 8 survivors carry the 5 terms of degree <= 2 with b-degree <= 1.
+    study = pcmb.Study(model, INPUTS, TIMES, order={"a": 4, "b": 1}, on_failure="regress")
+    result = study.run()
+    assert np.sum(result.status == 2) == 2
+    assert result.multi_index[:, 1].max() <= 1
+    # y = a² + b is in the span of degree-2-in-a, degree-1-in-b terms: exact refit.
+    # E[a²] = Var a + 4 = 13/3; Var y = Var a² + Var b with Var a² = E[a⁴] - E[a²]² = 121/5 - 169/9.
+    np.testing.assert_allclose(result.mean("y"), 13 / 3, atol=1e-10)
+    np.testing.assert_allclose(result.std("y") ** 2, 121 / 5 - 169 / 9 + 1, atol=1e-10)
+
+
+def test_regress_with_nothing_left_to_fit_is_a_model_failure():
+    def model(params, times):
+        raise RuntimeError("always")
+
+    model.outputs = ("y",)
+    study = pcmb.Study(model, INPUTS, TIMES, order=2, on_failure="regress")
+    with pytest.raises(ModelRunError, match="could not refit"):
+        study.run()
+
+
+def test_a_function_needs_no_nominal_values():
+    def model(params, times):
+        return {"y": params["a"] * times}
+
+    model.outputs = ("y",)
+    result = pcmb.Study(model, INPUTS, TIMES, order=1).run()
+    np.testing.assert_allclose(result.mean("y"), 2 * TIMES, atol=1e-12)
+    assert result.nominal_params == {"a": 2.0, "b": 0.0}
+
+
+def test_an_input_naming_no_model_parameter_is_rejected_before_running(tmp_path):
+    class Model:
+        outputs = ("y",)
+        parameters: ClassVar[dict[str, float]] = {"a": 1.0}
+
+        def __init__(self, **params):
+            self.ran = False
+
+        def simulate(self, params, times):
+            raise AssertionError("must not run")
+
+    with pytest.raises(ConfigError, match=r"input\(s\) \['b'\] name no parameter"):
+        pcmb.Study(Model, INPUTS, TIMES, order=1).run(tmp_path / "x.h5")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_execution_settings_rejected_by_the_executor_leave_no_journal(tmp_path):
+    study = pcmb.Study(
+        pointwise, INPUTS, TIMES, order=1, params={"a": 2, "b": 0}, address="tcp://x:1"
+    )
+    with pytest.raises(ConfigError, match="address"):
+        study.run(tmp_path / "x.h5")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_misspelled_settings_are_rejected():
+    for key, value in [("basis", "totl"), ("fit", "regresion"), ("on_failure", "regres")]:
+        with pytest.raises(ConfigError, match=f"{key} must be one of"):
+            pcmb.Study(pointwise, INPUTS, TIMES, **{key: value})
+    with pytest.raises(ConfigError, match="at least 2 samples"):
+        pcmb.Study(pointwise, INPUTS, TIMES, method="montecarlo", samples=1)
+
+
+def test_order_zero_is_reported():
+    result = pcmb.Study(
+        pointwise, INPUTS, TIMES, order={"a": 2, "b": 0}, params={"a": 2, "b": 0}
+    ).run()
+    assert any("order 0" in w for w in result.warnings)

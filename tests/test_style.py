@@ -41,3 +41,5 @@ def test_every_public_name_resolves():
     for name in pcmb.__all__:
         assert getattr(pcmb, name) is not None
     assert set(pcmb.__all__) == set(pcmb._MODULE_OF)
+    listed = [name for names in pcmb._EXPORTS.values() for name in names]
+    assert len(listed) == len(set(listed)), "a name is exported from two modules"
