@@ -37,9 +37,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.basis import PolynomialBasis
+from pcmb.density import DENSITY_POINTS, kernel_density
 from pcmb.errors import ConfigError, ConfigProblem
-from pcmb.sampling import TensorGrid
-from pcmb.spectral import WINDOWS, chaos_spectrum, periodogram
+from pcmb.sampling import TensorGrid, draw_germs
+from pcmb.spectral import chaos_spectrum, periodogram, taper, uniform_step
 
 if TYPE_CHECKING:
     from pcmb.study import StudyResult
@@ -53,7 +54,6 @@ __all__ = [
     "analyse",
     "draws_are_runs",
     "is_uniform_grid",
-    "kernel_density",
     "nearest_indices",
     "output_draws",
     "psd_draws",
@@ -64,27 +64,20 @@ __all__ = [
 
 #: Fewest surrogate draws allowed for PDFs and quantiles.
 MIN_SAMPLES = 100
-#: Points at which every PDF is tabulated.
-DENSITY_POINTS = 256
 #: Surrogate values held in memory at once while computing quantile bands (32 MB).
 _BLOCK_VALUES = 4_000_000
-#: Fewest cells of the binned kernel density estimate.
-_BINS = 4096
-#: Most cells (8 MB): reached only by far outliers, where the binning error grows.
-_MAX_BINS = 1 << 20
 #: Surrogate draws for quantile bands: the standard error of a 5 % quantile is then
 #: sqrt(0.05 · 0.95 / 20 000) = 0.0015 in probability, far below what a band plot shows.
 QUANTILE_DRAWS = 20_000
-#: A spread below this fraction of the magnitude is round-off: the law is a point mass.
-_RELATIVE_SPREAD = 1e-12
 
 
 def is_uniform_grid(times: NDArray[np.float64]) -> bool:
     """Whether ``times`` is a uniform grid of at least two points (what a PSD needs)."""
-    if times.size < 2:
+    try:
+        uniform_step(times)
+    except ValueError:
         return False
-    steps = np.diff(times)
-    return bool(steps[0] > 0 and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0))
+    return True
 
 
 @dataclass(frozen=True)
@@ -221,9 +214,11 @@ class AnalysisSettings:
 
 def window_problem(window: str) -> str | None:
     """Why ``window`` is not a supported window name, or ``None``."""
-    if window in WINDOWS:
-        return None
-    return f"expected one of {', '.join(WINDOWS)}, found {window!r}"
+    try:
+        taper(window, 2)
+    except ValueError as error:
+        return str(error)
+    return None
 
 
 def _raise(problems: Sequence[tuple[str, str]]) -> None:
@@ -317,59 +312,6 @@ def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
     return grid
 
 
-def kernel_density(
-    samples: NDArray[np.float64], *, nonnegative: bool = False, bandwidth: float | None = None
-) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """Gaussian kernel density of (M,) samples, tabulated on DENSITY_POINTS points.
-
-    The bandwidth h is ``bandwidth``, by default Scott's σ M^(-1/5) (as
-    :class:`scipy.stats.gaussian_kde`); pass another density's h to smooth two alike. The
-    sum of kernels is computed by linear binning on at least 60 cells per bandwidth and an
-    FFT convolution (Silverman's algorithm): O(M) instead of O(M G), with a binning error
-    below 1e-3 of the peak density. The table spans the samples plus three bandwidths on
-    each side. With ``nonnegative`` the kernel mass below zero is reflected back, as a PSD
-    is never negative.
-
-    Returns
-    -------
-    value, density, bandwidth
-        (G,) points and densities, and h; the densities (and h) are NaN when the samples do
-        not vary (a point mass at ``value[0]``).
-    """
-    samples = np.asarray(samples, dtype=float)
-    samples = samples[np.isfinite(samples)]
-    if samples.size < 2 or not np.ptp(samples) > _RELATIVE_SPREAD * np.max(np.abs(samples)):
-        value = np.full(DENSITY_POINTS, samples[0] if samples.size else np.nan)
-        return value, np.full(DENSITY_POINTS, np.nan), float("nan")
-    if bandwidth is None:
-        bandwidth = float(np.std(samples, ddof=1)) * samples.size ** (-0.2)
-    low = samples.min() - 3.0 * bandwidth
-    if nonnegative:
-        low = max(low, 0.0)
-    value = np.linspace(low, samples.max() + 3.0 * bandwidth, DENSITY_POINTS)
-    # Points mirrored at zero carry the reflected kernel mass.
-    data = np.concatenate([samples, -samples]) if nonnegative else samples
-    margin = 6.0 * bandwidth  # the kernel is below 1e-8 of its peak beyond 6 bandwidths
-    start, stop = min(data.min(), value[0]) - margin, max(data.max(), value[-1]) + margin
-    cells = int(np.clip(np.ceil(60.0 * (stop - start) / bandwidth), _BINS, _MAX_BINS))
-    step = (stop - start) / cells
-    position = (data - start) / step
-    left = np.floor(position).astype(np.int64)
-    right_share = position - left
-    counts = np.bincount(left, 1.0 - right_share, cells + 2)
-    counts += np.bincount(left + 1, right_share, cells + 2)
-    half = int(np.ceil(margin / step))
-    offsets = np.arange(-half, half + 1) * step
-    kernel = np.exp(-0.5 * (offsets / bandwidth) ** 2) / (bandwidth * np.sqrt(2.0 * np.pi))
-    # Linear convolution by a zero-padded FFT ("same" size; the kernel has odd length).
-    size = counts.size + kernel.size - 1
-    full = np.fft.irfft(np.fft.rfft(counts, size) * np.fft.rfft(kernel, size), size)
-    smooth = full[half : half + counts.size] / samples.size
-    density = np.interp(value, start + step * np.arange(cells + 2), smooth)
-    # FFT round-off can dip below zero in the tails.
-    return value, np.maximum(density, 0.0), bandwidth
-
-
 def _density_table(at: NDArray[np.float64], columns: NDArray, *, nonnegative: bool) -> Density:
     """KDEs of each column of (M, P) samples, at the P locations ``at``."""
     tables = [kernel_density(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
@@ -387,7 +329,7 @@ def nearest_indices(grid: NDArray[np.float64], points: Sequence[float]) -> NDArr
 def _germ_draws(result: StudyResult, settings: AnalysisSettings) -> NDArray[np.float64]:
     """(samples, n) germ draws from the settings' seed, shared by every output."""
     rng = np.random.default_rng(settings.seed)
-    return np.column_stack([d.sample_germ(settings.samples, rng) for d in result.distributions])
+    return draw_germs(result.distributions, settings.samples, rng)
 
 
 def _block_rows(terms: int) -> int:

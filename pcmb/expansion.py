@@ -25,7 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.basis import PolynomialBasis
+from pcmb.density import kernel_density
 from pcmb.inputs import Distribution
+from pcmb.sampling import draw_germs
 
 __all__ = ["ChaosExpansion"]
 
@@ -205,7 +207,7 @@ class ChaosExpansion:
         The inputs are drawn from their distributions; the same seed gives the same draw.
         """
         rng = np.random.default_rng(seed)
-        xi = np.column_stack([d.sample_germ(size, rng) for d in self.distributions])
+        xi = draw_germs(self.distributions, size, rng)
         return self.evaluate_germ(xi)
 
     def quantile(
@@ -215,9 +217,11 @@ class ChaosExpansion:
         return np.quantile(self.sample(size, seed), np.asarray(q, dtype=float), axis=0)
 
     def pdf(self, points: ArrayLike, size: int = 100_000, seed: int | None = 0) -> NDArray:
-        """Density of a scalar output at ``points`` by a Gaussian KDE of surrogate samples.
+        """Density of a scalar output at ``points``: a Gaussian KDE of surrogate samples.
 
-        Select a scalar first, e.g. ``expansion[time_index].pdf(x)``.
+        Select a scalar first, e.g. ``expansion[time_index].pdf(x)``. The estimate is
+        :func:`pcmb.density.kernel_density` (Scott's bandwidth), the one stored in result
+        files; it is zero beyond three bandwidths from the samples.
 
         Raises
         ------
@@ -229,9 +233,7 @@ class ChaosExpansion:
             raise ValueError(
                 f"pdf needs a scalar output, got trailing shape {self.shape}: index it"
             )
-        from scipy.stats import gaussian_kde  # deferred: scipy.stats is slow to import
-
-        samples = self.sample(size, seed)
-        if not np.ptp(samples) > 0:
+        value, density, bandwidth = kernel_density(self.sample(size, seed))
+        if not np.isfinite(bandwidth):
             raise ValueError("the output does not vary: its distribution is a point mass")
-        return gaussian_kde(samples)(np.asarray(points, dtype=float))
+        return np.interp(np.asarray(points, dtype=float), value, density, left=0.0, right=0.0)

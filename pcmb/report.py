@@ -42,13 +42,13 @@ from pcmb.analysis import (
     Density,
     analyse,
     draws_are_runs,
-    kernel_density,
     output_draws,
     psd_draws,
     psd_draws_are_runs,
     spectrum,
 )
 from pcmb.comparison import Comparison, compare, method_label
+from pcmb.density import kernel_density
 from pcmb.errors import ConfigError
 from pcmb.study import StudyResult
 

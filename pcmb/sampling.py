@@ -19,13 +19,20 @@ from pcmb.basis import tensor_index_set
 from pcmb.inputs import Distribution
 from pcmb.polynomials import GaussRule
 
-__all__ = ["NodeSet", "TensorGrid", "random_nodes"]
+__all__ = ["NodeSet", "TensorGrid", "draw_germs", "random_nodes"]
 
 SamplingMethod = Literal["montecarlo", "lhs", "sobol"]
 
 
 def _physical(distributions: Sequence[Distribution], germ: NDArray[np.float64]) -> NDArray:
     return np.column_stack([d.to_physical(germ[:, k]) for k, d in enumerate(distributions)])
+
+
+def draw_germs(
+    distributions: Sequence[Distribution], size: int, rng: np.random.Generator
+) -> NDArray[np.float64]:
+    """(size, n) independent germ draws, one column per input (Monte Carlo, surrogate sampling)."""
+    return np.column_stack([d.sample_germ(size, rng) for d in distributions])
 
 
 @dataclass(frozen=True)
@@ -159,7 +166,7 @@ def random_nodes(
     n = len(distributions)
     rng = np.random.default_rng(seed)
     if method == "montecarlo":
-        germ = np.column_stack([d.sample_germ(samples, rng) for d in distributions])
+        germ = draw_germs(distributions, samples, rng)
     elif method in ("lhs", "sobol"):
         from scipy.stats import qmc  # deferred: scipy.stats is slow to import
 

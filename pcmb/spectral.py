@@ -41,6 +41,7 @@ __all__ = [
     "coefficient_spectra",
     "periodogram",
     "taper",
+    "uniform_step",
 ]
 
 #: Supported windows: numpy's symmetric windows, made periodic (DFT-even) like
@@ -63,11 +64,18 @@ def taper(window: str, n_times: int) -> NDArray[np.float64]:
         If the window is not one of :data:`WINDOWS`.
     """
     if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}: use one of {', '.join(WINDOWS)}")
+        raise ValueError(f"expected one of {', '.join(WINDOWS)}, found {window!r}")
     return WINDOWS[window](n_times + 1)[:-1]
 
 
-def _step(times: ArrayLike) -> float:
+def uniform_step(times: ArrayLike) -> float:
+    """The step of a uniform, increasing grid of at least two points.
+
+    Raises
+    ------
+    ValueError
+        If the grid is shorter, not uniform or not increasing.
+    """
     times = np.asarray(times, dtype=float)
     if times.ndim != 1 or times.size < 2:
         raise ValueError("a spectrum needs a 1-D time grid of at least two points")
@@ -81,7 +89,7 @@ def _transform(
     values: NDArray[np.float64], times: ArrayLike, window: str
 ) -> tuple[NDArray[np.float64], NDArray[np.complex128], NDArray[np.float64]]:
     """Frequencies (F,), windowed transforms (..., F) and the density scale s(f) (F,)."""
-    dt = _step(times)
+    dt = uniform_step(times)
     n_times = values.shape[-1]
     weights = taper(window, n_times)
     transform = np.fft.rfft(values * weights, axis=-1)
@@ -159,15 +167,6 @@ class ChaosSpectrum:
     psd_expansion: ChaosExpansion
     spectra: NDArray[np.complex128]
     scale: NDArray[np.float64]
-
-    def sample_psd(self, frequency: float, size: int = 100_000, seed: int | None = 0) -> NDArray:
-        """PSD values at the bin nearest ``frequency`` for ``size`` random inputs, (size,)."""
-        k = int(np.argmin(np.abs(self.frequency - frequency)))
-        expansion = self.psd_expansion
-        rng = np.random.default_rng(seed)
-        xi = np.column_stack([d.sample_germ(size, rng) for d in expansion.distributions])
-        phi = expansion.basis.evaluate(xi)
-        return self.scale[k] * np.abs(phi @ self.spectra[:, k]) ** 2
 
 
 def chaos_spectrum(

@@ -7,7 +7,8 @@ from scipy.signal import periodogram as scipy_periodogram
 from scipy.stats import gaussian_kde, norm
 
 import pcmb
-from pcmb.analysis import AnalysisSettings, analyse, kernel_density
+from pcmb.analysis import AnalysisSettings, analyse
+from pcmb.density import kernel_density
 from pcmb.errors import ConfigError
 
 # 400 points, step 0.05 (Nyquist 10 Hz); endpoint excluded so the record is periodic-ready.

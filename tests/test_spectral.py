@@ -63,17 +63,8 @@ def test_parseval_holds_for_the_mean_psd():
     assert np.sum(spectrum.mean) * df == pytest.approx(mean_square, rel=1e-12)
 
 
-def test_psd_samples_at_a_frequency(study):
-    spectrum = study[2]
-    samples = spectrum.sample_psd(0.25, size=200_000)
-    k = int(np.argmin(np.abs(spectrum.frequency - 0.25)))
-    # Monte Carlo mean of the surrogate PSD: standard error ~ std / sqrt(2e5).
-    assert abs(samples.mean() - spectrum.mean[k]) < 5 * spectrum.std[k] / np.sqrt(2e5) + 1e-12
-    assert np.all(samples >= 0)
-
-
 def test_non_uniform_grids_and_unknown_windows_are_rejected():
     with pytest.raises(ValueError, match="uniform"):
         periodogram(np.zeros(3), [0.0, 1.0, 3.0])
-    with pytest.raises(ValueError, match="unknown window 'kaiser'"):
+    with pytest.raises(ValueError, match="found 'kaiser'"):
         periodogram(np.zeros(3), [0.0, 1.0, 2.0], "kaiser")
