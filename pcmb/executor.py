@@ -78,7 +78,7 @@ MAX_CHUNK_SIZE = 256
 BACKENDS = ("loky", "dask")
 # Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
 _STARTUP_SECONDS = {"loky": 1.0, "dask": 3.0}
-# Idle loky workers stay up this long, so consecutive runs do not pay the start-up again.
+# Seconds between progress-line updates.
 _PROGRESS_INTERVAL = 0.1
 
 

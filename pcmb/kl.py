@@ -21,7 +21,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.integrate as si
 import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
@@ -81,7 +80,7 @@ def spectral_covariance(omega: ArrayLike, density: ArrayLike) -> Kernel:
 
     def kernel(x1: NDArray[np.float64], x2: NDArray[np.float64]) -> NDArray[np.float64]:
         lag = np.subtract.outer(x1, x2)
-        return si.trapezoid(density * np.cos(np.multiply.outer(lag, omega)), omega, axis=-1)
+        return np.trapezoid(density * np.cos(np.multiply.outer(lag, omega)), omega, axis=-1)
 
     return kernel
 
