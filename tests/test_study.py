@@ -203,3 +203,22 @@ def test_order_zero_is_reported():
         pointwise, INPUTS, TIMES, order={"a": 2, "b": 0}, params={"a": 2, "b": 0}
     ).run()
     assert any("order 0" in w for w in result.warnings)
+
+
+@pytest.mark.slow
+def test_coefficients_are_bit_identical_for_one_or_two_workers(monkeypatch):
+    """The default quarter car (stacked solves, whose last bits depend on the batch) at order 2."""
+    from pathlib import Path
+
+    from pcmb import executor
+    from pcmb.config import load_config
+
+    config = load_config(Path(__file__).resolve().parents[1] / "configs" / "quarter_car.yaml")
+    study = pcmb.Study.from_config(config).replace(order=2, chunk_size=7, analysis=None)
+    monkeypatch.setattr(executor, "_workers_pay", lambda *args: True)  # really use the pool
+    serial = study.replace(jobs=1).run()
+    pooled = study.replace(jobs=2).run()
+    for name in serial.outputs:
+        np.testing.assert_array_equal(
+            serial.expansions[name].coefficients, pooled.expansions[name].coefficients
+        )
