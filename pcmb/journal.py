@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.errors import ConfigError
+from pcmb.files import replace_durably
 
 __all__ = ["STATUS_FAILED", "STATUS_OK", "STATUS_PENDING", "Journal"]
 
@@ -155,15 +156,7 @@ class Journal:
         temp = self.directory / f"{_TEMP_PREFIX}{os.getpid()}-{path.name}"
         with open(temp, "wb") as handle:
             write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-        # The rename itself is only durable once the directory entry is on disk.
-        directory_fd = os.open(self.directory, os.O_RDONLY)
-        try:
-            os.fsync(directory_fd)
-        finally:
-            os.close(directory_fd)
+        replace_durably(temp, path)
 
     def record(
         self,

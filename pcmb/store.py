@@ -51,6 +51,7 @@ import numpy as np
 from pcmb.analysis import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.executor import NodeFailure
 from pcmb.expansion import ChaosExpansion
+from pcmb.files import replace_durably
 from pcmb.inputs import from_description
 from pcmb.study import StudyResult
 
@@ -240,15 +241,7 @@ def write_result(
         with h5py.File(temporary, "w") as file:
             _write(file, result, provenance)
             file.flush()
-        with open(temporary, "rb") as written:
-            os.fsync(written.fileno())
-        os.replace(temporary, path)
-        # Make the rename itself durable before anyone deletes the journal it replaces.
-        directory = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(directory)
-        finally:
-            os.close(directory)
+        replace_durably(Path(temporary), path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
