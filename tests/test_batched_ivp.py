@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from model_loading import GLOBAL_FACTOR
 from scipy.integrate import DOP853, RK23, RK45, solve_ivp
 
 from pcmb.batched_ivp import StackedODEModel, solve_projected, solve_stacked
 from pcmb.errors import ConfigError, ModelError
-
-GLOBAL_FACTOR = 100  # global error allowance, in units of rtol (see the module docstring)
 
 
 def oscillators(omega: np.ndarray):

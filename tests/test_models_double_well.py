@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from model_loading import model_class
+from model_loading import GLOBAL_FACTOR, model_class
 
 DoubleWell = model_class("double_well", "DoubleWell")
-
-GLOBAL_FACTOR = 100  # global error allowance in units of rtol, as in tests/test_batched_ivp.py
 
 
 def exact(x0, times):

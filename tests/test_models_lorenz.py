@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from model_loading import gauss_legendre_grid, model_class, reference_run
+from model_loading import GLOBAL_FACTOR, gauss_legendre_grid, model_class, reference_run
 
 Lorenz = model_class("lorenz", "Lorenz")
 
 STABLE = {"sigma": 1.0, "rho": 10.0, "beta": 1.0}
 CHAOTIC = {"sigma": 10.0, "rho": 28.0, "beta": 8.0 / 3.0}
-GLOBAL_FACTOR = 100  # global error allowance in units of rtol, as in tests/test_batched_ivp.py
 LYAPUNOV = 0.906  # largest Lyapunov exponent of the classic chaotic case
 
 
