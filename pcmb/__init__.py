@@ -48,6 +48,7 @@ _EXPORTS = {
     ],
     "pcmb.recovery": [
         "LeastSquaresFit",
+        "evaluate_tensor",
         "fit_largest_stable",
         "fit_least_squares",
         "project_tensor",
@@ -105,6 +106,7 @@ __all__ = [
     "chaos_spectrum",
     "compare",
     "config_json_schema",
+    "evaluate_tensor",
     "fit_largest_stable",
     "fit_least_squares",
     "hyperbolic_index_set",

@@ -28,7 +28,13 @@ from pcmb.errors import IllPosedError
 from pcmb.inputs import Distribution
 from pcmb.sampling import TensorGrid
 
-__all__ = ["LeastSquaresFit", "fit_largest_stable", "fit_least_squares", "project_tensor"]
+__all__ = [
+    "LeastSquaresFit",
+    "evaluate_tensor",
+    "fit_largest_stable",
+    "fit_least_squares",
+    "project_tensor",
+]
 
 #: Largest condition number of the (weighted) basis matrix accepted by least squares.
 MAX_CONDITION = 1e8
@@ -36,8 +42,10 @@ MAX_CONDITION = 1e8
 OVERSAMPLING = 1.5
 
 
-def _rows(values: ArrayLike, n_nodes: int) -> NDArray[np.float64]:
-    values = np.asarray(values, dtype=float)
+def _rows(values: ArrayLike, n_nodes: int) -> NDArray:
+    """Values as a float (or complex) array with one row per node."""
+    values = np.asarray(values)
+    values = values if np.iscomplexobj(values) else values.astype(float, copy=False)
     if values.ndim == 0 or values.shape[0] != n_nodes:
         raise ValueError(f"values must have one row per node ({n_nodes}), got shape {values.shape}")
     return values
@@ -69,19 +77,77 @@ def project_tensor(
         If values do not match the grid or a term exceeds the grid's orders.
     """
     values = _rows(values, grid.size)
-    trailing = values.shape[1:]
-    coef = values.reshape(grid.size, -1)
-    # Axis k of the C-ordered grid is the middle axis of a (left, q_k, right) view:
-    # one batched matmul per axis, each result contiguous for the next.
-    left, right = 1, coef.size
-    for dist, rule, order in zip(grid.distributions, grid.rules, grid.orders, strict=True):
-        right //= rule.nodes.size
-        projector = (dist.family.evaluate(rule.nodes, order) * rule.weights[:, None]).T
-        coef = np.matmul(projector, coef.reshape(left, rule.nodes.size, right))
-        left *= order + 1
-    coef = coef.reshape(grid.size, *trailing)
+    projectors = [
+        (dist.family.evaluate(rule.nodes, order) * rule.weights[:, None]).T
+        for dist, rule, order in zip(grid.distributions, grid.rules, grid.orders, strict=True)
+    ]
+    coef = _along_axes(projectors, values)
     if multi_index is None:
         return coef
+    return coef[_tensor_positions(grid, multi_index)]
+
+
+def evaluate_tensor(
+    grid: TensorGrid, coefficients: ArrayLike, multi_index: ArrayLike | None = None
+) -> NDArray:
+    """The expansion Σ_α c_α φ_α at every node of a tensor grid, without the N×S matrix.
+
+    The inverse of :func:`project_tensor`: the 1-D basis matrices V_k are applied along each
+    axis, O(S Σ q_k) work per trailing entry instead of O(N S).
+
+    Parameters
+    ----------
+    grid:
+        The tensor grid.
+    coefficients:
+        (S, ...) coefficients, real or complex (e.g. coefficient spectra).
+    multi_index:
+        (S, n) their terms; default the grid's full tensor set. Every α_k <= P_k.
+
+    Returns
+    -------
+    ndarray
+        (N, ...) values at ``grid.nodes``.
+
+    Raises
+    ------
+    ValueError
+        If the coefficients do not match the terms or a term exceeds the grid's orders.
+    """
+    coefficients = np.asarray(coefficients)
+    if multi_index is not None:
+        positions = _tensor_positions(grid, multi_index)
+        if coefficients.ndim == 0 or coefficients.shape[0] != positions.size:
+            raise ValueError(
+                f"need one coefficient row per term ({positions.size}), got {coefficients.shape}"
+            )
+        full = np.zeros((grid.size, *coefficients.shape[1:]), dtype=coefficients.dtype)
+        full[positions] = coefficients
+        coefficients = full
+    coefficients = _rows(coefficients, grid.size)
+    bases = [
+        dist.family.evaluate(rule.nodes, order)
+        for dist, rule, order in zip(grid.distributions, grid.rules, grid.orders, strict=True)
+    ]
+    return _along_axes(bases, coefficients)
+
+
+def _along_axes(matrices: Sequence[NDArray], array: NDArray) -> NDArray:
+    """Apply square matrices[k] along axis k of a C-ordered tensor stored as (N, ...)."""
+    trailing = array.shape[1:]
+    out = array.reshape(array.shape[0], -1)
+    # Axis k of the C-ordered grid is the middle axis of a (left, q_k, right) view:
+    # one batched matmul per axis, each result contiguous for the next.
+    left, right = 1, out.size
+    for matrix in matrices:
+        right //= matrix.shape[1]
+        out = np.matmul(matrix, out.reshape(left, matrix.shape[1], right))
+        left *= matrix.shape[0]
+    return out.reshape(-1, *trailing)
+
+
+def _tensor_positions(grid: TensorGrid, multi_index: ArrayLike) -> NDArray[np.intp]:
+    """Rows of the grid's C-ordered tensor set that hold the given terms."""
     index = np.asarray(multi_index, dtype=np.int64)
     if index.ndim != 2 or index.shape[1] != len(grid.orders):
         raise ValueError(f"multi_index must be (S, {len(grid.orders)}), got {index.shape}")
@@ -89,7 +155,7 @@ def project_tensor(
         raise ValueError(
             f"the grid of orders {grid.orders} cannot resolve terms up to {tuple(index.max(0))}"
         )
-    return coef[np.ravel_multi_index(tuple(index.T), grid.shape)]
+    return np.ravel_multi_index(tuple(index.T), grid.shape)
 
 
 @dataclass(frozen=True)

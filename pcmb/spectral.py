@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.expansion import ChaosExpansion
-from pcmb.recovery import project_tensor
+from pcmb.recovery import evaluate_tensor, project_tensor
 from pcmb.sampling import TensorGrid
 
 __all__ = [
@@ -192,8 +192,8 @@ def chaos_spectrum(
     """
     frequency, spectra, scale = coefficient_spectra(expansion, times, window)
     mean = scale * np.sum(np.abs(spectra) ** 2, axis=0)
-    at_nodes = scale * np.abs(expansion.basis.evaluate(grid.nodes) @ spectra) ** 2
     index = expansion.multi_index
+    at_nodes = scale * np.abs(evaluate_tensor(grid, spectra, index)) ** 2
     psd = ChaosExpansion(
         project_tensor(grid, at_nodes, index), index, expansion.distributions, expansion.names
     )

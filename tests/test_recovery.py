@@ -7,7 +7,12 @@ import scipy.stats as st
 from pcmb.basis import PolynomialBasis, total_index_set
 from pcmb.errors import IllPosedError
 from pcmb.inputs import Beta, Gamma, Normal, Transformed, Uniform
-from pcmb.recovery import fit_largest_stable, fit_least_squares, project_tensor
+from pcmb.recovery import (
+    evaluate_tensor,
+    fit_largest_stable,
+    fit_least_squares,
+    project_tensor,
+)
 from pcmb.sampling import TensorGrid, random_nodes
 
 
@@ -122,3 +127,23 @@ def test_weighted_loo_error_does_not_depend_on_an_offset():
     shifted = fit_least_squares(basis, grid.nodes, y + 5.0, grid.weights).loo_error
     assert plain == pytest.approx(shifted, rel=1e-9)
     assert plain > 1e-3  # |x| is not a quadratic
+
+
+@pytest.mark.parametrize("total", [False, True])
+def test_evaluation_on_the_grid_equals_the_dense_basis_matrix(total):
+    """The Kronecker evaluation is Φ(nodes) @ c, also for a subset of terms and complex c."""
+    dists = [Uniform(0.0, 1.0), Normal(2.0, 0.3), Beta(2.0, 3.0, -1.0, 4.0)]
+    grid = TensorGrid(dists, [2, 3, 4])
+    index = total_index_set(3, 2) if total else grid.multi_index
+    rng = np.random.default_rng(5)
+    coef = rng.normal(size=(index.shape[0], 6)) + 1j * rng.normal(size=(index.shape[0], 6))
+    dense = _basis_matrix(grid, index) @ coef
+    np.testing.assert_allclose(evaluate_tensor(grid, coef, index), dense, atol=1e-12)
+
+
+def test_evaluation_inverts_the_projection():
+    grid = TensorGrid([Uniform(0.0, 1.0), Gamma(2.0, 1.0)], [5, 3])
+    values = np.random.default_rng(6).normal(size=(grid.size, 3))
+    np.testing.assert_allclose(
+        evaluate_tensor(grid, project_tensor(grid, values)), values, atol=1e-12
+    )
