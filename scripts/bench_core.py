@@ -13,11 +13,11 @@ Run: ``python scripts/bench_core.py [--repeat 5] [--skip-chaospy]``. Medians are
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 import tracemalloc
 
 import numpy as np
+from bench_timing import median_seconds
 
 from pcmb import (
     ChaosExpansion,
@@ -27,15 +27,6 @@ from pcmb import (
     project_tensor,
     total_index_set,
 )
-
-
-def _median_seconds(func, repeat):
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def _response(theta, n_times):
@@ -54,7 +45,7 @@ def bench_large_recovery(repeat):
     grid = TensorGrid([Uniform(0.5, 1.5)] * 7, [4] * 7)
     values = _response(grid.params, 100)
     _ = grid.rules  # Gauss rules are built once per grid, not per recovery
-    seconds = _median_seconds(lambda: recovery_and_statistics(grid, values), repeat)
+    seconds = median_seconds(lambda: recovery_and_statistics(grid, values), repeat)
     tracemalloc.start()
     recovery_and_statistics(grid, values)
     _, peak = tracemalloc.get_traced_memory()
@@ -70,8 +61,8 @@ def bench_large_recovery(repeat):
     small_values = _response(small.params, 100)
     basis = PolynomialBasis(tuple(d.family for d in small.distributions), small.multi_index)
     matrix = basis.evaluate(small.nodes)
-    dense = _median_seconds(lambda: np.linalg.solve(matrix, small_values), repeat)
-    kron = _median_seconds(lambda: project_tensor(small, small_values), repeat)
+    dense = median_seconds(lambda: np.linalg.solve(matrix, small_values), repeat)
+    kron = median_seconds(lambda: project_tensor(small, small_values), repeat)
     error = np.abs(np.linalg.solve(matrix, small_values) - project_tensor(small, small_values))
     print(
         f"    5 inputs x order 4 = {small.size} nodes: dense solve {dense * 1e3:.1f} ms "
@@ -88,7 +79,7 @@ def bench_sobol(repeat, with_chaospy):
     index = total_index_set(4, 4)
     total = ChaosExpansion(project_tensor(grid, values, index), index, dists)
     for label, expansion in [("tensor", tensor), ("total-degree", total)]:
-        ours = _median_seconds(lambda e=expansion: (e.sobol_first(), e.sobol_total()), repeat)
+        ours = median_seconds(lambda e=expansion: (e.sobol_first(), e.sobol_total()), repeat)
         print(
             f"[2] Sobol' first + total, 4 inputs, {label} order 4 "
             f"({expansion.multi_index.shape[0]} terms) x 2000 times, {grid.size} nodes: "

@@ -20,26 +20,16 @@ Run: ``python scripts/bench_models.py [--repeat 3]``. Medians are printed.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from pathlib import Path
 
 import numpy as np
+from bench_timing import median_seconds
 
 from pcmb.model import load_entry
 
 ROOT = Path(__file__).resolve().parents[1]
 RANGES = {"A": (0.025, 0.075), "kT": (1.2e5, 1.8e5), "c": (800.0, 1200.0)}  # the config's
 POINTS = 6  # order 5
-
-
-def _median_seconds(func, repeat):
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def _nodes():
@@ -70,8 +60,8 @@ def main():
         ]
         return {name: np.concatenate([run[name] for run in runs]) for name in model.outputs}
 
-    seconds_batched = _median_seconds(batched, args.repeat)
-    seconds_per_node = _median_seconds(per_node, args.repeat)
+    seconds_batched = median_seconds(batched, args.repeat)
+    seconds_per_node = median_seconds(per_node, args.repeat)
     together, alone = batched(), per_node()
 
     print(f"quarter car, {n_nodes} nodes x {times.size} times, rtol {model.rtol:g}")
