@@ -15,7 +15,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.batched_ivp import StackedODEModel
+from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
 

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from terrain_process import GERMS, L1_DEFAULT, L2_DEFAULT, random_profile
 
-from pcmb.batched_ivp import StackedODEModel
+from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
 

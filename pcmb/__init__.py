@@ -1,9 +1,9 @@
 """pcmb: simulations with error bars by generalized polynomial chaos.
 
-Uncertain inputs (:mod:`pcmb.inputs`) are mapped to standard germs with orthonormal
-polynomial families (:mod:`pcmb.polynomials`); a simulator is run at tensor Gauss nodes
-(:mod:`pcmb.sampling`); the runs are turned into chaos coefficients
-(:mod:`pcmb.recovery`) and statistics (:mod:`pcmb.expansion`). Importing pcmb is cheap:
+Uncertain inputs (:mod:`pcmb.chaos.inputs`) are mapped to standard germs with orthonormal
+polynomial families (:mod:`pcmb.chaos.polynomials`); a simulator is run at tensor Gauss nodes
+(:mod:`pcmb.chaos.nodes`); the runs are turned into chaos coefficients
+(:mod:`pcmb.chaos.recovery`) and statistics (:mod:`pcmb.chaos.expansion`). Importing pcmb is cheap:
 heavy optional modules (h5py, mujoco, matplotlib, dask) load only where used.
 """
 
@@ -13,23 +13,23 @@ from typing import Any
 #: Public name -> module that defines it. Loaded on first access (PEP 562), so that
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
-    "pcmb.batched_ivp": ["StackedODEModel", "solve_projected", "solve_stacked"],
-    "pcmb.analysis": ["AnalysisSettings", "analyse"],
-    "pcmb.basis": [
+    "pcmb.adapters.stacked_ode": ["StackedODEModel", "solve_projected", "solve_stacked"],
+    "pcmb.analysis.statistics": ["AnalysisSettings", "analyse"],
+    "pcmb.chaos.basis": [
         "PolynomialBasis",
         "hyperbolic_index_set",
         "tensor_index_set",
         "total_index_set",
     ],
-    "pcmb.comparison": ["compare"],
-    "pcmb.config": ["StudyConfig", "config_json_schema", "load_config", "validate_config"],
+    "pcmb.analysis.comparison": ["compare"],
+    "pcmb.config.schema": ["StudyConfig", "config_json_schema", "load_config", "validate_config"],
     "pcmb.errors": ["ConfigError", "IllPosedError", "ModelError", "ModelRunError", "PcmbError"],
-    "pcmb.density": ["kernel_density"],
-    "pcmb.executor": ["NodeFailure", "RunResult", "run_nodes"],
-    "pcmb.expansion": ["ChaosExpansion"],
-    "pcmb.inputs": ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform"],
-    "pcmb.kl": ["KarhunenLoeve", "line_covariance", "spectral_covariance"],
-    "pcmb.model": [
+    "pcmb.chaos.density": ["kernel_density"],
+    "pcmb.run.executor": ["NodeFailure", "RunResult", "run_nodes"],
+    "pcmb.chaos.expansion": ["ChaosExpansion"],
+    "pcmb.chaos.inputs": ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform"],
+    "pcmb.chaos.kl": ["KarhunenLoeve", "line_covariance", "spectral_covariance"],
+    "pcmb.adapters.python": [
         "CommandModel",
         "FunctionModel",
         "Model",
@@ -37,8 +37,8 @@ _EXPORTS = {
         "as_model",
         "load_entry",
     ],
-    "pcmb.mujoco_model": ["MujocoModel", "MujocoModelFactory"],
-    "pcmb.polynomials": [
+    "pcmb.adapters.mujoco.model": ["MujocoModel", "MujocoModelFactory"],
+    "pcmb.chaos.polynomials": [
         "GaussRule",
         "Hermite",
         "Jacobi",
@@ -46,17 +46,17 @@ _EXPORTS = {
         "Legendre",
         "OrthonormalFamily",
     ],
-    "pcmb.recovery": [
+    "pcmb.chaos.recovery": [
         "LeastSquaresFit",
         "evaluate_tensor",
         "fit_largest_stable",
         "fit_least_squares",
         "project_tensor",
     ],
-    "pcmb.report": ["write_report"],
-    "pcmb.sampling": ["NodeSet", "TensorGrid", "random_nodes"],
+    "pcmb.analysis.report": ["write_report"],
+    "pcmb.chaos.nodes": ["NodeSet", "TensorGrid", "random_nodes"],
     "pcmb.store": ["load"],
-    "pcmb.spectral": ["ChaosSpectrum", "chaos_spectrum", "periodogram"],
+    "pcmb.chaos.spectral": ["ChaosSpectrum", "chaos_spectrum", "periodogram"],
     "pcmb.study": ["Study", "StudyResult"],
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}

@@ -98,7 +98,7 @@ def _summary(config) -> str:
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from pcmb.config import load_config
+    from pcmb.config.schema import load_config
     from pcmb.errors import ConfigError
     from pcmb.study import Study
 
@@ -143,7 +143,7 @@ def _load(path: str):
 
 
 def _report(args: argparse.Namespace) -> int:
-    from pcmb.report import write_report
+    from pcmb.analysis.report import write_report
 
     result = _load(args.result)
     others = [_load(path) for path in args.compare]
@@ -154,7 +154,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from pcmb.comparison import compare, method_label
+    from pcmb.analysis.comparison import compare, method_label
 
     reference = _load(args.reference)
     others = [_load(path) for path in args.others]
@@ -166,7 +166,7 @@ def _compare(args: argparse.Namespace) -> int:
     ]
     print("\n\n".join(tables))
     if args.output:
-        from pcmb.report import write_comparison_figures
+        from pcmb.analysis.report import write_comparison_figures
 
         written = write_comparison_figures(reference, others, args.output, labels=args.others)
         _log(f"pcmb: wrote {len(written)} figures to {args.output}")
@@ -223,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "run":
             return _run(args, argv)
         if args.command == "validate":
-            from pcmb.config import load_config
+            from pcmb.config.schema import load_config
 
             print(_summary(load_config(args.config)))
         elif args.command == "inspect":
@@ -233,7 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "compare":
             return _compare(args)
         elif args.command == "schema":
-            from pcmb.config import config_json_schema
+            from pcmb.config.schema import config_json_schema
 
             print(json.dumps(config_json_schema(), indent=2))
         return EXIT_OK

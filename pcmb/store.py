@@ -14,7 +14,7 @@ The only module that imports h5py. Layout::
                     nominal (T,)       the deterministic run at the nominal parameters
                                        (their values: /inputs attrs nominal, JSON)
 
-With an analysis (root attrs ``analysis``: its settings as JSON; see :mod:`pcmb.analysis`)::
+With an analysis (root attrs ``analysis``: settings as JSON; see :mod:`pcmb.analysis.statistics`)::
 
     /quantile (Q,)                                  dimension scale: the levels
     /outputs/<name>/quantiles (Q, T)
@@ -48,11 +48,11 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pcmb.analysis import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
-from pcmb.executor import NodeFailure
-from pcmb.expansion import ChaosExpansion
-from pcmb.files import replace_durably
-from pcmb.inputs import from_description
+from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import from_description
+from pcmb.run.executor import NodeFailure
+from pcmb.run.files import replace_durably
 from pcmb.study import StudyResult
 
 __all__ = ["SCHEMA_VERSION", "load", "write_result"]

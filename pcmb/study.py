@@ -12,13 +12,13 @@ The command line and the Python API share this one code path::
     result = study.run("results/toy.h5")             # or study.run() to keep it in memory
     result.mean("y"), result.std("y"), result.sobol_total("y")
 
-``Study.from_config(pcmb.config.load_config("configs/quarter_car.yaml"))`` builds the same
+``Study.from_config(pcmb.config.schema.load_config("configs/quarter_car.yaml"))`` builds the same
 object from a YAML file.
 
 Besides the statistics, every run stores the deterministic run at the nominal parameters
 (``result.nominal``; for a nonlinear model the mean differs from it) and, when asked for
 (``analysis=``, the config's ``analysis:``), quantile bands, PDFs and spectra
-(:mod:`pcmb.analysis`). ``study.replace(method="montecarlo", samples=2000)`` is the same
+(:mod:`pcmb.analysis.statistics`). ``study.replace(method="montecarlo", samples=2000)`` is the same
 study by Monte Carlo, to check the chaos against.
 """
 
@@ -38,19 +38,19 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.analysis import Analysis, AnalysisSettings, analyse
-from pcmb.basis import total_index_set
+from pcmb.adapters.python import Model, ObjectModelFactory
+from pcmb.analysis.statistics import Analysis, AnalysisSettings, analyse
+from pcmb.chaos.basis import total_index_set
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import NodeSet, TensorGrid, random_nodes
+from pcmb.chaos.recovery import fit_largest_stable, project_tensor
 from pcmb.errors import ConfigError, IllPosedError, ModelRunError
-from pcmb.executor import NodeFailure, run_nodes
-from pcmb.expansion import ChaosExpansion
-from pcmb.inputs import Distribution
-from pcmb.journal import Journal
-from pcmb.model import Model, ObjectModelFactory
-from pcmb.recovery import fit_largest_stable, project_tensor
-from pcmb.sampling import NodeSet, TensorGrid, random_nodes
+from pcmb.run.executor import NodeFailure, run_nodes
+from pcmb.run.journal import Journal
 
 if TYPE_CHECKING:
-    from pcmb.config import StudyConfig
+    from pcmb.config.schema import StudyConfig
 
 __all__ = ["Study", "StudyResult"]
 
@@ -93,7 +93,7 @@ class StudyResult:
         Output name -> (T,) the deterministic run at the nominal parameters (empty if it
         failed: see ``warnings``). For a nonlinear model it differs from the mean.
     analysis:
-        Quantile bands, PDFs and spectra (:func:`pcmb.analysis.analyse`), when requested.
+        Quantile bands, PDFs and spectra (:func:`pcmb.analysis.statistics.analyse`), when requested.
     """
 
     name: str
@@ -185,7 +185,7 @@ class Study:
     name:
         Free text stored in the result.
     jobs, backend, address, chunk_size:
-        Execution settings (see :func:`pcmb.executor.run_nodes`).
+        Execution settings (see :func:`pcmb.run.executor.run_nodes`).
     on_failure, retries:
         Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
         node), ``"retry"`` (re-run failed nodes ``retries`` times, then abort) or
@@ -196,7 +196,7 @@ class Study:
         ``model.params`` value), else its distribution's mean.
     analysis:
         Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
-        can still be computed later from the result with :func:`pcmb.analysis.analyse`).
+        can still be computed later from the result with :func:`pcmb.analysis.statistics.analyse`).
 
     Raises
     ------
@@ -610,10 +610,12 @@ class Study:
 
 def _is_factory(model: Any) -> bool:
     """Whether ``model`` is one of pcmb's model factories (as built from a config)."""
-    from pcmb.model import CommandModelFactory, PythonModelFactory
+    from pcmb.adapters.python import CommandModelFactory, PythonModelFactory
 
     factories: tuple[type, ...] = (PythonModelFactory, CommandModelFactory, ObjectModelFactory)
-    mujoco = sys.modules.get("pcmb.mujoco_model")  # a MuJoCo factory exists only once imported
+    mujoco = sys.modules.get(
+        "pcmb.adapters.mujoco.model"
+    )  # a MuJoCo factory exists only once imported
     if mujoco is not None:
         factories += (mujoco.MujocoModelFactory,)
     return isinstance(model, factories)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from bench_timing import median_seconds
 
-from pcmb.model import load_entry
+from pcmb.adapters.python import load_entry
 
 ROOT = Path(__file__).resolve().parents[1]
 RANGES = {"A": (0.025, 0.075), "kT": (1.2e5, 1.8e5), "c": (800.0, 1200.0)}  # the config's

@@ -35,10 +35,10 @@ import mujoco
 import mujoco.rollout
 import numpy as np
 
+from pcmb.adapters.mujoco.model import MujocoModel
+from pcmb.chaos.inputs import Uniform
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
-from pcmb.inputs import Uniform
-from pcmb.mujoco_model import MujocoModel
-from pcmb.sampling import TensorGrid
 
 SCENE = Path(__file__).resolve().parents[1] / "models" / "mujoco" / "pendulum.xml"
 INPUTS = {"L": (0.8, 1.2), "theta0": (0.6, 0.9), "damping": (0.0, 0.05)}
@@ -119,7 +119,7 @@ def python_loop(params: np.ndarray) -> np.ndarray:
 
 @contextlib.contextmanager
 def threads(count: int) -> Iterator[None]:
-    """The thread budget pcmb's MuJoCo batch reads (see pcmb.mujoco_model)."""
+    """The thread budget pcmb's MuJoCo batch reads (see pcmb.adapters.mujoco.model)."""
     saved = os.environ.get("OMP_NUM_THREADS")
     os.environ["OMP_NUM_THREADS"] = str(count)
     try:

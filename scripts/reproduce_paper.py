@@ -34,9 +34,9 @@ from scipy.optimize import brentq
 from scipy.special import ellipj, ellipk
 
 import pcmb
-from pcmb.analysis import output_draws
-from pcmb.comparison import compare, method_label
-from pcmb.report import write_report
+from pcmb.analysis.comparison import compare, method_label
+from pcmb.analysis.report import write_report
+from pcmb.analysis.statistics import output_draws
 
 ROOT = Path(__file__).resolve().parents[1]
 #: --quick divides the Monte Carlo sample counts by this (keeping at least 100 runs).

@@ -7,8 +7,8 @@ from scipy.signal import periodogram as scipy_periodogram
 from scipy.stats import gaussian_kde, norm
 
 import pcmb
-from pcmb.analysis import AnalysisSettings, analyse
-from pcmb.density import kernel_density
+from pcmb.analysis.statistics import AnalysisSettings, analyse
+from pcmb.chaos.density import kernel_density
 from pcmb.errors import ConfigError
 
 # 400 points, step 0.05 (Nyquist 10 Hz); endpoint excluded so the record is periodic-ready.
@@ -136,7 +136,7 @@ def test_sampling_spectrum_is_the_mean_and_std_of_per_run_periodograms():
     np.testing.assert_allclose(spectrum.mean, per_run.mean(axis=0), atol=1e-12 * scale)
     np.testing.assert_allclose(spectrum.std, per_run.std(axis=0, ddof=1), atol=1e-12 * scale)
     # PDFs of a sampling study come from the runs themselves.
-    _, draws = pcmb.analysis.output_draws(result, "x", [5.0], result.analysis.settings)
+    _, draws = pcmb.analysis.statistics.output_draws(result, "x", [5.0], result.analysis.settings)
     assert draws.shape == (64, 1)
 
 

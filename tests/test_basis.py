@@ -5,9 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from pcmb.basis import PolynomialBasis, hyperbolic_index_set, tensor_index_set, total_index_set
-from pcmb.inputs import Normal, Uniform
-from pcmb.sampling import TensorGrid
+from pcmb.chaos.basis import (
+    PolynomialBasis,
+    hyperbolic_index_set,
+    tensor_index_set,
+    total_index_set,
+)
+from pcmb.chaos.inputs import Normal, Uniform
+from pcmb.chaos.nodes import TensorGrid
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""Tests of pcmb.batched_ivp: stacked and projected batch integration, and the model base.
+"""Tests of pcmb.adapters.stacked_ode: stacked and projected batch integration, and the model base.
 
 Accuracy bounds: an integrator that keeps every step's local error within rtol (relative to
 the state) gives a global error of a modest multiple of rtol on these stable, non-chaotic
@@ -13,7 +13,7 @@ import pytest
 from model_loading import GLOBAL_FACTOR
 from scipy.integrate import DOP853, RK23, RK45, solve_ivp
 
-from pcmb.batched_ivp import StackedODEModel, solve_projected, solve_stacked
+from pcmb.adapters.stacked_ode import StackedODEModel, solve_projected, solve_stacked
 from pcmb.errors import ConfigError, ModelError
 
 
@@ -80,7 +80,7 @@ def test_one_node_among_idle_ones_keeps_its_own_accuracy():
 @pytest.mark.parametrize("method", ["RK23", "RK45", "DOP853"])
 def test_stacked_error_norm_is_the_worst_separate_runs_norm(method):
     """The stacked solvers' step test, checked against scipy's own solver on each node."""
-    from pcmb.batched_ivp import _PER_NODE_SOLVERS
+    from pcmb.adapters.stacked_ode import _PER_NODE_SOLVERS
 
     d, n_nodes, h = 3, 5, 0.01
     rng = np.random.default_rng(1)
@@ -205,7 +205,7 @@ def test_stacked_rejects_an_rhs_of_the_wrong_shape():
 
 def test_dormand_prince_tableau_is_scipys():
     """An independent copy of the same pair: scipy's RK45 (error weights there are B4 - B5)."""
-    from pcmb import batched_ivp
+    from pcmb.adapters import stacked_ode as batched_ivp
 
     assert np.allclose(batched_ivp._DP_C[:6], RK45.C, rtol=0, atol=1e-15)
     assert np.allclose(batched_ivp._DP_A[:6, :5], RK45.A, rtol=0, atol=1e-15)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import pcmb
+from pcmb.analysis.comparison import NOISE_FACTOR, compare, method_label
 from pcmb.cli import main
-from pcmb.comparison import NOISE_FACTOR, compare, method_label
 from pcmb.errors import ConfigError
 from pcmb.store import write_result
 

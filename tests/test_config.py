@@ -21,9 +21,10 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 
-from pcmb import inputs
+from pcmb.adapters.python import CommandModelFactory, PythonModelFactory
+from pcmb.chaos import inputs
 from pcmb.cli import main as cli_main
-from pcmb.config import (
+from pcmb.config.schema import (
     CommandModelSpec,
     StudyConfig,
     config_json_schema,
@@ -31,7 +32,6 @@ from pcmb.config import (
     validate_config,
 )
 from pcmb.errors import ConfigError
-from pcmb.model import CommandModelFactory, PythonModelFactory
 
 DATA = Path(__file__).parent / "data"
 SOURCE = DATA / "study.yaml"  # named in messages; the text is passed in, the folder is real
@@ -467,7 +467,7 @@ def test_missing_file():
 
 def test_loading_a_python_config_does_not_import_mujoco():
     code = (
-        "import sys; from pcmb.config import load_config; "
+        "import sys; from pcmb.config.schema import load_config; "
         f"load_config({str(DATA / 'valid_python.yaml')!r}); print('mujoco' in sys.modules)"
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

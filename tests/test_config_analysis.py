@@ -3,7 +3,7 @@
 import pytest
 from pipeline_fixtures import write_study
 
-from pcmb.config import load_config
+from pcmb.config.schema import load_config
 from pcmb.errors import ConfigError
 from pcmb.study import Study
 

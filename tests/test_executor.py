@@ -1,4 +1,4 @@
-"""Tests of pcmb.executor: chunking, in-process vs workers, determinism, failures, resume."""
+"""Tests of pcmb.run.executor: chunking, in-process vs workers, determinism, failures, resume."""
 
 from __future__ import annotations
 
@@ -18,10 +18,10 @@ import executor_models as em
 import numpy as np
 import pytest
 
-from pcmb import executor
 from pcmb.errors import ConfigError, ModelError
-from pcmb.executor import NodeFailure, chunk_bounds, run_nodes
-from pcmb.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.run import executor
+from pcmb.run.executor import NodeFailure, chunk_bounds, run_nodes
+from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
 
 TESTS = Path(__file__).resolve().parent
 TIMES = np.linspace(0.0, 1.0, 11)
@@ -469,8 +469,8 @@ import sys
 sys.path.insert(0, {tests!r})
 import functools
 import executor_models as em
-from pcmb.executor import run_nodes
-from pcmb.journal import Journal
+from pcmb.run.executor import run_nodes
+from pcmb.run.journal import Journal
 
 params, times = em.oscillator_nodes(48)
 journal = Journal(sys.argv[1], "fp", 48, ["x", "v"], times.size)

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from reference_functions import ishigami, ishigami_statistics
 
-from pcmb.basis import total_index_set
-from pcmb.expansion import ChaosExpansion
-from pcmb.inputs import Normal, Uniform
-from pcmb.recovery import project_tensor
-from pcmb.sampling import TensorGrid
+from pcmb.chaos.basis import total_index_set
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Normal, Uniform
+from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.recovery import project_tensor
 
 PI = np.pi
 

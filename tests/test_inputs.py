@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from pcmb.inputs import Beta, Gamma, Normal, Transformed, Uniform
-from pcmb.polynomials import Hermite, Jacobi, Laguerre, Legendre
+from pcmb.chaos.inputs import Beta, Gamma, Normal, Transformed, Uniform
+from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
 
 INPUTS = [
     Uniform(0.025, 0.075),
@@ -96,7 +96,7 @@ def test_describe_is_json_ready():
 
 @pytest.mark.parametrize("dist", INPUTS, ids=lambda d: d.describe()["dist"])
 def test_description_round_trip(dist):
-    from pcmb.inputs import from_description
+    from pcmb.chaos.inputs import from_description
 
     rebuilt = from_description(dist.describe())
     xi = np.linspace(-0.9, 0.9, 5)

@@ -1,4 +1,4 @@
-"""Tests of pcmb.journal: round trip, superseding records, refusals, atomicity under kills."""
+"""Tests of pcmb.run.journal: round trip, superseding records, refusals, atomicity under kills."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pcmb import journal as journal_module
 from pcmb.errors import ConfigError
-from pcmb.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.run import journal as journal_module
+from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
 
 OUTPUTS = ("x", "v")
 N_TIMES = 7
@@ -133,7 +133,7 @@ def test_an_unreadable_record_is_reported_by_name(tmp_path: Path) -> None:
 _WRITER = """
 import sys
 import numpy as np
-from pcmb.journal import Journal
+from pcmb.run.journal import Journal
 
 journal = Journal(sys.argv[1], "abc", 100000, ("x", "v"), 4000)
 for i in range(100000):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pcmb.kl import KarhunenLoeve, line_covariance, spectral_covariance
+from pcmb.chaos.kl import KarhunenLoeve, line_covariance, spectral_covariance
 
 D, A1, A2 = 100.0, 0.2, 0.1
 L1, L2 = D / (6 * np.pi), D / (14 * np.pi)

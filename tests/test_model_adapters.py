@@ -18,8 +18,7 @@ import joblib
 import numpy as np
 import pytest
 
-from pcmb.errors import ConfigError, ModelError
-from pcmb.model import (
+from pcmb.adapters.python import (
     CommandModel,
     CommandModelFactory,
     FunctionModel,
@@ -30,6 +29,7 @@ from pcmb.model import (
     load_entry,
     split_command,
 )
+from pcmb.errors import ConfigError, ModelError
 
 DATA = Path(__file__).parent / "data"
 TIMES = np.linspace(0.0, 2.0, 5)

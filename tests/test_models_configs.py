@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from model_loading import CONFIGS_DIR
 
-from pcmb.config import load_config
+from pcmb.config.schema import load_config
 
 GERMS = ("xi11", "xi12", "xi21", "xi22")
 

@@ -1,4 +1,4 @@
-"""The MuJoCo adapter: bindings, outputs, grid, divergence, errors (pcmb.mujoco_model).
+"""The MuJoCo adapter: bindings, outputs, grid, divergence, errors (pcmb.adapters.mujoco.model).
 
 References are independent of the adapter: a plain ``mj_step`` loop on a scene compiled
 fresh from XML that spells the node's values out (as mujoco's own rollout tests do), and,
@@ -18,10 +18,10 @@ import mujoco
 import numpy as np
 import pytest
 
-import pcmb.mujoco_model
+import pcmb.adapters.mujoco.model
+from pcmb.adapters.mujoco.model import MujocoModel, MujocoModelFactory
 from pcmb.cli import main
 from pcmb.errors import ConfigError, ModelError
-from pcmb.mujoco_model import MujocoModel, MujocoModelFactory
 
 # A damped compound pendulum: a hub on the hinge and a ball at distance L below it. L is a
 # template input; everything else may be bound. Contacts off: nothing here touches.
@@ -118,7 +118,7 @@ def test_each_node_equals_a_plain_mj_step_loop_on_a_fresh_scene(
     tmp_path, monkeypatch, record_bytes
 ):
     if record_bytes is not None:
-        monkeypatch.setattr(pcmb.mujoco_model, "_RECORD_BYTES", record_bytes)
+        monkeypatch.setattr(pcmb.adapters.mujoco.model, "_RECORD_BYTES", record_bytes)
     model = pendulum(
         tmp_path,
         bind={

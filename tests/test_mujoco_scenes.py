@@ -19,14 +19,14 @@ import numpy as np
 import pytest
 from scipy.special import ellipj, ellipk
 
+from pcmb.adapters.mujoco.model import MujocoModel
+from pcmb.adapters.python import load_entry
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Uniform
+from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.recovery import project_tensor
 from pcmb.cli import main
-from pcmb.config import load_config
-from pcmb.expansion import ChaosExpansion
-from pcmb.inputs import Uniform
-from pcmb.model import load_entry
-from pcmb.mujoco_model import MujocoModel
-from pcmb.recovery import project_tensor
-from pcmb.sampling import TensorGrid
+from pcmb.config.schema import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"

@@ -8,7 +8,7 @@ import pytest
 import scipy.integrate as si
 import scipy.special as sp
 
-from pcmb.polynomials import Hermite, Jacobi, Laguerre, Legendre
+from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
 
 FAMILIES = [
     Legendre(),

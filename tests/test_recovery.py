@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from pcmb.basis import PolynomialBasis, total_index_set
-from pcmb.errors import IllPosedError
-from pcmb.inputs import Beta, Gamma, Normal, Transformed, Uniform
-from pcmb.recovery import (
+from pcmb.chaos.basis import PolynomialBasis, total_index_set
+from pcmb.chaos.inputs import Beta, Gamma, Normal, Transformed, Uniform
+from pcmb.chaos.nodes import TensorGrid, random_nodes
+from pcmb.chaos.recovery import (
     evaluate_tensor,
     fit_largest_stable,
     fit_least_squares,
     project_tensor,
 )
-from pcmb.sampling import TensorGrid, random_nodes
+from pcmb.errors import IllPosedError
 
 
 def _basis_matrix(grid, index=None):

@@ -13,7 +13,7 @@ from pcmb.cli import main
 pytest.importorskip("matplotlib")
 from matplotlib.image import imread
 
-from pcmb.report import figure_pixels, write_report
+from pcmb.analysis.report import figure_pixels, write_report
 
 MODEL = '''
 import numpy as np

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pcmb.inputs import Normal, Uniform
-from pcmb.sampling import TensorGrid, random_nodes
+from pcmb.chaos.inputs import Normal, Uniform
+from pcmb.chaos.nodes import TensorGrid, random_nodes
 
 
 def test_tensor_grid_layout_and_weights():

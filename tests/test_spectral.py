@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.signal import periodogram as scipy_periodogram
 
-from pcmb.expansion import ChaosExpansion
-from pcmb.inputs import Uniform
-from pcmb.recovery import project_tensor
-from pcmb.sampling import TensorGrid
-from pcmb.spectral import WINDOWS, chaos_spectrum, periodogram
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Uniform
+from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.recovery import project_tensor
+from pcmb.chaos.spectral import WINDOWS, chaos_spectrum, periodogram
 
 TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)
 

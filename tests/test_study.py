@@ -210,8 +210,8 @@ def test_coefficients_are_bit_identical_for_one_or_two_workers(monkeypatch):
     """The default quarter car (stacked solves, whose last bits depend on the batch) at order 2."""
     from pathlib import Path
 
-    from pcmb import executor
-    from pcmb.config import load_config
+    from pcmb.config.schema import load_config
+    from pcmb.run import executor
 
     config = load_config(Path(__file__).resolve().parents[1] / "configs" / "quarter_car.yaml")
     study = pcmb.Study.from_config(config).replace(order=2, chunk_size=7, analysis=None)

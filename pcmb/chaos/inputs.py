@@ -1,7 +1,7 @@
 """Uncertain inputs: distributions and their maps between germ ξ and physical value θ.
 
 Every input θ_k is a map θ_k = T_k(ξ_k) of a standard germ ξ_k whose measure has an
-orthonormal polynomial family (:mod:`pcmb.polynomials`):
+orthonormal polynomial family (:mod:`pcmb.chaos.polynomials`):
 
 =========================================  =============  ==========================
 distribution                               germ           map θ = T(ξ)
@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
+from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
 
 __all__ = ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform", "from_description"]
 

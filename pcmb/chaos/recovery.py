@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.basis import PolynomialBasis, total_index_set
+from pcmb.chaos.basis import PolynomialBasis, total_index_set
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.errors import IllPosedError
-from pcmb.inputs import Distribution
-from pcmb.sampling import TensorGrid
 
 __all__ = [
     "LeastSquaresFit",

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.errors import ConfigError
-from pcmb.files import replace_durably
+from pcmb.run.files import replace_durably
 
 __all__ = ["STATUS_FAILED", "STATUS_OK", "STATUS_PENDING", "Journal"]
 

@@ -66,10 +66,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.errors import ConfigError, ConfigProblem, ModelError, PcmbError
-from pcmb.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
 
 if TYPE_CHECKING:
-    from pcmb.model import Model
+    from pcmb.adapters.python import Model
 
 __all__ = ["NodeFailure", "RunResult", "chunk_bounds", "run_nodes"]
 

@@ -30,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.expansion import ChaosExpansion
-from pcmb.recovery import evaluate_tensor, project_tensor
-from pcmb.sampling import TensorGrid
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.recovery import evaluate_tensor, project_tensor
 
 __all__ = [
     "WINDOWS",

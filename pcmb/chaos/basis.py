@@ -5,7 +5,7 @@ orthonormal polynomials. Index sets are (S, n) integer arrays, one row per term,
 always start with the zero multi-index (the mean term).
 
 - ``tensor_index_set(orders)``: 0 <= α_k <= P_k, S = Π (P_k + 1) (Part I Eq. 27). Rows in
-  C order (last input varies fastest), the same order as :class:`pcmb.sampling.TensorGrid`
+  C order (last input varies fastest), the same order as :class:`pcmb.chaos.nodes.TensorGrid`
   nodes, so tensor coefficients reshape to (P_1+1, ..., P_n+1).
 - ``total_index_set(n, order)``: |α| <= P, S = (n+P)! / (n! P!) (Part I Eq. 26), graded by
   total degree.
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.polynomials import OrthonormalFamily
+from pcmb.chaos.polynomials import OrthonormalFamily
 
 __all__ = ["PolynomialBasis", "hyperbolic_index_set", "tensor_index_set", "total_index_set"]
 

@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.basis import PolynomialBasis
-from pcmb.density import kernel_density
-from pcmb.inputs import Distribution
-from pcmb.sampling import draw_germs
+from pcmb.chaos.basis import PolynomialBasis
+from pcmb.chaos.density import kernel_density
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import draw_germs
 
 __all__ = ["ChaosExpansion"]
 
@@ -220,7 +220,7 @@ class ChaosExpansion:
         """Density of a scalar output at ``points``: a Gaussian KDE of surrogate samples.
 
         Select a scalar first, e.g. ``expansion[time_index].pdf(x)``. The estimate is
-        :func:`pcmb.density.kernel_density` (Scott's bandwidth), the one stored in result
+        :func:`pcmb.chaos.density.kernel_density` (Scott's bandwidth), the one stored in result
         files; it is zero beyond three bandwidths from the samples.
 
         Raises

@@ -9,11 +9,11 @@ numbers):
 - **PDFs at chosen times**: a Gaussian KDE (Scott's bandwidth) of ``samples`` surrogate
   draws when the output has a chaos expansion, else of the model runs themselves
   (sampling methods); each time is taken at the nearest grid point;
-- **spectra** (one-sided PSD, :mod:`pcmb.spectral` conventions: y² per Hz, window
+- **spectra** (one-sided PSD, :mod:`pcmb.chaos.spectral` conventions: y² per Hz, window
   ``window``, mean not removed): on a tensor collocation grid, the mean PSD comes from
   the coefficient spectra (Σ|ĉ_α|², equal to the quadrature of the per-node PSDs) and the
   band is the collocation estimate of the PSD's std — the PSD treated as one more output
-  and integrated by the grid's Gauss rule (:func:`pcmb.spectral.chaos_spectrum`); it is not
+  and integrated by the grid's Gauss rule (:func:`pcmb.chaos.spectral.chaos_spectrum`); it is not
   the exact std of the squared surrogate, which the PSD PDFs sample. For sampling methods:
   the sample mean and standard deviation (ddof 1) of the per-run periodograms, same window
   and scaling. The
@@ -36,11 +36,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.basis import PolynomialBasis
-from pcmb.density import DENSITY_POINTS, kernel_density
+from pcmb.chaos.basis import PolynomialBasis
+from pcmb.chaos.density import DENSITY_POINTS, kernel_density
+from pcmb.chaos.nodes import TensorGrid, draw_germs
+from pcmb.chaos.spectral import chaos_spectrum, periodogram, taper, uniform_step
 from pcmb.errors import ConfigError, ConfigProblem
-from pcmb.sampling import TensorGrid, draw_germs
-from pcmb.spectral import chaos_spectrum, periodogram, taper, uniform_step
 
 if TYPE_CHECKING:
     from pcmb.study import StudyResult
@@ -90,7 +90,7 @@ class AnalysisSettings:
         Outputs whose spectrum is computed; ``None``: every output (when the time grid is
         uniform), ``()``: none.
     window:
-        Window used for every spectrum, one of :data:`pcmb.spectral.WINDOWS`.
+        Window used for every spectrum, one of :data:`pcmb.chaos.spectral.WINDOWS`.
     pdf_times:
         Times at which PDFs are tabulated; ``None``: the final time.
     pdf_freqs:

@@ -9,7 +9,7 @@ expected, found what`` — so that nothing runs on an invalid config:
    surprises), rejects duplicate keys and unsupported tags, and remembers the line of every
    key.
 2. Schema: :class:`StudyConfig` (pydantic v2, unknown keys forbidden, discriminated unions
-   on ``model.kind`` and ``inputs.*.dist``); each distribution is built by :mod:`pcmb.inputs`
+   on ``model.kind`` and ``inputs.*.dist``); each distribution is built by :mod:`pcmb.chaos.inputs`
    in an after-validator, so its constructor's checks become located errors.
 3. Semantics: cross-section checks (order mapping vs inputs, grid sizes), then the model is
    built exactly as a worker would build it — entry/XML found and loaded, the constructor
@@ -52,10 +52,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from pcmb import inputs
-from pcmb.analysis import MIN_SAMPLES, AnalysisSettings, window_problem
-from pcmb.errors import ConfigError, ConfigProblem
-from pcmb.model import (
+from pcmb.adapters.python import (
     CommandModel,
     CommandModelFactory,
     FunctionModel,
@@ -63,6 +60,9 @@ from pcmb.model import (
     PythonModelFactory,
     split_command,
 )
+from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
+from pcmb.chaos import inputs
+from pcmb.errors import ConfigError, ConfigProblem
 
 __all__ = [
     "AnalysisSpec",
@@ -351,7 +351,7 @@ class _Spec(BaseModel):
 
 
 class _InputSpec(_Spec, ABC):
-    """An uncertain input; :attr:`distribution` is the :mod:`pcmb.inputs` object."""
+    """An uncertain input; :attr:`distribution` is the :mod:`pcmb.chaos.inputs` object."""
 
     _distribution: inputs.Distribution = PrivateAttr()
 
@@ -711,7 +711,7 @@ def _window(value: str) -> str:
 
 
 class AnalysisSpec(_Spec):
-    """What to compute beyond mean, std and Sobol' indices (see :mod:`pcmb.analysis`)."""
+    """What to compute beyond mean, std and Sobol' indices (see :mod:`pcmb.analysis.statistics`)."""
 
     psd: Annotated[list[Name], AfterValidator(_unique)] | None = Field(
         default=None, description="outputs whose PSD is stored (default: all; [] for none)"
@@ -736,7 +736,7 @@ class AnalysisSpec(_Spec):
     time_unit: str = Field(default="", description="unit of time, for figures")
 
     def settings(self) -> AnalysisSettings:
-        """The :class:`pcmb.analysis.AnalysisSettings` this section describes."""
+        """The :class:`pcmb.analysis.statistics.AnalysisSettings` this section describes."""
         return AnalysisSettings(**self.model_dump())
 
 
@@ -846,7 +846,7 @@ class StudyConfig(_Spec):
                 time_column=spec.output.time_column,
             )
         # Imported here: mujoco is heavy and only needed for this kind.
-        from pcmb.mujoco_model import MujocoModelFactory
+        from pcmb.adapters.mujoco.model import MujocoModelFactory
 
         return MujocoModelFactory(
             xml=(base_dir / spec.xml).resolve(),

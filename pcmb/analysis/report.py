@@ -16,7 +16,7 @@
 
 and an ``index.html`` that shows them with the key numbers (runs, wall time, warnings,
 largest differences). A result without a stored analysis is analysed with the default
-:class:`~pcmb.analysis.AnalysisSettings`; comparisons use the same window, times and
+:class:`~pcmb.analysis.statistics.AnalysisSettings`; comparisons use the same window, times and
 frequencies as the result.
 
 This is the only module that imports matplotlib (object-oriented API and the Agg canvas:
@@ -36,7 +36,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.analysis import (
+from pcmb.analysis.comparison import Comparison, compare, method_label
+from pcmb.analysis.statistics import (
     Analysis,
     AnalysisSettings,
     Density,
@@ -47,8 +48,7 @@ from pcmb.analysis import (
     psd_draws_are_runs,
     spectrum,
 )
-from pcmb.comparison import Comparison, compare, method_label
-from pcmb.density import kernel_density
+from pcmb.chaos.density import kernel_density
 from pcmb.errors import ConfigError
 from pcmb.study import StudyResult
 

@@ -15,9 +15,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.basis import tensor_index_set
-from pcmb.inputs import Distribution
-from pcmb.polynomials import GaussRule
+from pcmb.chaos.basis import tensor_index_set
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.polynomials import GaussRule
 
 __all__ = ["NodeSet", "TensorGrid", "draw_germs", "random_nodes"]
 
@@ -40,7 +40,7 @@ class TensorGrid:
     """The tensor product of 1-D Gauss rules, q_k = orders[k] + 1 points per input.
 
     With the tensor basis of the same orders the collocation system is square and
-    interpolation equals pseudo-spectral projection (:func:`pcmb.recovery.project_tensor`).
+    interpolation equals pseudo-spectral projection (:func:`pcmb.chaos.recovery.project_tensor`).
 
     Attributes
     ----------

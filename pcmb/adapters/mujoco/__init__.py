@@ -1,0 +1,1 @@
+"""The MuJoCo adapter (the only package that imports mujoco)."""

@@ -1,0 +1,1 @@
+"""Study configuration: YAML loader, schema, messages and checks."""

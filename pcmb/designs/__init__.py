@@ -1,0 +1,1 @@
+"""Node designs: how nodes are made and how runs become coefficients."""

@@ -1,0 +1,1 @@
+"""Running nodes: executor, backends, journal and durable files."""
