@@ -1,11 +1,9 @@
-"""The ``pcmb`` command line (SPEC §7).
+"""The ``pcmb`` command line.
 
-Exit codes: 0 success; 2 invalid config or usage; 3 the model failed at one or more nodes
-(policy abort); 1 anything unexpected. Logs and progress go to stderr; stdout carries only
-requested data (``validate``'s summary, ``inspect``'s report, ``compare``'s table,
-``schema``'s JSON); ``report`` writes files and says where on stderr.
-
-Heavy modules are imported inside the commands, so ``pcmb --help`` starts fast.
+Exit codes come from the error kinds (:mod:`pcmb.errors`): 0 success; 2 invalid config,
+usage, missing dependency or result file; 3 the model failed at one or more nodes (policy
+abort); 1 anything unexpected. Logs and progress go to stderr; stdout carries only requested
+data. Heavy modules are imported inside the commands, so ``pcmb --help`` starts fast.
 """
 
 from __future__ import annotations
@@ -19,7 +17,8 @@ import traceback
 from collections.abc import Sequence
 from pathlib import Path
 
-EXIT_OK, EXIT_UNEXPECTED, EXIT_CONFIG, EXIT_MODEL = 0, 1, 2, 3
+from pcmb.errors import EXIT_OK, EXIT_UNEXPECTED, PcmbError, UsageError
+from pcmb.run.backends import BACKENDS
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -33,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("config", help="YAML study configuration")
     run.add_argument("-o", "--output", help="result file (overrides the config's output)")
     run.add_argument("--jobs", type=int, help="worker processes (default: config, else all cores)")
-    run.add_argument("--backend", choices=["loky", "dask"], help="parallel backend")
+    run.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
     run.add_argument("--resume", action="store_true", help="continue an interrupted run")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -99,17 +98,16 @@ def _summary(config) -> str:
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from pcmb.config.schema import load_config
-    from pcmb.errors import ConfigError
     from pcmb.study import Study
 
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
     config = load_config(args.config)
     output = args.output or config.output
     if output is None:
-        raise ConfigError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
+        raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
     study = Study.from_config(config)
     if args.jobs is not None:
-        if args.jobs < 1:
-            raise ConfigError(f"--jobs must be >= 1, got {args.jobs}")
         study.jobs = args.jobs
     if args.backend is not None:
         study.backend = args.backend
@@ -125,21 +123,14 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     )
     for warning in result.warnings:
         _log(f"pcmb: warning: {warning}")
-    _log(f"pcmb: wrote {output} ({result.nodes.shape[0]} nodes, {result.seconds:.2f} s of runs)")
+    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
     return EXIT_OK
 
 
 def _load(path: str):
-    """A result file, or a ConfigError naming why it cannot be read."""
-    from pcmb.errors import ConfigError
     from pcmb.store import load
 
-    if not Path(path).is_file():
-        raise ConfigError(f"{path}: no such file")
-    try:
-        return load(path)
-    except (OSError, ValueError, KeyError) as error:
-        raise ConfigError(f"{path}: not a readable pcmb result file ({error})") from error
+    return load(path)
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -182,7 +173,7 @@ def _inspect(path: str) -> str:
     lines = [
         f"file     {path}",
         f"name     {result.name}",
-        f"method   {result.method}, {result.nodes.shape[0]} nodes: {status[1]} ok, "
+        f"method   {result.design.label}, {result.n_nodes} nodes: {status[1]} ok, "
         f"{status[2]} failed, {status[0]} pending; {result.seconds:.2f} s of runs",
         f"time     {result.times[0]} .. {result.times[-1]}, {result.times.size} points",
         "inputs   " + ", ".join(f"{n}: {d.describe()['dist']}" for n, d in named_inputs),
@@ -217,8 +208,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exit_:
         return int(exit_.code or 0)
-    from pcmb.errors import ConfigError, ModelRunError
-
     try:
         if args.command == "run":
             return _run(args, argv)
@@ -237,12 +226,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             print(json.dumps(config_json_schema(), indent=2))
         return EXIT_OK
-    except ConfigError as error:
-        _log(f"pcmb: invalid configuration:\n{error}")
-        return EXIT_CONFIG
-    except ModelRunError as error:
-        _log(f"pcmb: {error}")
-        return EXIT_MODEL
+    except PcmbError as error:
+        _log(
+            f"pcmb: {error.label}:\n{error}"
+            if "\n" in str(error)
+            else f"pcmb: {error.label}: {error}"
+        )
+        return error.exit_code
     except BrokenPipeError:
         # stdout closed early (e.g. `pcmb schema | head`): not worth a traceback. Point
         # stdout at devnull so the interpreter's final flush does not fail again.
@@ -250,7 +240,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
     except KeyboardInterrupt:
         _log("pcmb: interrupted; finished nodes are kept in the journal (use --resume)")
-        return EXIT_UNEXPECTED
+        return 128 + 2
     except Exception:
         _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
         return EXIT_UNEXPECTED

@@ -1,27 +1,35 @@
-"""Exceptions raised by pcmb.
+"""The kinds of error pcmb raises on purpose, and its warning category.
 
-Only the command line turns these into exit codes and messages (see :mod:`pcmb.cli`):
-:class:`ConfigError` -> 2, :class:`ModelRunError` -> 3, anything else -> 1.
+Each kind carries the exit code the command line gives it (:attr:`PcmbError.exit_code`);
+only :mod:`pcmb.cli` turns errors into exit codes and messages.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
+
+#: Exit codes of the command line, by kind of outcome.
+EXIT_OK, EXIT_UNEXPECTED, EXIT_INVALID, EXIT_MODEL = 0, 1, 2, 3
 
 
 class PcmbError(Exception):
     """Base class of every error pcmb raises on purpose."""
 
+    exit_code: ClassVar[int] = EXIT_UNEXPECTED
+    #: How the command line introduces the message.
+    label: ClassVar[str] = "error"
+
 
 @dataclass(frozen=True)
 class ConfigProblem:
-    """One problem found in a configuration.
+    """One problem found in a configuration or in a call's arguments.
 
     Attributes
     ----------
     path:
-        Key path inside the config, e.g. ``"inputs.A.low"`` (empty for the whole file).
+        Key path, e.g. ``"inputs.A.low"`` (empty for the whole file or call).
     message:
         What was expected and what was found.
     line:
@@ -33,23 +41,17 @@ class ConfigProblem:
     line: int | None = None
 
     def format(self, source: str | None = None) -> str:
-        where = source or "<config>"
+        where = source or ""
         if self.line is not None:
             where = f"{where}:{self.line}"
-        key = f" {self.path}:" if self.path else ""
-        return f"{where}:{key} {self.message}"
+        key = f"{self.path}: " if self.path else ""
+        return f"{where}: {key}{self.message}" if where else f"{key}{self.message}"
 
 
-class ConfigError(PcmbError, ValueError):
-    """An invalid configuration or invalid arguments, found before any model runs.
+class _Located(PcmbError, ValueError):
+    """An error made of located problems (every problem is reported, not just the first)."""
 
-    Parameters
-    ----------
-    problems:
-        Every problem found (a config is checked as a whole, not stopped at the first).
-    source:
-        The config file name, used in the message.
-    """
+    exit_code = EXIT_INVALID
 
     def __init__(self, problems: Sequence[ConfigProblem] | str, source: str | None = None):
         if isinstance(problems, str):
@@ -59,18 +61,72 @@ class ConfigError(PcmbError, ValueError):
         super().__init__("\n".join(p.format(source) for p in self.problems))
 
 
+class ConfigError(_Located):
+    """An invalid configuration, found before any model runs (exit 2).
+
+    Parameters
+    ----------
+    problems:
+        Every problem found, each with its key path (and line, from a file).
+    source:
+        The config file name, used in the message.
+    """
+
+    label = "invalid configuration"
+
+
+class UsageError(_Located):
+    """Invalid command-line or API arguments (exit 2); ``source`` names the call."""
+
+    label = "usage"
+
+
+class MissingDependencyError(PcmbError, ImportError):
+    """An optional package is needed and not installed (exit 2).
+
+    Parameters
+    ----------
+    package:
+        The import name that failed, e.g. ``"matplotlib"``.
+    extra:
+        The pcmb extra that installs it, e.g. ``"plot"``.
+    needed_for:
+        What needed it, e.g. ``"figures"``.
+    """
+
+    exit_code = EXIT_INVALID
+    label = "missing dependency"
+
+    def __init__(self, package: str, extra: str, needed_for: str):
+        self.package, self.extra = package, extra
+        super().__init__(
+            f'{needed_for} need {package}, which is not installed: pip install "pcmb[{extra}]"',
+            name=package,
+        )
+
+
+class ResultFileError(PcmbError, OSError):
+    """A result file that is missing, unreadable or not a pcmb result (exit 2)."""
+
+    exit_code = EXIT_INVALID
+    label = "file"
+
+
 class ModelError(PcmbError):
     """A model run failed (raised by models and adapters for a single run or batch)."""
 
 
 class ModelRunError(PcmbError):
-    """One or more collocation nodes failed and the failure policy does not allow going on.
+    """Nodes failed and the failure policy does not allow going on (exit 3).
 
     Attributes
     ----------
     failures:
-        The failed nodes (objects with ``index``, ``params`` and ``message``).
+        The failed nodes (:class:`pcmb.result.NodeFailure`).
     """
+
+    exit_code = EXIT_MODEL
+    label = "model failure"
 
     def __init__(self, failures: Sequence[object], message: str | None = None):
         self.failures = tuple(failures)
@@ -81,3 +137,15 @@ class ModelRunError(PcmbError):
 
 class IllPosedError(PcmbError, ValueError):
     """A least-squares chaos fit that cannot be trusted (too few nodes or ill conditioned)."""
+
+    exit_code = EXIT_INVALID
+    label = "ill-posed fit"
+
+
+class PcmbWarning(UserWarning):
+    """The category of every warning pcmb issues (see :class:`pcmb.result.WarningRecord`)."""
+
+
+def missing_dependency(package: str, extra: str, needed_for: str) -> MissingDependencyError:
+    """The error for an optional ``package`` (from the ``extra``) that failed to import."""
+    return MissingDependencyError(package, extra, needed_for)

@@ -35,6 +35,7 @@ the write time (7.6 -> 69 ms). Chaos values are dense floating-point data that c
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import json
 import os
@@ -51,9 +52,9 @@ import numpy as np
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import from_description
-from pcmb.run.executor import NodeFailure
+from pcmb.errors import ResultFileError
+from pcmb.result import Design, NodeFailure, StudyResult, WarningRecord
 from pcmb.run.files import replace_durably
-from pcmb.study import StudyResult
 
 __all__ = ["SCHEMA_VERSION", "load", "write_result"]
 
@@ -144,7 +145,7 @@ def _read_analysis(file: h5py.File, names: list[str]) -> Analysis | None:
 def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) -> None:
     from pcmb import __version__
 
-    n_nodes = result.nodes.shape[0]
+    n_nodes = result.n_nodes
     attrs = file.attrs
     attrs["pcmb_version"] = __version__
     attrs["schema_version"] = SCHEMA_VERSION
@@ -153,13 +154,14 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     attrs["created"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
     attrs["versions"] = json.dumps(_versions())
     attrs["seconds"] = result.seconds
-    attrs["warnings"] = json.dumps(list(result.warnings))
     attrs["failures"] = json.dumps(
         [{"index": f.index, "params": f.params, "message": f.message} for f in result.failures]
     )
     for key in ("config", "config_sha256", "command_line"):
         attrs[key] = provenance.get(key, "")
 
+    file.create_group("design").attrs["record"] = result.design.describe()
+    _write_warnings(file, result.warnings)
     time_ = _scale(file, "time", result.times)
     node = _scale(file, "node", np.arange(n_nodes))
     input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
@@ -170,7 +172,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     inputs.attrs["nominal"] = json.dumps(result.nominal_params)
 
     nodes = file.create_group("nodes")
-    _attach(nodes.create_dataset("germ", data=result.nodes), node, input_)
+    _attach(nodes.create_dataset("germ", data=result.germ), node, input_)
     _attach(nodes.create_dataset("params", data=result.params), node, input_)
     _attach(nodes.create_dataset("status", data=result.status.astype(np.int8)), node)
     if result.weights is not None:
@@ -208,6 +210,52 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
         if analysis is not None:
             unit = analysis.settings.units.get(name, "")
             _write_analysis(file, group, analysis.outputs[name], time_, unit)
+
+
+def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> None:
+    """Warning records as JSON attributes: the study's on /diagnostics, an output's on
+    /diagnostics/<output> (attributes, so no output name can collide with them)."""
+    group = file.create_group("diagnostics")
+    for output in dict.fromkeys(w.output for w in warnings):
+        records = [dataclasses.asdict(w) for w in warnings if w.output == output]
+        owner = group if output is None else group.require_group(output)
+        owner.attrs["warnings"] = json.dumps(records)
+
+
+def _read_warnings(file: h5py.File) -> tuple[WarningRecord, ...]:
+    if "diagnostics" not in file:  # files of pcmb 0.1 kept them as text in a root attribute
+        texts = json.loads(_text(file.attrs.get("warnings", "[]")))
+        return tuple(WarningRecord("legacy", text) for text in texts)
+    group = file["diagnostics"]
+    owners = [group, *(g for g in group.values() if isinstance(g, h5py.Group))]
+    records = []
+    for owner in owners:
+        for record in json.loads(_text(owner.attrs.get("warnings", "[]"))):
+            span = record.pop("time_range")
+            records.append(
+                WarningRecord(**record, time_range=None if span is None else tuple(span))
+            )
+    return tuple(records)
+
+
+def _read_design(file: h5py.File, index: np.ndarray | None) -> Design:
+    """The design record; for pcmb 0.1 files, rebuilt from what they hold."""
+    if "design" in file:
+        return Design.from_description(_text(file["design"].attrs["record"]))
+    kind = _text(file.attrs["method"])
+    if kind == "collocation":
+        orders = tuple(int(q) - 1 for q in (np.unique(c).size for c in file["nodes/germ"][()].T))
+        full = index is not None and index.shape[0] == int(np.prod(np.add(orders, 1)))
+        return Design(kind, "tensor-gauss", "tensor" if full else "total", orders, fit="projection")
+    orders = None if index is None else tuple(int(p) for p in index.max(axis=0))
+    return Design(
+        kind,
+        "random",
+        None if index is None else "total",
+        orders,
+        samples=int(file["nodes/germ"].shape[0]),
+        fit="none" if index is None else "regression",
+    )
 
 
 def write_result(
@@ -257,15 +305,26 @@ def load(path: str | os.PathLike[str]) -> StudyResult:
 
     Raises
     ------
-    ValueError
-        If the file is not a pcmb result or was written by a newer schema.
+    ResultFileError
+        The file is missing, unreadable, not a pcmb result, or written by a newer schema.
     """
+    if not Path(path).is_file():
+        raise ResultFileError(f"{path}: no such file")
+    try:
+        return _read(path)
+    except ResultFileError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ResultFileError(f"{path}: not a readable pcmb result file ({error})") from error
+
+
+def _read(path: str | os.PathLike[str]) -> StudyResult:
     with h5py.File(path, "r") as file:
         attrs = file.attrs
         if "schema_version" not in attrs:
-            raise ValueError(f"{path} is not a pcmb result file")
+            raise ResultFileError(f"{path} is not a pcmb result file")
         if int(attrs["schema_version"]) > SCHEMA_VERSION:
-            raise ValueError(
+            raise ResultFileError(
                 f"{path} has schema version {int(attrs['schema_version'])}; this pcmb reads "
                 f"up to {SCHEMA_VERSION}: upgrade pcmb"
             )
@@ -291,18 +350,18 @@ def load(path: str | os.PathLike[str]) -> StudyResult:
         )
         return StudyResult(
             name=_text(attrs["name"]),
-            method=_text(attrs["method"]),
+            design=_read_design(file, index),
             times=file["time"][()],
             input_names=names,
             distributions=dists,
-            nodes=file["nodes/germ"][()],
+            germ=file["nodes/germ"][()],
             params=file["nodes/params"][()],
             weights=file["nodes/weights"][()] if "weights" in file["nodes"] else None,
             status=file["nodes/status"][()],
             values=values,
             expansions=expansions,
             failures=failures,
-            warnings=tuple(json.loads(_text(attrs.get("warnings", "[]")))),
+            warnings=_read_warnings(file),
             seconds=float(attrs.get("seconds", 0.0)),
             nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
             nominal=nominal,

@@ -1,25 +1,6 @@
 """The pipeline: nodes -> model runs -> coefficients -> statistics -> one result file.
 
-The command line and the Python API share this one code path::
-
-    import numpy as np, pcmb
-
-    def model(params, times):                       # any per-point simulator
-        return {"y": params["a"] * np.sin(params["w"] * times)}
-
-    study = pcmb.Study(model, {"a": pcmb.Uniform(0.5, 1.5), "w": pcmb.Normal(2.0, 0.1)},
-                       times=np.linspace(0, 10, 201), order=5, outputs=["y"])
-    result = study.run("results/toy.h5")             # or study.run() to keep it in memory
-    result.mean("y"), result.std("y"), result.sobol_total("y")
-
-``Study.from_config(pcmb.config.schema.load_config("configs/quarter_car.yaml"))`` builds the same
-object from a YAML file.
-
-Besides the statistics, every run stores the deterministic run at the nominal parameters
-(``result.nominal``; for a nonlinear model the mean differs from it) and, when asked for
-(``analysis=``, the config's ``analysis:``), quantile bands, PDFs and spectra
-(:mod:`pcmb.analysis.statistics`). ``study.replace(method="montecarlo", samples=2000)`` is the same
-study by Monte Carlo, to check the chaos against.
+The command line and the Python API share this one code path; see ``docs/architecture.md``.
 """
 
 from __future__ import annotations
@@ -30,130 +11,44 @@ import inspect
 import json
 import sys
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import cloudpickle
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from pcmb.adapters.python import Model, ObjectModelFactory
-from pcmb.analysis.statistics import Analysis, AnalysisSettings, analyse
-from pcmb.chaos.basis import total_index_set
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, random_nodes
-from pcmb.chaos.recovery import fit_largest_stable, project_tensor
-from pcmb.errors import ConfigError, IllPosedError, ModelRunError
-from pcmb.run.executor import NodeFailure, run_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.designs import DESIGNS, MethodSettings, NodeDesign, make_design
+from pcmb.errors import ConfigProblem, IllPosedError, ModelRunError, UsageError
+from pcmb.result import Status, StudyResult, WarningRecord
+from pcmb.run.backends import BACKENDS
+from pcmb.run.executor import RunResult, run_nodes
 from pcmb.run.journal import Journal
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
 
-__all__ = ["Study", "StudyResult"]
+__all__ = ["FAILURE_POLICIES", "Study"]
 
-Method = Literal["collocation", "montecarlo", "lhs", "sobol"]
+#: ``execution.on_failure`` values.
+FAILURE_POLICIES = ("abort", "retry", "regress")
 FailurePolicy = Literal["abort", "retry", "regress"]
-_SAMPLING: tuple[str, ...] = ("montecarlo", "lhs", "sobol")
 
 
-@dataclass(frozen=True)
-class StudyResult:
-    """Everything a study produced (and everything a result file holds).
-
-    Attributes
-    ----------
-    name, method:
-        The study's name and node method.
-    times:
-        (T,) output grid.
-    input_names, distributions:
-        The n inputs in germ order.
-    nodes, params:
-        (N, n) germ and physical coordinates of the nodes.
-    weights:
-        (N,) quadrature weights (collocation) or ``None`` (sampling).
-    status:
-        (N,) int8: 0 pending, 1 ok, 2 failed.
-    values:
-        Output name -> (N, T) model values (NaN rows for failed nodes).
-    expansions:
-        Output name -> :class:`ChaosExpansion` (empty for sampling without a fit).
-    failures:
-        The failed nodes.
-    warnings:
-        Everything the user must know about the trustworthiness of the numbers.
-    seconds:
-        Wall time of the model runs.
-    nominal_params:
-        Input name -> the value used in the deterministic nominal run.
-    nominal:
-        Output name -> (T,) the deterministic run at the nominal parameters (empty if it
-        failed: see ``warnings``). For a nonlinear model it differs from the mean.
-    analysis:
-        Quantile bands, PDFs and spectra (:func:`pcmb.analysis.statistics.analyse`), when requested.
-    """
-
-    name: str
-    method: str
-    times: NDArray[np.float64]
-    input_names: tuple[str, ...]
-    distributions: tuple[Distribution, ...]
-    nodes: NDArray[np.float64]
-    params: NDArray[np.float64]
-    weights: NDArray[np.float64] | None
-    status: NDArray[np.int8]
-    values: dict[str, NDArray[np.float64]]
-    expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
-    failures: tuple[NodeFailure, ...] = ()
-    warnings: tuple[str, ...] = ()
-    seconds: float = 0.0
-    nominal_params: dict[str, float] = field(default_factory=dict)
-    nominal: dict[str, NDArray[np.float64]] = field(default_factory=dict)
-    analysis: Analysis | None = None
-
-    @property
-    def outputs(self) -> tuple[str, ...]:
-        return tuple(self.values)
-
-    @property
-    def multi_index(self) -> NDArray[np.int64] | None:
-        """(S, n) the chaos terms, or ``None`` without an expansion."""
-        first = next(iter(self.expansions.values()), None)
-        return None if first is None else first.multi_index
-
-    def _ok_values(self, name: str) -> NDArray[np.float64]:
-        return self.values[name][self.status == 1]
-
-    def mean(self, name: str) -> NDArray[np.float64]:
-        """(T,) mean of an output: from the expansion, else the sample mean."""
-        if name in self.expansions:
-            return self.expansions[name].mean()
-        return self._ok_values(name).mean(axis=0)
-
-    def std(self, name: str) -> NDArray[np.float64]:
-        """(T,) standard deviation: from the expansion, else the sample std (ddof 1)."""
-        if name in self.expansions:
-            return self.expansions[name].std()
-        return self._ok_values(name).std(axis=0, ddof=1)
-
-    def sobol_first(self, name: str) -> NDArray[np.float64]:
-        """(n, T) first-order Sobol' indices (needs an expansion)."""
-        return self.expansions[name].sobol_first()
-
-    def sobol_total(self, name: str) -> NDArray[np.float64]:
-        """(n, T) total Sobol' indices (needs an expansion)."""
-        return self.expansions[name].sobol_total()
+def _usage(key: str, message: str) -> UsageError:
+    return UsageError([ConfigProblem(key, message)], source="Study")
 
 
 def _check_inputs(inputs: Mapping[str, Distribution]) -> dict[str, Distribution]:
     if not inputs:
-        raise ConfigError("a study needs at least one input")
+        raise _usage("inputs", "a study needs at least one input")
     for name, dist in inputs.items():
         if not isinstance(dist, Distribution):
-            raise ConfigError(f"input {name!r} must be a pcmb distribution, got {dist!r}")
+            raise _usage(f"inputs.{name}", f"must be a pcmb distribution, got {dist!r}")
     return dict(inputs)
 
 
@@ -175,9 +70,10 @@ class Study:
     basis:
         ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P).
     method:
-        ``"collocation"`` (tensor Gauss nodes) or a sampling method ``"montecarlo"``,
-        ``"lhs"``, ``"sobol"`` (with ``samples`` and ``seed``; ``fit="regression"`` adds a
-        least-squares chaos fit of total order ``order``).
+        A registered ``method.kind`` (:data:`pcmb.designs.DESIGNS`): ``"collocation"``
+        (tensor Gauss nodes) or a sampling method ``"montecarlo"``, ``"lhs"``, ``"sobol"``
+        (with ``samples`` and ``seed``; ``fit="regression"`` adds a least-squares chaos fit
+        of total order ``order``).
     outputs:
         Outputs to keep (default: all the model declares).
     params:
@@ -196,13 +92,13 @@ class Study:
         ``model.params`` value), else its distribution's mean.
     analysis:
         Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
-        can still be computed later from the result with :func:`pcmb.analysis.statistics.analyse`).
+        can still be computed later with :func:`pcmb.analysis.statistics.analyse`).
 
     Raises
     ------
-    ConfigError
-        Bad settings (no inputs, a non-increasing grid, a sampling method without samples,
-        an unknown method, a nominal value for an unknown input).
+    UsageError
+        Bad arguments (no inputs, a non-increasing grid, a sampling method without samples,
+        an unknown method, a nominal value for an unknown input), named by argument.
     """
 
     def __init__(
@@ -212,11 +108,11 @@ class Study:
         times: ArrayLike,
         *,
         order: int | Mapping[str, int] = 3,
-        basis: Literal["tensor", "total"] = "tensor",
-        method: Method = "collocation",
+        basis: str = "tensor",
+        method: str = "collocation",
         samples: int | None = None,
         seed: int = 0,
-        fit: Literal["none", "regression"] = "none",
+        fit: str = "none",
         outputs: Sequence[str] | None = None,
         params: Mapping[str, Any] | None = None,
         name: str = "study",
@@ -232,7 +128,7 @@ class Study:
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
-            raise ConfigError("times must be a non-empty increasing 1-D grid")
+            raise _usage("times", "must be a non-empty increasing 1-D grid")
         self.order = order
         self.basis = basis
         self.method = method
@@ -260,18 +156,31 @@ class Study:
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
-            raise ConfigError(f"nominal values given for unknown input(s) {unknown}")
+            raise _usage("nominal", f"values given for unknown input(s) {unknown}")
         choices = {
-            "method": (method, ("collocation", *_SAMPLING)),
-            "basis": (basis, ("tensor", "total")),
-            "fit": (fit, ("none", "regression")),
-            "on_failure": (on_failure, ("abort", "retry", "regress")),
+            "method": (method, tuple(DESIGNS)),
+            "on_failure": (on_failure, FAILURE_POLICIES),
+            "backend": (backend, tuple(BACKENDS)),
         }
         for key, (value, allowed) in choices.items():
             if value not in allowed:
-                raise ConfigError(f"{key} must be one of {', '.join(allowed)}, got {value!r}")
-        if method in _SAMPLING and (samples is None or samples < 2):
-            raise ConfigError(f"method {method!r} needs at least 2 samples, got {samples}")
+                raise _usage(key, f"expected one of {', '.join(allowed)}, got {value!r}")
+        self.design = self._design()
+
+    def _design(self) -> NodeDesign:
+        settings = MethodSettings(
+            kind=self.method,
+            orders=self.orders if self.method == "collocation" or self.fit != "none" else None,
+            basis=self.basis,
+            samples=self.samples,
+            seed=self.seed,
+            fit=self.fit,
+        )
+        try:
+            return make_design(self.inputs, settings)
+        except ValueError as error:
+            key, _, message = str(error).partition(": ")
+            raise _usage(key.removeprefix("method."), message) from None
 
     # -- construction from a config -----------------------------------------------------------
 
@@ -319,7 +228,7 @@ class Study:
 
         Raises
         ------
-        ConfigError
+        UsageError
             If an argument is unknown or the changed study is invalid.
         """
         arguments = {
@@ -345,7 +254,7 @@ class Study:
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
-            raise ConfigError(f"Study.replace: unknown argument(s) {unknown}")
+            raise UsageError(f"unknown argument(s) {unknown}", source="Study.replace")
         if "inputs" in changes and "nominal" not in changes:
             arguments["nominal"] = {k: v for k, v in self.nominal.items() if k in changes["inputs"]}
         study = Study(self.model_factory, **{**arguments, **changes})
@@ -364,7 +273,7 @@ class Study:
         if isinstance(self.order, Mapping):
             missing = set(self.inputs) - set(self.order)
             if missing:
-                raise ConfigError(f"no order given for input(s) {sorted(missing)}")
+                raise _usage("order", f"no order given for input(s) {sorted(missing)}")
             return tuple(int(self.order[name]) for name in self.inputs)
         return (int(self.order),) * len(self.inputs)
 
@@ -381,11 +290,8 @@ class Study:
         return values
 
     def node_set(self) -> TensorGrid | NodeSet:
-        """The nodes this study runs: a tensor Gauss grid or random samples."""
-        dists = tuple(self.inputs.values())
-        if self.method == "collocation":
-            return TensorGrid(dists, self.orders)
-        return random_nodes(dists, int(self.samples or 0), self.method, self.seed)
+        """The nodes this study runs (made by its design)."""
+        return self.design.nodes()
 
     def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> str:
         """Hash of everything that changes the results (for the resume journal)."""
@@ -404,7 +310,7 @@ class Study:
 
         Raises
         ------
-        ConfigError
+        UsageError
             A requested output the model lacks, or an uncertain input that names none of the
             model's parameters (when the model lists them) — before anything runs.
         """
@@ -412,14 +318,17 @@ class Study:
         declared = tuple(model.outputs)
         unknown = [name for name in self.outputs or () if name not in declared]
         if unknown:
-            raise ConfigError(f"the model has no output(s) {unknown}; it has {list(declared)}")
+            raise _usage(
+                "outputs", f"the model has no output(s) {unknown}; it has {list(declared)}"
+            )
         parameters = getattr(model, "parameters", None)
         if parameters is not None:
             strangers = [name for name in self.inputs if name not in parameters]
             if strangers:
-                raise ConfigError(
+                raise _usage(
+                    "inputs",
                     f"input(s) {strangers} name no parameter of the model; "
-                    f"it has {sorted(parameters)}"
+                    f"it has {sorted(parameters)}",
                 )
         return declared if self.outputs is None else self.outputs
 
@@ -447,7 +356,7 @@ class Study:
 
         Raises
         ------
-        ConfigError
+        UsageError
             Bad settings, or an unfinished journal exists and ``resume`` is False.
         ModelRunError
             Nodes failed and the policy does not allow going on; the journal is kept.
@@ -462,7 +371,7 @@ class Study:
             journal_dir = Path(f"{output}.journal")
             fresh_journal = not Journal.exists(journal_dir)
             if not fresh_journal and not resume:
-                raise ConfigError(
+                raise UsageError(
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
                 )
@@ -483,7 +392,7 @@ class Study:
                 journal=journal,
                 progress=progress,
             )
-        except ConfigError:
+        except UsageError:
             # Rejected before any node ran: leave nothing behind (a journal would block a rerun).
             if journal is not None and fresh_journal:
                 journal.remove()
@@ -495,7 +404,7 @@ class Study:
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
                 f"(on_failure: {self.on_failure}){kept}:",
             )
-        result = self._recover(nodes, runs.values, runs.status, runs.failures, runs.seconds)
+        result = self._recover(nodes, runs)
         result = self._with_nominal(result, outputs)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
@@ -522,89 +431,49 @@ class Study:
             progress=False,
         )
         if run.failures:
-            message = f"the nominal run failed, so none is stored: {run.failures[0].message}"
+            warning = WarningRecord(
+                "nominal-failed",
+                f"the nominal run failed, so none is stored: {run.failures[0].message}",
+            )
             return dataclasses.replace(
-                result, nominal_params=params, warnings=(*result.warnings, message)
+                result, nominal_params=params, warnings=(*result.warnings, warning)
             )
         nominal = {name: values[0] for name, values in run.values.items()}
         return dataclasses.replace(result, nominal_params=params, nominal=nominal)
 
     # -- recovery -----------------------------------------------------------------------------
 
-    def _projection_index(self, grid: TensorGrid) -> NDArray[np.int64]:
-        """The terms recovered from a complete grid: the tensor set, or |α| <= P inside it."""
-        if self.basis == "tensor":
-            return grid.multi_index
-        index = total_index_set(len(self.inputs), max(self.orders))
-        return index[np.all(index <= np.array(self.orders), axis=1)]
-
-    def _recover(
-        self,
-        nodes: TensorGrid | NodeSet,
-        values: dict[str, NDArray[np.float64]],
-        status: NDArray[np.int8],
-        failures: tuple[NodeFailure, ...],
-        seconds: float,
-    ) -> StudyResult:
-        dists = tuple(self.inputs.values())
-        names = self.input_names
-        ok = status == 1
-        warnings: list[str] = []
-        expansions: dict[str, ChaosExpansion] = {}
-        if failures:
+    def _recover(self, nodes: TensorGrid | NodeSet, runs: RunResult) -> StudyResult:
+        ok = runs.status == Status.OK
+        warnings: list[WarningRecord] = []
+        if runs.failures:
             warnings.append(
-                f"{len(failures)} of {nodes.size} node(s) failed and were left out "
-                f"(on_failure: regress): " + "; ".join(str(f) for f in failures)
-            )
-        if isinstance(nodes, TensorGrid) and not failures:
-            index = self._projection_index(nodes)
-            for name, y in values.items():
-                coefficients = project_tensor(nodes, y, index)
-                expansions[name] = ChaosExpansion(coefficients, index, dists, names)
-        elif isinstance(nodes, TensorGrid) or self.fit == "regression":
-            # An incomplete grid is no quadrature rule: refit by least squares instead, all
-            # outputs at once (one basis, one factorisation).
-            max_order = max(self.orders)
-            weights = nodes.weights[ok] if isinstance(nodes, TensorGrid) else None
-            caps = self.orders if isinstance(nodes, TensorGrid) else None
-            stacked = np.stack([y[ok] for y in values.values()], axis=1)
-            try:
-                index, fit = fit_largest_stable(
-                    dists, nodes.nodes[ok], stacked, max_order, weights, orders=caps
+                WarningRecord(
+                    "nodes-failed",
+                    f"{len(runs.failures)} of {nodes.size} node(s) failed and were left out "
+                    f"(on_failure: regress): " + "; ".join(str(f) for f in runs.failures),
                 )
-            except IllPosedError as error:
-                message = f"on_failure regress could not refit: {error}:"
-                raise ModelRunError(failures, message) from error
-            for k, name in enumerate(values):
-                expansions[name] = ChaosExpansion(fit.coefficients[:, k], index, dists, names)
-            order = int(index.sum(axis=1).max())
-            warnings.append(
-                f"least-squares chaos of total order {order} ({index.shape[0]} terms, asked "
-                f"{max_order}) on {int(ok.sum())} nodes; worst relative leave-one-out error "
-                f"{float(np.nanmax(fit.loo_error, initial=0.0)):.3g}"
             )
-        if self.method == "collocation":
-            flat = [name for name, order in zip(names, self.orders, strict=True) if order == 0]
-            if flat:
-                warnings.append(
-                    f"input(s) {flat} have order 0: each is held at its single Gauss node and "
-                    "contributes no variance"
-                )
+        try:
+            recovery = self.design.recover(nodes, runs.values, ok)
+        except IllPosedError as error:
+            message = f"on_failure regress could not refit: {error}:"
+            raise ModelRunError(runs.failures, message) from error
         return StudyResult(
             name=self.name,
-            method=self.method,
+            design=self.design.record(),
             times=self.times,
-            input_names=names,
-            distributions=dists,
-            nodes=nodes.nodes,
+            input_names=self.input_names,
+            distributions=tuple(self.inputs.values()),
+            germ=nodes.nodes,
             params=nodes.params,
-            weights=nodes.weights if isinstance(nodes, TensorGrid) else None,
-            status=status,
-            values=values,
-            expansions=expansions,
-            failures=failures,
-            warnings=tuple(warnings),
-            seconds=seconds,
+            weights=self.design.weights(nodes),
+            status=runs.status,
+            values=runs.values,
+            expansions=recovery.expansions,
+            failures=runs.failures,
+            warnings=(*warnings, *recovery.warnings),
+            seconds=runs.seconds,
         )
 
 
@@ -613,9 +482,7 @@ def _is_factory(model: Any) -> bool:
     from pcmb.adapters.python import CommandModelFactory, PythonModelFactory
 
     factories: tuple[type, ...] = (PythonModelFactory, CommandModelFactory, ObjectModelFactory)
-    mujoco = sys.modules.get(
-        "pcmb.adapters.mujoco.model"
-    )  # a MuJoCo factory exists only once imported
+    mujoco = sys.modules.get("pcmb.adapters.mujoco.model")
     if mujoco is not None:
         factories += (mujoco.MujocoModelFactory,)
     return isinstance(model, factories)

@@ -9,7 +9,7 @@ from scipy.stats import gaussian_kde, norm
 import pcmb
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.density import kernel_density
-from pcmb.errors import ConfigError
+from pcmb.errors import ConfigError, UsageError
 
 # 400 points, step 0.05 (Nyquist 10 Hz); endpoint excluded so the record is periodic-ready.
 TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)
@@ -151,7 +151,7 @@ def test_the_nominal_run_uses_config_values_else_means():
     np.testing.assert_array_equal(result.nominal["x"], exact["x"][0])
     # The oscillator is nonlinear in k: its mean response is not the nominal response.
     assert np.max(np.abs(result.mean("x") - result.nominal["x"])) > 0.1
-    with pytest.raises(ConfigError, match="unknown input"):
+    with pytest.raises(UsageError, match="unknown input"):
         pcmb.Study(Oscillator(), INPUTS, TIMES, nominal={"m": 1.0})
 
 
@@ -165,7 +165,7 @@ def test_a_failing_nominal_run_is_a_warning():
     study = pcmb.Study(fragile, {"k": INPUTS["k"]}, TIMES, order=1, jobs=1, params={"k": 2.5})
     result = study.run()
     assert result.nominal == {}
-    assert any("nominal run failed" in w and "singular" in w for w in result.warnings)
+    assert any(w.code == "nominal-failed" and "singular" in w.message for w in result.warnings)
 
 
 def test_file_layout_and_named_dimensions(stored, tmp_path):
@@ -194,9 +194,9 @@ def test_replace_builds_the_monte_carlo_twin():
     assert twin.method == "montecarlo" and twin.node_set().size == 32
     assert twin.analysis is study.analysis and twin.nominal_params() == study.nominal_params()
     assert study.method == "collocation"
-    with pytest.raises(ConfigError, match="unknown argument"):
+    with pytest.raises(UsageError, match="unknown argument"):
         study.replace(colour="blue")
-    with pytest.raises(ConfigError, match="samples"):
+    with pytest.raises(UsageError, match="samples"):
         study.replace(method="sobol", samples=None)
 
 

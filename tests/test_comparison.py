@@ -6,7 +6,7 @@ import pytest
 import pcmb
 from pcmb.analysis.comparison import NOISE_FACTOR, compare, method_label
 from pcmb.cli import main
-from pcmb.errors import ConfigError
+from pcmb.errors import UsageError
 from pcmb.store import write_result
 
 TIMES = np.linspace(0.0, 2.0, 21)
@@ -94,7 +94,7 @@ def test_results_that_cannot_be_compared():
     other_grid = pcmb.Study(
         ramp, {"a": pcmb.Uniform(1.0, 3.0)}, TIMES[:-1], order=1, params={"a": 2.0}, jobs=1
     ).run()
-    with pytest.raises(ConfigError, match="different time grids"):
+    with pytest.raises(UsageError, match="different time grids"):
         compare(_run(3.0), other_grid)
 
     def other_model(params, times):
@@ -104,7 +104,7 @@ def test_results_that_cannot_be_compared():
     unrelated = pcmb.Study(
         other_model, {"a": pcmb.Uniform(1.0, 3.0)}, TIMES, order=1, params={"a": 2.0}, jobs=1
     ).run()
-    with pytest.raises(ConfigError, match="share no output"):
+    with pytest.raises(UsageError, match="share no output"):
         compare(_run(3.0), unrelated)
 
 

@@ -18,10 +18,11 @@ import executor_models as em
 import numpy as np
 import pytest
 
-from pcmb.errors import ConfigError, ModelError
+from pcmb.errors import ModelError, UsageError
+from pcmb.result import NodeFailure, Status
 from pcmb.run import executor
-from pcmb.run.executor import NodeFailure, chunk_bounds, run_nodes
-from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.run.executor import chunk_bounds, run_nodes
+from pcmb.run.journal import Journal
 
 TESTS = Path(__file__).resolve().parent
 TIMES = np.linspace(0.0, 1.0, 11)
@@ -125,7 +126,7 @@ def test_joblib_parallel_still_works_after_a_pooled_run() -> None:
 
 def test_small_work_stays_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
     # With start-up costlier than any possible gain, the timed first chunk decides: in-process.
-    monkeypatch.setattr(executor, "_STARTUP_SECONDS", {"loky": 1e9, "dask": 1e9})
+    monkeypatch.setattr(executor.BACKENDS["loky"], "startup_seconds", 1e9)
     result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], jobs=2)
     assert (result.values["pid"] == os.getpid()).all()
 
@@ -141,7 +142,7 @@ def oscillator_serial():
 
 def test_batched_nodes_match_the_closed_form(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
-    assert (oscillator_serial.status == STATUS_OK).all()
+    assert (oscillator_serial.status == Status.OK).all()
     assert oscillator_serial.failures == ()
     error = np.abs(oscillator_serial.values["x"] - em.exact_oscillator(**params, times=times))
     assert error.max() < OSCILLATOR_TOL
@@ -207,10 +208,10 @@ def test_exceptions_are_narrowed_to_the_failing_nodes() -> None:
         assert failure.params == {"a": a}
         assert failure.message == f"ValueError: a={a!r} is outside the model's range"
         assert str(failure).startswith(f"node {failure.index} (a={a:.6g}): ValueError: a=")
-    expected_status = np.full(32, STATUS_OK)
-    expected_status[bad] = STATUS_FAILED
+    expected_status = np.full(32, Status.OK)
+    expected_status[bad] = Status.FAILED
     np.testing.assert_array_equal(result.status, expected_status)
-    good = result.status == STATUS_OK
+    good = result.status == Status.OK
     np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
     assert np.isnan(result.values["y"][~good]).all()
 
@@ -225,7 +226,7 @@ def test_non_finite_rows_are_narrowed_in_workers() -> None:
     assert result.values["batch_size"][8, 0] == 2
     # TIMES has steps of 0.1: the first time >= 0.55 is 0.6.
     assert {f.message for f in result.failures} == {"non-finite output 'y' at t=0.6"}
-    good = result.status == STATUS_OK
+    good = result.status == Status.OK
     np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
     assert (result.values["pid"][good][-1] != os.getpid()).all()
 
@@ -239,7 +240,7 @@ def test_a_nan_node_fails_a_stacked_solve_as_a_whole() -> None:
     factory = functools.partial(em.StackedOscillator, poison_k=params["k"][victim])
     result = run_nodes(factory, params, times, ["x"], jobs=1)
     assert [f.index for f in result.failures] == [victim]
-    good = result.status == STATUS_OK
+    good = result.status == Status.OK
     exact = em.exact_oscillator(**params, times=times)
     assert np.abs(result.values["x"][good] - exact[good]).max() < OSCILLATOR_TOL
     # Its chunk mates were re-run alone: bit for bit what a one-node batch gives.
@@ -292,7 +293,7 @@ def test_a_dying_worker_costs_only_its_node(how: str, cause: str) -> None:
     assert [f.index for f in result.failures] == [victim]
     assert result.failures[0].message == f"worker process died ({cause})"
     good = np.arange(24) != victim
-    assert (result.status[good] == STATUS_OK).all()
+    assert (result.status[good] == Status.OK).all()
     np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
     # Only the killer's chunk was split into single runs; every other chunk kept its batch.
     assert result.values["batch_size"][12, 0] == 1
@@ -386,7 +387,7 @@ def test_isolation_names_the_killer_and_retries_it(retries: int, survives: bool)
     executor._run_pooled(campaign, pool, tasks)
     result = campaign.result(0.0)
     assert [f.index for f in result.failures] == ([] if survives else [13])
-    good = result.status == STATUS_OK
+    good = result.status == Status.OK
     assert good.sum() == 24 - (not survives)
     np.testing.assert_array_equal(result.values["y"][good], (params["a"][:, None] * TIMES)[good])
     assert result.values["batch_size"][12, 0] == 1  # the killer chunk was split
@@ -400,7 +401,7 @@ def test_isolation_names_the_killer_and_retries_it(retries: int, survives: bool)
 def test_bad_arguments_are_all_reported_before_anything_runs() -> None:
     em.SIMULATED.clear()
     params = {"a": np.zeros(4), "b": np.zeros(5), "c": np.array([0.0, np.nan, 1.0, 2.0])}
-    with pytest.raises(ConfigError) as caught:
+    with pytest.raises(UsageError) as caught:
         run_nodes(em.Ramp, params, TIMES, "y", jobs=0, backend="mpi", chunk_size=0, retries=-1)
     text = str(caught.value)
     for key in ("params.c", "params:", "outputs", "jobs", "backend", "chunk_size", "retries"):
@@ -410,7 +411,7 @@ def test_bad_arguments_are_all_reported_before_anything_runs() -> None:
 
 def test_an_output_the_model_lacks_is_rejected_before_running() -> None:
     em.SIMULATED.clear()
-    with pytest.raises(ConfigError, match=r"outputs: the model has no output \['z'\]"):
+    with pytest.raises(UsageError, match=r"outputs: the model has no output \['z'\]"):
         run_nodes(em.Ramp, ramp_params(4), TIMES, ["y", "z"])
     assert em.SIMULATED == []
 
@@ -460,7 +461,7 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
 
 def test_a_journal_of_another_shape_is_refused(tmp_path: Path) -> None:
     journal = Journal(tmp_path / "j", "fp", 16, ["y"], TIMES.size)
-    with pytest.raises(ConfigError, match="delete it or drop --resume"):
+    with pytest.raises(UsageError, match="delete it or drop --resume"):
         run_nodes(em.Ramp, ramp_params(32), TIMES, ["y"], journal=journal)
 
 
@@ -512,6 +513,6 @@ def test_a_run_killed_with_sigkill_resumes_to_identical_results(
     resumed = run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=1, journal=journal)
     assert resumed.resumed == journaled
     assert sum(em.SIMULATED) == 48 - journaled
-    assert (resumed.status == STATUS_OK).all()
+    assert (resumed.status == Status.OK).all()
     for name in ("x", "v"):
         np.testing.assert_array_equal(resumed.values[name], oscillator_serial.values[name])

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pcmb.errors import ConfigError
+from pcmb.errors import ResultFileError
+from pcmb.result import Status
 from pcmb.run import journal as journal_module
-from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.run.journal import Journal
 
 OUTPUTS = ("x", "v")
 N_TIMES = 7
@@ -32,8 +33,8 @@ def test_records_survive_reopening_bit_for_bit(tmp_path: Path) -> None:
     first = make(tmp_path / "j")
     a, b = chunk([0, 1, 2], 1), chunk([5, 6], 2)
     b["x"][1] = np.nan
-    first.record([0, 1, 2], a, [STATUS_OK] * 3)
-    first.record([5, 6], b, [STATUS_OK, STATUS_FAILED], {6: "ValueError: boom"})
+    first.record([0, 1, 2], a, [Status.OK] * 3)
+    first.record([5, 6], b, [Status.OK, Status.FAILED], {6: "ValueError: boom"})
     indices, values, status = make(tmp_path / "j").completed()
     np.testing.assert_array_equal(indices, [0, 1, 2, 5, 6])
     np.testing.assert_array_equal(status, [1, 1, 1, 1, 2])
@@ -44,38 +45,38 @@ def test_records_survive_reopening_bit_for_bit(tmp_path: Path) -> None:
 
 def test_a_later_record_supersedes_an_earlier_one(tmp_path: Path) -> None:
     journal = make(tmp_path / "j")
-    journal.record([3, 4], chunk([3, 4], 1), [STATUS_FAILED, STATUS_OK], {3: "died"})
+    journal.record([3, 4], chunk([3, 4], 1), [Status.FAILED, Status.OK], {3: "died"})
     again = make(tmp_path / "j")  # the resumed run appends after the existing records
     fixed = chunk([3], 2)
-    again.record([3], fixed, [STATUS_OK])
+    again.record([3], fixed, [Status.OK])
     indices, values, status = make(tmp_path / "j").completed()
     np.testing.assert_array_equal(indices, [3, 4])
-    np.testing.assert_array_equal(status, [STATUS_OK, STATUS_OK])
+    np.testing.assert_array_equal(status, [Status.OK, Status.OK])
     np.testing.assert_array_equal(values["x"][0], fixed["x"][0])
     assert make(tmp_path / "j").messages() == {}
 
 
 def test_a_journal_of_another_config_is_refused(tmp_path: Path) -> None:
     make(tmp_path / "j", fingerprint="abc")
-    with pytest.raises(ConfigError, match="was written for a different config; delete it"):
+    with pytest.raises(ResultFileError, match="was written for a different config; delete it"):
         make(tmp_path / "j", fingerprint="xyz")
-    with pytest.raises(ConfigError, match=r"n_nodes: 10 != 11.*drop --resume"):
+    with pytest.raises(ResultFileError, match=r"n_nodes: 10 != 11.*drop --resume"):
         make(tmp_path / "j", n_nodes=11)
-    with pytest.raises(ConfigError, match="outputs"):
+    with pytest.raises(ResultFileError, match="outputs"):
         Journal(tmp_path / "j", "abc", 10, ("x",), N_TIMES)
 
 
 def test_things_that_are_not_journals_are_refused(tmp_path: Path) -> None:
     (tmp_path / "file").write_text("")
-    with pytest.raises(ConfigError, match="not a directory"):
+    with pytest.raises(ResultFileError, match="not a directory"):
         make(tmp_path / "file")
     (tmp_path / "d").mkdir()
     (tmp_path / "d" / "record-000000.npz").write_bytes(b"")
-    with pytest.raises(ConfigError, match="not a pcmb journal"):
+    with pytest.raises(ResultFileError, match="not a pcmb journal"):
         make(tmp_path / "d")
     (tmp_path / "m").mkdir()
     (tmp_path / "m" / "journal.json").write_text("{not json")
-    with pytest.raises(ConfigError, match=r"cannot read journal\.json"):
+    with pytest.raises(ResultFileError, match=r"cannot read journal\.json"):
         make(tmp_path / "m")
 
 
@@ -86,7 +87,7 @@ def test_bad_records_are_rejected(tmp_path: Path) -> None:
         journal.record([0, 10], good, [1, 1])
     with pytest.raises(ValueError, match="distinct and in"):
         journal.record([1, 1], good, [1, 1])
-    with pytest.raises(ValueError, match="STATUS_OK"):
+    with pytest.raises(ValueError, match=r"Status\.OK"):
         journal.record([0, 1], good, [1, 0])
     with pytest.raises(ValueError, match="exactly the outputs"):
         journal.record([0, 1], {"x": good["x"]}, [1, 1])
@@ -105,7 +106,7 @@ def test_a_write_interrupted_before_its_rename_leaves_no_record(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     journal = make(tmp_path / "j")
-    journal.record([0], chunk([0], 0), [STATUS_OK])
+    journal.record([0], chunk([0], 0), [Status.OK])
 
     def crash(*_: object) -> None:
         raise OSError("killed before the rename")
@@ -113,20 +114,20 @@ def test_a_write_interrupted_before_its_rename_leaves_no_record(
     with monkeypatch.context() as patch:
         patch.setattr(journal_module.os, "replace", crash)
         with pytest.raises(OSError, match="killed"):
-            journal.record([1], chunk([1], 1), [STATUS_OK])
+            journal.record([1], chunk([1], 1), [Status.OK])
     assert list((tmp_path / "j").glob(".tmp-*"))  # the half-done write is there ...
     reopened = make(tmp_path / "j")
     np.testing.assert_array_equal(reopened.completed()[0], [0])  # ... and never read
-    reopened.record([1], chunk([1], 1), [STATUS_OK])
+    reopened.record([1], chunk([1], 1), [Status.OK])
     np.testing.assert_array_equal(make(tmp_path / "j").completed()[0], [0, 1])
 
 
 def test_an_unreadable_record_is_reported_by_name(tmp_path: Path) -> None:
     journal = make(tmp_path / "j")
-    journal.record([0, 1], chunk([0, 1], 0), [STATUS_OK] * 2)
+    journal.record([0, 1], chunk([0, 1], 0), [Status.OK] * 2)
     record = tmp_path / "j" / "record-000000.npz"
     record.write_bytes(record.read_bytes()[:100])  # damage from outside pcmb
-    with pytest.raises(ConfigError, match=r"record-000000\.npz is unreadable"):
+    with pytest.raises(ResultFileError, match=r"record-000000\.npz is unreadable"):
         make(tmp_path / "j").completed()
 
 
@@ -166,13 +167,13 @@ def test_a_writer_killed_mid_write_never_corrupts_the_journal(tmp_path: Path) ->
     expected = (indices // 50).astype(float)
     np.testing.assert_array_equal(values["x"], np.repeat(expected[:, None], 4000, axis=1))
     np.testing.assert_array_equal(values["v"][:, -1], -expected)
-    assert (status == STATUS_OK).all()
+    assert (status == Status.OK).all()
 
 
 def test_exists_and_remove(tmp_path: Path) -> None:
     assert not Journal.exists(tmp_path / "j")
     journal = make(tmp_path / "j")
-    journal.record([0], chunk([0], 0), [STATUS_OK])
+    journal.record([0], chunk([0], 0), [Status.OK])
     assert Journal.exists(tmp_path / "j")
     journal.remove()
     assert not (tmp_path / "j").exists()

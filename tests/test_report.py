@@ -149,7 +149,7 @@ def test_report_errors(tmp_path, capsys, monkeypatch):
     # Without matplotlib: a clear message and exit code 2, nothing unexpected.
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
     assert main(["report", str(path), "-o", str(tmp_path / "no_mpl")]) == 2
-    assert "pip install 'pcmb[plot]'" in capsys.readouterr().err
+    assert 'pip install "pcmb[plot]"' in capsys.readouterr().err
     assert not (tmp_path / "no_mpl").exists()
 
 

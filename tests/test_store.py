@@ -1,5 +1,6 @@
 """The result file: SPEC §5 layout, round trip, named dimensions, atomic writes."""
 
+import dataclasses
 import json
 
 import h5py
@@ -8,6 +9,8 @@ import pytest
 
 import pcmb
 from pcmb import store
+from pcmb.errors import ResultFileError
+from pcmb.result import WarningRecord
 
 INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Beta(2.0, 3.0, -1.0, 1.0)}
 TIMES = np.linspace(0.0, 1.0, 4)
@@ -98,8 +101,28 @@ def test_load_refuses_other_files(tmp_path):
     other = tmp_path / "other.h5"
     with h5py.File(other, "w") as f:
         f["x"] = 1
-    with pytest.raises(ValueError, match="not a pcmb result"):
+    with pytest.raises(ResultFileError, match="not a pcmb result"):
         pcmb.load(other)
+    with pytest.raises(ResultFileError, match="no such file"):
+        pcmb.load(tmp_path / "absent.h5")
+    garbage = tmp_path / "garbage.h5"
+    garbage.write_bytes(b"not hdf5 at all")
+    with pytest.raises(ResultFileError, match="not a readable pcmb result file"):
+        pcmb.load(garbage)
+
+
+def test_design_and_warnings_round_trip(written):
+    path, result = written
+    loaded = pcmb.load(path)
+    assert loaded.design == result.design
+    assert loaded.design.kind == "collocation" and loaded.design.grid == "tensor-gauss"
+    records = (
+        WarningRecord("study-wide", "about everything"),
+        WarningRecord("per-output", "about x", output=result.outputs[0], time_range=(0.5, 1.0)),
+    )
+    again = path.with_name("again.h5")
+    store.write_result(again, dataclasses.replace(result, warnings=records), provenance={})
+    assert set(pcmb.load(again).warnings) == set(records)
 
 
 def test_the_file_mode_follows_the_umask(written, tmp_path):

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.errors import ConfigError
-from pcmb.study import StudyResult
+from pcmb.errors import UsageError
+from pcmb.result import StudyResult
 
 __all__ = ["NOISE_FACTOR", "Comparison", "OutputDifference", "compare", "method_label"]
 
@@ -37,30 +37,16 @@ NOISE_FACTOR = 4.0
 _ROUND_OFF = 1e-9
 
 
-def _order_label(index: NDArray[np.int64]) -> str:
-    """``order 3`` (tensor, same order per input), ``orders 3x5`` or ``total order 4``."""
-    highest = index.max(axis=0)
-    if index.shape[0] == int(np.prod(highest + 1)):
-        if np.all(highest == highest[0]):
-            return f"order {int(highest[0])}"
-        return "orders " + "x".join(str(int(p)) for p in highest)
-    return f"total order {int(index.sum(axis=1).max())}"
-
-
 def method_label(result: StudyResult) -> str:
-    """A short description of how a result was computed, e.g. ``chaos order 5 (216 runs)``."""
-    runs = int(np.sum(result.status == 1))
-    index = result.multi_index
-    if result.method == "collocation" and index is not None:
-        return f"chaos {_order_label(index)} ({runs} runs)"
-    fit = f" + chaos fit, {_order_label(index)}" if index is not None else ""
-    return f"{result.method}{fit} ({runs} runs)"
+    """A short description of how a result was computed, e.g. ``collocation, tensor order 5
+    (216 runs)``."""
+    return f"{result.design.label} ({int(np.sum(result.ok))} runs)"
 
 
 def _noise(result: StudyResult, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(T,) standard errors of a result's mean and std: zero for a collocation grid."""
     if result.weights is None:
-        runs = result.values[name][result.status == 1]
+        runs = result.values[name][result.ok]
         count = runs.shape[0]
         if count >= 2:
             centred = runs - runs.mean(axis=0)
@@ -181,7 +167,7 @@ def _departure(times: NDArray[np.float64], *scores: NDArray[np.float64] | None) 
 def _check_grids(reference: StudyResult, other: StudyResult) -> None:
     a, b = reference.times, other.times
     if a.shape != b.shape or not np.allclose(a, b, rtol=1e-9, atol=1e-12 * np.ptp(a)):
-        raise ConfigError(
+        raise UsageError(
             f"the results have different time grids ({a[0]}..{a[-1]}, {a.size} points vs "
             f"{b[0]}..{b[-1]}, {b.size} points): compare studies run on the same grid"
         )
@@ -192,12 +178,12 @@ def common_outputs(results: Sequence[StudyResult]) -> list[str]:
 
     Raises
     ------
-    ConfigError
+    UsageError
         If there is none.
     """
     names = [n for n in results[0].outputs if all(n in r.outputs for r in results[1:])]
     if not names:
-        raise ConfigError("the results share no output: nothing to compare")
+        raise UsageError("the results share no output: nothing to compare")
     return names
 
 
@@ -222,7 +208,7 @@ def compare(
 
     Raises
     ------
-    ConfigError
+    UsageError
         If the time grids differ or no output is shared.
     """
     _check_grids(reference, other)

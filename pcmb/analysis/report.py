@@ -49,8 +49,8 @@ from pcmb.analysis.statistics import (
     spectrum,
 )
 from pcmb.chaos.density import kernel_density
-from pcmb.errors import ConfigError
-from pcmb.study import StudyResult
+from pcmb.errors import MissingDependencyError, UsageError
+from pcmb.result import StudyResult
 
 __all__ = [
     "DPI",
@@ -84,16 +84,14 @@ def _matplotlib() -> tuple[Any, Any]:
 
     Raises
     ------
-    ConfigError
-        If matplotlib is not installed.
+    MissingDependencyError
+        If matplotlib is not installed (it comes with ``pcmb[plot]``).
     """
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
     except ImportError:
-        raise ConfigError(
-            "figures need matplotlib: install it with pip install 'pcmb[plot]'"
-        ) from None
+        raise MissingDependencyError("matplotlib", "plot", "figures") from None
     return Figure, FigureCanvasAgg
 
 
@@ -544,7 +542,7 @@ def _others(
     """The comparison results with labels and colors, and their differences to ``result``."""
     names = list(labels) if labels is not None else [method_label(c) for c in comparisons]
     if len(names) != len(comparisons):
-        raise ConfigError(f"{len(comparisons)} comparisons but {len(names)} labels")
+        raise UsageError(f"{len(comparisons)} comparisons but {len(names)} labels")
     others = [
         _Other(label, other, _COLORS[1 + i % (len(_COLORS) - 1)])
         for i, (label, other) in enumerate(zip(names, comparisons, strict=True))
@@ -572,8 +570,10 @@ def write_comparison_figures(
 
     Raises
     ------
-    ConfigError
-        If matplotlib is missing, or a comparison has another time grid or no shared output.
+    MissingDependencyError
+        If matplotlib is missing.
+    UsageError
+        If a comparison has another time grid or no shared output.
     """
     directory = Path(directory)
     canvas = _Canvas(directory)
@@ -617,8 +617,10 @@ def write_report(
 
     Raises
     ------
-    ConfigError
-        If matplotlib is missing, or a comparison has another time grid or no shared output.
+    MissingDependencyError
+        If matplotlib is missing.
+    UsageError
+        If a comparison has another time grid or no shared output.
     """
     directory = Path(directory)
     canvas = _Canvas(directory)

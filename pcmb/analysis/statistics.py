@@ -43,7 +43,7 @@ from pcmb.chaos.spectral import chaos_spectrum, periodogram, taper, uniform_step
 from pcmb.errors import ConfigError, ConfigProblem
 
 if TYPE_CHECKING:
-    from pcmb.study import StudyResult
+    from pcmb.result import StudyResult
 
 __all__ = [
     "Analysis",
@@ -303,13 +303,10 @@ class Analysis:
 
 def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
     """The tensor Gauss grid a collocation result was computed on (``None`` otherwise)."""
-    if result.weights is None:
+    design = result.design
+    if design.grid != "tensor-gauss" or design.orders is None:
         return None
-    sizes = [np.unique(column).size for column in result.nodes.T]
-    grid = TensorGrid(result.distributions, [q - 1 for q in sizes])
-    if grid.size != result.nodes.shape[0] or not np.allclose(grid.nodes, result.nodes):
-        return None
-    return grid
+    return TensorGrid(result.distributions, design.orders)
 
 
 def _density_table(at: NDArray[np.float64], columns: NDArray, *, nonnegative: bool) -> Density:
@@ -387,7 +384,7 @@ class _PsdSource:
                 self.chaos.std,
             )
         else:
-            ok = result.values[name][result.status == 1]
+            ok = result.values[name][result.ok]
             self.frequency, self.per_run = periodogram(ok, result.times, settings.window)
             self.mean, self.std = self.per_run.mean(axis=0), self.per_run.std(axis=0, ddof=1)
 
@@ -432,7 +429,7 @@ def output_draws(
     indices = nearest_indices(result.times, times)
     expansion = result.expansions.get(name)
     if expansion is None:
-        return result.times[indices], result.values[name][result.status == 1][:, indices]
+        return result.times[indices], result.values[name][result.ok][:, indices]
     surrogates = _Surrogates(_germ_draws(result, settings))
     surrogates.add(name, expansion.basis, expansion.coefficients[:, indices])
     return result.times[indices], surrogates.evaluate()[name]
@@ -521,7 +518,7 @@ def _quantile_bands(
     for name in result.outputs:
         expansion = result.expansions.get(name)
         if expansion is None:
-            runs = result.values[name][result.status == 1]
+            runs = result.values[name][result.ok]
             bands[name] = np.quantile(runs, levels, axis=0).reshape(len(levels), n_times)
             continue
         key = expansion.multi_index.tobytes()
@@ -579,7 +576,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     for name in result.outputs:
         at_times = drawn.get(("time", name))
         if at_times is None:
-            at_times = result.values[name][result.status == 1][:, indices]
+            at_times = result.values[name][result.ok][:, indices]
         spectrum_ = None
         if name in sources:
             source, k = sources[name], bins[name]

@@ -7,6 +7,7 @@ values of shape (N, ...) reshape to (q_1, ..., q_n, ...).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -172,7 +173,10 @@ def random_nodes(
 
         engine_type = qmc.LatinHypercube if method == "lhs" else qmc.Sobol
         engine = engine_type(d=n, scramble=True, rng=rng)
-        u = engine.random(samples)
+        with warnings.catch_warnings():
+            # Sobol' balance with N not a power of two: the sampling design reports it.
+            warnings.filterwarnings("ignore", message=".*balance properties", category=UserWarning)
+            u = engine.random(samples)
         germ = np.column_stack([d.family.germ.ppf(u[:, k]) for k, d in enumerate(distributions)])
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")

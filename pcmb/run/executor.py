@@ -50,8 +50,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import os
-import re
 import sys
 import threading
 import time
@@ -59,61 +57,30 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any
 
 import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.errors import ConfigError, ConfigProblem, ModelError, PcmbError
-from pcmb.run.journal import STATUS_FAILED, STATUS_OK, Journal
+from pcmb.errors import ConfigProblem, ModelError, PcmbError, UsageError
+from pcmb.result import NodeFailure, Status
+from pcmb.run.backends import BACKENDS, InProcessPool, Pool
+from pcmb.run.journal import Journal
+from pcmb.run.progress import Progress
 
 if TYPE_CHECKING:
     from pcmb.adapters.python import Model
 
-__all__ = ["NodeFailure", "RunResult", "chunk_bounds", "run_nodes"]
+__all__ = ["RunResult", "chunk_bounds", "run_nodes"]
 
 TARGET_CHUNKS = 16
 MAX_CHUNK_SIZE = 256
-BACKENDS = ("loky", "dask")
 # Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
-_STARTUP_SECONDS = {"loky": 1.0, "dask": 3.0}
 # Seconds between progress-line updates.
-_PROGRESS_INTERVAL = 0.1
 
 
 # -- results ---------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class NodeFailure:
-    """A node whose model run failed.
-
-    Attributes
-    ----------
-    index:
-        The node's index in the full node set.
-    params:
-        The node's values of the uncertain inputs (a tuple for a field input).
-    message:
-        The model's message (exception type and text), ``"non-finite output 'x1' at t=..."``,
-        or ``"worker process died (...)"``.
-    """
-
-    index: int
-    params: dict[str, float | tuple[float, ...]]
-    message: str
-
-    def __str__(self) -> str:
-        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
-        return f"node {self.index} ({values}): {' '.join(self.message.split())}"
-
-
-def _format_value(value: float | tuple[float, ...]) -> str:
-    if isinstance(value, tuple):
-        shown = ", ".join(f"{v:.6g}" for v in value[:3])
-        return f"[{shown}, ... ({len(value)} values)]" if len(value) > 3 else f"[{shown}]"
-    return f"{value:.6g}"
 
 
 @dataclass(frozen=True)
@@ -295,159 +262,6 @@ def _read_only(array: NDArray[np.float64]) -> NDArray[np.float64]:
     return view
 
 
-# -- worker pools ----------------------------------------------------------------------------
-
-
-class _Pool(Protocol):
-    slots: int
-
-    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]: ...
-
-    def death(self, error: BaseException) -> str | None:
-        """A message if ``error`` means the worker running the task died, else None."""
-
-    def rebuild(self) -> None: ...
-
-    def close(self) -> None: ...
-
-
-#: Environment variables that cap native thread pools in worker processes.
-_THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-class _LokyPool:
-    """A private loky process pool (joblib's process backend), shut down after the campaign.
-
-    Private rather than joblib's global reusable pool: sharing that singleton breaks a later
-    ``joblib.Parallel`` in the user's process, which expects the pool to be set up its own way.
-    """
-
-    def __init__(self, jobs: int) -> None:
-        self.slots = jobs
-        self._executor: Any = None
-        self.rebuild()
-
-    def rebuild(self) -> None:
-        from joblib.externals.loky import ProcessPoolExecutor
-
-        # A broken pool is replaced by a fresh one here. Each worker gets its share of the cores
-        # for native thread pools (BLAS, OpenMP, MuJoCo's threads), as joblib.Parallel does,
-        # so that `slots` workers do not each start one thread per core.
-        share = str(max(1, (os.cpu_count() or 1) // self.slots))
-        if self._executor is not None:
-            self._executor.shutdown(wait=False, kill_workers=True)
-        self._executor = ProcessPoolExecutor(
-            max_workers=self.slots, env={name: share for name in _THREAD_LIMITS}
-        )
-
-    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
-        return self._executor.submit(fn, *args)
-
-    def death(self, error: BaseException) -> str | None:
-        from joblib.externals.loky.process_executor import TerminatedWorkerError
-
-        if not isinstance(error, TerminatedWorkerError):
-            return None
-        # loky reports e.g. "The exit codes of the workers are {SIGSEGV(-11)}" or "{EXIT(7)}".
-        codes = re.findall(r"([A-Z]+)\((-?\d+)\)", str(error).partition("exit codes")[2])
-        causes = [
-            f"signal {-int(code)}, {name}" if int(code) < 0 else f"exit code {code}"
-            for name, code in codes
-        ]
-        return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
-
-    def close(self) -> None:
-        self._executor.shutdown(wait=True)
-
-
-class _DaskPool:
-    """A dask.distributed cluster: ``address``, or a local cluster that is closed afterwards."""
-
-    def __init__(self, jobs: int | None, workers: int, address: str | None) -> None:
-        import dask
-        import distributed
-
-        self._killed = distributed.KilledWorker
-        self._cluster = None
-        if address is None:
-            # Report a task at its first worker death (dask would try it on 3 more workers,
-            # killing each): the executor's own isolation then names the node.
-            with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-                self._cluster = distributed.LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
-                )
-        try:
-            self._client = distributed.Client(address or self._cluster)
-        except BaseException:
-            if self._cluster is not None:
-                self._cluster.close()
-            raise
-        self.slots = jobs or sum(self._client.nthreads().values()) or 1
-        # pure=False: a re-run of a task must run again, not come back from dask's cache.
-        self._executor = self._client.get_executor(pure=False)
-
-    def submit(self, fn: Callable[..., _Outcome], *args: Any) -> Future[_Outcome]:
-        return self._executor.submit(fn, *args)
-
-    def death(self, error: BaseException) -> str | None:
-        # dask reschedules a task whose worker died, until its allowed failures are used up.
-        if isinstance(error, self._killed):
-            return "worker process died (dask KilledWorker: see the dask worker logs)"
-        return None
-
-    def rebuild(self) -> None:
-        """Nothing to do: dask's nannies restart dead workers."""
-
-    def close(self) -> None:
-        self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
-
-
-# -- progress --------------------------------------------------------------------------------
-
-
-class _Progress:
-    """One status line on a stream, rewritten in place: nodes done / total, rate, ETA."""
-
-    def __init__(self, total: int, done: int, stream: TextIO | None) -> None:
-        self._total, self._done, self._stream = total, done, stream
-        self._ran = 0
-        self._start = self._last = time.perf_counter()
-        self._width = 0
-
-    def advance(self, count: int) -> None:
-        self._done += count
-        self._ran += count
-        now = time.perf_counter()
-        if now - self._last >= _PROGRESS_INTERVAL or self._done == self._total:
-            self._last = now
-            self._show(now)
-
-    def _show(self, now: float) -> None:
-        if self._stream is None:
-            return
-        rate = self._ran / max(now - self._start, 1e-9)
-        eta = (self._total - self._done) / rate if rate > 0 else math.inf
-        if math.isfinite(eta):
-            seconds = round(eta)
-            eta_text = f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
-        else:
-            eta_text = "?"
-        line = (
-            f"pcmb: {self._done}/{self._total} nodes ({100 * self._done / self._total:.0f}%), "
-            f"{rate:.3g} nodes/s, ETA {eta_text}"
-        )
-        self._stream.write("\r" + line.ljust(self._width))
-        self._stream.flush()
-        self._width = len(line)
-
-    def close(self) -> None:
-        if self._stream is not None and self._width:
-            self._stream.write("\n")
-            self._stream.flush()
-
-
 # -- the campaign ----------------------------------------------------------------------------
 
 
@@ -472,15 +286,15 @@ class _Campaign:
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
         self.resumed = 0
-        self.progress: _Progress | None = None
+        self.progress: Progress | None = None
 
     def resume(self, journal: Journal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
         indices, values, status = journal.completed()
-        ok = indices[status == STATUS_OK]
+        ok = indices[status == Status.OK]
         for name in self.outputs:
-            self.values[name][ok] = values[name][status == STATUS_OK]
-        self.status[ok] = STATUS_OK
+            self.values[name][ok] = values[name][status == Status.OK]
+        self.status[ok] = Status.OK
         self.resumed = int(ok.size)
 
     def plan(self, bounds: Sequence[tuple[int, int]]) -> list[_Task]:
@@ -491,7 +305,7 @@ class _Campaign:
         """
         tasks = []
         for start, stop in bounds:
-            pending = start + np.flatnonzero(self.status[start:stop] != STATUS_OK)
+            pending = start + np.flatnonzero(self.status[start:stop] != Status.OK)
             if pending.size:
                 tasks.append(_Task(pending, batched=pending.size == stop - start))
         return tasks
@@ -522,7 +336,7 @@ class _Campaign:
         }
         for name, column in chunk.items():
             self.values[name][task.indices] = column
-        self.status[task.indices] = np.where(failed, STATUS_FAILED, STATUS_OK)
+        self.status[task.indices] = np.where(failed, Status.FAILED, Status.OK)
         found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
         for i in task.indices:
             self.messages.pop(int(i), None)
@@ -560,7 +374,7 @@ class _Campaign:
         )
 
 
-def _run_alone(campaign: _Campaign, pool: _Pool, task: _Task) -> _Outcome | str:
+def _run_alone(campaign: _Campaign, pool: Pool, task: _Task) -> _Outcome | str:
     """Run ``task`` as the only task in the pool: its outcome, or a death message."""
     future = pool.submit(_execute, *campaign.arguments(task))
     error = future.exception()
@@ -573,7 +387,7 @@ def _run_alone(campaign: _Campaign, pool: _Pool, task: _Task) -> _Outcome | str:
     return death
 
 
-def _isolate(campaign: _Campaign, pool: _Pool, task: _Task) -> None:
+def _isolate(campaign: _Campaign, pool: Pool, task: _Task) -> None:
     """Re-run a task that was in flight when a worker died, alone, down to single nodes."""
     attempts = 1 + campaign.retries if task.indices.size == 1 else 1
     for _ in range(attempts):
@@ -588,7 +402,7 @@ def _isolate(campaign: _Campaign, pool: _Pool, task: _Task) -> None:
         _isolate(campaign, pool, _Task(np.array([index]), batched=False))
 
 
-def _run_pooled(campaign: _Campaign, pool: _Pool, tasks: Sequence[_Task]) -> None:
+def _run_pooled(campaign: _Campaign, pool: Pool, tasks: Sequence[_Task]) -> None:
     """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead workers."""
     queue = deque(tasks)
     in_flight: dict[Future[_Outcome], _Task] = {}
@@ -625,13 +439,13 @@ def _workers_pay(
     n_rest: int,
     build_seconds: float,
     workers: int,
-    backend: str,
+    startup_seconds: float,
 ) -> bool:
     """Whether workers are estimated to finish the remaining nodes sooner than this process."""
     if workers < 2 or n_rest == 0:
         return False
     serial = trial_seconds / n_trial * n_rest
-    parallel = _STARTUP_SECONDS[backend] + build_seconds + serial / workers
+    parallel = startup_seconds + build_seconds + serial / workers
     return parallel < serial
 
 
@@ -699,7 +513,9 @@ def _check_arguments(
     if jobs is not None and not integer_at_least(jobs, 1):
         problems.append(ConfigProblem("jobs", f"must be a positive integer, got {jobs!r}"))
     if backend not in BACKENDS:
-        problems.append(ConfigProblem("backend", f"must be one of {BACKENDS}, got {backend!r}"))
+        problems.append(
+            ConfigProblem("backend", f"must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        )
     elif address is not None and backend != "dask":
         problems.append(ConfigProblem("address", "is only used with backend 'dask'"))
     if chunk_size is not None and not integer_at_least(chunk_size, 1):
@@ -709,7 +525,7 @@ def _check_arguments(
     if not integer_at_least(retries, 0):
         problems.append(ConfigProblem("retries", f"must be an integer >= 0, got {retries!r}"))
     if problems:
-        raise ConfigError(problems, source="run_nodes")
+        raise UsageError(problems, source="run_nodes")
     return arrays, time_grid, tuple(outputs)
 
 
@@ -717,13 +533,13 @@ def _check_model(model: object, outputs: Sequence[str]) -> None:
     """Check the protocol and that the model offers every requested output."""
     offered = getattr(model, "outputs", None)
     if offered is None or not callable(getattr(model, "simulate", None)):
-        raise ConfigError(
+        raise UsageError(
             [ConfigProblem("model_factory", "must build an object with outputs and simulate()")],
             source="run_nodes",
         )
     missing = [name for name in outputs if name not in offered]
     if missing:
-        raise ConfigError(
+        raise UsageError(
             [ConfigProblem("outputs", f"the model has no output {missing} (it has {offered})")],
             source="run_nodes",
         )
@@ -732,7 +548,7 @@ def _check_model(model: object, outputs: Sequence[str]) -> None:
 def _check_journal(journal: Journal, n_nodes: int, outputs: tuple[str, ...], n_times: int) -> None:
     found = (journal.n_nodes, tuple(journal.outputs), journal.n_times)
     if found != (n_nodes, outputs, n_times):
-        raise ConfigError(
+        raise UsageError(
             f"journal {journal.directory} holds (nodes, outputs, times) = {found}, this run "
             f"has {(n_nodes, outputs, n_times)}; delete it or drop --resume"
         )
@@ -793,7 +609,7 @@ def run_nodes(
 
     Raises
     ------
-    ConfigError
+    UsageError
         Before anything runs, for invalid arguments, a model without a requested output, or a
         journal that does not match this run.
     ModelError
@@ -807,7 +623,7 @@ def run_nodes(
     try:
         token = hashlib.sha256(cloudpickle.dumps(model_factory)).hexdigest()
     except Exception as exc:  # pickling can fail with almost any exception type
-        raise ConfigError(
+        raise UsageError(
             [ConfigProblem("model_factory", f"cannot be sent to worker processes: {exc}")],
             source="run_nodes",
         ) from exc
@@ -823,7 +639,7 @@ def run_nodes(
     preferred = getattr(model, "chunk_size", None)
     tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or preferred))
     show = sys.stderr.isatty() if progress is None else progress
-    campaign.progress = _Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
+    campaign.progress = Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
     try:
         if tasks:
             trial = _execute(*campaign.arguments(tasks[0]))
@@ -832,17 +648,15 @@ def run_nodes(
             workers = jobs or _default_workers()
             n_rest = sum(task.indices.size for task in rest)
             n_trial = tasks[0].indices.size
-            if _workers_pay(trial.seconds, n_trial, n_rest, build_seconds, workers, backend):
-                pool: _Pool = (
-                    _LokyPool(workers) if backend == "loky" else _DaskPool(jobs, workers, address)
-                )
-                try:
-                    _run_pooled(campaign, pool, rest)
-                finally:
-                    pool.close()
-            else:
-                for task in rest:
-                    campaign.accept_outcome(task, _execute(*campaign.arguments(task)))
+            pool_type = BACKENDS[backend]
+            startup = pool_type.startup_seconds
+            if not _workers_pay(trial.seconds, n_trial, n_rest, build_seconds, workers, startup):
+                pool_type = InProcessPool
+            pool: Pool = pool_type(jobs, workers, address)
+            try:
+                _run_pooled(campaign, pool, rest)
+            finally:
+                pool.close()
     finally:
         campaign.progress.close()
     return campaign.result(time.perf_counter() - start)

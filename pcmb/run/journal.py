@@ -28,15 +28,11 @@ from typing import BinaryIO
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.errors import ConfigError
+from pcmb.errors import ResultFileError
+from pcmb.result import Status
 from pcmb.run.files import replace_durably
 
-__all__ = ["STATUS_FAILED", "STATUS_OK", "STATUS_PENDING", "Journal"]
-
-# Node status codes, shared with the output file (SPEC §5).
-STATUS_PENDING = 0
-STATUS_OK = 1
-STATUS_FAILED = 2
+__all__ = ["Journal"]
 
 _FORMAT = 1
 _META = "journal.json"
@@ -63,7 +59,7 @@ class Journal:
 
     Raises
     ------
-    ConfigError
+    ResultFileError
         If the directory holds a journal written for a different fingerprint, node count,
         output list or time grid ("delete it or drop --resume"), or something that is not a
         pcmb journal.
@@ -110,13 +106,13 @@ class Journal:
 
     def _open(self) -> None:
         if self.directory.exists() and not self.directory.is_dir():
-            raise ConfigError(f"journal {self.directory} exists and is not a directory")
+            raise ResultFileError(f"journal {self.directory} exists and is not a directory")
         self.directory.mkdir(parents=True, exist_ok=True)
         records = self._record_paths()
         meta_path = self.directory / _META
         if not meta_path.is_file():
             if records:
-                raise ConfigError(
+                raise ResultFileError(
                     f"journal {self.directory} has records but no {_META}: it is not a pcmb "
                     "journal; delete it or drop --resume"
                 )
@@ -126,19 +122,19 @@ class Journal:
         try:
             found = json.loads(meta_path.read_text())
         except (OSError, ValueError) as exc:
-            raise ConfigError(
+            raise ResultFileError(
                 f"journal {self.directory}: cannot read {_META} ({exc}); delete it or drop --resume"
             ) from exc
         expected = self._metadata()
         if not isinstance(found, dict) or found.get("fingerprint") != self.fingerprint:
-            raise ConfigError(
+            raise ResultFileError(
                 f"journal {self.directory} was written for a different config; "
                 "delete it or drop --resume"
             )
         differing = [key for key in expected if found.get(key) != expected[key]]
         if differing:
             detail = ", ".join(f"{k}: {found.get(k)!r} != {expected[k]!r}" for k in differing)
-            raise ConfigError(
+            raise ResultFileError(
                 f"journal {self.directory} does not match this run ({detail}); "
                 "delete it or drop --resume"
             )
@@ -175,7 +171,7 @@ class Journal:
             Output name -> (B, T) values, for every output of the journal (rows of failed
             nodes are stored as given, normally NaN).
         status:
-            (B,) int, ``STATUS_OK`` or ``STATUS_FAILED`` for each node.
+            (B,) int, ``Status.OK`` or ``Status.FAILED`` for each node.
         messages:
             Node index -> failure message, for the failed nodes.
 
@@ -192,8 +188,8 @@ class Journal:
             )
         if idx.min() < 0 or idx.max() >= self.n_nodes or np.unique(idx).size != idx.size:
             raise ValueError(f"indices must be distinct and in [0, {self.n_nodes})")
-        if not np.isin(codes, (STATUS_OK, STATUS_FAILED)).all():
-            raise ValueError("status must be STATUS_OK (1) or STATUS_FAILED (2) for every node")
+        if not np.isin(codes, (Status.OK, Status.FAILED)).all():
+            raise ValueError("status must be Status.OK (1) or Status.FAILED (2) for every node")
         if set(values) != set(self.outputs):
             raise ValueError(f"values must hold exactly the outputs {list(self.outputs)}")
         stacked = np.stack([np.asarray(values[name], dtype=np.float64) for name in self.outputs], 1)
@@ -223,12 +219,12 @@ class Journal:
                     idx, codes = data["indices"], data["status"]
                     values, text = data["values"], data["messages"]
             except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-                raise ConfigError(
+                raise ResultFileError(
                     f"journal record {path} is unreadable ({exc}); delete the journal or drop "
                     "--resume"
                 ) from exc
             if values.shape != (idx.size, *shape) or codes.shape != idx.shape:
-                raise ConfigError(f"journal record {path} does not match the journal's shape")
+                raise ResultFileError(f"journal record {path} does not match the journal's shape")
             for i, code, row, message in zip(idx, codes, values, text, strict=True):
                 latest[int(i)] = (int(code), row, str(message))
         return latest
@@ -245,11 +241,11 @@ class Journal:
         values:
             Output name -> (K, T) values.
         status:
-            (K,) ``STATUS_OK`` or ``STATUS_FAILED``.
+            (K,) ``Status.OK`` or ``Status.FAILED``.
 
         Raises
         ------
-        ConfigError
+        ResultFileError
             If a record cannot be read or does not match the journal.
         """
         latest = self._latest()
@@ -266,10 +262,10 @@ class Journal:
 
         Raises
         ------
-        ConfigError
+        ResultFileError
             If a record cannot be read or does not match the journal.
         """
-        return {i: text for i, (code, _, text) in self._latest().items() if code == STATUS_FAILED}
+        return {i: text for i, (code, _, text) in self._latest().items() if code == Status.FAILED}
 
     def remove(self) -> None:
         """Delete the journal directory (once the result file is safely written)."""

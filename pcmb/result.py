@@ -1,0 +1,277 @@
+"""What a study produced: the result, node status, the design record, failures and warnings.
+
+Everything here is plain data (numpy and the chaos core); :mod:`pcmb.store` writes and reads it.
+"""
+
+from __future__ import annotations
+
+import enum
+import json
+from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Distribution
+
+if TYPE_CHECKING:
+    from pcmb.analysis.statistics import Analysis
+
+__all__ = ["Design", "NodeFailure", "Status", "StudyResult", "WarningRecord"]
+
+
+class Status(enum.IntEnum):
+    """The state of a node, with the codes stored in ``/nodes/status``."""
+
+    PENDING = 0
+    OK = 1
+    FAILED = 2
+
+
+@dataclass(frozen=True)
+class Design:
+    """How a study's nodes were made, so nothing downstream has to guess.
+
+    Attributes
+    ----------
+    kind:
+        ``method.kind`` of the config: ``"collocation"``, ``"montecarlo"``, ``"lhs"``,
+        ``"sobol"``, ...
+    grid:
+        The node rule: ``"tensor-gauss"`` for collocation, ``"random"`` for sampling.
+    basis:
+        The chaos terms recovered: ``"tensor"`` or ``"total"`` (``None``: no expansion).
+    orders:
+        Largest degree per input, germ order (``None`` without an expansion).
+    level:
+        Level of a sparse grid (``None`` otherwise).
+    elements:
+        Number of elements the germ domain is split into (1: one global expansion).
+    samples, seed:
+        Size and seed of a sampled design (``None`` for a grid).
+    fit:
+        How coefficients come from the runs: ``"projection"``, ``"regression"`` or ``"none"``.
+    """
+
+    kind: str
+    grid: str
+    basis: str | None = None
+    orders: tuple[int, ...] | None = None
+    level: int | None = None
+    elements: int = 1
+    samples: int | None = None
+    seed: int | None = None
+    fit: str = "none"
+
+    def describe(self) -> str:
+        """JSON text of the record (stored in ``/design``)."""
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_description(cls, text: str) -> Design:
+        """The record back from :meth:`describe`'s text."""
+        data = json.loads(text)
+        if data.get("orders") is not None:
+            data["orders"] = tuple(data["orders"])
+        return cls(**data)
+
+    @property
+    def label(self) -> str:
+        """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
+        ``lhs`` or ``lhs + chaos fit, total order 3``."""
+        if self.orders is None:
+            return self.kind
+        if self.basis == "tensor":
+            highest = set(self.orders)
+            order = (
+                f"order {self.orders[0]}"
+                if len(highest) == 1
+                else "orders " + "x".join(map(str, self.orders))
+            )
+        else:
+            order = f"total order {max(self.orders)}"
+        return f"chaos {order}" if self.fit == "projection" else f"{self.kind} + chaos fit, {order}"
+
+
+@dataclass(frozen=True)
+class NodeFailure:
+    """A node whose model run failed.
+
+    Attributes
+    ----------
+    index:
+        The node's index in the full node set.
+    params:
+        The node's values of the uncertain inputs (a tuple for a field input).
+    message:
+        The model's message (exception type and text), ``"non-finite output 'x1' at t=..."``,
+        or ``"worker process died (...)"``.
+    """
+
+    index: int
+    params: dict[str, float | tuple[float, ...]]
+    message: str
+
+    def __str__(self) -> str:
+        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
+        return f"node {self.index} ({values}): {' '.join(self.message.split())}"
+
+
+def _format_value(value: float | tuple[float, ...]) -> str:
+    if isinstance(value, tuple):
+        shown = ", ".join(f"{v:.6g}" for v in value[:3])
+        return f"[{shown}, ... ({len(value)} values)]" if len(value) > 3 else f"[{shown}]"
+    return f"{value:.6g}"
+
+
+@dataclass(frozen=True)
+class WarningRecord:
+    """One thing the user must know about the trustworthiness of the numbers.
+
+    Attributes
+    ----------
+    code:
+        A stable identifier, e.g. ``"nodes-failed"``, ``"least-squares-refit"``,
+        ``"order-zero"``, ``"nominal-failed"``.
+    message:
+        What happened and what it means, in a sentence or two.
+    output:
+        The output it concerns (``None``: the whole study).
+    time_range:
+        ``(start, stop)`` of the times it concerns (``None``: all times).
+    """
+
+    code: str
+    message: str
+    output: str | None = None
+    time_range: tuple[float, float] | None = None
+
+    def __str__(self) -> str:
+        where = f"{self.output}: " if self.output else ""
+        if self.time_range is not None:
+            where += f"t in [{self.time_range[0]:g}, {self.time_range[1]:g}]: "
+        return f"{where}{self.message} [{self.code}]"
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """Everything a study produced (and everything a result file holds).
+
+    Attributes
+    ----------
+    name:
+        The study's name.
+    design:
+        How the nodes were made (:class:`Design`).
+    times:
+        (T,) output grid.
+    input_names, distributions:
+        The n inputs in germ order.
+    germ, params:
+        (N, n) germ (standard-variable) and physical coordinates of the nodes;
+        :attr:`node_params` names the physical columns.
+    weights:
+        (N,) quadrature weights, or ``None`` for random sampling.
+    status:
+        (N,) int8 :class:`Status` codes.
+    values:
+        Output name -> (N, T) model values (NaN rows for failed nodes).
+    expansions:
+        Output name -> :class:`ChaosExpansion` (empty for sampling without a fit).
+    failures:
+        The failed nodes.
+    warnings:
+        Structured :class:`WarningRecord` s.
+    seconds:
+        Wall time of the model runs.
+    nominal_params:
+        Input name -> the value used in the deterministic nominal run.
+    nominal:
+        Output name -> (T,) the deterministic run at the nominal parameters (empty if it
+        failed: see ``warnings``).
+    analysis:
+        Quantile bands, PDFs and spectra (:func:`pcmb.analysis.statistics.analyse`).
+    """
+
+    name: str
+    design: Design
+    times: NDArray[np.float64]
+    input_names: tuple[str, ...]
+    distributions: tuple[Distribution, ...]
+    germ: NDArray[np.float64]
+    params: NDArray[np.float64]
+    weights: NDArray[np.float64] | None
+    status: NDArray[np.int8]
+    values: dict[str, NDArray[np.float64]]
+    expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
+    failures: tuple[NodeFailure, ...] = ()
+    warnings: tuple[WarningRecord, ...] = ()
+    seconds: float = 0.0
+    nominal_params: dict[str, float] = field(default_factory=dict)
+    nominal: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    analysis: Analysis | None = None
+
+    @property
+    def method(self) -> str:
+        """The node method (``design.kind``)."""
+        return self.design.kind
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(self.values)
+
+    @property
+    def n_nodes(self) -> int:
+        return self.germ.shape[0]
+
+    @property
+    def node_params(self) -> dict[str, NDArray[np.float64]]:
+        """Input name -> (N,) physical value at every node."""
+        return {name: self.params[:, k] for k, name in enumerate(self.input_names)}
+
+    @property
+    def multi_index(self) -> NDArray[np.int64] | None:
+        """(S, n) the chaos terms, or ``None`` without an expansion."""
+        first = next(iter(self.expansions.values()), None)
+        return None if first is None else first.multi_index
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        """(N,) whether each node ran successfully."""
+        return self.status == Status.OK
+
+    def _expansion(self, name: str, statistic: str) -> ChaosExpansion:
+        if name not in self.values:
+            raise KeyError(f"no output {name!r}; the result has {list(self.values)}")
+        if name not in self.expansions:
+            raise ValueError(
+                f"{statistic} of {name!r} needs a chaos expansion, and this {self.method} "
+                "result has none (sample with fit: regression, or use collocation)"
+            )
+        return self.expansions[name]
+
+    def mean(self, name: str) -> NDArray[np.float64]:
+        """(T,) mean of an output: from the expansion, else the sample mean."""
+        if name in self.expansions:
+            return self.expansions[name].mean()
+        return self.values[name][self.ok].mean(axis=0)
+
+    def std(self, name: str) -> NDArray[np.float64]:
+        """(T,) standard deviation: from the expansion, else the sample std (ddof 1)."""
+        if name in self.expansions:
+            return self.expansions[name].std()
+        return self.values[name][self.ok].std(axis=0, ddof=1)
+
+    def sobol_first(self, name: str) -> NDArray[np.float64]:
+        """(n, T) first-order Sobol' indices (needs an expansion)."""
+        return self._expansion(name, "sobol_first").sobol_first()
+
+    def sobol_total(self, name: str) -> NDArray[np.float64]:
+        """(n, T) total Sobol' indices (needs an expansion)."""
+        return self._expansion(name, "sobol_total").sobol_total()
+
+    def warnings_for(self, output: str | None) -> tuple[WarningRecord, ...]:
+        """The warnings about one output (``None``: those about the whole study)."""
+        return tuple(w for w in self.warnings if w.output == output)
