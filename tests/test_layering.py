@@ -1,0 +1,138 @@
+"""The package's layering, read from its import statements (static) and checked at run time."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "pcmb"
+HEAVY = ("h5py", "joblib", "mujoco", "pydantic", "matplotlib", "distributed", "dask", "yaml")
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path, *, top_level_only: bool) -> set[str]:
+    """Modules imported by a file: all of them, or only those run at import time (not inside
+    functions and not under ``if TYPE_CHECKING``)."""
+    tree = ast.parse(path.read_text())
+    found: set[str] = set()
+    module = _module_name(path)
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+
+    def visit(node: ast.AST, inside: bool) -> None:
+        for child in ast.iter_child_nodes(node):
+            nested = inside or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
+            if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                nested = True
+            if isinstance(child, ast.Import) and not (top_level_only and inside):
+                found.update(alias.name for alias in child.names)
+            elif isinstance(child, ast.ImportFrom) and not (top_level_only and inside):
+                base = child.module or ""
+                if child.level:
+                    anchor = package.split(".")[: len(package.split(".")) - child.level + 1]
+                    base = ".".join([*anchor, base] if base else anchor)
+                found.add(base)
+                found.update(f"{base}.{alias.name}" for alias in child.names)
+            visit(child, nested)
+
+    visit(tree, False)
+    return found
+
+
+MODULES = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _importers_of(prefix: str) -> set[str]:
+    return {
+        name
+        for name, path in MODULES.items()
+        if any(
+            m == prefix or m.startswith(prefix + ".") for m in _imports(path, top_level_only=False)
+        )
+    }
+
+
+def test_the_chaos_core_imports_no_heavy_library_and_no_pipeline():
+    for name, path in MODULES.items():
+        if not name.startswith("pcmb.chaos"):
+            continue
+        imported = _imports(path, top_level_only=False)
+        pcmb_parts = {m for m in imported if m.startswith("pcmb.")}
+        heavy = {m for m in imported if m.split(".")[0] in HEAVY}
+        assert not heavy, f"{name} imports {heavy}"
+        outside = {m for m in pcmb_parts if not m.startswith(("pcmb.chaos", "pcmb.errors"))}
+        assert not outside, f"{name} imports {outside}"
+
+
+@pytest.mark.parametrize(
+    ("library", "owners"),
+    [
+        ("h5py", ("pcmb.store",)),
+        ("mujoco", ("pcmb.adapters.mujoco",)),
+        ("yaml", ("pcmb.config.loader", "pcmb.config.schema")),
+        ("matplotlib", ("pcmb.analysis.report",)),
+    ],
+)
+def test_each_heavy_library_has_one_owner(library, owners):
+    users = _importers_of(library)
+    strangers = {u for u in users if not u.startswith(owners)}
+    assert not strangers, f"{library} is imported by {sorted(strangers)} (owners: {owners})"
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of a directed graph (as a path that returns to its start), or None."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def walk(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for target in sorted(graph.get(node, ())):
+            if state.get(target) == 1:
+                return [*stack[stack.index(target) :], target]
+            if target not in state and (found := walk(target)):
+                return found
+        stack.pop()
+        state[node] = 2
+        return None
+
+    for name in sorted(graph):
+        if name not in state and (found := walk(name)):
+            return found
+    return None
+
+
+def test_the_cycle_finder_finds_cycles():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+
+
+def test_no_import_cycles():
+    graph = {
+        name: {
+            m
+            for m in _imports(path, top_level_only=True)
+            if m in MODULES and m != name and not name.startswith(m + ".")
+        }
+        for name, path in MODULES.items()
+    }
+    cycle = _cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_the_public_core_api_loads_no_heavy_library():
+    code = (
+        "import sys, pcmb\n"
+        "pcmb.TensorGrid, pcmb.project_tensor, pcmb.ChaosExpansion, pcmb.Uniform, pcmb.Normal\n"
+        "pcmb.Beta, pcmb.Gamma, pcmb.Transformed, pcmb.fit_least_squares, pcmb.KarhunenLoeve\n"
+        f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
