@@ -14,10 +14,11 @@ import os
 import shlex
 import sys
 import traceback
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from pcmb.errors import EXIT_OK, EXIT_UNEXPECTED, PcmbError, UsageError
+from pcmb.errors import EXIT_OK, EXIT_UNEXPECTED, PcmbError, PcmbWarning, UsageError
 from pcmb.run.backends import BACKENDS
 
 
@@ -118,9 +119,14 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "config_sha256": config.sha256,
         "command_line": shlex.join(["pcmb", *argv]),
     }
-    result = study.run(
-        output, resume=args.resume, progress=False if args.quiet else None, provenance=provenance
-    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
+        result = study.run(
+            output,
+            resume=args.resume,
+            progress=False if args.quiet else None,
+            provenance=provenance,
+        )
     for warning in result.warnings:
         _log(f"pcmb: warning: {warning}")
     _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")

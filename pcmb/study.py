@@ -10,6 +10,7 @@ import hashlib
 import inspect
 import json
 import sys
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -23,7 +24,7 @@ from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.designs import DESIGNS, MethodSettings, NodeDesign, make_design
-from pcmb.errors import ConfigProblem, IllPosedError, ModelRunError, UsageError
+from pcmb.errors import ConfigProblem, IllPosedError, ModelRunError, PcmbWarning, UsageError
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS
 from pcmb.run.executor import RunResult, run_nodes
@@ -354,6 +355,12 @@ class Study:
         provenance:
             Extra attributes for the file (config text, command line).
 
+        Warns
+        -----
+        PcmbWarning
+            One per :class:`~pcmb.result.WarningRecord` of the result (also in
+            ``result.warnings`` and in the file).
+
         Raises
         ------
         UsageError
@@ -414,6 +421,8 @@ class Study:
             write_result(output, result, provenance=provenance or {})
             if journal is not None:
                 journal.remove()
+        for record in result.warnings:
+            warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
 
     def _with_nominal(self, result: StudyResult, outputs: Sequence[str]) -> StudyResult:

@@ -163,7 +163,8 @@ def test_a_failing_nominal_run_is_a_warning():
 
     fragile.outputs = ("x",)
     study = pcmb.Study(fragile, {"k": INPUTS["k"]}, TIMES, order=1, jobs=1, params={"k": 2.5})
-    result = study.run()
+    with pytest.warns(pcmb.PcmbWarning, match=r"nominal run failed.*\[nominal-failed\]"):
+        result = study.run()
     assert result.nominal == {}
     assert any(w.code == "nominal-failed" and "singular" in w.message for w in result.warnings)
 
