@@ -84,16 +84,12 @@ def _summary(config) -> str:
     for name, dist in study.inputs.items():
         described = ", ".join(f"{k}={v}" for k, v in dist.describe().items() if k != "dist")
         lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
-    method = config.method
-    if method.kind == "collocation":
-        lines.append(
-            f"method   collocation, {method.basis} basis, orders {study.orders}: "
-            f"{nodes.size} tensor Gauss nodes"
-        )
-    else:
-        lines.append(f"method   {method.kind}, {nodes.size} samples, seed {method.seed}")
+    design = study.design.record()
+    seed = f", seed {design.seed}" if design.seed is not None else ""
+    lines.append(f"method   {design.kind}: {design.label}, {design.grid} nodes{seed}")
     lines.append(f"runs     {nodes.size} model runs ({config.execution.on_failure} on failure)")
-    lines.append(f"output   {config.output or '(none: give -o)'}")
+    where = "relative to the current directory; model files resolve against the config's folder"
+    lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     return "\n".join(lines)
 
 
@@ -171,6 +167,8 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _inspect(path: str) -> str:
+    import dataclasses
+
     import numpy as np
 
     result = _load(path)
@@ -184,6 +182,8 @@ def _inspect(path: str) -> str:
         f"time     {result.times[0]} .. {result.times[-1]}, {result.times.size} points",
         "inputs   " + ", ".join(f"{n}: {d.describe()['dist']}" for n, d in named_inputs),
     ]
+    design = dataclasses.asdict(result.design)
+    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
     if result.multi_index is not None:
         lines.append(f"chaos    {result.multi_index.shape[0]} terms")
     lines.append(f"{'output':<12}{'mean min':>12}{'mean max':>12}{'std min':>12}{'std max':>12}")

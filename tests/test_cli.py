@@ -34,13 +34,15 @@ def test_output_from_the_config_and_inspect(tmp_path, capsys):
     assert main(["inspect", str(tmp_path / "out.h5")]) == 0
     report = capsys.readouterr().out
     assert "16 ok, 0 failed" in report and "y" in report and "16 terms" in report
+    assert "design   kind collocation, grid tensor-gauss, basis tensor, orders (3, 3)" in report
 
 
 def test_validate_prints_a_summary_and_runs_nothing(tmp_path, capsys):
     config = write_study(tmp_path)
     assert main(["validate", str(config)]) == 0
     summary = capsys.readouterr().out
-    assert "16 tensor Gauss nodes" in summary and "uniform(low=1.0, high=3.0)" in summary
+    assert "method   collocation: chaos order 3, tensor-gauss nodes" in summary
+    assert "16 model runs" in summary and "uniform(low=1.0, high=3.0)" in summary
     assert not (tmp_path / "out.h5").exists()
 
 
@@ -61,8 +63,25 @@ def test_invalid_config_exits_2_without_traceback_or_file(tmp_path, capsys):
 
 def test_usage_errors_exit_2(capsys):
     assert main(["run"]) == 2
-    assert main(["inspect", "/nonexistent.h5"]) == 2
     assert main(["frobnicate"]) == 2
+
+
+def test_result_file_errors_exit_2_with_their_kind(tmp_path, capsys):
+    assert main(["inspect", "/nonexistent.h5"]) == 2
+    assert capsys.readouterr().err == "pcmb: file: /nonexistent.h5: no such file\n"
+    garbage = tmp_path / "garbage.h5"
+    garbage.write_text("not a result")
+    assert main(["report", str(garbage)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pcmb: file: ") and "not a readable pcmb result file" in err
+    assert "invalid configuration" not in err and "Traceback" not in err
+
+
+def test_bad_jobs_is_a_usage_error(tmp_path, capsys):
+    config = write_study(tmp_path)
+    assert main(["run", str(config), "--jobs", "0"]) == 2
+    assert capsys.readouterr().err == "pcmb: usage: --jobs must be >= 1, got 0\n"
+    assert not (tmp_path / "out.h5").exists()
 
 
 def test_model_failure_exits_3_naming_the_nodes(tmp_path, capsys):
