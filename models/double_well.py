@@ -1,4 +1,4 @@
-"""Double-well problem x' = x − x³ (SPEC §8.5, Part II Eq. 25).
+"""Double-well problem x' = x − x³ (Part II Eq. 25).
 
 Stable equilibria at x = ±1, an unstable one at 0: every x0 < 0 flows to −1 and every x0 > 0
 to +1, so an initial distribution straddling 0 ends as two Dirac peaks. Loaded by pcmb as

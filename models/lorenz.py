@@ -1,4 +1,4 @@
-"""Lorenz system (SPEC §8.6, Part II Eq. 26–27).
+"""Lorenz system (Part II Eq. 26–27).
 
     x' = σ (y − x),  y' = x (ρ − z) − y,  z' = x y − β z.
 

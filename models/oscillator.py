@@ -1,8 +1,8 @@
-"""Cubic oscillator driven by the two-mode terrain process (SPEC §8.4, Part II Eq. 17–24).
+"""Cubic oscillator driven by the two-mode terrain process (Part II Eq. 17–24).
 
     m x'' + c x' + h x³ = f(t),
 
-where f is the zero-mean part of the uncertain terrain of SPEC §8.3 seen in time: a point
+where f is the zero-mean part of the uncertain terrain (Part II Eq. 11) seen in time: a point
 moving at ``speed`` along the profile, s = speed·t, so
 
     f(t) = A1 (ξ11 cos(ω1 t) + ξ12 sin(ω1 t)) + A2 (ξ21 cos(ω2 t) + ξ22 sin(ω2 t)),

@@ -1,4 +1,4 @@
-"""Simple pendulum as an ODE and as a DAE with projection (SPEC §8.7, Part II Eq. 28–31).
+"""Simple pendulum as an ODE and as a DAE with projection (Part II Eq. 28–31).
 
 The bob hangs from the origin on a massless rod of length L; θ is measured from the
 downward vertical, and y points down: x = L sin θ, y = L cos θ. Loaded by pcmb as

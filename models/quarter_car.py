@@ -1,4 +1,4 @@
-"""Quarter-car vehicle suspension (SPEC §8.1–8.3, Part II Eq. 1–5, 10, 11).
+"""Quarter-car vehicle suspension (Part II Eq. 1–5, 10, 11).
 
 Two masses: the sprung mass Ms (body, displacement x1, velocity v1) on the unsprung mass Mu
 (wheel, x2, v2), joined by a suspension spring and damper; the tire is a linear spring kT
@@ -38,14 +38,14 @@ _SPRINGS: dict[str, tuple[dict[str, float], Law]] = {
 
 
 def _mr_force(dv: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
-    # SPEC §8.2: a tanh law in the relative velocity whose strength grows with the current.
+    # Part II (MR damper): a tanh law in the relative velocity, stronger with the current.
     return (p["F0"] + p["F1"] * p["I"]) * np.tanh(p["mr_slope"] * dv)
 
 
 # Damper force Fd(δ'), δ' = v1 - v2.
 _DAMPERS: dict[str, tuple[dict[str, float], Law]] = {
     "linear": ({"c": 1000.0}, lambda dv, p: p["c"] * dv),
-    # Part II Eq. 10 is unreadable; fitted to SPEC §8.2's figures: ±1015 N at I = 0 and
+    # Part II Eq. 10 is unreadable; fitted to the figures Part II quotes: ±1015 N at I = 0 and
     # ±(1015 + 2·2250) = ±5515 N at I = 2 A, reached within 1 % once |v| > 0.2 m/s
     # (tanh(14.3·0.2) = 0.994): over most of Part II Fig. 9a's |v| ≤ 1.5 m/s, the plateaus.
     "mr": ({"I": 1.0, "F0": 1015.0, "F1": 2250.0, "mr_slope": 14.3}, _mr_force),
@@ -101,7 +101,7 @@ class QuarterCar(StackedODEModel):
         ``"sine"``: z = A sin(2π f t) (A in m, f in Hz).
         ``"bump"``: a square bump z = bump_height (m) for bump_start <= t < bump_start +
         bump_duration (s), else 0; the integration restarts at both edges.
-        ``"kl"``: the periodic profile of SPEC §8.3 driven over at ``speed`` (m/s):
+        ``"kl"``: the periodic profile of Part II Eq. 11 driven over at ``speed`` (m/s):
         z(t) = A0 sin(2π s/D) + A1 (xi11 cos(s/L1) + xi12 sin(s/L1))
         + A2 (xi21 cos(s/L2) + xi22 sin(s/L2)), s = speed·t; the germs xi.. are parameters.
     damper:

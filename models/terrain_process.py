@@ -1,4 +1,4 @@
-"""The two-mode periodic terrain process of the uncertain-terrain case (SPEC §8.3, Part II Eq. 11).
+"""The two-mode periodic terrain process of the uncertain-terrain case (Part II Eq. 11).
 
 Not a model: the profile shared by ``quarter_car.py`` (the car drives over it) and
 ``oscillator.py`` (its zero-mean part, seen in time, drives the oscillator). Model files import

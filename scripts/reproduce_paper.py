@@ -1,14 +1,14 @@
 """Reproduce the papers' cases: polynomial chaos, the matching Monte Carlo, and the report.
 
     python scripts/reproduce_paper.py all --quick         # every case, reduced Monte Carlo
-    python scripts/reproduce_paper.py double_well         # one case, SPEC §8 sample counts
+    python scripts/reproduce_paper.py double_well         # one case, the papers' sample counts
     python scripts/reproduce_paper.py all --docs          # also refresh docs/figures/
 
 For each case (a config in configs/) this runs, through pcmb's public API only:
 
 1. the config's chaos study, and the other chaos orders the paper shows;
 2. its Monte Carlo twin (same model, inputs, grid, executor and analysis) with the sample
-   count of SPEC §8 (``--quick``: a tenth, at least 100);
+   count of the papers (``--quick``: a tenth, at least 100);
 3. ``pcmb report`` of the chaos result with the others overlaid;
 
 and prints and stores (``summary.json``) the comparison numbers: largest differences of
