@@ -1,36 +1,5 @@
-"""The result file: one HDF5 file per study (SPEC §5), written atomically.
-
-The only module that imports h5py. Layout::
-
-    /                        attrs: pcmb_version, schema_version, name, config, config_sha256,
-                                    method, created, versions, command_line, seconds,
-                                    warnings (JSON list), failures (JSON list)
-    /time (T,)   /node (N,)   /term (S,)   /input (n,)      dimension scales
-    /inputs                  attrs: names, distributions (JSON)
-    /nodes/germ (N, n)   /nodes/params (N, n)   /nodes/weights (N,)   /nodes/status (N,)
-    /basis/multi_index (S, n)
-    /outputs/<name>/values (N, T)  coefficients (S, T)  mean (T,)  std (T,)
-                    sobol_first (n, T)  sobol_total (n, T)
-                    nominal (T,)       the deterministic run at the nominal parameters
-                                       (their values: /inputs attrs nominal, JSON)
-
-With an analysis (root attrs ``analysis``: settings as JSON; see :mod:`pcmb.analysis.statistics`)::
-
-    /quantile (Q,)                                  dimension scale: the levels
-    /outputs/<name>/quantiles (Q, T)
-    /outputs/<name>/pdf/pdf_time (P,)  point (G,)  value (P, G)  density (P, G)  bandwidth (P,)
-    /outputs/<name>/spectrum/frequency (F,)  mean (F,)  std (F,)  nominal (F,)
-                                             attrs window, units ("<output unit>^2/Hz")
-    /outputs/<name>/spectrum/pdf/pdf_frequency (Fp,)  point (G,)  value (Fp, G)  density
-
-Every dataset has its dimension scales attached, so
-``xarray.open_dataset(path, group="outputs/x1", engine="h5netcdf")`` shows named dimensions.
-The file is written under a temporary name in the same folder, flushed, fsynced and renamed
-into place: a crash never leaves a truncated file at the output path.
-
-Compression: none. Measured on a study of the default quarter car's size (216 nodes × 301
-times, two outputs plus coefficients; 1.56 MB): gzip+shuffle saved 11 % of the size for 9×
-the write time (7.6 -> 69 ms). Chaos values are dense floating-point data that compress poorly.
+"""The result file: one HDF5 file per study, written atomically (layout in
+``docs/architecture.md``). The only module that imports h5py.
 """
 
 from __future__ import annotations

@@ -1,19 +1,5 @@
-"""How far apart two studies of the same model are: chaos against Monte Carlo, and so on.
-
-:func:`compare` measures, per output, the largest and the root-mean-square difference over
-time of the means and of the standard deviations of two results on the same time grid
-(the papers' Fig. 6 and 13 show these curves overlaid). Each difference is also given
-relative to the reference's largest standard deviation (the scale of the error bars; a
-mean can be near zero), and against the sampling noise of the results that come from
-random samples: a difference within that noise at every time is what "indistinguishable
-from Monte Carlo" means (:meth:`OutputDifference.verdict`).
-
-For N independent samples the standard error of the sample mean is σ/√N and that of the
-sample standard deviation σ √((κ - 1) / (4N)) to first order, κ the kurtosis estimated
-from the same samples (σ/√(2N) for a normal output; much less for a two-peaked one, much
-more for a heavy-tailed one). LHS and scrambled Sobol' samples have smaller errors for
-smooth outputs, and a chaos fit on samples is treated the same way: for them these
-overestimate the noise, and the verdict is lenient.
+"""How far apart two studies of the same model are (chaos against Monte Carlo, ...), in
+units of the reference's largest std and of the sampling noise (``docs/architecture.md``).
 """
 
 from __future__ import annotations

@@ -1,26 +1,9 @@
 """Figures and an index page for a result file: simulations with error bars, to look at.
 
-:func:`write_report` writes, for every output of a study, PNG figures
-
-- ``<output>_time.png``: mean ± 1σ and the quantile band over time, the deterministic run
-  at the nominal parameters, and the mean ± 1σ of every comparison result;
-- ``<output>_pdf.png``: PDFs at the analysis times (KDE of surrogate draws), with the
-  comparisons' histograms (sampled results) or KDEs (chaos results);
-- ``<output>_sobol.png``: first-order (stacked) and total Sobol' indices over time (when the
-  output has a chaos expansion);
-- ``<output>_psd.png``: mean PSD with its ±1σ band, the nominal PSD, the comparisons' mean
-  PSDs (when the output has a spectrum);
-- ``<output>_psd_pdf.png``: PDFs of the PSD at the analysis frequencies;
-- ``<output>_compare.png``: means and standard deviations of the result and each
-  comparison overlaid (the papers' Fig. 6 and 13);
-
-and an ``index.html`` that shows them with the key numbers (runs, wall time, warnings,
-largest differences). A result without a stored analysis is analysed with the default
-:class:`~pcmb.analysis.statistics.AnalysisSettings`; comparisons use the same window, times and
-frequencies as the result.
-
-This is the only module that imports matplotlib (object-oriented API and the Agg canvas:
-no pyplot, no global backend switch).
+:func:`write_report` writes, per output, ``<output>_time.png`` (mean ± 1σ, quantile band,
+nominal run, comparisons), ``_pdf.png``, ``_sobol.png``, ``_psd.png``, ``_psd_pdf.png`` and
+``_compare.png`` where they apply, and an ``index.html`` with the key numbers and warnings.
+The only module that imports matplotlib (object-oriented API and the Agg canvas).
 """
 
 from __future__ import annotations

@@ -1,29 +1,7 @@
 """What people look at: quantile bands, PDFs at chosen times, and spectra with error bars.
 
-:func:`analyse` turns a :class:`~pcmb.study.StudyResult` into an :class:`Analysis`, computed
-from the runs and expansions alone (so a result read back from its file gives the same
-numbers):
-
-- **quantile bands** over time, (Q, T) per output, from the first QUANTILE_DRAWS surrogate
-  draws (or the runs);
-- **PDFs at chosen times**: a Gaussian KDE (Scott's bandwidth) of ``samples`` surrogate
-  draws when the output has a chaos expansion, else of the model runs themselves
-  (sampling methods); each time is taken at the nearest grid point;
-- **spectra** (one-sided PSD, :mod:`pcmb.chaos.spectral` conventions: y² per Hz, window
-  ``window``, mean not removed): on a tensor collocation grid, the mean PSD comes from
-  the coefficient spectra (Σ|ĉ_α|², equal to the quadrature of the per-node PSDs) and the
-  band is the collocation estimate of the PSD's std — the PSD treated as one more output
-  and integrated by the grid's Gauss rule (:func:`pcmb.chaos.spectral.chaos_spectrum`); it is not
-  the exact std of the squared surrogate, which the PSD PDFs sample. For sampling methods:
-  the sample mean and standard deviation (ddof 1) of the per-run periodograms, same window
-  and scaling. The
-  PSD's PDF at chosen frequencies comes from the surrogate PSD (chaos) or the per-run
-  periodograms (sampling), with a KDE reflected at zero because a PSD is never negative.
-- the **nominal** spectrum: the periodogram of the deterministic run at nominal parameters.
-
-Every input draw uses one seeded generator, so the same settings give the same numbers.
-All surrogate values at those draws (every output, time and frequency asked for) come from
-one pass over the basis matrix, its costly part.
+:func:`analyse` computes them from the runs and expansions alone, so a result read back from
+its file gives the same numbers (what each is: ``docs/architecture.md``).
 """
 
 from __future__ import annotations

@@ -1,49 +1,8 @@
 """Run a model at every node, in parallel chunks, with failure capture and a resumable journal.
 
-How the work is cut and where it runs
--------------------------------------
-*Chunks.* The N nodes are cut into contiguous chunks; each chunk is one batched
-``model.simulate`` call. Chunk boundaries depend only on N (or an explicit ``chunk_size``),
-never on the number of workers, the backend or the machine: a batched integrator (one stacked
-``solve_ivp`` per chunk) gives results that depend on the batch composition, and pcmb promises
-bit-identical results for 1 or 2 workers, loky or dask, and after a resume. A model may state
-the ``chunk_size`` it prefers (stacked integrators do: their per-call cost is high). Otherwise
-the default size is
-``ceil(N / 16)`` capped to [1, 256]: 9 to 16 chunks for 16 <= N <= 4096, so two workers stay
-busy to the end (the idle tail is at most one chunk) and progress moves in steps of about 6 %,
-while each chunk stays big enough for batching to pay; the cap bounds the memory of one stacked
-solve (larger N simply gives more chunks of 256).
-
-*In-process or workers.* The first pending chunk always runs in this process, timed. With
-``jobs == 1`` everything runs in-process. Otherwise the rest goes to worker processes only if
-that is estimated to be faster: ``start-up + build + t_rest / workers < t_rest``, where
-``t_rest`` extrapolates the first chunk's time per node to the remaining nodes, ``build`` is
-the measured time to build the model (each worker builds it once) and start-up is about 1 s
-for loky and 3 s for a local dask cluster. Results do not depend on the choice: a chunk's
-values depend only on its nodes. (A model that kills its process during that first in-process
-chunk kills the run; the journal then holds nothing for it.)
-
-*Backends.* ``loky`` uses a private loky process pool (joblib's process backend; private so a
-user's later ``joblib.Parallel`` is not disturbed), ``dask`` a dask.distributed
-cluster (``address``, or a local cluster of ``jobs`` single-threaded worker processes). Both are
-driven through :mod:`concurrent.futures` futures rather than ``joblib.Parallel``: with one
-future per chunk the executor knows exactly which chunks were in flight when a worker died,
-and it journals each chunk the moment it finishes. At most as many chunks as there are worker
-slots are in flight, so a dying worker can only take those down with it.
-
-Failures
---------
-When a chunk's ``simulate`` raises or returns a wrong shape, all its nodes are re-run one by
-one in the same worker; when it returns non-finite rows, those nodes are (the finite rows are
-kept: a pointwise adapter's rows are independent, and a stacked solver with a non-finite node
-fails the whole call instead of returning biased rows). Each failing node is tried ``retries``
-more times; single-node results that succeed are used.
-
-When a worker dies (segfault, ``os._exit``, killed by the OS) every chunk in flight is a
-suspect: the pool is rebuilt and each suspect is re-run alone; one that dies again is split
-into single nodes, each run alone, so the node that kills its process is named ("worker
-process died (signal 11, SIGSEGV)"), and the campaign goes on. The executor reports failures
-in :class:`RunResult`; what to do about them (abort, regress) is the caller's policy.
+Chunk boundaries depend only on N, the config and the model class, never on workers or
+backend, so results are bit-identical however they run; a worker that dies costs only its
+chunk, and its killer node is named. See ``docs/architecture.md``.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
 """A crash-safe journal of finished model runs, so that an interrupted study can resume.
 
-The journal is a directory beside the output file (for example ``OUT.h5.journal/``)::
-
-    journal.json            what the journal belongs to (fingerprint, node count, outputs, grid)
-    record-000000.npz       one finished chunk: node indices, status, values, failure messages
-    record-000001.npz       ...
-
-Every file is written to a temporary name, flushed to disk (``fsync``) and renamed into place
-with :func:`os.replace`, which is atomic on POSIX: a process killed at any moment leaves either
-a complete record or no record, never a truncated one (a leftover ``.tmp-*`` file is an
-interrupted write and is never read). Records are never modified; a later record for a node
-(a failed node re-run on resume) supersedes an earlier one. One process writes to a journal at
-a time.
+A directory beside the output (``OUT.h5.journal/``): ``journal.json`` says what it belongs
+to, each ``record-NNNNNN.npz`` holds one finished chunk; every file is written atomically.
 """
 
 from __future__ import annotations

@@ -1,0 +1,79 @@
+"""Every registered node design honours the NodeDesign contract (pcmb.designs)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.designs import DESIGNS, MethodSettings, make_design
+from pcmb.result import Design
+
+INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.5, 0.2)}
+
+#: The smallest sensible settings per method kind; a new design adds its own here.
+EXAMPLES = {
+    "collocation": MethodSettings("collocation", orders=(2, 3)),
+    "montecarlo": MethodSettings("montecarlo", samples=64, seed=3),
+    "lhs": MethodSettings("lhs", samples=64, seed=3, fit="regression", orders=(2, 2)),
+    "sobol": MethodSettings("sobol", samples=64, seed=3),
+}
+
+
+def test_every_registered_kind_has_an_example():
+    assert set(EXAMPLES) == set(DESIGNS)
+
+
+@pytest.fixture(params=sorted(DESIGNS))
+def design(request):
+    return make_design(INPUTS, EXAMPLES[request.param])
+
+
+def test_nodes_are_germs_mapped_to_physical_values(design):
+    nodes = design.nodes()
+    n = len(INPUTS)
+    assert nodes.nodes.shape == nodes.params.shape and nodes.nodes.shape[1] == n
+    for k, dist in enumerate(INPUTS.values()):
+        np.testing.assert_allclose(nodes.params[:, k], dist.to_physical(nodes.nodes[:, k]))
+    weights = design.weights(nodes)
+    if weights is not None:
+        assert weights.shape == (nodes.size,)
+        assert abs(weights.sum() - 1.0) < 1e-12 and np.all(weights > 0)
+
+
+def test_the_record_says_how_the_nodes_were_made_and_round_trips(design):
+    record = design.record()
+    nodes = design.nodes()
+    assert isinstance(record, Design) and record.kind in DESIGNS
+    assert Design.from_description(record.describe()) == record
+    if record.samples is not None:
+        assert record.samples == nodes.size
+    if record.grid == "tensor-gauss":
+        assert nodes.size == int(np.prod(np.add(record.orders, 1)))
+
+
+def test_recovery_reproduces_an_affine_response(design):
+    """y = 2 + 3 a - b, linear in the physical inputs: every expansion of order >= 1 holds
+    it exactly, so its mean and std are the exact ones to round-off."""
+    nodes = design.nodes()
+    times = np.linspace(0.0, 1.0, 3)
+    response = 2.0 + 3.0 * nodes.params[:, 0] - nodes.params[:, 1]
+    values = {"y": response[:, None] * (1.0 + times)}
+    recovery = design.recover(nodes, values, np.ones(nodes.size, dtype=bool))
+    a, b = INPUTS.values()
+    mean = 2.0 + 3.0 * a.expectation() - b.expectation()
+    std = np.sqrt(9.0 * (2.0**2 / 12.0) + 0.2**2)
+    for expansion in recovery.expansions.values():
+        np.testing.assert_allclose(expansion.mean(), mean * (1.0 + times), rtol=1e-12)
+        np.testing.assert_allclose(expansion.std(), std * (1.0 + times), rtol=1e-10)
+    expected_fit = design.record().fit in ("projection", "regression")
+    assert bool(recovery.expansions) == expected_fit
+
+
+def test_unusable_settings_name_their_key():
+    with pytest.raises(ValueError, match=r"^method\.order:"):
+        make_design(INPUTS, MethodSettings("collocation"))
+    with pytest.raises(ValueError, match=r"^method\.samples:"):
+        make_design(INPUTS, MethodSettings("lhs", samples=1))
+    with pytest.raises(ValueError, match=r"^method\.kind: expected one of collocation"):
+        make_design(INPUTS, MethodSettings("smolyak"))
