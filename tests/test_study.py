@@ -228,3 +228,29 @@ def test_coefficients_are_bit_identical_for_one_or_two_workers(monkeypatch):
         np.testing.assert_array_equal(
             serial.expansions[name].coefficients, pooled.expansions[name].coefficients
         )
+
+
+def test_api_errors_name_the_argument_not_a_config():
+    with pytest.raises(UsageError) as caught:
+        pcmb.Study(pointwise, INPUTS, TIMES, method="montecarlo", samples=1)
+    assert str(caught.value) == "Study: samples: montecarlo needs at least 2 samples, got 1"
+    assert "<config>" not in str(caught.value)
+
+
+def test_sobol_without_a_power_of_two_is_a_recorded_warning_not_scipys():
+    study = pcmb.Study(pointwise, INPUTS, TIMES, method="sobol", samples=50, params={"a": 2})
+    with pytest.warns(pcmb.PcmbWarning) as caught:
+        result = study.run()
+    assert [w.code for w in result.warnings] == ["sobol-balance"]
+    assert all(issubclass(w.category, pcmb.PcmbWarning) for w in caught)
+
+
+def test_the_result_names_node_values_and_its_design():
+    result = pcmb.Study(pointwise, INPUTS, TIMES, order=2, params={"a": 2, "b": 0}).run()
+    assert result.design == pcmb.Design(
+        "collocation", "tensor-gauss", "tensor", (2, 2), fit="projection"
+    )
+    np.testing.assert_array_equal(result.node_params["b"], result.params[:, 1])
+    np.testing.assert_allclose(result.node_params["a"], 2.0 + result.germ[:, 0])
+    with pytest.raises(ValueError, match="needs a chaos expansion"):
+        pcmb.Study(pointwise, INPUTS, TIMES, method="lhs", samples=8).run().sobol_first("y")
