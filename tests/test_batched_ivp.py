@@ -1,4 +1,5 @@
-"""Tests of pcmb.adapters.stacked_ode: stacked and projected batch integration, and the model base.
+"""Tests of pcmb.adapters.runge_kutta (the explicit pairs) and pcmb.adapters.stacked_ode
+(stacked and projected batch integration, and the model base).
 
 Accuracy bounds: an integrator that keeps every step's local error within rtol (relative to
 the state) gives a global error of a modest multiple of rtol on these stable, non-chaotic
@@ -8,11 +9,15 @@ the solution's scale) for that accumulation, against closed-form solutions.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
+import scipy.integrate
 from model_loading import GLOBAL_FACTOR
-from scipy.integrate import DOP853, RK23, RK45, solve_ivp
+from scipy.integrate import solve_ivp
 
+from pcmb.adapters.runge_kutta import DOP853, PAIRS, RK23, RK45, rk_step
 from pcmb.adapters.stacked_ode import StackedODEModel, solve_projected, solve_stacked
 from pcmb.errors import ConfigError, ModelError
 
@@ -75,53 +80,6 @@ def test_one_node_among_idle_ones_keeps_its_own_accuracy():
     )
     error_plain = np.abs(plain.y.reshape(2, n_nodes, -1)[0, 0] - exact).max()
     assert error_plain > 3 * error_alone
-
-
-@pytest.mark.parametrize("method", ["RK23", "RK45", "DOP853"])
-def test_stacked_error_norm_is_the_worst_separate_runs_norm(method):
-    """The stacked solvers' step test, checked against scipy's own solver on each node."""
-    from pcmb.adapters.stacked_ode import _PER_NODE_SOLVERS
-
-    d, n_nodes, h = 3, 5, 0.01
-    rng = np.random.default_rng(1)
-    plain_class = {"RK23": RK23, "RK45": RK45, "DOP853": DOP853}[method]
-    stacked = _PER_NODE_SOLVERS[method](
-        lambda t, y: -y, 0.0, np.ones(d * n_nodes), 1.0, n_nodes=n_nodes
-    )
-    alone = plain_class(lambda t, y: -y, 0.0, np.ones(d), 1.0)
-    stages = rng.standard_normal((stacked.K.shape[0], d, n_nodes))
-    stages[:, :, 2] *= 1e3  # one node far worse than the others
-    scale = rng.uniform(0.5, 2.0, (d, n_nodes))
-    norm = stacked._estimate_error_norm(stages.reshape(-1, d * n_nodes), h, scale.ravel())
-    separate = [alone._estimate_error_norm(stages[:, :, b], h, scale[:, b]) for b in range(5)]
-    assert norm == pytest.approx(max(separate), rel=1e-12)
-
-
-def test_dop853_stacked_norm_can_hide_a_node_whatever_the_scaling():
-    """Why DOP853 needs its norm per node: its estimate |h|·‖e5‖²/√((‖e5‖² + 0.01‖e3‖²)·n)
-    over a stack lets one node's large 3rd-order estimate shrink another node's error, so
-    no tolerance scaling of the plain stacked solver bounds every node."""
-    d, h = 2, 0.01
-    plain_stacked = DOP853(lambda t, y: -y, 0.0, np.ones(2 * d), 1.0)
-    alone = DOP853(lambda t, y: -y, 0.0, np.ones(d), 1.0)
-    stages = np.zeros((plain_stacked.K.shape[0], d, 2))
-    # Node 0: stages with a 5th-order error estimate only; node 1: a pure 3rd-order one.
-    stages[:, :, 0] = np.linalg.lstsq(
-        np.stack([DOP853.E5, DOP853.E3]), np.array([[1.0, 1.0], [0.0, 0.0]]), rcond=None
-    )[0]
-    stages[:, :, 1] = (
-        1e4
-        * np.linalg.lstsq(
-            np.stack([DOP853.E5, DOP853.E3]), np.array([[0.0, 0.0], [1.0, 1.0]]), rcond=None
-        )[0]
-    )
-    scale = np.ones((d, 2))
-    node0 = alone._estimate_error_norm(stages[:, :, 0], h, scale[:, 0])
-    # Even with the tolerance shrunk by sqrt(B) = sqrt(2), the stack reports far less.
-    stacked = plain_stacked._estimate_error_norm(
-        stages.reshape(-1, 2 * d), h, scale.ravel() / np.sqrt(2)
-    )
-    assert stacked < node0 / 100
 
 
 def test_every_node_of_a_batch_is_at_least_as_accurate_as_promised():
@@ -200,21 +158,262 @@ def test_stacked_rejects_an_rhs_of_the_wrong_shape():
         solve_stacked(lambda t, y: y[0], np.ones((2, 4)), np.linspace(0.0, 1.0, 3))
 
 
+# =========================================================================== Runge–Kutta pairs
+
+EPS = np.finfo(float).eps
+
+
+@functools.cache
+def rooted_trees(order: int) -> tuple[tuple, ...]:
+    """Rooted trees with ``order`` vertices, each written as the sorted tuple of its subtrees."""
+    return tuple(sorted(set(_forests(order - 1))))
+
+
+@functools.cache
+def _forests(size: int) -> tuple[tuple, ...]:
+    """Multisets of rooted trees with ``size`` vertices in all, as sorted tuples."""
+    if size == 0:
+        return ((),)
+    found = set()
+    for first in range(1, size + 1):
+        for tree in rooted_trees(first):
+            for rest in _forests(size - first):
+                found.add(tuple(sorted((tree, *rest))))
+    return tuple(found)
+
+
+def tree_order(tree: tuple) -> int:
+    return 1 + sum(tree_order(child) for child in tree)
+
+
+def density(tree: tuple) -> int:
+    """γ(t) = |t| · Π γ(children): the order condition of t is b·Φ(t) = 1/γ(t)."""
+    return tree_order(tree) * int(np.prod([density(child) for child in tree]))
+
+
+def elementary_weight(tree: tuple, a: np.ndarray) -> np.ndarray:
+    """Φ(t) per stage: 1 for a single vertex, else the product over children of a·Φ(child)."""
+    weight = np.ones(a.shape[0])
+    for child in tree:
+        weight = weight * (a @ elementary_weight(child, a))
+    return weight
+
+
+def extended(pair) -> tuple[np.ndarray, np.ndarray]:
+    """The tableau with stage s = f(t + h, y_new) appended: A (s+1, s+1) and b (s+1,)."""
+    s = pair.stages
+    a = np.zeros((s + 1, s + 1))
+    a[:s, :s], a[s, :s] = pair.a, pair.b
+    return a, np.append(pair.b, 0.0)
+
+
+def condition_residual(weights: np.ndarray, tree: tuple, a: np.ndarray, target: float):
+    """|weights·Φ(t) − target| and its round-off allowance: every coefficient and every one of
+    the at most (s + 1)·|t| products and sums on a path carries a relative error of eps, so the
+    float result is within that many eps of the magnitude Σ|w|·Φ(|A|)(t)."""
+    value = weights @ elementary_weight(tree, a)
+    magnitude = np.abs(weights) @ elementary_weight(tree, np.abs(a))
+    return abs(value - target), (a.shape[0] + 1) * tree_order(tree) * EPS * magnitude
+
+
+def test_rooted_tree_counts():
+    """1, 1, 2, 4, 9, 20, 48, 115, 286 trees of orders 1 to 9 (OEIS A000081)."""
+    assert [len(rooted_trees(q)) for q in range(1, 10)] == [1, 1, 2, 4, 9, 20, 48, 115, 286]
+
+
+@pytest.mark.parametrize("pair", [RK23, RK45, DOP853], ids=lambda pair: pair.name)
+def test_tableau_satisfies_the_order_conditions_of_its_order_exactly(pair):
+    """Row sums of A are the nodes c, b·Φ(t) = 1/γ(t) for every rooted tree up to the order,
+    and some tree of the next order violates it (the order is not higher)."""
+    a, b = extended(pair)
+    row_sums = pair.a.sum(axis=1)
+    assert np.all(np.abs(row_sums - pair.c) <= pair.stages * EPS * np.abs(pair.a).sum(axis=1))
+    for q in range(1, pair.order + 1):
+        for tree in rooted_trees(q):
+            residual, allowance = condition_residual(b, tree, a, 1 / density(tree))
+            assert residual <= allowance, (q, tree)
+    violations = [
+        residual > 1e3 * allowance
+        for tree in rooted_trees(pair.order + 1)
+        for residual, allowance in [condition_residual(b, tree, a, 1 / density(tree))]
+    ]
+    assert any(violations)
+
+
+@pytest.mark.parametrize(
+    ("pair", "weights", "embedded_order"),
+    [(RK23, "e", 2), (RK45, "e", 4), (DOP853, "e", 5), (DOP853, "e3", 3)],
+    ids=["RK23", "RK45", "DOP853-e5", "DOP853-e3"],
+)
+def test_error_weights_compare_with_an_embedded_method_of_lower_order(
+    pair, weights, embedded_order
+):
+    """e = (embedded weights) − b: both solutions satisfy the conditions up to the embedded
+    order, so e·Φ(t) = 0 there; at the next order the embedded one fails (the estimate is
+    O(h^(embedded_order + 1)))."""
+    a, _ = extended(pair)
+    e = getattr(pair, weights)
+    for q in range(1, embedded_order + 1):
+        for tree in rooted_trees(q):
+            residual, allowance = condition_residual(e, tree, a, 0.0)
+            assert residual <= allowance, (q, tree)
+    assert any(
+        residual > 1e3 * allowance
+        for tree in rooted_trees(embedded_order + 1)
+        for residual, allowance in [condition_residual(e, tree, a, 0.0)]
+    )
+
+
+def exp_sin(t, y):
+    """y' = y cos t: with y(0) = 1 the solution is exp(sin t)."""
+    return y * np.cos(t)
+
+
+@pytest.mark.parametrize(
+    ("pair", "steps"), [(RK23, 64), (RK45, 32), (DOP853, 8)], ids=["RK23", "RK45", "DOP853"]
+)
+def test_fixed_steps_converge_at_the_pairs_order(pair, steps):
+    """Halving the step divides the global error by 2^order. The step counts put the errors
+    between 1e-11 and 1e-5: far above round-off and in the asymptotic range, where the next
+    error term moves the observed order by less than 0.2."""
+
+    def error(n: int) -> float:
+        h, y = 2.0 / n, np.ones(1)
+        f, stages = exp_sin(0.0, y), pair.stage_storage(1)
+        for i in range(n):
+            y, f = rk_step(pair, exp_sin, i * h, y, f, h, stages)
+        return abs(y[0] - np.exp(np.sin(2.0)))
+
+    assert np.log2(error(steps) / error(2 * steps)) == pytest.approx(pair.order, abs=0.2)
+
+
+@pytest.mark.parametrize(
+    ("pair", "dense_order", "h"),
+    [(RK23, 3, 0.05), (RK45, 4, 0.05), (DOP853, 7, 0.2)],
+    ids=["RK23", "RK45", "DOP853"],
+)
+def test_dense_output_has_its_order_inside_a_step(pair, dense_order, h):
+    """From the exact state, the interpolant's error inside a step is O(h^(q+1)) for a dense
+    output of order q (cubic Hermite for RK23, Shampine's quartic for RK45, DOP853's 7th
+    order); it starts at the old state and ends at the new one."""
+    t0 = 0.3
+
+    def worst_error(step: float) -> float:
+        y0 = np.exp(np.sin(np.array([t0])))
+        stages = pair.stage_storage(1)
+        y1, _ = rk_step(pair, exp_sin, t0, y0, exp_sin(t0, y0), step, stages)
+        times = t0 + step * np.linspace(0.0, 1.0, 41)
+        values = pair.interpolant(exp_sin, t0, y0, y1, step, stages)(times)[0]
+        assert values[0] == y0[0]
+        assert abs(values[-1] - y1[0]) <= 4 * EPS * abs(y1[0])
+        return float(np.abs(values - np.exp(np.sin(times))).max())
+
+    observed = np.log2(worst_error(h) / worst_error(h / 2))
+    assert observed == pytest.approx(dense_order + 1, abs=0.2)
+
+
+def forced_oscillator(t, y):
+    """x'' = −4x + 0.3 sin t on (2, B) states."""
+    return np.stack([y[1], -4.0 * y[0] + 0.3 * np.sin(t)])
+
+
+@pytest.mark.parametrize("name", ["RK23", "RK45", "DOP853"])
+def test_a_step_and_its_dense_output_are_scipys_bit_for_bit(name):
+    """Same tableau, same arithmetic: one step of a given size (accepted at once) and its dense
+    output equal those of scipy's public solver class of the same name."""
+    y0, h = np.array([1.0, 0.5]), 0.05
+
+    def fun(t, y):
+        return forced_oscillator(t, y[:, None])[:, 0]
+
+    solver = getattr(scipy.integrate, name)(fun, 0.0, y0, 1.0, first_step=h, atol=1e-9)
+    solver.step()
+    assert solver.step_size == h  # accepted without a rejection
+    pair = PAIRS[name]
+    stages = pair.stage_storage(y0.size)
+    y1, _ = rk_step(pair, fun, 0.0, y0, fun(0.0, y0), h, stages)
+    assert np.array_equal(y1, solver.y)
+    times = np.linspace(0.0, h, 7)
+    dense = pair.interpolant(fun, 0.0, y0, y1, h, stages)(times)
+    assert np.array_equal(dense, solver.dense_output()(times))
+
+
+@pytest.mark.parametrize("name", ["RK23", "RK45", "DOP853"])
+@pytest.mark.parametrize("rtol", [1e-5, 1e-7])
+def test_a_batch_of_one_follows_scipys_solve_ivp(name, rtol):
+    """One node runs scipy's algorithm: starting step, step control, dense output and output
+    sampling. Only roundings differ -- the per-node norm is sqrt(mean(x²)) where scipy takes
+    ‖x‖/√n, and RK45's error weights are rounded as b̂ − b -- so step sizes differ in their
+    last bits and the outputs by round-off: each step rounds fewer than 64 operations in a
+    chain per state (stages, update, dense output), each by at most one ulp of the solution's
+    scale. Any difference in the algorithm would show at the level of rtol, far above."""
+    times = np.linspace(0.0, 10.0, 101)
+    atol = 1e-12
+    ours = solve_stacked(
+        forced_oscillator, np.array([[1.0], [0.0]]), times, method=name, rtol=rtol, atol=atol
+    )[:, 0]
+
+    def fun(t, y):
+        return forced_oscillator(t, y[:, None])[:, 0]
+
+    options = {"method": name, "rtol": rtol, "atol": atol}
+    reference = solve_ivp(fun, (0.0, 10.0), [1.0, 0.0], t_eval=times, **options).y
+    steps = solve_ivp(fun, (0.0, 10.0), [1.0, 0.0], **options).t.size - 1
+    round_off = steps * 64 * EPS * np.abs(reference).max()
+    assert round_off < 1e-2 * rtol  # the comparison can tell the algorithms apart
+    assert np.abs(ours - reference).max() <= round_off
+
+
+@pytest.mark.parametrize("pair", [RK23, RK45, DOP853], ids=lambda pair: pair.name)
+def test_error_norm_is_the_worst_nodes_own_norm(pair):
+    """The stacked acceptance test: the largest of B per-node norms, each the norm a one-node
+    batch computes (equal up to the rounding of a d-term sum)."""
+    d, n_nodes, h = 3, 5, 0.01
+    rng = np.random.default_rng(1)
+    stages = rng.standard_normal((pair.stages + 1, d, n_nodes))
+    stages[:, :, 2] *= 1e3  # one node far worse than the others
+    scale = rng.uniform(0.5, 2.0, (d, n_nodes))
+    norm = pair.error_norm(stages.reshape(-1, d * n_nodes), h, scale.ravel(), n_nodes)
+    separate = [
+        pair.error_norm(np.ascontiguousarray(stages[:, :, b]), h, scale[:, b], 1)
+        for b in range(n_nodes)
+    ]
+    assert norm == pytest.approx(max(separate), rel=d * EPS)
+
+
+@pytest.mark.parametrize("pair", [RK23, RK45, DOP853], ids=lambda pair: pair.name)
+def test_idle_nodes_do_not_dilute_an_active_nodes_error(pair):
+    """One active node among B − 1 with zero error: the per-node norm is the active node's
+    own, where one norm over the stack as a single system would be sqrt(B) times smaller."""
+    d, n_nodes, h = 2, 100, 0.01
+    stages = np.zeros((pair.stages + 1, d, n_nodes))
+    stages[:, :, 0] = np.random.default_rng(2).standard_normal((pair.stages + 1, d))
+    scale = np.ones(d * n_nodes)
+    alone = pair.error_norm(np.ascontiguousarray(stages[:, :, 0]), h, np.ones(d), 1)
+    flat = stages.reshape(-1, d * n_nodes)
+    assert pair.error_norm(flat, h, scale, n_nodes) == pytest.approx(alone, rel=d * EPS)
+    as_one_system = pair.error_norm(flat, h, scale, 1)
+    assert as_one_system == pytest.approx(alone / np.sqrt(n_nodes), rel=d * n_nodes * EPS)
+
+
+def test_dop853_node_norms_keep_one_nodes_estimate_from_hiding_anothers():
+    """DOP853's norm |h|·‖e5‖²/√((‖e5‖² + 0.01‖e3‖²)·n) over a whole stack lets one node's
+    large 3rd-order estimate shrink another node's error by any factor, so no scaling of the
+    tolerances bounds every node; per node, each keeps its own norm."""
+    d, h = 2, 0.01
+    # Stage vectors with (e5·k, e3·k) = (1, 0) and (0, 1).
+    basis = np.linalg.lstsq(np.stack([DOP853.e, DOP853.e3]), np.eye(2), rcond=None)[0]
+    stages = np.zeros((DOP853.stages + 1, d, 2))
+    stages[:, :, 0] = basis[:, [0]]  # node 0: a 5th-order estimate only
+    stages[:, :, 1] = 1e4 * basis[:, [1]]  # node 1: a large 3rd-order estimate only
+    flat = stages.reshape(-1, 2 * d)
+    node0 = DOP853.error_norm(np.ascontiguousarray(stages[:, :, 0]), h, np.ones(d), 1)
+    assert DOP853.error_norm(flat, h, np.ones(2 * d), 2) == pytest.approx(node0, rel=d * EPS)
+    # As one system, even with the tolerance shrunk by sqrt(B) = sqrt(2), node 0 is hidden.
+    assert DOP853.error_norm(flat, h, np.ones(2 * d) / np.sqrt(2), 1) < node0 / 100
+
+
 # =========================================================================== solve_projected
-
-
-def test_dormand_prince_tableau_is_scipys():
-    """An independent copy of the same pair: scipy's RK45 (error weights there are B4 - B5)."""
-    from pcmb.adapters import stacked_ode as batched_ivp
-
-    assert np.allclose(batched_ivp._DP_C[:6], RK45.C, rtol=0, atol=1e-15)
-    assert np.allclose(batched_ivp._DP_A[:6, :5], RK45.A, rtol=0, atol=1e-15)
-    assert np.allclose(batched_ivp._DP_B5[:6], RK45.B, rtol=0, atol=1e-15)
-    assert np.allclose(batched_ivp._DP_E, -RK45.E, rtol=0, atol=1e-15)
-    # Classical order conditions of the 5th-order weights through order 4, and the bushy
-    # tree of order 5: sums of b·c^(q-1) equal 1/q.
-    b, c = batched_ivp._DP_B5, batched_ivp._DP_C
-    assert [float(b @ c**q) for q in range(5)] == pytest.approx([1, 1 / 2, 1 / 3, 1 / 4, 1 / 5])
 
 
 def rotation(omega: np.ndarray):

@@ -1,40 +1,11 @@
 """Integrate a batch of independent ODE systems as one stacked system.
 
-A collocation batch holds B nodes of the same model, each an independent initial value
-problem with d states. Integrating them as one system of B·d states in a single solver call
-replaces B solver set-ups and B Python step loops by one, with every right-hand side evaluated
-on whole (d, B) arrays.
-
-Layout: a batch state is an array of shape (d, B) -- states x nodes -- so ``x1, x2 = y``
-unpacks one row per state, each row a (B,) vector over the nodes. The stacked vector handed to
-the solver is that array raveled (row-major), so it is reshaped without copying.
-
-Per-node accuracy
------------------
-scipy's solvers accept a step when one error norm over all components, scaled by
-``atol + rtol·|y|``, is at most 1. Over a stacked system that norm mixes the nodes: the RMS
-norm of RK23, RK45, Radau and BDF lets one node's error be up to sqrt(B) times what a run of
-that node alone would accept, and DOP853's norm (a ratio of its 5th- and 3rd-order estimates
-summed over all components) can hide a node's error behind the others' by any factor.
-:func:`solve_stacked` therefore gives the explicit methods an error norm taken per node --
-each node's own norm over its d states, exactly as a separate run computes it, and the largest
-of these B norms -- so every accepted step passes every node's separate-run acceptance test.
-The implicit methods get ``rtol/sqrt(B)`` and ``atol/sqrt(B)`` instead, which bounds each
-node's RMS norm by the stacked one. :func:`solve_projected` controls the error per node the
-same way, and projects the state onto a constraint manifold after every step.
-
-Output times
-------------
-:func:`solve_stacked` samples the solution at ``times`` through the solver's dense output (its
-continuous extension), as ``solve_ivp(t_eval=...)`` does. The step control does not see the
-interpolation error between steps, which can exceed the step error when a fast mode spans a
-good part of a step; choose tolerances for the accuracy wanted at the output times and check
-it against a tight reference. :func:`solve_projected` lands a step on every output time
-instead, so its outputs are integrated (and projected) states.
-
-:class:`StackedODEModel` builds the model protocol of SPEC §3 on top: a subclass states its
-parameters, initial state, right-hand side and outputs, and inherits parameter handling,
-validation and batched integration.
+A collocation batch holds B nodes of the same model, each an independent initial value problem
+with d states, held as one (d, B) array -- states x nodes -- and integrated in one solver call
+with every right-hand side evaluated on whole (d, B) arrays. The explicit methods
+(:mod:`pcmb.adapters.runge_kutta`) control each node's error by its own norm; the implicit ones
+(scipy's Radau and BDF) get tolerances divided by sqrt(B), which bounds every node's RMS norm by
+the stacked one. :class:`StackedODEModel` builds the model protocol of SPEC §3 on top.
 """
 
 from __future__ import annotations
@@ -49,8 +20,17 @@ from typing import Any, ClassVar
 import numpy as np
 import scipy.sparse
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import DOP853, RK23, RK45, solve_ivp
+from scipy.integrate import solve_ivp
 
+from pcmb.adapters.runge_kutta import (
+    PAIRS,
+    RK45,
+    initial_step,
+    integrate,
+    node_rms,
+    rk_step,
+    step_factor,
+)
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 
 __all__ = [
@@ -62,31 +42,10 @@ __all__ = [
 BatchRhs = Callable[[float, NDArray[np.float64]], NDArray[np.float64]]
 BatchProjection = Callable[[float, NDArray[np.float64]], NDArray[np.float64]]
 
-_EXPLICIT_METHODS = ("RK23", "RK45", "DOP853")
+_EXPLICIT_METHODS = tuple(PAIRS)
 _IMPLICIT_METHODS = ("Radau", "BDF")
 # scipy clips a smaller rtol (with a warning); below it round-off dominates anyway.
 _RTOL_FLOOR = 100 * np.finfo(float).eps
-
-# Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, Table 5.2): nodes C,
-# coefficients A, 5th-order weights B5 and the difference B5 − B4 of the embedded 4th order.
-_DP_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
-_DP_A = np.array(
-    [
-        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [1 / 5, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [3 / 40, 9 / 40, 0.0, 0.0, 0.0, 0.0],
-        [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0, 0.0],
-        [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0, 0.0],
-        [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656, 0.0],
-        [35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84],
-    ]
-)
-_DP_B5 = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0])
-_DP_B4 = np.array([5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40])
-_DP_E = _DP_B5 - _DP_B4
-_DP_ERROR_ORDER = 4  # order of the embedded solution: the error estimate is O(h^5)
-# Step-size controller bounds (the usual choice: scipy and Hairer use the same).
-_SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0
 
 
 # =========================================================================== stacked solve
@@ -118,14 +77,15 @@ def solve_stacked(
     t0:
         Time of the initial state.
     method:
-        One of scipy's ``"RK23"``, ``"RK45"``, ``"DOP853"`` (explicit) or ``"Radau"``,
-        ``"BDF"`` (implicit; they get the block-diagonal Jacobian sparsity of the batch, so a
-        finite-difference Jacobian costs d right-hand side calls, not B·d).
+        An explicit pair of :mod:`pcmb.adapters.runge_kutta` (``"RK23"``, ``"RK45"``,
+        ``"DOP853"``) or scipy's implicit ``"Radau"``, ``"BDF"`` (with the block-diagonal
+        Jacobian sparsity of the batch, so a finite-difference Jacobian costs d right-hand
+        side calls, not B·d).
     rtol, atol:
         Per-node tolerances, as for a separate run of one node: ``atol`` is a scalar or a (d,)
         vector (one value per state). Explicit methods apply them to every node's own error
-        norm; implicit methods get them divided by sqrt(B) (see the module notes), with
-        ``rtol`` floored at 100 machine epsilons.
+        norm; implicit methods get them divided by sqrt(B), with ``rtol`` floored at 100
+        machine epsilons.
     breakpoints:
         Times where ``rhs`` is discontinuous (a step input): the integration restarts there
         instead of stepping across the jump. Values outside ``(t0, times[-1])`` are ignored.
@@ -141,6 +101,12 @@ def solve_stacked(
         Shapes, times, tolerances or method are invalid, or ``rhs`` returns the wrong shape.
     ModelError
         The integration failed (the solver's message, or a non-finite value in ``rhs``).
+
+    Notes
+    -----
+    Outputs come from the dense output (continuous extension) of the step that reaches them,
+    as with ``solve_ivp(t_eval=...)``. Step control does not see the interpolation error,
+    which can exceed the step error when a fast mode spans a good part of a step.
     """
     state = _as_state(y0)
     d, n_nodes = state.shape
@@ -150,10 +116,18 @@ def solve_stacked(
         choices = ", ".join(_EXPLICIT_METHODS + _IMPLICIT_METHODS)
         raise ValueError(f"method must be one of {choices}, got {method!r}")
     _check_rtol(rtol)
-    options: dict[str, Any]
+    _check_rhs(rhs, t0, state)
+
+    last_t = [t0]
+
+    def fun(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        last_t[0] = t
+        return np.asarray(rhs(t, y.reshape(d, n_nodes)), dtype=float).reshape(-1)
+
+    # advance(start, stop, y, t_eval) -> states at t_eval, (d·B, len(t_eval)).
     if method in _IMPLICIT_METHODS:
         scale = 1.0 / math.sqrt(n_nodes)
-        options = {
+        options: dict[str, Any] = {
             "method": method,
             "rtol": max(rtol * scale, _RTOL_FLOOR),
             "atol": np.repeat(per_state_atol * scale, n_nodes),
@@ -162,20 +136,26 @@ def solve_stacked(
                 np.ones((d, d)), scipy.sparse.identity(n_nodes), format="csc"
             ),
         }
+
+        def advance(
+            start: float, stop: float, y: NDArray[np.float64], t_eval: NDArray[np.float64]
+        ) -> NDArray[np.float64]:
+            sol = solve_ivp(fun, (start, stop), y, t_eval=t_eval, **options)
+            if sol.status != 0:
+                raise ModelError(
+                    f"{method} integration failed near t={last_t[0]:.6g}: {sol.message}"
+                )
+            return sol.y
+
     else:
-        options = {
-            "method": _PER_NODE_SOLVERS[method],
-            "n_nodes": n_nodes,
-            "rtol": rtol,
-            "atol": np.repeat(per_state_atol, n_nodes),
-        }
-    _check_rhs(rhs, t0, state)
+        pair, tolerance = PAIRS[method], np.repeat(per_state_atol, n_nodes)
 
-    last_t = [t0]
-
-    def fun(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        last_t[0] = t
-        return rhs(t, y.reshape(d, n_nodes)).reshape(-1)
+        def advance(
+            start: float, stop: float, y: NDArray[np.float64], t_eval: NDArray[np.float64]
+        ) -> NDArray[np.float64]:
+            return integrate(
+                pair, fun, start, y, t_eval, rtol=rtol, atol=tolerance, n_nodes=n_nodes
+            )
 
     cuts = sorted({float(b) for b in breakpoints if t0 < b < grid[-1]})
     edges = [t0, *cuts, float(grid[-1])]
@@ -191,75 +171,15 @@ def solve_stacked(
             continue
         try:
             with np.errstate(over="raise", invalid="raise", divide="raise"):
-                sol = solve_ivp(fun, (start, stop), y, t_eval=t_eval, **options)
+                values = advance(start, stop, y, t_eval)
         except FloatingPointError as exc:
             raise ModelError(
                 f"{method} integration failed near t={last_t[0]:.6g}: non-finite value in the "
                 f"right-hand side ({exc})"
             ) from exc
-        if sol.status != 0:
-            raise ModelError(f"{method} integration failed near t={sol.t[-1]:.6g}: {sol.message}")
-        values = sol.y.reshape(d, n_nodes, -1)
-        out[:, :, inside] = values[:, :, : np.count_nonzero(inside)]
-        y = sol.y[:, -1]
+        out[:, :, inside] = values.reshape(d, n_nodes, -1)[:, :, : np.count_nonzero(inside)]
+        y = values[:, -1]
     return out
-
-
-class _PerNodeNorm:
-    """Mixin for scipy's explicit Runge–Kutta solvers: the error norm of a stacked (d, B)
-    state is the largest per-node norm, each computed as a separate run of the node would.
-
-    It overrides ``_estimate_error_norm(K, h, scale)``, the hook scipy's ``RungeKutta`` step
-    calls with the stage derivatives K (stages, d·B) and the tolerance scale (d·B,).
-    """
-
-    def __init__(self, *args: Any, n_nodes: int, **options: Any) -> None:
-        self._n_nodes = n_nodes
-        super().__init__(*args, **options)
-
-    def _by_node(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
-        return values.reshape(-1, self._n_nodes)  # (d, B): the stacked layout
-
-
-class _PerNodeRK(_PerNodeNorm):
-    """RK23 and RK45: the RMS over a node's d states of its scaled error estimate."""
-
-    def _estimate_error_norm(self, K: NDArray, h: float, scale: NDArray) -> float:
-        scaled = self._by_node(self._estimate_error(K, h) / scale)
-        return float(np.max(np.sqrt(np.mean(scaled**2, axis=0))))
-
-
-class _PerNodeDOP853(_PerNodeNorm):
-    """DOP853: its combined 5th/3rd-order estimate (Hairer's DOP853), per node."""
-
-    def _estimate_error_norm(self, K: NDArray, h: float, scale: NDArray) -> float:
-        err5 = np.sum(self._by_node(K.T @ self.E5 / scale) ** 2, axis=0)
-        err3 = np.sum(self._by_node(K.T @ self.E3 / scale) ** 2, axis=0)
-        denominator = err5 + 0.01 * err3
-        d = scale.size // self._n_nodes
-        active = denominator > 0  # a node with both estimates zero has zero error
-        norms = np.zeros_like(err5)
-        norms[active] = abs(h) * err5[active] / np.sqrt(denominator[active] * d)
-        return float(np.max(norms))
-
-
-class _PerNodeRK23(_PerNodeRK, RK23):
-    """RK23 with the per-node error norm."""
-
-
-class _PerNodeRK45(_PerNodeRK, RK45):
-    """RK45 with the per-node error norm."""
-
-
-class _PerNodeDOP853Solver(_PerNodeDOP853, DOP853):
-    """DOP853 with the per-node error norm."""
-
-
-_PER_NODE_SOLVERS: dict[str, type] = {
-    "RK23": _PerNodeRK23,
-    "RK45": _PerNodeRK45,
-    "DOP853": _PerNodeDOP853Solver,
-}
 
 
 # =========================================================================== projected solve
@@ -288,7 +208,9 @@ def solve_projected(
     ``atol + rtol·max(|y|, |y_new|)`` and its RMS over the d states is taken; a step is
     accepted when the largest of these B norms is at most 1. Every node therefore meets the
     acceptance test of a separate run; the batch shares one step size (the smallest any node
-    needs).
+    needs). Step, norm, starting step (measured with the same per-node norm) and step-size
+    rule are those of :data:`pcmb.adapters.runge_kutta.RK45`; unlike :func:`solve_stacked`,
+    a step right after a rejection may grow.
 
     Parameters
     ----------
@@ -323,97 +245,56 @@ def solve_projected(
     state = _as_state(y0)
     d, n_nodes = state.shape
     grid = _as_times(times, t0)
-    tol_abs = _as_atol(atol, d)[:, None]
+    tolerance = np.repeat(_as_atol(atol, d), n_nodes)
     _check_rtol(rtol)
     if max_steps < 1:
         raise ValueError(f"max_steps must be at least 1, got {max_steps}")
     _check_rhs(rhs, t0, state)
+
+    def fun(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(rhs(t, y.reshape(d, n_nodes)), dtype=float).reshape(-1)
+
+    def per_node(x: NDArray[np.float64]) -> float:
+        return node_rms(x, n_nodes)
+
     t = float(t0)
     try:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
-            y = _checked_projection(project, t, state)
+            y = _checked_projection(project, t, state).reshape(-1)
             out = np.empty((d, n_nodes, grid.size))
             done = int(np.searchsorted(grid, t, side="right"))  # outputs at t0: the start
-            out[:, :, :done] = y[:, :, None]
+            out[:, :, :done] = y.reshape(d, n_nodes, 1)
             if done == grid.size:
                 return out
-            h = _initial_step(rhs, t, y, rtol, tol_abs, grid[-1] - t)
-            stages = np.empty((_DP_C.size, d, n_nodes))
+            f = fun(t, y)
+            h = initial_step(
+                fun, t, y, f, grid[-1] - t, RK45.error_order, rtol, tolerance, per_node
+            )
+            stages = RK45.stage_storage(y.size)
             for _ in range(max_steps):
-                if done == grid.size:
-                    return out
                 target = grid[done]
                 step = min(h, target - t)
                 if t + step == t:
                     raise ModelError(f"step size underflow at t={t:.6g}")
-                y_new = _dopri_step(rhs, t, y, step, stages)
-                error = step * (_DP_E @ stages.reshape(_DP_C.size, -1)).reshape(y.shape)
-                scale = tol_abs + rtol * np.maximum(np.abs(y), np.abs(y_new))
-                norm = float(np.max(np.sqrt(np.mean((error / scale) ** 2, axis=0))))
-                factor = _step_factor(norm)
+                y_new, _ = rk_step(RK45, fun, t, y, f, step, stages)
+                scale = tolerance + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+                norm = RK45.error_norm(stages, step, scale, n_nodes)
+                factor = step_factor(norm, RK45.error_order)
                 if norm <= 1.0:
                     t = target if step == target - t else t + step
-                    y = _checked_projection(project, t, y_new)
+                    y = _checked_projection(project, t, y_new.reshape(d, n_nodes)).reshape(-1)
                     if t == target:
-                        out[:, :, done] = y
+                        out[:, :, done] = y.reshape(d, n_nodes)
                         done += 1
+                        if done == grid.size:
+                            return out
+                    f = fun(t, y)
                     h = step * factor
                 else:
                     h = step * min(factor, 1.0)
     except FloatingPointError as exc:
         raise ModelError(f"non-finite value near t={t:.6g} ({exc})") from exc
     raise ModelError(f"no result after {max_steps} steps (reached t={t:.6g})")
-
-
-def _dopri_step(
-    rhs: BatchRhs,
-    t: float,
-    y: NDArray[np.float64],
-    h: float,
-    stages: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """One Dormand–Prince step; fills ``stages`` (7, d, B) and returns the 5th-order state."""
-    flat = stages.reshape(_DP_C.size, -1)  # a view: stage sums as one small matrix product
-    stages[0] = rhs(t, y)
-    for i in range(1, _DP_C.size):
-        y_stage = y + h * (_DP_A[i, :i] @ flat[:i]).reshape(y.shape)
-        stages[i] = rhs(t + _DP_C[i] * h, y_stage)
-    # The last row of A is B5 (first same as last): the last stage point is the new state.
-    return y_stage
-
-
-def _step_factor(norm: float) -> float:
-    if norm == 0.0:
-        return _MAX_FACTOR
-    proposal = _SAFETY * norm ** (-1.0 / (_DP_ERROR_ORDER + 1))
-    return min(_MAX_FACTOR, max(_MIN_FACTOR, proposal))
-
-
-def _initial_step(
-    rhs: BatchRhs,
-    t: float,
-    y: NDArray[np.float64],
-    rtol: float,
-    tol_abs: NDArray[np.float64],
-    span: float,
-) -> float:
-    """Starting step of Hairer, Nørsett & Wanner (II.4), with the per-node maximum norm."""
-
-    def norm(v: NDArray[np.float64]) -> float:
-        return float(np.max(np.sqrt(np.mean((v / scale) ** 2, axis=0))))
-
-    scale = tol_abs + rtol * np.abs(y)
-    f0 = rhs(t, y)
-    d0, d1 = norm(y), norm(f0)
-    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h0 = min(h0, span)
-    f1 = rhs(t + h0, y + h0 * f0)
-    d2 = norm(f1 - f0) / h0
-    if max(d1, d2) <= 1e-15:
-        h1 = max(1e-6, h0 * 1e-3)
-    else:
-        h1 = (0.01 / max(d1, d2)) ** (1.0 / (_DP_ERROR_ORDER + 1))
-    return min(100 * h0, h1, span)
 
 
 def _checked_projection(
