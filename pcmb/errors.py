@@ -116,6 +116,17 @@ class ModelError(PcmbError):
     """A model run failed (raised by models and adapters for a single run or batch)."""
 
 
+class ModelDefinitionError(ModelError):
+    """A model that breaks the model protocol in a way no node can escape (exit 3).
+
+    For example a per-point function that returns a number where a (T,) array is due: every
+    node would fail the same way, so the run stops at the first with one message.
+    """
+
+    exit_code = EXIT_MODEL
+    label = "model error"
+
+
 class ModelRunError(PcmbError):
     """Nodes failed and the failure policy does not allow going on (exit 3).
 

@@ -7,11 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import inspect
 import json
-import sys
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -19,12 +17,20 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pcmb.adapters.python import Model, ObjectModelFactory
+from pcmb.adapters.protocol import ModelFactory
+from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.designs import DESIGNS, MethodSettings, NodeDesign, make_design
-from pcmb.errors import ConfigProblem, IllPosedError, ModelRunError, PcmbWarning, UsageError
+from pcmb.errors import (
+    ConfigProblem,
+    IllPosedError,
+    ModelDefinitionError,
+    ModelRunError,
+    PcmbWarning,
+    UsageError,
+)
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS
 from pcmb.run.executor import RunResult, run_nodes
@@ -59,9 +65,9 @@ class Study:
     Parameters
     ----------
     model:
-        A model factory (a picklable callable returning a model, as built from a config),
-        a model class (constructed with ``params``), a model object, or a per-point
-        function ``f(params: dict, times) -> dict``.
+        A :class:`~pcmb.adapters.protocol.ModelFactory` (as built from a config), a model
+        class (constructed with ``params``), a model object, or a function marked with
+        :func:`pcmb.pointwise` or :func:`pcmb.batched`.
     inputs:
         Ordered mapping input name -> distribution; the order is the germ order.
     times:
@@ -141,16 +147,14 @@ class Study:
         self.chunk_size = chunk_size
         self.on_failure, self.retries = on_failure, retries
         self.params = dict(params or {})
-        if _is_function(model):
+        if is_function_model(model):
             # A per-point function receives every parameter by name: uncertain inputs it was
             # not given a nominal value for start at their mean (used by the nominal run).
             self.params = {
                 **{name: dist.expectation() for name, dist in self.inputs.items()},
                 **self.params,
             }
-        self.model_factory: Callable[[], Model] = (
-            model if _is_factory(model) else ObjectModelFactory(model, self.params, _tuple(outputs))
-        )
+        self.model_factory: ModelFactory = model_factory(model, self.params, _tuple(outputs))
         self.outputs = _tuple(outputs)
         self.nominal = dict(nominal or {})
         self.analysis = analysis
@@ -399,8 +403,9 @@ class Study:
                 journal=journal,
                 progress=progress,
             )
-        except UsageError:
-            # Rejected before any node ran: leave nothing behind (a journal would block a rerun).
+        except (UsageError, ModelDefinitionError):
+            # Rejected before any node ran, or a model broken at every node: leave nothing
+            # behind (a journal would block a rerun).
             if journal is not None and fresh_journal:
                 journal.remove()
             raise
@@ -484,27 +489,6 @@ class Study:
             warnings=(*warnings, *recovery.warnings),
             seconds=runs.seconds,
         )
-
-
-def _is_factory(model: Any) -> bool:
-    """Whether ``model`` is one of pcmb's model factories (as built from a config)."""
-    from pcmb.adapters.python import CommandModelFactory, PythonModelFactory
-
-    factories: tuple[type, ...] = (PythonModelFactory, CommandModelFactory, ObjectModelFactory)
-    mujoco = sys.modules.get("pcmb.adapters.mujoco.model")
-    if mujoco is not None:
-        factories += (mujoco.MujocoModelFactory,)
-    return isinstance(model, factories)
-
-
-def _is_function(model: Any) -> bool:
-    """A plain per-point function (not a class, a model object or a factory)."""
-    return (
-        callable(model)
-        and not inspect.isclass(model)
-        and not hasattr(model, "simulate")
-        and not _is_factory(model)
-    )
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

@@ -30,13 +30,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
-from scipy.special import ellipj, ellipk
 
 import pcmb
 from pcmb.analysis.comparison import compare, method_label
 from pcmb.analysis.report import write_report
 from pcmb.analysis.statistics import output_draws
+from pcmb.references import double_well, pendulum_angle, statistical_linearization
 
 ROOT = Path(__file__).resolve().parents[1]
 #: --quick divides the Monte Carlo sample counts by this (keeping at least 100 runs).
@@ -53,17 +52,9 @@ def _mean_square_at_end(runs: dict[str, pcmb.StudyResult], config: Any) -> dict[
     found = {label: float(r.mean("x")[-1] ** 2 + r.std("x")[-1] ** 2) for label, r in runs.items()}
     p = config.model.params
     omegas = (p["speed"] / p["L1"], p["speed"] / p["L2"])
-    amplitudes = (p["A1"], p["A2"])
-
-    def residual(e: float) -> float:
-        k_eq = 3.0 * p["h"] * e
-        response = sum(
-            a**2 / ((k_eq - p["m"] * w**2) ** 2 + (p["c"] * w) ** 2)
-            for a, w in zip(amplitudes, omegas, strict=True)
-        )
-        return response - e
-
-    found["statistical linearization"] = float(brentq(residual, 1e-9, 1e3))
+    found["statistical linearization"] = statistical_linearization(
+        p["m"], p["c"], p["h"], (p["A1"], p["A2"]), omegas
+    )
     return found
 
 
@@ -99,13 +90,7 @@ def _double_well(runs: dict[str, pcmb.StudyResult], config: Any) -> dict[str, fl
     (0 is an equilibrium)."""
     times = next(iter(runs.values())).times
     spec = config.inputs["x0"]
-    growth = np.exp(times)
-
-    def exact(x0: np.ndarray) -> np.ndarray:
-        x0 = x0[:, None]
-        return x0 * growth / np.sqrt(1.0 + x0**2 * (growth**2 - 1.0))
-
-    mean, std = _uniform_average(exact, spec.low, spec.high)
+    mean, std = _uniform_average(lambda x0: double_well(times, x0), spec.low, spec.high)
     at = [int(np.argmin(np.abs(times - t))) for t in (2.0, 4.0)]
     found: dict[str, float] = {"exact P(x < 0)": 0.625}
     for k, t in zip(at, (2.0, 4.0), strict=True):
@@ -127,12 +112,9 @@ def _pendulum(runs: dict[str, pcmb.StudyResult], config: Any) -> dict[str, float
     if params.get("omega0", 0.0) != 0.0:
         raise ValueError("the exact pendulum solution used here needs a release from rest")
     times = next(iter(runs.values())).times
-    k = np.sin(params["theta0"] / 2.0)
-    quarter = ellipk(k**2)
 
     def exact(length: np.ndarray) -> np.ndarray:
-        phase = quarter - np.sqrt(params["g"] / length)[:, None] * times
-        return 2.0 * np.arcsin(k * ellipj(phase, k**2)[0])
+        return pendulum_angle(times, length, params["theta0"], params["g"])
 
     mean, std = _uniform_average(exact, spec.low, spec.high)
     found = _errors_against(runs, "theta", mean, std, slice(None))

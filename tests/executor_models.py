@@ -28,6 +28,8 @@ def _batch_size(params: Mapping[str, NDArray[np.float64]]) -> int:
 class StackedOscillator:
     """x'' + c x' + k x = 0, x(0) = 1, x'(0) = 0, all B nodes as one stacked ``solve_ivp``.
 
+    Its exact solution is :func:`pcmb.references.damped_oscillator` (underdamped: c² < 4k).
+
     The stacked RK45 controls its error over the whole batch, so a node's values depend (in the
     last bits) on which nodes share its batch, just like the project's native models.
     """
@@ -60,15 +62,6 @@ class StackedOscillator:
         )
         time.sleep(self.sleep)
         return {"x": sol.y[:b], "v": sol.y[b:]}
-
-
-def exact_oscillator(
-    k: NDArray[np.float64], c: NDArray[np.float64], times: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """(N, T) closed-form x(t) of :class:`StackedOscillator` (underdamped: c² < 4k)."""
-    k, c = k[:, None], c[:, None]
-    decay, omega = c / 2, np.sqrt(k - c**2 / 4)
-    return np.exp(-decay * times) * (np.cos(omega * times) + decay / omega * np.sin(omega * times))
 
 
 class Ramp:

@@ -10,6 +10,7 @@ import pcmb
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.density import kernel_density
 from pcmb.errors import ConfigError, UsageError
+from pcmb.references import damped_oscillator
 
 # 400 points, step 0.05 (Nyquist 10 Hz); endpoint excluded so the record is periodic-ready.
 TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)
@@ -25,14 +26,9 @@ class Oscillator:
 
     def simulate(self, params, times):
         size = len(next(iter(params.values())))
-        k = np.broadcast_to(params.get("k", self.parameters["k"]), size)[:, None]
-        x0 = np.broadcast_to(params.get("x0", self.parameters["x0"]), size)[:, None]
-        omega = np.sqrt(k - 0.01)
-        x = (
-            x0
-            * np.exp(-0.1 * times)
-            * (np.cos(omega * times) + 0.1 / omega * np.sin(omega * times))
-        )
+        k = np.broadcast_to(params.get("k", self.parameters["k"]), size)
+        x0 = np.broadcast_to(params.get("x0", self.parameters["x0"]), size)
+        x = damped_oscillator(times, k, 0.2, x0)
         return {"x": x, "x_squared": x**2}
 
 
@@ -156,12 +152,12 @@ def test_the_nominal_run_uses_config_values_else_means():
 
 
 def test_a_failing_nominal_run_is_a_warning():
+    @pcmb.pointwise(outputs=("x",))
     def fragile(params, times):
         if params["k"] == 2.5:  # the nominal value: the Gauss points never hit it
             raise RuntimeError("singular at the nominal point")
         return {"x": params["k"] * times}
 
-    fragile.outputs = ("x",)
     study = pcmb.Study(fragile, {"k": INPUTS["k"]}, TIMES, order=1, jobs=1, params={"k": 2.5})
     with pytest.warns(pcmb.PcmbWarning, match=r"nominal run failed.*\[nominal-failed\]"):
         result = study.run()
@@ -262,11 +258,11 @@ def test_impossible_settings_are_rejected(settings, message):
 def test_settings_that_do_not_fit_the_study_fail_before_running(settings, message):
     calls = []
 
+    @pcmb.pointwise(outputs=("x",))
     def model(params, times):
         calls.append(1)
         return {"x": params["k"] * times}
 
-    model.outputs = ("x",)
     study = pcmb.Study(
         model, {"k": INPUTS["k"]}, TIMES, order=1, jobs=1, analysis=AnalysisSettings(**settings)
     )

@@ -9,14 +9,13 @@ import time
 
 import numpy as np
 import pytest
-from pipeline_fixtures import write_study
 
 import pcmb
 from pcmb.cli import main
 
 
-def test_run_writes_a_complete_result(tmp_path, capsys):
-    config = write_study(tmp_path)
+def test_run_writes_a_complete_result(tmp_path, linear_study, capsys):
+    config = linear_study()
     out = tmp_path / "explicit.h5"
     assert main(["run", str(config), "-o", str(out), "--quiet"]) == 0
     result = pcmb.load(out)
@@ -27,8 +26,8 @@ def test_run_writes_a_complete_result(tmp_path, capsys):
     assert not (tmp_path / "explicit.h5.journal").exists()
 
 
-def test_output_from_the_config_and_inspect(tmp_path, capsys):
-    config = write_study(tmp_path)
+def test_output_from_the_config_and_inspect(tmp_path, linear_study, capsys):
+    config = linear_study()
     assert main(["run", str(config), "--quiet"]) == 0
     capsys.readouterr()
     assert main(["inspect", str(tmp_path / "out.h5")]) == 0
@@ -37,8 +36,8 @@ def test_output_from_the_config_and_inspect(tmp_path, capsys):
     assert "design   kind collocation, grid tensor-gauss, basis tensor, orders (3, 3)" in report
 
 
-def test_validate_prints_a_summary_and_runs_nothing(tmp_path, capsys):
-    config = write_study(tmp_path)
+def test_validate_prints_a_summary_and_runs_nothing(tmp_path, linear_study, capsys):
+    config = linear_study()
     assert main(["validate", str(config)]) == 0
     summary = capsys.readouterr().out
     assert "method   collocation: chaos order 3, tensor-gauss nodes" in summary
@@ -52,8 +51,8 @@ def test_schema_is_json(capsys):
     assert "properties" in schema or "$defs" in schema
 
 
-def test_invalid_config_exits_2_without_traceback_or_file(tmp_path, capsys):
-    config = write_study(tmp_path)
+def test_invalid_config_exits_2_without_traceback_or_file(tmp_path, linear_study, capsys):
+    config = linear_study()
     config.write_text(config.read_text().replace("high: 3.0", "high: 0.5"))
     assert main(["run", str(config)]) == 2
     err = capsys.readouterr().err
@@ -77,15 +76,15 @@ def test_result_file_errors_exit_2_with_their_kind(tmp_path, capsys):
     assert "invalid configuration" not in err and "Traceback" not in err
 
 
-def test_bad_jobs_is_a_usage_error(tmp_path, capsys):
-    config = write_study(tmp_path)
+def test_bad_jobs_is_a_usage_error(tmp_path, linear_study, capsys):
+    config = linear_study()
     assert main(["run", str(config), "--jobs", "0"]) == 2
     assert capsys.readouterr().err == "pcmb: usage: --jobs must be >= 1, got 0\n"
     assert not (tmp_path / "out.h5").exists()
 
 
-def test_model_failure_exits_3_naming_the_nodes(tmp_path, capsys):
-    config = write_study(tmp_path, extra_params=", fail_above: 2.5")
+def test_model_failure_exits_3_naming_the_nodes(tmp_path, linear_study, capsys):
+    config = linear_study(extra_params=", fail_above: 2.5")
     assert main(["run", str(config), "--quiet"]) == 3
     err = capsys.readouterr().err
     assert "blew up at a=2.86" in err and "node 12 (a=2.86" in err
@@ -96,9 +95,9 @@ def test_model_failure_exits_3_naming_the_nodes(tmp_path, capsys):
     assert "--resume" in capsys.readouterr().err
 
 
-def test_regress_policy_records_the_failures(tmp_path):
-    config = write_study(
-        tmp_path, extra_params=", fail_above: 2.5", execution="jobs: 1, on_failure: regress"
+def test_regress_policy_records_the_failures(tmp_path, linear_study):
+    config = linear_study(
+        extra_params=", fail_above: 2.5", execution="jobs: 1, on_failure: regress"
     )
     assert main(["run", str(config), "--quiet"]) == 0
     result = pcmb.load(tmp_path / "out.h5")
@@ -107,15 +106,13 @@ def test_regress_policy_records_the_failures(tmp_path):
 
 
 @pytest.mark.slow
-def test_sigkill_then_resume_gives_identical_results(tmp_path):
+def test_sigkill_then_resume_gives_identical_results(tmp_path, linear_study):
     """Kill a real `pcmb run` mid-way; --resume runs only the rest and matches a clean run.
 
     64 nodes at 0.05 s each (3.2 s) in chunks of 4: the kill after 3 records leaves ~2.6 s
     of slack before the run could finish on its own.
     """
-    config = write_study(
-        tmp_path, order=7, extra_params=", delay: 0.05", execution="jobs: 1, chunk_size: 4"
-    )
+    config = linear_study(order=7, extra_params=", delay: 0.05", execution="jobs: 1, chunk_size: 4")
     out = tmp_path / "out.h5"
     journal = tmp_path / "out.h5.journal"
     command = [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"]
@@ -145,9 +142,9 @@ def test_sigkill_then_resume_gives_identical_results(tmp_path):
         )
 
 
-def test_a_run_imports_no_heavy_module_it_does_not_need(tmp_path):
+def test_a_run_imports_no_heavy_module_it_does_not_need(linear_study):
     """`pcmb run` of a python-kind study must not import mujoco, matplotlib, scipy.stats/signal."""
-    config = write_study(tmp_path)
+    config = linear_study()
     code = (
         "import sys; from pcmb.cli import main; "
         f"assert main(['run', {str(config)!r}, '--quiet']) == 0; "

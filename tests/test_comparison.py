@@ -12,12 +12,10 @@ from pcmb.store import write_result
 TIMES = np.linspace(0.0, 2.0, 21)
 
 
+@pcmb.pointwise(outputs=("y", "z"))
 def ramp(params, times):
     """y = a t, z = a: with a ~ U[lo, hi], mean (lo + hi) t / 2, std (hi - lo) t / √12."""
     return {"y": params["a"] * times, "z": params["a"] + 0.0 * times}
-
-
-ramp.outputs = ("y", "z")
 
 
 def _run(high, **options):
@@ -57,10 +55,9 @@ def test_monte_carlo_noise_and_the_verdict():
 
 
 def test_departure_is_when_the_difference_leaves_the_noise():
+    @pcmb.pointwise(outputs=("y",))
     def late(params, times):
         return {"y": params["a"] * np.maximum(times - 1.0, 0.0)}
-
-    late.outputs = ("y",)
 
     def run(high, **options):
         inputs = {"a": pcmb.Uniform(1.0, high)}
@@ -77,10 +74,10 @@ def test_departure_is_when_the_difference_leaves_the_noise():
 
 
 def test_round_off_at_a_fixed_state_is_not_a_difference():
+    @pcmb.pointwise(outputs=("y",))
     def offset(params, times):
         return {"y": 0.1 + params["a"] * times}
 
-    offset.outputs = ("y",)
     study = pcmb.Study(offset, {"a": pcmb.Uniform(1.0, 3.0)}, TIMES, order=1, params={"a": 2})
     chaos, same = study.run(), study.replace(method="sobol", samples=1024).run()
     # At t = 0 every run gives 0.1: the sample mean and std are off by ~1e-15 of round-off,
@@ -97,10 +94,10 @@ def test_results_that_cannot_be_compared():
     with pytest.raises(UsageError, match="different time grids"):
         compare(_run(3.0), other_grid)
 
+    @pcmb.pointwise(outputs=("w",))
     def other_model(params, times):
         return {"w": params["a"] * times}
 
-    other_model.outputs = ("w",)
     unrelated = pcmb.Study(
         other_model, {"a": pcmb.Uniform(1.0, 3.0)}, TIMES, order=1, params={"a": 2.0}, jobs=1
     ).run()
@@ -112,10 +109,10 @@ def test_method_labels():
     assert method_label(_run(3.0)) == "chaos order 1 (2 runs)"
     assert method_label(_run(3.0, method="lhs", samples=50)) == "lhs (50 runs)"
 
+    @pcmb.pointwise(outputs=("y",))
     def plane(params, times):
         return {"y": params["a"] + params["b"] * times}
 
-    plane.outputs = ("y",)
     inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
     study = pcmb.Study(plane, inputs, TIMES, order={"a": 1, "b": 2}, params={"a": 0, "b": 0})
     assert method_label(study.run()) == "chaos orders 1x2 (6 runs)"

@@ -21,16 +21,12 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 
-from pcmb.adapters.python import CommandModelFactory, PythonModelFactory
+from pcmb.adapters.command import CommandModelFactory
+from pcmb.adapters.command.spec import CommandModelSpec
+from pcmb.adapters.python import PythonModelFactory
 from pcmb.chaos import inputs
 from pcmb.cli import main as cli_main
-from pcmb.config.schema import (
-    CommandModelSpec,
-    StudyConfig,
-    config_json_schema,
-    load_config,
-    validate_config,
-)
+from pcmb.config import StudyConfig, config_json_schema, load_config, validate_config
 from pcmb.errors import ConfigError
 
 DATA = Path(__file__).parent / "data"
@@ -465,6 +461,36 @@ def test_missing_file():
         load_config(DATA / "nope.yaml")
 
 
+def test_the_model_kinds_are_the_registered_adapters():
+    from pcmb.adapters.registry import ADAPTERS
+
+    with pytest.raises(ConfigError) as exc:
+        load(BASE.replace("kind: python", "kind: fortran"))
+    assert f"expected one of {', '.join(ADAPTERS)}, found the text 'fortran'" in str(exc.value)
+    with pytest.raises(ConfigError) as exc:
+        load(BASE.replace("  kind: python\n", ""))
+    assert f"model.kind: required key is missing (one of {', '.join(ADAPTERS)})" in str(exc.value)
+    model = config_json_schema()["properties"]["model"]
+    assert set(model["discriminator"]["mapping"]) == set(ADAPTERS)
+
+
+def test_a_function_entry_must_be_marked():
+    text = BASE.replace(":Decay", ":plain_point")
+    with pytest.raises(ConfigError) as exc:
+        load(text)
+    (problem,) = exc.value.problems
+    assert problem.path == "model.entry" and problem.line == line_of(text, "entry:")
+    assert '@pcmb.pointwise(outputs=("y", ...))' in problem.message
+    assert "@pcmb.batched" in problem.message
+
+
+def test_marked_functions_load_from_a_config():
+    text = BASE.replace(":Decay", ":decay_batch")
+    model = load(text).model_factory()()
+    out = model.simulate({"k": np.array([1.0, 2.0])}, np.linspace(0.0, 1.0, 3))
+    assert out["y"].shape == (2, 3)
+
+
 def test_loading_a_python_config_does_not_import_mujoco():
     code = (
         "import sys; from pcmb.config.schema import load_config; "
@@ -533,6 +559,39 @@ def test_command_config_builds_a_working_model(tmp_path):
             "c: {",
             "'c' has no nominal value in model.params (a command model takes every nominal",
         ),
+        # keys under model.command are reported there, not at model (the union's tag)
+        (f"command: {sys.executable} sim", "command: [] #", "model.command", "command:", "least 1"),
+        (f"command: {sys.executable} sim", "command: 5 #", "model.command", "command:", "a list"),
+        (f"command: {sys.executable} sim", "command: [a, 5] #", "model.command[1]", "[a, 5]", ""),
+        (
+            f"command: {sys.executable} sim",
+            'command: "a \'b" #',
+            "model.command",
+            "command:",
+            "cannot split the command: No closing quotation",
+        ),
+        (
+            "files: [sim_decay.py]",
+            "files: [sim_decay.py, deck.txt, 3]",
+            "model.files[2]",
+            "files:",
+            "expected a string, found 3",
+        ),
+        (
+            "files: [sim_decay.py]",
+            "files: [sim_decay.py, nope.py]",
+            "model.files[1]",
+            "files:",
+            "nope.py does not exist",
+        ),
+        (
+            "files: [sim_decay.py]",
+            "files: [sim_decay.py, sim_decay.py]",
+            "model.files[1]",
+            "files:",
+            "sim_decay.py is already used by model.files[0]",
+        ),
+        ("{file: out.csv}", "{file: params.json}", "model.output.file", "output:", "reserved"),
     ],
 )
 def test_broken_command_config(old, new, path, marker, fragment):

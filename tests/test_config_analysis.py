@@ -1,7 +1,6 @@
 """The config's ``analysis:`` section: accepted forms and located errors."""
 
 import pytest
-from pipeline_fixtures import write_study
 
 from pcmb.config.schema import load_config
 from pcmb.errors import ConfigError
@@ -10,16 +9,21 @@ from pcmb.study import Study
 # The fixture's grid: 0 .. 2 in 5 points, step 0.5, Nyquist 1 Hz; outputs y and z.
 
 
-def _config(tmp_path, analysis):
-    path = write_study(tmp_path)
-    path.write_text(path.read_text() + f"analysis: {analysis}\n")
-    return path
+@pytest.fixture
+def with_analysis(linear_study):
+    """Write the linear study with an ``analysis:`` section; returns the config path."""
+
+    def write(analysis):
+        path = linear_study()
+        path.write_text(path.read_text() + f"analysis: {analysis}\n")
+        return path
+
+    return write
 
 
-def test_a_full_analysis_section(tmp_path):
+def test_a_full_analysis_section(with_analysis):
     config = load_config(
-        _config(
-            tmp_path,
+        with_analysis(
             "{psd: [y], window: boxcar, pdf_times: [1.0, 2.0], pdf_freqs: [0.5, 1.0], "
             "quantiles: [0.1, 0.5, 0.9], samples: 5000, seed: 3, units: {y: m}, time_unit: s}",
         )
@@ -31,17 +35,17 @@ def test_a_full_analysis_section(tmp_path):
     assert settings.units == {"y": "m"} and settings.time_unit == "s"
 
 
-def test_the_study_takes_the_analysis_and_the_nominal_values(tmp_path):
-    config = load_config(_config(tmp_path, "{pdf_times: [1.0]}"))
+def test_the_study_takes_the_analysis_and_the_nominal_values(with_analysis):
+    config = load_config(with_analysis("{pdf_times: [1.0]}"))
     study = Study.from_config(config)
     assert study.analysis == config.analysis_settings
     # model.params gives a = 1.0 and b = 0.0 (the inputs' means would be 2.0 and 0.0).
     assert study.nominal_params() == {"a": 1.0, "b": 0.0}
 
 
-def test_defaults_and_absence(tmp_path):
-    assert load_config(write_study(tmp_path)).analysis_settings is None
-    settings = load_config(_config(tmp_path, "{}")).analysis_settings
+def test_defaults_and_absence(linear_study, with_analysis):
+    assert load_config(linear_study()).analysis_settings is None
+    settings = load_config(with_analysis("{}")).analysis_settings
     assert settings.psd is None and settings.pdf_times is None and settings.window == "hann"
     assert settings.quantiles == (0.05, 0.95)
 
@@ -62,7 +66,7 @@ def test_defaults_and_absence(tmp_path):
         ("{pdf_time: [1.0]}", r"analysis.pdf_time: unknown key.*did you mean 'pdf_times'"),
     ],
 )
-def test_mistakes_name_their_key(tmp_path, analysis, expected):
+def test_mistakes_name_their_key(with_analysis, analysis, expected):
     with pytest.raises(ConfigError, match=expected) as error:
-        load_config(_config(tmp_path, analysis))
+        load_config(with_analysis(analysis))
     assert error.value.problems[0].line is not None  # located in the file

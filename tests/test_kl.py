@@ -4,29 +4,30 @@ import numpy as np
 import pytest
 
 from pcmb.chaos.kl import KarhunenLoeve, line_covariance, spectral_covariance
+from pcmb.references import cosine_covariance, cosine_covariance_kl
 
+# The periodic terrain of Part II Eq. 12 and 16.
 D, A1, A2 = 100.0, 0.2, 0.1
 L1, L2 = D / (6 * np.pi), D / (14 * np.pi)
 
 
 def terrain_kernel(x1, x2):
-    lag = np.subtract.outer(x1, x2)
-    return A1**2 * np.cos(lag / L1) + A2**2 * np.cos(lag / L2)
+    return cosine_covariance(x1, x2, [A1**2, A2**2], [L1, L2])
 
 
 def _check_terrain(kl):
     """Two distinct eigenvalues D·A²/2, each twice (cos and sin), spanned by cos/sin(x/L)."""
     assert kl.terms == 4
-    expected = [D * A1**2 / 2] * 2 + [D * A2**2 / 2] * 2
+    x = np.linspace(0.0, D, 301)
+    expected, exact = cosine_covariance_kl(x, [A1**2, A2**2], [L1, L2], D)
     np.testing.assert_allclose(kl.eigenvalues, expected, rtol=1e-10)
     assert kl.captured_energy == pytest.approx(1.0, rel=1e-10)
-    x = np.linspace(0.0, D, 301)
     g = kl.eigenfunctions(x)
-    for pair, length in [(slice(0, 2), L1), (slice(2, 4), L2)]:
+    for pair in (slice(0, 2), slice(2, 4)):
         # Eigenvectors of a double eigenvalue are any orthonormal basis of its space:
         # compare the L2 projectors onto span{cos, sin}(x/L) normalised on [0, D].
-        exact = np.column_stack([np.cos(x / length), np.sin(x / length)]) * np.sqrt(2 / D)
-        np.testing.assert_allclose(g[:, pair] @ g[:, pair].T, exact @ exact.T, atol=1e-9)
+        projector = exact[:, pair] @ exact[:, pair].T
+        np.testing.assert_allclose(g[:, pair] @ g[:, pair].T, projector, atol=1e-9)
 
 
 def test_periodic_terrain_from_its_covariance():

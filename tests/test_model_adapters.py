@@ -1,4 +1,4 @@
-"""Model adapters: entry points, per-point functions, external commands, factories.
+"""Model adapters: entry points, marked functions, external commands, factories.
 
 References: the decay law y = y0 exp(-k t), dy = -k y, evaluated in the test. Where the
 adapter only moves numbers (exact float text in templates and CSV, binary NPY/NPZ, JSON
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -18,18 +19,21 @@ import joblib
 import numpy as np
 import pytest
 
+from pcmb.adapters.command import CommandModel, CommandModelFactory, split_command
+from pcmb.adapters.protocol import Model, ModelDefinitionError, ModelFactory
 from pcmb.adapters.python import (
-    CommandModel,
-    CommandModelFactory,
+    BatchFunctionModel,
     FunctionModel,
-    Model,
     ObjectModelFactory,
     PythonModelFactory,
     as_model,
+    batched,
+    is_function_model,
     load_entry,
-    split_command,
+    model_factory,
+    pointwise,
 )
-from pcmb.errors import ConfigError, ModelError
+from pcmb.errors import ConfigError, ModelError, UsageError
 
 DATA = Path(__file__).parent / "data"
 TIMES = np.linspace(0.0, 2.0, 5)
@@ -121,12 +125,27 @@ def test_as_model_uses_instance_as_is_and_refuses_params():
     assert only_problem(exc)[0] == "model.params"
 
 
-def test_as_model_wraps_function():
+def test_as_model_wraps_marked_functions():
     func = load_entry("toy_models.py:decay_point", DATA)
     model = as_model(func, {"k": 2.0, "y0": 1.0})
     assert isinstance(model, FunctionModel)
     assert model.outputs == ("y", "dy")
     assert as_model(func, {"k": 2.0, "y0": 1.0}, outputs=["y"]).outputs == ("y",)
+    batch = as_model(load_entry("toy_models.py:decay_batch", DATA), {"k": 2.0, "y0": 1.0})
+    assert isinstance(batch, BatchFunctionModel) and batch.outputs == ("y", "dy")
+
+
+def test_as_model_builds_a_factory_and_checks_outputs_of_classes():
+    factory = PythonModelFactory("toy_models.py:Decay", DATA, {"k": 3.0})
+    model = as_model(factory, {})
+    assert model.parameters == {"k": 3.0, "y0": 1.0}
+    with pytest.raises(ConfigError) as exc:
+        as_model(factory, {"k": 1.0})
+    assert only_problem(exc)[0] == "model.params"
+    with pytest.raises(ConfigError) as exc:
+        as_model(load_entry("toy_models.py:Decay", DATA), {}, outputs=["y", "zz"])
+    message = "'zz' is not an output of Decay (outputs: y, dy)"
+    assert only_problem(exc) == ("model.outputs[1]", message)
 
 
 @pytest.mark.parametrize(
@@ -137,14 +156,131 @@ def test_as_model_wraps_function():
         ("NotAModel", {}, "model.entry", "NotAModel is not a model"),
         ("NUMBER", {}, "model.entry", "found int"),
         ("undeclared_point", {}, "model.outputs", "does not declare its outputs"),
+        ("plain_point", {}, "model.entry", "@pcmb.pointwise(outputs="),
+        ("decay_point", {}, "model.outputs[0]", "'zz' is not an output of decay_point"),
     ],
 )
 def test_as_model_errors_are_located(name, params, path, fragment):
+    outputs = ["zz"] if name == "decay_point" else None
     with pytest.raises(ConfigError) as exc:
-        as_model(load_entry(f"toy_models.py:{name}", DATA), params)
+        as_model(load_entry(f"toy_models.py:{name}", DATA), params, outputs)
     found_path, message = only_problem(exc)
     assert found_path == path
     assert fragment in message
+
+
+# --------------------------------------------------------------------------- markers
+
+
+def test_markers_set_a_documented_attribute_and_return_the_function():
+    def f(params, times):
+        return {}
+
+    assert pointwise(f, outputs=("y",)) is f
+    assert f.pcmb_model == "pointwise" and f.outputs == ("y",)
+    g = batched(outputs=["a", "b"])(lambda params, times: {})
+    assert g.pcmb_model == "batched" and g.outputs == ("a", "b")
+    assert is_function_model(f) and is_function_model(g)
+    assert not is_function_model(load_entry("toy_models.py:plain_point", DATA))
+    assert not is_function_model(load_entry("toy_models.py:Decay", DATA))
+    marked = load_entry("toy_models.py:decay_point", DATA)
+    assert pickle.loads(pickle.dumps(marked)) is marked  # still pickled by reference
+
+
+@pytest.mark.parametrize(
+    ("call", "fragment"),
+    [
+        (lambda: pointwise(outputs="y"), "outputs: expected a sequence of names"),
+        (lambda: pointwise(int), "expected a function"),
+        (lambda: batched(len, outputs=("y",)), "wrap it in a def"),
+    ],
+)
+def test_markers_refuse_what_they_cannot_mark(call, fragment):
+    with pytest.raises(UsageError, match=fragment):
+        call()
+
+
+def test_batch_function_gets_every_parameter_as_a_batch():
+    model = as_model(load_entry("toy_models.py:decay_batch", DATA), {"k": 2.0, "y0": 1.5})
+    k = np.array([1.0, 2.0, 3.0])
+    out = model.simulate({"k": k}, TIMES)
+    for name in ("y", "dy"):
+        np.testing.assert_allclose(out[name], decay(k, 1.5)[name], rtol=EXP_RTOL, atol=0)
+    nominal = model.simulate({}, TIMES)
+    np.testing.assert_allclose(nominal["y"], decay(np.array([2.0]), 1.5)["y"], rtol=EXP_RTOL)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        model.simulate({"zz": np.ones(2)}, TIMES)
+
+
+@pytest.mark.parametrize(
+    ("result", "error", "fragment"),
+    [
+        ({"y": np.zeros(5)}, ModelDefinitionError, "returned shape (5,) for output 'y' for 2"),
+        ({}, ModelDefinitionError, "returned no output(s) 'y'"),
+        (RuntimeError("boom"), ModelError, "raised RuntimeError: boom"),
+    ],
+)
+def test_batch_function_results_are_checked(result, error, fragment):
+    def f(params, times):
+        if isinstance(result, Exception):
+            raise result
+        return result
+
+    model = BatchFunctionModel(batched(f), {"k": 1.0}, ["y"])
+    with pytest.raises(error) as exc:
+        model.simulate({"k": np.ones(2)}, TIMES)
+    assert fragment in str(exc.value)
+
+
+# --------------------------------------------------------------------------- model_factory
+
+
+def test_model_factory_takes_what_the_api_accepts():
+    factory = PythonModelFactory("toy_models.py:Decay", DATA, {"k": 2.0})
+    assert model_factory(factory, {"ignored": 1.0}) is factory
+    assert isinstance(factory, ModelFactory)
+    decay_class = load_entry("toy_models.py:Decay", DATA)
+    built = model_factory(decay_class, {"k": 3.0}, ["y"])
+    assert isinstance(built, ModelFactory) and built().parameters["k"] == 3.0
+    instance = load_entry("toy_models.py:DECAY", DATA)
+    assert model_factory(instance)() is instance
+    marked = load_entry("toy_models.py:decay_point", DATA)
+    assert isinstance(model_factory(marked, {"k": 1.0, "y0": 1.0})(), FunctionModel)
+
+
+@pytest.mark.parametrize(
+    ("name", "params", "key", "fragment"),
+    [
+        ("plain_point", {}, "model", '@pcmb.pointwise(outputs=("y", ...))'),
+        ("NUMBER", {}, "model", "found int"),
+        ("DECAY", {"k": 1.0}, "params", "already built model and takes no params"),
+    ],
+)
+def test_model_factory_refuses_ambiguous_objects_at_once(name, params, key, fragment):
+    with pytest.raises(UsageError) as exc:
+        model_factory(load_entry(f"toy_models.py:{name}", DATA), params)
+    (problem,) = exc.value.problems
+    assert problem.path == key and fragment in problem.message
+    assert str(exc.value).startswith(f"Study: {key}: ")
+
+
+def test_a_callable_object_is_told_to_subclass_model_factory():
+    class Builder:
+        def __call__(self):
+            return load_entry("toy_models.py:DECAY", DATA)
+
+    with pytest.raises(UsageError, match=r"the Builder object is callable .* subclass pcmb\.Model"):
+        model_factory(Builder())
+
+
+def test_api_factory_names_the_arguments_of_the_call():
+    decay_class = load_entry("toy_models.py:Decay", DATA)
+    with pytest.raises(UsageError) as exc:
+        model_factory(decay_class, {"k": -1.0})()
+    assert only_problem(exc)[0] == "params"
+    with pytest.raises(UsageError) as exc:
+        model_factory(decay_class, {}, ["y", "zz"])()
+    assert only_problem(exc)[0] == "outputs[1]"
 
 
 # --------------------------------------------------------------------------- FunctionModel
@@ -165,6 +301,7 @@ def test_function_model_loops_and_keeps_nominal_values():
 
 
 def test_function_model_field_input_gets_its_row():
+    @pointwise
     def total(params, times):
         return {"s": np.full_like(times, np.sum(params["field"]) + params["c"])}
 
@@ -186,19 +323,37 @@ def test_function_model_failed_node_is_nan_in_batch_and_raises_alone():
 
 
 @pytest.mark.parametrize(
-    ("result", "fragment"),
+    ("result", "error", "fragment"),
     [
-        ([1.0], "is a list, expected a dict of outputs"),
-        ({"y": np.zeros(5)}, "output(s) 'dy' missing"),
-        ({"y": np.zeros(4), "dy": np.zeros(5)}, "has shape (4,), expected (5,)"),
-        ({"y": "abc", "dy": np.zeros(5)}, "output 'y' in the result of"),
+        ([1.0], ModelDefinitionError, "returned a list; it must return a dict {name: (T,) array}"),
+        ({"y": np.zeros(5)}, ModelDefinitionError, "returned no output(s) 'dy' (it returned: y)"),
+        ({"y": np.zeros(4), "dy": np.zeros(5)}, ModelError, "has shape (4,), expected (5,)"),
+        ({"y": "abc", "dy": np.zeros(5)}, ModelError, "output 'y' of the per-point function"),
+        (
+            {"y": 1.5, "dy": np.zeros(5)},
+            ModelDefinitionError,
+            "returned a float for output 'y'; it must return a (T,) array, one value per time",
+        ),
+        ({"y": np.zeros((5, 1)), "dy": np.zeros(5)}, ModelDefinitionError, "shape (5, 1)"),
     ],
 )
-def test_function_model_checks_results(result, fragment):
-    model = FunctionModel(lambda params, times: result, {}, ["y", "dy"])
-    with pytest.raises(ModelError) as exc:
+def test_function_model_checks_results(result, error, fragment):
+    model = FunctionModel(pointwise(lambda params, times: result), {}, ["y", "dy"])
+    with pytest.raises(error) as exc:
         model.simulate({}, TIMES)
     assert fragment in str(exc.value)
+    assert exc.type is error
+
+
+def test_a_result_no_node_can_get_right_stops_the_whole_batch():
+    model = as_model(load_entry("toy_models.py:scalar_point", DATA), {"k": 1.0})
+    with pytest.raises(ModelDefinitionError) as exc:
+        model.simulate({"k": np.array([1.0, 2.0, 3.0])}, TIMES)  # not three NaN rows
+    assert str(exc.value) == (
+        "the per-point function scalar_point returned a float for output 'y'; it must return "
+        "a (T,) array, one value per time"
+    )
+    assert exc.value.exit_code == 3
 
 
 def test_function_model_rejects_unknown_names_and_ragged_batches():
@@ -222,10 +377,12 @@ def test_python_factory_pickles_and_builds_same_model():
 
 
 def test_object_factory_in_process_and_in_loky_workers():
+    @pointwise(outputs=("y",))
     def ramp(params, times):
         return {"y": params["a"] * times + params["b"]}
 
-    factory = ObjectModelFactory(ramp, {"a": 1.0, "b": 0.5}, ("y",))
+    factory = model_factory(ramp, {"a": 1.0, "b": 0.5})
+    assert isinstance(factory, ObjectModelFactory)
     # joblib ships callables to loky workers with cloudpickle: a local function survives.
     clone = cloudpickle.loads(cloudpickle.dumps(factory))
     a = np.array([1.0, 2.0, 3.0, 4.0])
@@ -341,7 +498,13 @@ def test_command_timeout_kills_the_whole_process_group(tmp_path):
         ({"params": {"k": 2.0}}, "model.templates[0]", "deck.txt line 2: placeholder '{{y0}}'"),
         ({"output_file": "out.txt"}, "model.output.format", "found 'txt'"),
         ({"output_file": "sub/out.csv"}, "model.output.file", "plain file name"),
-        ({"output_file": "deck.txt", "output_format": "csv"}, "model", "deck.txt"),
+        (
+            {"output_file": "deck.txt", "output_format": "csv"},
+            "model.templates[0]",
+            "deck.txt is already used by model.output.file",
+        ),
+        ({"files": ["sim_decay.py", "sim_decay.py"]}, "model.files[1]", "already used by"),
+        ({"output_file": "params.json"}, "model.output.file", "reserved work-directory name"),
         ({"outputs": []}, "model.outputs", "must list the outputs"),
         ({"outputs": ["time"]}, "model.outputs", "time column"),
         ({"timeout": 0.0}, "model.timeout", "positive"),
@@ -398,3 +561,16 @@ def test_command_factory_pickles_and_builds(tmp_path):
     np.testing.assert_array_equal(out["y"], decay(np.array([1.0]))["y"])
     assert model.parameters == {"k": 2.0, "y0": 1.0}
     assert pickle.loads(pickle.dumps(model)).argv == model.argv  # the model itself ships too
+
+
+def test_the_python_and_command_adapters_load_no_pydantic_yaml_or_mujoco():
+    code = (
+        "import sys\n"
+        "import pcmb.adapters.command\n"
+        "from pcmb.adapters.python import model_factory, pointwise\n"
+        "f = pointwise(lambda params, times: {'y': times}, outputs=('y',))\n"
+        "model_factory(f, {'a': 1.0})()\n"
+        "print(sorted(m for m in ('pydantic', 'yaml', 'mujoco') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"

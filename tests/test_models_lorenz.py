@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from model_loading import GLOBAL_FACTOR, gauss_legendre_grid, model_class, reference_run
 
+from pcmb.references import lorenz_equilibria
+
 Lorenz = model_class("lorenz", "Lorenz")
 
 STABLE = {"sigma": 1.0, "rho": 10.0, "beta": 1.0}
@@ -23,8 +25,7 @@ def lorenz_rhs(sigma, rho, beta):
 
 @pytest.mark.parametrize("case", [STABLE, CHAOTIC], ids=["stable", "chaotic"])
 def test_equilibria_are_fixed_points(case):
-    r = np.sqrt(case["beta"] * (case["rho"] - 1))
-    points = np.array([[r, r, case["rho"] - 1], [-r, -r, case["rho"] - 1], [0.0, 0.0, 0.0]])
+    points = lorenz_equilibria(case["rho"], case["beta"])
     model = Lorenz(**case)
     out = model.simulate(
         {"x0": points[:, 0], "y0": points[:, 1], "z0": points[:, 2]}, np.linspace(0.0, 2.0, 21)

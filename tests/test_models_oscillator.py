@@ -7,7 +7,8 @@ import itertools
 import numpy as np
 import pytest
 from model_loading import GLOBAL_FACTOR, model_class, reference_run
-from scipy.optimize import brentq
+
+from pcmb.references import statistical_linearization
 
 CubicOscillator = model_class("oscillator", "CubicOscillator")
 
@@ -72,27 +73,6 @@ def test_without_spring_the_response_is_the_closed_form():
         assert np.abs(out["x"][b] - x).max() <= GLOBAL_FACTOR * model.rtol * np.abs(x).max()
 
 
-def statistical_linearization(p):
-    """E[y²] of Part II Eq. 21 and 23 solved jointly: E = Σ A_i² / ((3hE − mω_i²)² + c²ω_i²).
-
-    Each mode A(ξ1 cos ωt + ξ2 sin ωt) has unit-variance germs, so the linear response has
-    variance A² |H(ω)|². The root is bracketed on a fine log grid (it is unique here)."""
-    modes = [(p["A1"], p["speed"] / p["L1"]), (p["A2"], p["speed"] / p["L2"])]
-
-    def gap(e):
-        k = 3 * p["h"] * e
-        return sum(a**2 / ((k - p["m"] * w**2) ** 2 + (p["c"] * w) ** 2) for a, w in modes) - e
-
-    grid = np.geomspace(1e-6, 1e3, 2001)
-    values = np.array([gap(e) for e in grid])
-    roots = [
-        brentq(gap, grid[i], grid[i + 1])
-        for i in np.flatnonzero(np.sign(values[:-1]) != np.sign(values[1:]))
-    ]
-    assert len(roots) == 1
-    return roots[0]
-
-
 @pytest.mark.slow
 def test_default_parameters_reproduce_the_papers_finding():
     """Part II Table 1: chaos of order 3 agrees with Monte Carlo on E[x²] at t = 200, and
@@ -112,7 +92,11 @@ def test_default_parameters_reproduce_the_papers_finding():
     x_mc = model.simulate({g: germs[:, i] for i, g in enumerate(GERMS)}, times)["x"][:, -1]
     monte_carlo = float(np.mean(x_mc**2))
     standard_error = float(np.std(x_mc**2) / np.sqrt(x_mc.size))
-    linearized = statistical_linearization(model.parameters)
+    p = model.parameters
+    # E[x²] of Part II Eq. 21 and 23 solved jointly (a unique root here, or it raises).
+    linearized = statistical_linearization(
+        p["m"], p["c"], p["h"], [p["A1"], p["A2"]], [p["speed"] / p["L1"], p["speed"] / p["L2"]]
+    )
 
     assert abs(chaos - monte_carlo) <= 3 * standard_error
     assert linearized - monte_carlo >= 3 * standard_error

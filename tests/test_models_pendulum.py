@@ -1,6 +1,7 @@
 """Tests of models/pendulum.py against the exact elliptic-function solution (SPEC §8.7).
 
-θ(t) = 2 asin(k sn(K(k) − √(g/L) t, k)), k = sin(θ0/2), for a release from rest at θ0.
+θ(t) = 2 asin(k sn(K(k) − √(g/L) t, k)), k = sin(θ0/2), for a release from rest at θ0
+(:func:`pcmb.references.pendulum_angle`).
 """
 
 from __future__ import annotations
@@ -8,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from model_loading import GLOBAL_FACTOR, model_class, reference_run
-from scipy.special import ellipj, ellipk
+
+from pcmb.references import pendulum_angle
 
 PendulumODE = model_class("pendulum", "PendulumODE")
 PendulumDAE = model_class("pendulum", "PendulumDAE")
@@ -17,17 +19,10 @@ LENGTHS = np.array([0.8, 0.9, 1.0, 1.1, 1.2])  # the paper's L = 1 + 0.2 ξ rang
 TIMES = np.linspace(0.0, 15.0, 301)
 
 
-def exact_angle(length, times, g=9.81, theta0=np.pi / 4):
-    """(B, T) exact angle for each length (scipy's ellipj takes the parameter m = k²)."""
-    m = np.sin(theta0 / 2) ** 2
-    sn, _, _, _ = ellipj(ellipk(m) - np.sqrt(g / length)[:, None] * times, m)
-    return 2 * np.arcsin(np.sqrt(m) * sn)
-
-
 def test_ode_matches_the_exact_solution_at_the_tightest_tolerance():
     model = PendulumODE(rtol=1e-12, atol=1e-14)
     out = model.simulate({"L": LENGTHS}, TIMES)
-    exact = exact_angle(LENGTHS, TIMES)
+    exact = pendulum_angle(TIMES, LENGTHS)
     assert np.abs(out["theta"] - exact).max() <= 1e-8  # the issue's bound
     assert np.allclose(out["x"], LENGTHS[:, None] * np.sin(out["theta"]), rtol=0, atol=1e-15)
     assert np.allclose(out["y"], LENGTHS[:, None] * np.cos(out["theta"]), rtol=0, atol=1e-15)
@@ -54,7 +49,7 @@ def test_dae_stays_on_the_constraint_and_matches_the_exact_solution():
     model = PendulumDAE()
     out = model.simulate({"L": LENGTHS}, TIMES)
     assert np.abs(out["constraint"]).max() <= 1e-10  # the issue's bound (round-off here)
-    theta = exact_angle(LENGTHS, TIMES)
+    theta = pendulum_angle(TIMES, LENGTHS)
     # The step control keeps each node's local error within rtol; 100·rtol·L overall.
     bound = GLOBAL_FACTOR * model.rtol * LENGTHS.max()
     assert np.abs(out["x"] - LENGTHS[:, None] * np.sin(theta)).max() <= bound
@@ -66,7 +61,7 @@ def test_dae_stays_on_the_constraint_and_matches_the_exact_solution():
 def test_dae_error_follows_its_tolerance(rtol):
     model = PendulumDAE(rtol=rtol, atol=rtol * 1e-2)
     out = model.simulate({"L": LENGTHS[[0, -1]]}, TIMES)
-    exact = LENGTHS[[0, -1], None] * np.sin(exact_angle(LENGTHS[[0, -1]], TIMES))
+    exact = LENGTHS[[0, -1], None] * np.sin(pendulum_angle(TIMES, LENGTHS[[0, -1]]))
     assert np.abs(out["x"] - exact).max() <= GLOBAL_FACTOR * rtol * LENGTHS.max()
 
 

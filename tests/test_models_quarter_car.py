@@ -10,9 +10,10 @@ import itertools
 
 import numpy as np
 import pytest
-import scipy.linalg
 from model_loading import gauss_legendre_grid, model_class, reference_run
 from scipy.integrate import simpson
+
+from pcmb.references import quarter_car_linear
 
 QuarterCar = model_class("quarter_car", "QuarterCar")
 
@@ -187,29 +188,13 @@ def test_mr_damper_law_has_the_documented_strength():
 
 
 def test_linear_suspension_matches_the_closed_form_response():
-    """Linear spring and damper: the whole response (transient and steady state) in closed form.
-
-    x' = S x + b sin(ω t) with x(0) = 0 is x = Im(X e^{iωt}) + exp(S t) (−Im X),
-    X = (iω − S)⁻¹ b: the steady response plus the free response that cancels it at t = 0.
-    """
+    """Linear spring and damper: the whole response (transient and steady state) in closed
+    form (:func:`pcmb.references.quarter_car_linear`)."""
     ms, mu, k, c, kt, a, f = 250.0, 35.0, 2.0e4, 1000.0, 1.5e5, 0.05, 1.3
     model = QuarterCar(spring="linear", Ms=ms, Mu=mu, k=k, c=c, kT=kt, A=a, f=f)
     times = np.linspace(0.0, 6.0, 601)
     out = model.simulate({}, times)
-    system = np.array(
-        [
-            [0, 0, 1, 0],
-            [0, 0, 0, 1],
-            [-k / ms, k / ms, -c / ms, c / ms],
-            [k / mu, -(k + kt) / mu, c / mu, -c / mu],
-        ]
-    )
-    forcing = np.array([0, 0, 0, kt * a / mu])
-    omega = 2 * np.pi * f
-    amplitude = np.linalg.solve(1j * omega * np.eye(4) - system, forcing)
-    steady = np.imag(amplitude[:, None] * np.exp(1j * omega * times))
-    free = np.array([scipy.linalg.expm(system * t) @ -steady[:, 0] for t in times]).T
-    exact = steady + free
+    exact = quarter_car_linear(times, ms=ms, mu=mu, k=k, c=c, kt=kt, amplitude=a, frequency=f)
     for k_state, name in enumerate(("x1", "x2", "v1", "v2")):
         scale = np.abs(exact[k_state]).max()
         # Global error of the default rtol 1e-8: the documented 1e-6 of the scale.

@@ -20,6 +20,7 @@ import pytest
 
 import pcmb.adapters.mujoco.model
 from pcmb.adapters.mujoco.model import MujocoModel, MujocoModelFactory
+from pcmb.adapters.mujoco.spec import parse_scene_io
 from pcmb.cli import main
 from pcmb.errors import ConfigError, ModelError
 
@@ -322,7 +323,21 @@ CONFIG_ERRORS = [
     (bad(outputs={"s": {"sensor": "tip_pos"}}), "model.outputs.s.index", "3 values"),
     (bad(outputs={"s": {"sensor": "gyro"}}), "model.outputs.s.sensor", "tip_pos, tip_acc"),
     (bad(outputs={"s": {"qpos": "hinge", "qvel": "hinge"}}), "model.outputs.s", "one of"),
-    (bad(outputs={}), "model.outputs", "at least one"),
+    (bad(outputs={}), "model.outputs", "at least 1 entry"),
+    # the binding language's own checks (pcmb.adapters.mujoco.spec), as in a config
+    (bad(bind={"m": {"field": "body_mass"}}), "model.bind.m", "expected a list"),
+    (bad(bind={"m": []}), "model.bind.m", "at least 1 entry"),
+    (
+        bad(bind={"m": [{"field": "body_mass", "name": "bob", "index": -1}]}),
+        "model.bind.m[0].index",
+        ">= 0",
+    ),
+    (bad(bind={"m": [{"qpos0": "hinge", "field": "body_mass"}]}), "model.bind.m[0]", "expected"),
+    (bad(bind={"1m": [{"qpos0": "hinge"}]}), "model.bind.1m", "letters, digits"),
+    (bad(init={"qpos": {"hinge": "a lot"}}), "model.init.qpos.hinge", "expected a number"),
+    (bad(init={"qpos": {"hinge": float("nan")}}), "model.init.qpos.hinge", "finite"),
+    (bad(outputs={"x": {"xpos": "bob", "axis": True}}), "model.outputs.x.axis", "0, 1 or 2"),
+    (bad(outputs={"x": {"xpos": "bob"}}), "model.outputs.x.axis", "required key is missing"),
 ]
 
 
@@ -332,6 +347,14 @@ def test_semantic_errors_name_the_key_path(tmp_path, changes, path, fragment):
         pendulum(tmp_path, **changes)
     assert [p.path for p in exc.value.problems] == [path]
     assert fragment in exc.value.problems[0].message
+
+
+def test_parsed_entries_of_the_binding_language_are_taken_as_they_are(tmp_path):
+    scene_io = parse_scene_io(
+        {"m": [{"field": "body_mass", "name": "bob"}]}, INIT, {"theta": {"qpos": "hinge"}}
+    )
+    model = pendulum(tmp_path, bind=scene_io.bind, init=scene_io.init, outputs=scene_io.outputs)
+    assert dict(model.parameters) == {"L": 0.5, "m": 1.0} and model.outputs == ("theta",)
 
 
 def test_every_problem_is_reported_at_once(tmp_path):

@@ -17,7 +17,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from scipy.special import ellipj, ellipk
 
 from pcmb.adapters.mujoco.model import MujocoModel
 from pcmb.adapters.python import load_entry
@@ -27,6 +26,7 @@ from pcmb.chaos.nodes import TensorGrid
 from pcmb.chaos.recovery import project_tensor
 from pcmb.cli import main
 from pcmb.config.schema import load_config
+from pcmb.references import pendulum_angle
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"
@@ -47,20 +47,13 @@ def statistics(grid: TensorGrid, values: np.ndarray) -> tuple[np.ndarray, np.nda
 # --------------------------------------------------------------------------- pendulum
 
 
-def exact_pendulum(lengths: np.ndarray, times: np.ndarray, theta0: float = np.pi / 4):
-    """θ(t) = 2 asin(k sn(K(k) - sqrt(g/L) t, k)), k = sin(θ0/2), (N, T)."""
-    m = np.sin(theta0 / 2) ** 2  # scipy's parameter m = k²
-    sn = ellipj(ellipk(m) - np.sqrt(9.81 / lengths)[:, None] * times, m)[0]
-    return 2 * np.arcsin(np.sqrt(m) * sn)
-
-
 def test_mujoco_pendulum_matches_the_exact_solution_and_the_native_model():
     config, model = config_model("mujoco_pendulum.yaml")
     times = config.times  # 0-15 s
     grid = TensorGrid([Uniform(0.8, 1.2)], orders=[7])  # the config's inputs and order
     lengths = grid.params[:, 0]
     mujoco_theta = model.simulate({"L": lengths}, times)["theta"]
-    exact = exact_pendulum(lengths, times)
+    exact = pendulum_angle(times, lengths)  # θ0 = π/4, the config's
     native_model = load_entry("pendulum.py:PendulumODE", MODELS)(rtol=1e-12, atol=1e-14)
     native = native_model.simulate({"L": lengths}, times)["theta"]
 
@@ -84,9 +77,9 @@ def test_the_pendulum_statistics_are_limited_by_the_order_not_by_mujoco():
     # converged statistics come from 80 Gauss nodes of the exact solution.
     times = np.linspace(0.0, 15.0, 1501)
     fine = TensorGrid([Uniform(0.8, 1.2)], orders=[79])
-    true_mean, _ = statistics(fine, exact_pendulum(fine.params[:, 0], times))
+    true_mean, _ = statistics(fine, pendulum_angle(times, fine.params[:, 0]))
     grid = TensorGrid([Uniform(0.8, 1.2)], orders=[7])
-    mean, _ = statistics(grid, exact_pendulum(grid.params[:, 0], times))
+    mean, _ = statistics(grid, pendulum_angle(times, grid.params[:, 0]))
     error = np.abs(mean - true_mean)
     assert error[times <= 3.0].max() < 1e-9
     assert error[-1] > 1e-4

@@ -1,14 +1,12 @@
 """1-D orthonormal families and Gauss rules against their defining properties."""
 
-import math
-from fractions import Fraction
-
 import numpy as np
 import pytest
 import scipy.integrate as si
 import scipy.special as sp
 
 from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
+from pcmb.references import gamma_moment, jacobi_moment, normal_moment, uniform_moment
 
 FAMILIES = [
     Legendre(),
@@ -34,18 +32,12 @@ def test_weights_are_probabilities(family):
 def exact_moment(family, m):
     """E[ξ^m] of the germ in closed form (scipy's loc/scale moments are numerical)."""
     if isinstance(family, Hermite):
-        return 0.0 if m % 2 else float(sp.factorial2(m - 1)) if m else 1.0
+        return normal_moment(m)
     if isinstance(family, Laguerre):
-        return float(np.exp(sp.gammaln(family.alpha + 1 + m) - sp.gammaln(family.alpha + 1)))
+        return gamma_moment(m, family.alpha)
     if isinstance(family, Legendre):
-        return 0.0 if m % 2 else 1.0 / (m + 1)
-    # Jacobi: ξ = 2u - 1, u ~ Beta(a, b) with a = beta + 1, b = alpha + 1.
-    # Exact rational arithmetic: the alternating binomial sum cancels badly in floats.
-    a, b = Fraction(family.beta) + 1, Fraction(family.alpha) + 1
-    raw = [Fraction(1)]
-    for r in range(m):
-        raw.append(raw[-1] * (a + r) / (a + b + r))
-    return float(sum(math.comb(m, j) * (-1) ** (m - j) * 2**j * raw[j] for j in range(m + 1)))
+        return uniform_moment(m)
+    return jacobi_moment(m, family.alpha, family.beta)
 
 
 @pytest.mark.parametrize("family", FAMILIES, ids=repr)

@@ -16,11 +16,9 @@ INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Beta(2.0, 3.0, -1.0, 1.0)}
 TIMES = np.linspace(0.0, 1.0, 4)
 
 
+@pcmb.pointwise(outputs=("y", "w"))
 def model(params, times):
     return {"y": params["a"] * times + params["b"] ** 3, "w": np.cos(params["a"] * times)}
-
-
-model.outputs = ("y", "w")
 
 
 @pytest.fixture(scope="module")

@@ -12,21 +12,17 @@ TIMES = np.linspace(0.0, 2.0, 5)
 INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
 
 
+@pcmb.pointwise(outputs=("y",))
 def pointwise(params, times):
     """y = a t + b²: E y = 2t + 1, Var y = t²/3 + 2."""
     return {"y": params["a"] * times + params["b"] ** 2}
 
 
-pointwise.outputs = ("y",)
-
-
+@pcmb.pointwise(outputs=("y",))
 def failing(params, times):
     if params["a"] > 2.5 and params["b"] > 0.5:
         raise RuntimeError("diverged")
     return pointwise(params, times)
-
-
-failing.outputs = ("y",)
 
 
 def _exact_mean_var(t):
@@ -130,12 +126,12 @@ def test_bad_study_settings_are_config_errors():
 def test_regress_respects_anisotropic_orders():
     """On a grid with q_b = 2 the refit must not ask for b² (it would be aliased)."""
 
+    @pcmb.pointwise(outputs=("y",))
     def model(params, times):
         if params["a"] > 2.8:
             raise RuntimeError("diverged")
         return {"y": params["a"] ** 2 + params["b"] + 0 * times}
 
-    model.outputs = ("y",)
     # 5 x 2 nodes, 2 fail: 8 survivors carry the 5 terms of degree <= 2 with b-degree <= 1.
     study = pcmb.Study(model, INPUTS, TIMES, order={"a": 4, "b": 1}, on_failure="regress")
     with pytest.warns(pcmb.PcmbWarning):
@@ -149,20 +145,20 @@ def test_regress_respects_anisotropic_orders():
 
 
 def test_regress_with_nothing_left_to_fit_is_a_model_failure():
+    @pcmb.pointwise(outputs=("y",))
     def model(params, times):
         raise RuntimeError("always")
 
-    model.outputs = ("y",)
     study = pcmb.Study(model, INPUTS, TIMES, order=2, on_failure="regress")
     with pytest.raises(ModelRunError, match="could not refit"):
         study.run()
 
 
 def test_a_function_needs_no_nominal_values():
+    @pcmb.pointwise(outputs=("y",))
     def model(params, times):
         return {"y": params["a"] * times}
 
-    model.outputs = ("y",)
     result = pcmb.Study(model, INPUTS, TIMES, order=1).run()
     np.testing.assert_allclose(result.mean("y"), 2 * TIMES, atol=1e-12)
     assert result.nominal_params == {"a": 2.0, "b": 0.0}

@@ -1,1 +1,2 @@
-"""Model adapters: the model protocol and the doors through which simulators come in."""
+"""Model adapters: the model protocol (:mod:`.protocol`) and the doors simulators come in by,
+one per ``model.kind`` (:mod:`.registry`), plus stacked ODE integration for Python models."""

@@ -22,14 +22,14 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.errors import ConfigProblem, ModelError, PcmbError, UsageError
+from pcmb.errors import ConfigProblem, ModelDefinitionError, ModelError, PcmbError, UsageError
 from pcmb.result import NodeFailure, Status
 from pcmb.run.backends import BACKENDS, InProcessPool, Pool
 from pcmb.run.journal import Journal
 from pcmb.run.progress import Progress
 
 if TYPE_CHECKING:
-    from pcmb.adapters.python import Model
+    from pcmb.adapters.protocol import Model
 
 __all__ = ["RunResult", "chunk_bounds", "run_nodes"]
 
@@ -151,6 +151,8 @@ def _run_batch(
     values = np.full((n, len(outputs), times.size), np.nan)
     try:
         result = model.simulate(params, times)
+    except ModelDefinitionError:
+        raise  # the same at every node: stop with its one message
     except Exception as exc:  # the model's own failure, whatever its type, is data here
         return values, [f"{type(exc).__name__}: {exc}"] * n
     if not isinstance(result, Mapping):

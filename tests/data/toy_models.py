@@ -1,10 +1,13 @@
-"""Small closed-form models for the config and adapter tests (no integration, no pcmb import).
+"""Small closed-form models for the config and adapter tests (no integration).
 
 ``Decay`` is y(t) = y0 exp(-k t), dy = -k y: batch-capable, declares its parameters.
-``decay_point`` is the same law as a per-point function.
+``decay_point`` is the same law as a per-point function, ``decay_batch`` as a batch function;
+``plain_point`` is the per-point law without a marker (which pcmb refuses).
 """
 
 import numpy as np
+
+from pcmb.adapters.python import batched, pointwise
 
 
 class Decay:
@@ -49,6 +52,7 @@ class NotAModel:
         self.params = params
 
 
+@pointwise(outputs=("y", "dy"))
 def decay_point(params, times):
     """One node of the decay law."""
     y = params["y0"] * np.exp(-params["k"] * times)
@@ -57,12 +61,32 @@ def decay_point(params, times):
     return {"y": y, "dy": -params["k"] * y}
 
 
-decay_point.outputs = ("y", "dy")
+@batched(outputs=("y", "dy"))
+def decay_batch(params, times):
+    """The decay law for a batch: every parameter is a (B,) array."""
+    k, y0 = params["k"][:, None], params["y0"][:, None]
+    y = y0 * np.exp(-k * times)
+    return {"y": y, "dy": -k * y}
 
 
+@pointwise
 def undeclared_point(params, times):
     """A per-point function that does not declare its outputs."""
     return {"y": np.zeros_like(times)}
+
+
+def plain_point(params, times):
+    """A per-point function without a marker."""
+    return {"y": params["y0"] * np.exp(-params["k"] * times)}
+
+
+plain_point.outputs = ("y",)
+
+
+@pointwise(outputs=("y",))
+def scalar_point(params, times):
+    """Returns a number where a (T,) array is due."""
+    return {"y": params["k"]}
 
 
 DECAY = Decay(k=2.0)

@@ -1,1 +1,2 @@
-"""The MuJoCo adapter (the only package that imports mujoco)."""
+"""The MuJoCo adapter (``model.kind: mujoco``): :mod:`.spec` is its binding language and config
+section, :mod:`.model` the scene as a model (the only module that imports mujoco)."""

@@ -1,65 +1,10 @@
-"""MuJoCo scenes as black-box simulators (SPEC §3, and ``kind: mujoco`` in §4).
+"""MuJoCo scenes as models (``model.kind: mujoco``); the only pcmb module importing mujoco.
 
-This is the only pcmb module that imports :mod:`mujoco`; others import it lazily.
-
-How a node's inputs reach MuJoCo
---------------------------------
-- ``{{ name }}`` placeholders in the MJCF make it a template: each node renders it with
-  ``repr(float)`` (exact) and compiles its own scene. Placeholders must not change the scene's
-  structure (its sizes); a node whose scene does is a failed run.
-- ``bind`` entries ``{field: F, name: E, index: i}`` set entry ``i`` of element ``E``'s slice of
-  the ``MjModel`` array ``F`` (``body_mass``, ``body_pos``, ``geom_friction``, ``dof_damping``,
-  ``jnt_stiffness``, ``tendon_stiffness``, ``actuator_gear``, ...; ``dof_*`` and
-  ``qpos_spring`` are named by joint), or ``opt.F`` entry ``i`` (``opt.gravity``,
-  ``opt.timestep``, ...; no name). ``mj_setConst`` then recomputes what MuJoCo derives from
-  the fields (subtree masses, the inverse weights that scale constraint softness, ...).
-  Two fields need more than an edit:
-
-  - ``body_mass`` scales the body's ``body_inertia`` by the same factor (its shape is kept,
-    its density changes), as editing a geom's ``mass`` in the XML would; an explicit
-    ``body_inertia`` binding is applied after it and wins;
-  - ``geom_size`` and ``geom_pos`` are set on the scene's ``MjSpec``, which is compiled per
-    node: the compiler turns geometry into body mass, inertia and collision bounds, which a
-    field edit would leave stale.
-
-- ``{qpos0: joint}`` and ``{qvel0: joint}`` set the initial position or velocity of a hinge or
-  slide joint; they override ``init``, the fixed initial state.
-
-Inputs that are not uncertain keep their nominal value: a placeholder's from ``params``
-(required), a bound input's from ``params`` when given there, else whatever the XML says.
-
-Running a batch
----------------
-Every batch runs in one :class:`mujoco.batch.Batch`, one model per node (``set_models``), on
-MuJoCo's C thread pool. ``Batch.rollout`` advances the nodes by many output intervals per
-call, recording their full state at every substep (at most 64 MB per call): a call is a
-barrier for the threads, so calls are few and long. ``qpos``/``qvel`` outputs are read from
-the recorded states at the output times; derived outputs (``xpos``, ``site_xpos``, sensors)
-are computed at those states by a forward pass (``Batch.forward``, up to the stage they
-need). ``mujoco.batch`` (MuJoCo >= 4) is the engine of :func:`mujoco.rollout.rollout` plus
-what pcmb needs and rollout lacks: per-simulation warning counters (rollout keeps them in
-per-thread data, so a divergence could not be pinned to its node), forward passes on the
-pool for derived outputs, and stepping only the nodes still alive.
-
-Threads: ``min(B, T_w)``, where ``T_w`` is the thread budget of this process:
-``OMP_NUM_THREADS`` when set (joblib's loky workers get ``cores // workers`` through it, so
-workers x threads stays within the cores), else the CPUs the process may run on. One thread
-is as fast as a Python ``mj_step`` loop per node (the stepping is the same C code; Python
-runs per call, not per step), and more threads divide the time; ``scripts/bench_mujoco.py``
-measures both against ``mujoco.rollout``.
-
-Divergence
-----------
-A diverged node is a failed run, never a silent result. MuJoCo resets (or freezes) a state
-whose accelerations, velocities or positions blow up and carries on, and a rollout stops
-such a node and repeats its last state. A node fails when any of its warning counters rose
-(``mjWARN_BADQACC``, ``BADQPOS``, ``BADQVEL``, and the contact/constraint buffer and inertia
-warnings, after which the physics is wrong too), when its state at an output time is not
-finite, or when its clock is not at that time. In a batch of several nodes a failed node's
-rows are NaN (the executor treats them as failed nodes and keeps the others); a batch of one
-node raises :class:`~pcmb.errors.ModelError` with the reason. MuJoCo's own log (console and
-``MUJOCO_LOG.TXT`` in the current folder) is off while pcmb compiles and steps: pcmb reports
-what it would say.
+Inputs reach a scene as ``{{ name }}`` placeholders (each node compiles its own scene),
+``bind`` targets (MjModel fields, ``opt`` fields, initial joint states) or ``init`` values, in
+the binding language of :mod:`pcmb.adapters.mujoco.spec`. A batch runs in one
+:class:`mujoco.batch.Batch` on MuJoCo's thread pool; a node that diverges is a failed run.
+See ``docs/architecture.md`` for how bindings, batching, threads and divergence work.
 """
 
 from __future__ import annotations
@@ -80,11 +25,26 @@ import mujoco.batch
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.adapters.mujoco.spec import (
+    FieldBind,
+    InitSpec,
+    Qpos0Bind,
+    QposOutput,
+    Qvel0Bind,
+    QvelOutput,
+    SensorOutput,
+    SiteXposOutput,
+    XposOutput,
+    parse_scene_io,
+)
+from pcmb.adapters.protocol import ModelFactory
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 
 __all__ = ["MujocoModel", "MujocoModelFactory"]
 
 _EMPTY: Mapping[str, Any] = MappingProxyType({})
+BindTarget = FieldBind | Qpos0Bind | Qvel0Bind
+OutputSource = QposOutput | QvelOutput | SensorOutput | XposOutput | SiteXposOutput
 _PLACEHOLDER = re.compile(r"\{\{\s*([^{}]*?)\s*\}\}")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 # Output times closer than this (in timesteps) to a whole step count are on the grid: a
@@ -136,7 +96,6 @@ _SPEC_FIELDS = {"geom_size": "size", "geom_pos": "pos"}
 _JOINT = mujoco.mjtJoint
 _ONE_DOF = (int(_JOINT.mjJNT_HINGE), int(_JOINT.mjJNT_SLIDE))
 _QPOS_WIDTH = {int(_JOINT.mjJNT_FREE): 7, int(_JOINT.mjJNT_BALL): 4}
-_OUTPUT_KINDS = ("qpos", "qvel", "sensor", "xpos", "site_xpos")
 _STAGE = mujoco.mjtStage
 _INTEGRATION = mujoco.mjtState.mjSTATE_INTEGRATION
 # Recorded states per rollout call: long calls, since each is a barrier for the threads.
@@ -159,17 +118,13 @@ def _is_number(value: object) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
-def _is_index(value: object) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
-
-
 def _render(text: str, values: Mapping[str, float]) -> str:
     """The template with every placeholder replaced by its value's exact ``repr``."""
     return _PLACEHOLDER.sub(lambda m: repr(float(values[m.group(1)])), text)
 
 
 def _worker_threads() -> int:
-    """Threads this process may use (see the module docstring)."""
+    """Threads this process may use: ``OMP_NUM_THREADS`` when set, else its CPUs."""
     budget = os.environ.get("OMP_NUM_THREADS", "")
     if budget.isdigit() and int(budget) > 0:
         return int(budget)
@@ -298,10 +253,10 @@ class _Output:
 
 
 class MujocoModel:
-    """An MJCF scene as a pcmb model (SPEC §3): one MuJoCo run per node, batched on threads.
+    """An MJCF scene as a pcmb model: one MuJoCo run per node, batched on threads.
 
-    The scene is loaded and checked once, at construction; see the module docstring for how
-    inputs, outputs, threads and divergence are handled.
+    The scene is loaded and checked once, at construction (``docs/architecture.md`` says how
+    inputs, outputs, threads and divergence are handled).
 
     Parameters
     ----------
@@ -310,6 +265,8 @@ class MujocoModel:
     params:
         Nominal values: one for every placeholder, and optionally for bound inputs.
     bind:
+        In the binding language of :mod:`pcmb.adapters.mujoco.spec` (plain dicts or its
+        parsed entries), as are ``init`` and ``outputs``.
         Input name -> list of targets: ``{field: body_mass, name: bob}``,
         ``{field: geom_friction, name: foot, index: 0}``, ``{field: opt.gravity, index: 2}``,
         ``{qpos0: hinge}``, ``{qvel0: hinge}``.
@@ -344,19 +301,20 @@ class MujocoModel:
         *,
         xml: Path,
         params: Mapping[str, float] = _EMPTY,
-        bind: Mapping[str, Sequence[Mapping[str, Any]]] = _EMPTY,
-        init: Mapping[str, Mapping[str, float]] = _EMPTY,
-        outputs: Mapping[str, Mapping[str, Any]],
+        bind: Mapping[str, Sequence[Mapping[str, Any] | BindTarget]] = _EMPTY,
+        init: Mapping[str, Mapping[str, float]] | InitSpec = _EMPTY,
+        outputs: Mapping[str, Mapping[str, Any] | OutputSource],
     ) -> None:
         self._xml = Path(xml)
         try:
             text = self._xml.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError([_problem("model.xml", f"cannot read {self._xml}: {exc}")]) from exc
+        scene_io = parse_scene_io(bind, init, outputs)
         problems: list[ConfigProblem] = []
         placeholders = self._placeholders(text, problems)
         self._template = text if placeholders else None
-        self._nominal = self._check_params(params, placeholders, bind, problems)
+        self._nominal = self._check_params(params, placeholders, scene_io.bind, problems)
         if problems:  # without every nominal value the scene cannot be compiled
             raise ConfigError(problems)
 
@@ -375,9 +333,9 @@ class MujocoModel:
             self._field_targets: list[tuple[str, _FieldTarget]] = []
             self._spec_targets: list[tuple[str, _SpecTarget]] = []
             self._state_targets: list[tuple[str, _StateTarget]] = []
-            self._resolve_bind(bind, problems)
-            self._init = self._resolve_init(init, problems)
-            self._outputs = self._resolve_outputs(outputs, problems)
+            self._resolve_bind(scene_io.bind, problems)
+            self._init = self._resolve_init(scene_io.init, problems)
+            self._outputs = self._resolve_outputs(scene_io.outputs, problems)
             if problems:
                 raise ConfigError(problems)
             # body_mass first, so that an explicit body_inertia binding wins over its scaling
@@ -396,7 +354,7 @@ class MujocoModel:
         self._structure = _structure(self._nominal_model)
         self.outputs: tuple[str, ...] = tuple(self._outputs)
         self.parameters: Mapping[str, float] = MappingProxyType(
-            {name: self._nominal_value(name) for name in (*placeholders, *bind)}
+            {name: self._nominal_value(name) for name in (*placeholders, *scene_io.bind)}
         )
 
     # -- construction: what the config says --------------------------------------------------
@@ -423,7 +381,7 @@ class MujocoModel:
     def _check_params(
         params: Mapping[str, float],
         placeholders: Sequence[str],
-        bind: Mapping[str, Sequence[Mapping[str, Any]]],
+        bind: Mapping[str, object],
         problems: list[ConfigProblem],
     ) -> dict[str, float]:
         nominal: dict[str, float] = {}
@@ -500,17 +458,16 @@ class MujocoModel:
 
     @staticmethod
     def _index(
-        entry: Mapping[str, Any], size: int, what: str, path: str, problems: list[ConfigProblem]
+        index: int | None, size: int, what: str, path: str, problems: list[ConfigProblem]
     ) -> int | None:
-        """The entry's ``index`` into ``size`` values (may be omitted when size is 1)."""
-        index = entry.get("index")
+        """An entry's ``index`` into ``size`` values (may be omitted when size is 1)."""
         if index is None:
             if size == 1:
                 return 0
             problems.append(
                 _problem(f"{path}.index", f"{what} has {size} values: give an index 0-{size - 1}")
             )
-        elif not _is_index(index) or not 0 <= index < size:
+        elif not 0 <= index < size:
             problems.append(
                 _problem(
                     f"{path}.index",
@@ -521,71 +478,27 @@ class MujocoModel:
             return int(index)
         return None
 
-    @staticmethod
-    def _keys(
-        entry: object, allowed: Sequence[str], path: str, problems: list[ConfigProblem]
-    ) -> bool:
-        if not isinstance(entry, Mapping):
-            problems.append(_problem(path, f"expected a mapping, got {entry!r}"))
-            return False
-        unknown = [k for k in entry if k not in allowed]
-        for key in unknown:
-            problems.append(
-                _problem(f"{path}.{key}", f"unknown key (expected: {', '.join(allowed)})")
-            )
-        return not unknown
-
     def _resolve_bind(
-        self, bind: Mapping[str, Sequence[Mapping[str, Any]]], problems: list[ConfigProblem]
+        self, bind: Mapping[str, Sequence[BindTarget]], problems: list[ConfigProblem]
     ) -> None:
         for name, entries in bind.items():
-            if isinstance(entries, Mapping | str) or not isinstance(entries, Sequence):
-                problems.append(_problem(f"model.bind.{name}", "expected a list of targets"))
-                continue
             for i, entry in enumerate(entries):
                 path = f"model.bind.{name}[{i}]"
-                if not isinstance(entry, Mapping):
-                    problems.append(_problem(path, f"expected a mapping, got {entry!r}"))
-                elif "field" in entry:
-                    if self._keys(entry, ("field", "name", "index"), path, problems):
-                        self._resolve_field(name, entry, path, problems)
-                elif "qpos0" in entry or "qvel0" in entry:
-                    state = "qpos" if "qpos0" in entry else "qvel"
-                    if self._keys(entry, (f"{state}0",), path, problems):
-                        joint = self._joint(entry[f"{state}0"], f"{path}.{state}0", problems)
-                        if joint is not None:
-                            adr = (
-                                self._base.jnt_qposadr if state == "qpos" else self._base.jnt_dofadr
-                            )
-                            self._state_targets.append((name, _StateTarget(state, int(adr[joint]))))
-                else:
-                    problems.append(
-                        _problem(
-                            path,
-                            "expected {field: ..., name: ..., index: ...}, "
-                            "{qpos0: joint} or {qvel0: joint}",
-                        )
-                    )
-
-    def _resolve_field(
-        self, name: str, entry: Mapping[str, Any], path: str, problems: list[ConfigProblem]
-    ) -> None:
-        field = entry["field"]
-        if not isinstance(field, str):
-            problems.append(_problem(f"{path}.field", f"expected a field name, got {field!r}"))
-        elif field.startswith("opt."):
-            self._resolve_option(name, field, entry, path, problems)
-        else:
-            self._resolve_model_field(name, field, entry, path, problems)
+                if isinstance(entry, FieldBind):
+                    if entry.field.startswith("opt."):
+                        self._resolve_option(name, entry, path, problems)
+                    else:
+                        self._resolve_model_field(name, entry, path, problems)
+                    continue
+                joint = self._joint(entry.joint, f"{path}.{entry.state}0", problems)
+                if joint is not None:
+                    adr = self._base.jnt_qposadr if entry.state == "qpos" else self._base.jnt_dofadr
+                    self._state_targets.append((name, _StateTarget(entry.state, int(adr[joint]))))
 
     def _resolve_option(
-        self,
-        name: str,
-        field: str,
-        entry: Mapping[str, Any],
-        path: str,
-        problems: list[ConfigProblem],
+        self, name: str, entry: FieldBind, path: str, problems: list[ConfigProblem]
     ) -> None:
+        field = entry.field
         option = field[4:]
         current = None if option.startswith("_") else getattr(self._base.opt, option, None)
         if current is None or callable(current) or np.asarray(current).dtype.kind != "f":
@@ -596,21 +509,17 @@ class MujocoModel:
                     "(e.g. opt.gravity, opt.timestep, opt.wind, opt.viscosity)",
                 )
             )
-        elif "name" in entry:
+        elif entry.name is not None:
             problems.append(_problem(f"{path}.name", f"{field} belongs to no element: drop name"))
         else:
-            index = self._index(entry, int(np.size(current)), field, path, problems)
+            index = self._index(entry.index, int(np.size(current)), field, path, problems)
             if index is not None:
                 self._field_targets.append((name, _FieldTarget(field, index)))
 
     def _resolve_model_field(
-        self,
-        name: str,
-        field: str,
-        entry: Mapping[str, Any],
-        path: str,
-        problems: list[ConfigProblem],
+        self, name: str, entry: FieldBind, path: str, problems: list[ConfigProblem]
     ) -> None:
+        field = entry.field
         prefix = field.split("_", 1)[0]
         array = None if field.startswith("_") else getattr(self._base, field, None)
         obj, size = _PREFIXES.get(prefix, (None, ""))
@@ -632,7 +541,7 @@ class MujocoModel:
             hint = f" (did you mean {', '.join(close)}?)" if close else ""
             problems.append(_problem(f"{path}.field", f"cannot bind {field!r}: {why}{hint}"))
             return
-        element = self._element(obj, entry.get("name"), f"{path}.name", problems)
+        element = self._element(obj, entry.name, f"{path}.name", problems)
         if element is None:
             return
         # the element's rows of the field: one, or a joint's dofs / coordinates
@@ -644,21 +553,21 @@ class MujocoModel:
         else:
             rows = np.array([element])
         width = array[0].size
-        what = f"{field} of {_KINDS[obj][0]} {entry['name']!r}"
-        index = self._index(entry, rows.size * width, what, path, problems)
+        what = f"{field} of {_KINDS[obj][0]} {entry.name!r}"
+        index = self._index(entry.index, rows.size * width, what, path, problems)
         if index is None:
             return
         if field in _SPEC_FIELDS:
-            if not np.isnan(self._spec.geom(entry["name"]).fromto[0]):
+            if not np.isnan(self._spec.geom(entry.name).fromto[0]):
                 problems.append(
                     _problem(
                         f"{path}.field",
-                        f"geom {entry['name']!r} is given by fromto, from which MuJoCo computes "
+                        f"geom {entry.name!r} is given by fromto, from which MuJoCo computes "
                         "its size and pos: put a placeholder in fromto instead",
                     )
                 )
             else:
-                target = _SpecTarget(entry["name"], _SPEC_FIELDS[field], index)
+                target = _SpecTarget(str(entry.name), _SPEC_FIELDS[field], index)
                 self._spec_targets.append((name, target))
             return
         entry_index = int(rows[0]) * width + index
@@ -666,83 +575,55 @@ class MujocoModel:
         self._field_targets.append((name, _FieldTarget(field, entry_index, scaled)))
 
     def _resolve_init(
-        self, init: Mapping[str, Mapping[str, float]], problems: list[ConfigProblem]
+        self, init: InitSpec, problems: list[ConfigProblem]
     ) -> list[tuple[_StateTarget, float]]:
         writes: list[tuple[_StateTarget, float]] = []
-        if not self._keys(init, ("qpos", "qvel"), "model.init", problems):
-            return writes
-        for state, values in init.items():
-            if not isinstance(values, Mapping):
-                problems.append(_problem(f"model.init.{state}", "expected joint: value pairs"))
-                continue
+        for state, values in (("qpos", init.qpos), ("qvel", init.qvel)):
             adr = self._base.jnt_qposadr if state == "qpos" else self._base.jnt_dofadr
             for joint_name, value in values.items():
-                path = f"model.init.{state}.{joint_name}"
-                joint = self._joint(joint_name, path, problems)
-                if joint is None:
-                    continue
-                if not _is_number(value) or not np.isfinite(value):
-                    problems.append(_problem(path, f"expected a finite number, got {value!r}"))
-                    continue
-                writes.append((_StateTarget(state, int(adr[joint])), float(value)))
+                joint = self._joint(joint_name, f"model.init.{state}.{joint_name}", problems)
+                if joint is not None:
+                    writes.append((_StateTarget(state, int(adr[joint])), float(value)))
         return writes
 
     def _resolve_outputs(
-        self, outputs: Mapping[str, Mapping[str, Any]], problems: list[ConfigProblem]
+        self, outputs: Mapping[str, OutputSource], problems: list[ConfigProblem]
     ) -> dict[str, _Output]:
         resolved: dict[str, _Output] = {}
-        if not outputs:
-            problems.append(_problem("model.outputs", "name at least one output"))
         for name, source in outputs.items():
-            path = f"model.outputs.{name}"
-            kinds = [k for k in _OUTPUT_KINDS if isinstance(source, Mapping) and k in source]
-            if len(kinds) != 1:
-                problems.append(
-                    _problem(
-                        path,
-                        "expected one of {qpos: joint}, {qvel: joint}, {sensor: name}, "
-                        "{xpos: body, axis: 0-2}, {site_xpos: site, axis: 0-2}",
-                    )
-                )
-                continue
-            kind = kinds[0]
-            extra = {"sensor": ("index",), "xpos": ("axis",), "site_xpos": ("axis",)}
-            if not self._keys(source, (kind, *extra.get(kind, ())), path, problems):
-                continue
-            output = self._resolve_output(kind, source, path, problems)
+            output = self._resolve_output(source, f"model.outputs.{name}", problems)
             if output is not None:
                 resolved[name] = output
         return resolved
 
     def _resolve_output(
-        self, kind: str, source: Mapping[str, Any], path: str, problems: list[ConfigProblem]
+        self, source: OutputSource, path: str, problems: list[ConfigProblem]
     ) -> _Output | None:
         base = self._base
-        if kind in ("qpos", "qvel"):
-            joint = self._joint(source[kind], f"{path}.{kind}", problems)
+        if isinstance(source, QposOutput | QvelOutput):
+            kind = source.source
+            joint = self._joint(getattr(source, kind), f"{path}.{kind}", problems)
             if joint is None:
                 return None
             adr = base.jnt_qposadr if kind == "qpos" else base.jnt_dofadr
             return _Output(kind, int(adr[joint]), int(_STAGE.mjSTAGE_NONE))
-        if kind == "sensor":
-            sensor = self._element(_OBJ.mjOBJ_SENSOR, source[kind], f"{path}.sensor", problems)
+        if isinstance(source, SensorOutput):
+            sensor = self._element(_OBJ.mjOBJ_SENSOR, source.sensor, f"{path}.sensor", problems)
             if sensor is None:
                 return None
-            what = f"sensor {source[kind]!r}"
-            index = self._index(source, int(base.sensor_dim[sensor]), what, path, problems)
+            what = f"sensor {source.sensor!r}"
+            size = int(base.sensor_dim[sensor])
+            index = self._index(source.index, size, what, path, problems)
             if index is None:
                 return None
             column = int(base.sensor_adr[sensor]) + index
             return _Output("sensordata", column, int(base.sensor_needstage[sensor]))
+        kind = source.source
         obj = _OBJ.mjOBJ_BODY if kind == "xpos" else _OBJ.mjOBJ_SITE
-        element = self._element(obj, source[kind], f"{path}.{kind}", problems)
-        axis = source.get("axis")
-        if not _is_index(axis) or not 0 <= axis <= 2:
-            problems.append(_problem(f"{path}.axis", f"expected 0, 1 or 2 (x, y, z), got {axis!r}"))
-            return None
+        element = self._element(obj, getattr(source, kind), f"{path}.{kind}", problems)
         if element is None:
             return None
-        return _Output(kind, 3 * element + int(axis), int(_STAGE.mjSTAGE_POS))
+        return _Output(kind, 3 * element + int(source.axis), int(_STAGE.mjSTAGE_POS))
 
     def _nominal_value(self, name: str) -> float:
         if name in self._nominal:
@@ -1119,7 +1000,7 @@ class _BatchRun:
 
 
 @dataclass(frozen=True)
-class MujocoModelFactory:
+class MujocoModelFactory(ModelFactory):
     """Builds a :class:`MujocoModel` (plain-picklable; the executor builds one per worker).
 
     Attributes

@@ -1,31 +1,8 @@
-"""The model protocol and the adapters that turn existing simulators into models.
+"""The command adapter (``model.kind: command``): an external program run once per node.
 
-A *model* (SPEC §3) is anything with ``outputs`` and ``simulate(params, times)``:
-
-- ``params[name]`` holds only the uncertain inputs of one batch, each (B,) (or (B, m) for a
-  field input); every other parameter keeps the nominal value given at construction;
-- ``times`` is the (T,) output grid;
-- the result maps every name in ``outputs`` to a (B, T) array.
-
-Adapters provided here:
-
-- a Python class (constructed with the config's ``model.params``) or a ready object with
-  ``simulate`` is used as is (:func:`load_entry`, :func:`as_model`);
-- a per-point function ``f(params: dict, times) -> dict[str, (T,)]`` is looped over the
-  batch (:class:`FunctionModel`);
-- an external executable is run once per node in its own work directory
-  (:class:`CommandModel`).
-
-Model *factories* are small picklable callables that build a model; the executor ships a
-factory to each worker, which builds its model once. Problems found while building a
-model (missing file, unknown attribute, a constructor that rejects its parameters) raise
-:class:`~pcmb.errors.ConfigError` located at the config key they come from (``model.entry``,
-``model.params``, ...), so the config validator reports them like any other key.
-
-Pointwise adapters follow the project's batch convention: in a batch of several nodes a
-failed node becomes a row of NaN (the executor treats non-finite rows as failed nodes and
-keeps the others); a batch of one node raises :class:`~pcmb.errors.ModelError` with the
-reason, which is how the executor names the failure.
+Per node: a fresh work directory; template files rendered into it; the listed files linked;
+``params.json`` written; the command run there in its own process group (killed whole on
+timeout); its output file parsed. Its config section is :mod:`pcmb.adapters.command.spec`.
 """
 
 from __future__ import annotations
@@ -33,10 +10,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
-import hashlib
-import importlib
-import importlib.util
-import inspect
 import io
 import json
 import os
@@ -45,39 +18,35 @@ import shlex
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
+import typing
 import zipfile
-from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
-from typing import Any, Literal, Protocol, runtime_checkable
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.adapters.protocol import (
+    ModelFactory,
+    PointwiseModel,
+    check_point_result,
+    describe_exception,
+)
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 
-__all__ = [
-    "CommandModel",
-    "CommandModelFactory",
-    "FunctionModel",
-    "Model",
-    "ObjectModelFactory",
-    "PointwiseModel",
-    "PythonModelFactory",
-    "as_model",
-    "load_entry",
-    "split_command",
-]
+__all__ = ["FORMATS", "KEEP_POLICIES", "CommandModel", "CommandModelFactory", "split_command"]
 
 OutputFormat = Literal["csv", "json", "npy", "npz"]
 KeepPolicy = Literal["failed", "all", "none"]
 
-_FORMATS: tuple[str, ...] = ("csv", "json", "npy", "npz")
+#: Output file formats, and which work directories survive (``keep``); the config's lists.
+FORMATS: tuple[str, ...] = typing.get_args(OutputFormat)
+KEEP_POLICIES: tuple[str, ...] = typing.get_args(KeepPolicy)
+
 _PLACEHOLDER = re.compile(r"\{\{\s*([^{}]*?)\s*\}\}")
 # Template names that describe the output grid; dotted, so no parameter name can clash.
 _GRID_NAMES = ("times.start", "times.stop", "times.points")
@@ -88,206 +57,8 @@ _TAIL_LINES = 15
 _TAIL_CHARS = 2000
 
 
-@runtime_checkable
-class Model(Protocol):
-    """What pcmb needs from a simulator (SPEC §3).
-
-    Attributes
-    ----------
-    outputs:
-        Names of the observables :meth:`simulate` returns.
-
-    Notes
-    -----
-    A model may also have ``parameters: Mapping[str, float]``, the nominal value of every
-    named parameter; the config validator then checks uncertain inputs against it. A model
-    may have ``check_times(times)`` raising :class:`~pcmb.errors.ConfigError` when it
-    cannot produce the grid; the config validator calls it before anything runs. A model
-    whose ``simulate`` has a large per-call cost (a stacked integrator steps once for the
-    whole batch) may state ``chunk_size: int``, the nodes per call it prefers; the executor
-    uses it unless the config sets ``execution.chunk_size``.
-    """
-
-    outputs: tuple[str, ...]
-
-    def simulate(
-        self, params: Mapping[str, NDArray[np.float64]], times: NDArray[np.float64]
-    ) -> Mapping[str, NDArray[np.float64]]:
-        """Run one batch.
-
-        Parameters
-        ----------
-        params:
-            Uncertain inputs only, each (B,) or (B, m).
-        times:
-            Output grid, (T,).
-
-        Returns
-        -------
-        Mapping[str, NDArray]
-            Every name in ``outputs`` -> (B, T).
-        """
-        ...
-
-
 def _problem(path: str, message: str) -> ConfigError:
     return ConfigError([ConfigProblem(path=path, message=message)])
-
-
-def _describe(exc: BaseException) -> str:
-    text = str(exc)
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-# --------------------------------------------------------------------------- entry points
-
-
-@contextlib.contextmanager
-def _on_sys_path(directory: Path) -> Iterator[None]:
-    """Put ``directory`` first on sys.path while importing, as ``python file.py`` would."""
-    entry = str(directory)
-    sys.path.insert(0, entry)
-    try:
-        yield
-    finally:
-        with contextlib.suppress(ValueError):
-            sys.path.remove(entry)
-
-
-def _load_file(path: Path) -> ModuleType:
-    if not path.is_file():
-        raise _problem("model.entry", f"model file {path} does not exist")
-    # A unique module name per file, so two models both called model.py do not collide.
-    digest = hashlib.sha256(str(path).encode()).hexdigest()[:12]
-    stem = re.sub(r"\W", "_", path.stem)
-    name = f"pcmb_entry_{stem}_{digest}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    if spec is None or spec.loader is None:
-        raise _problem("model.entry", f"{path} cannot be imported as a Python module")
-    module = importlib.util.module_from_spec(spec)
-    # Registered before running it: dataclasses and pickling look modules up by name.
-    sys.modules[name] = module
-    try:
-        with _on_sys_path(path.parent):
-            spec.loader.exec_module(module)
-    except (Exception, SystemExit) as exc:
-        del sys.modules[name]
-        raise _problem("model.entry", f"importing {path} failed: {_describe(exc)}") from exc
-    return module
-
-
-def _import_module(name: str, base_dir: Path) -> ModuleType:
-    try:
-        with _on_sys_path(base_dir):
-            return importlib.import_module(name)
-    except ModuleNotFoundError as exc:
-        raise _problem("model.entry", f"cannot import module {name!r}: {exc}") from exc
-    except (Exception, SystemExit) as exc:
-        raise _problem(
-            "model.entry", f"importing module {name!r} failed: {_describe(exc)}"
-        ) from exc
-
-
-def load_entry(entry: str, base_dir: Path) -> object:
-    """Load the object named by an entry point.
-
-    Parameters
-    ----------
-    entry:
-        ``path/to/file.py:Name`` (relative paths resolve against ``base_dir``) or
-        ``package.module:Name`` (imported with ``base_dir`` first on ``sys.path``).
-        ``Name`` may be dotted (``Outer.Inner``).
-    base_dir:
-        Folder of the config file.
-
-    Returns
-    -------
-    object
-        The class, function or object found.
-
-    Raises
-    ------
-    ConfigError
-        At ``model.entry``: malformed entry, missing file, failed import (with the original
-        message), missing attribute.
-    """
-    target, sep, attribute = entry.rpartition(":")
-    parts = attribute.split(".")
-    if not sep or not target or not all(part.isidentifier() for part in parts):
-        raise _problem(
-            "model.entry",
-            f"expected 'path/to/file.py:Name' or 'package.module:Name', found {entry!r}",
-        )
-    if target.endswith(".py"):
-        module = _load_file((Path(base_dir) / target).resolve())
-    else:
-        module = _import_module(target, Path(base_dir).resolve())
-    obj: object = module
-    for depth, part in enumerate(parts):
-        if not hasattr(obj, part):
-            owner = ".".join([target, *parts[:depth]])
-            raise _problem("model.entry", f"{owner} has no attribute {part!r}")
-        obj = getattr(obj, part)
-    return obj
-
-
-def as_model(obj: object, params: Mapping[str, Any], outputs: Sequence[str] | None = None) -> Model:
-    """Turn a class, a model object or a per-point function into a model.
-
-    Parameters
-    ----------
-    obj:
-        A class (constructed as ``obj(**params)``), an object with ``outputs`` and
-        ``simulate`` (used as is), or a per-point function ``f(params, times) -> dict``
-        (wrapped in a :class:`FunctionModel`).
-    params:
-        Nominal parameter values.
-    outputs:
-        Output names of a per-point function (ignored for classes and objects, which
-        declare their own).
-
-    Returns
-    -------
-    Model
-
-    Raises
-    ------
-    ConfigError
-        At ``model.params`` when the constructor rejects the parameters or an already built
-        object is given parameters; at ``model.entry`` when ``obj`` is neither a class, a
-        model nor a callable, or a class whose instances lack ``outputs``/``simulate``; at
-        ``model.outputs`` for a function with no declared outputs.
-    """
-    name = getattr(obj, "__qualname__", type(obj).__name__)
-    if inspect.isclass(obj):
-        try:
-            instance = obj(**params)
-        except Exception as exc:
-            raise _problem("model.params", f"{name}(**params) failed: {_describe(exc)}") from exc
-        if not isinstance(instance, Model):
-            raise _problem(
-                "model.entry",
-                f"{name} is not a model: its instances need 'outputs' and "
-                "'simulate(params, times)'",
-            )
-        return instance
-    if isinstance(obj, Model):
-        if params:
-            raise _problem(
-                "model.params",
-                f"{name} is an already constructed model and takes no params; "
-                "give its class to construct it with these values",
-            )
-        return obj
-    if callable(obj):
-        return FunctionModel(obj, params, outputs)
-    raise _problem(
-        "model.entry",
-        f"expected a model class, a model object or a function, found {type(obj).__name__}",
-    )
-
-
-# --------------------------------------------------------------------------- pointwise models
 
 
 def split_command(text: str) -> list[str]:
@@ -307,166 +78,7 @@ def _float_array(value: Any, what: str) -> NDArray[np.float64]:
     try:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ModelError(f"{what} is not numeric: {_describe(exc)}") from exc
-
-
-def _check_point_result(
-    result: object, outputs: Sequence[str], n_times: int, where: str
-) -> dict[str, NDArray[np.float64]]:
-    """Validate one node's outputs: a mapping with every output as a (T,) float array."""
-    if not isinstance(result, Mapping):
-        raise ModelError(f"{where} is a {type(result).__name__}, expected a dict of outputs")
-    missing = [name for name in outputs if name not in result]
-    if missing:
-        raise ModelError(f"output(s) {', '.join(map(repr, missing))} missing from {where}")
-    checked = {}
-    for name in outputs:
-        values = _float_array(result[name], f"output {name!r} in {where}")
-        if values.shape != (n_times,):
-            raise ModelError(
-                f"output {name!r} in {where} has shape {values.shape}, expected ({n_times},)"
-            )
-        checked[name] = values
-    return checked
-
-
-class PointwiseModel(ABC):
-    """A model that runs one node at a time; :meth:`simulate` loops over the batch.
-
-    Subclasses set ``outputs`` and ``parameters`` and implement :meth:`run_point`.
-    """
-
-    outputs: tuple[str, ...]
-    parameters: Mapping[str, Any]
-
-    @abstractmethod
-    def run_point(
-        self, values: Mapping[str, Any], times: NDArray[np.float64]
-    ) -> dict[str, NDArray[np.float64]]:
-        """Run one node.
-
-        Parameters
-        ----------
-        values:
-            The node's uncertain inputs (floats, or (m,) arrays for field inputs).
-        times:
-            Output grid, (T,).
-
-        Returns
-        -------
-        dict[str, NDArray]
-            Every name in ``outputs`` -> (T,).
-
-        Raises
-        ------
-        ModelError
-            The run failed; the message says how.
-        """
-
-    def simulate(
-        self, params: Mapping[str, NDArray[np.float64]], times: NDArray[np.float64]
-    ) -> dict[str, NDArray[np.float64]]:
-        """Run a batch node by node.
-
-        Parameters
-        ----------
-        params:
-            Uncertain inputs, each (B,) or (B, m); names must be in ``parameters``.
-        times:
-            Output grid, (T,).
-
-        Returns
-        -------
-        dict[str, NDArray]
-            Every output -> (B, T); rows of failed nodes are NaN when B > 1.
-
-        Raises
-        ------
-        ValueError
-            Unknown parameter names, inconsistent batch sizes, or ``times`` not 1-D.
-        ModelError
-            The single node of a batch of one failed.
-        """
-        times = np.asarray(times, dtype=float)
-        if times.ndim != 1:
-            raise ValueError(f"times must be 1-D, got shape {times.shape}")
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise ValueError(
-                f"unknown parameter(s) {', '.join(unknown)}; "
-                f"known: {', '.join(self.parameters) or 'none'}"
-            )
-        arrays = {name: np.asarray(value) for name, value in params.items()}
-        sizes = {len(a) if a.ndim in (1, 2) else -1 for a in arrays.values()}
-        if len(sizes) > 1 or -1 in sizes:
-            shapes = {name: a.shape for name, a in arrays.items()}
-            raise ValueError(f"params must all be (B,) or (B, m) with one B, got {shapes}")
-        batch = sizes.pop() if sizes else 1
-        out = {name: np.full((batch, times.size), np.nan) for name in self.outputs}
-        for i in range(batch):
-            values = {name: a[i] if a.ndim == 2 else float(a[i]) for name, a in arrays.items()}
-            try:
-                result = self.run_point(values, times)
-            except ModelError:
-                if batch == 1:
-                    raise
-                continue
-            for name in self.outputs:
-                out[name][i] = result[name]
-        return out
-
-
-class FunctionModel(PointwiseModel):
-    """A per-point function ``f(params: dict, times) -> dict[str, (T,)]`` as a model.
-
-    Parameters
-    ----------
-    func:
-        Called once per node with the nominal ``params`` merged with the node's values.
-    params:
-        Nominal value of every parameter, including every input that will be uncertain.
-    outputs:
-        Names of the outputs to take from ``func``'s result; ``None`` uses
-        ``func.outputs`` when the function declares it.
-
-    Raises
-    ------
-    ConfigError
-        At ``model.outputs`` when no output names are given or declared.
-    """
-
-    def __init__(
-        self,
-        func: Callable[[dict[str, Any], NDArray[np.float64]], Mapping[str, Any]],
-        params: Mapping[str, Any],
-        outputs: Sequence[str] | None = None,
-    ):
-        declared = outputs if outputs is not None else getattr(func, "outputs", None)
-        name = getattr(func, "__qualname__", repr(func))
-        if isinstance(declared, str):
-            raise _problem("model.outputs", f"expected a list of names, found {declared!r}")
-        if not declared:
-            raise _problem(
-                "model.outputs",
-                f"the function {name} does not declare its outputs: list their names",
-            )
-        self.func = func
-        self.outputs = tuple(declared)
-        self.parameters = dict(params)
-        self._who = name
-
-    def run_point(
-        self, values: Mapping[str, Any], times: NDArray[np.float64]
-    ) -> dict[str, NDArray[np.float64]]:
-        """Call the function at one node; see :meth:`PointwiseModel.run_point`."""
-        try:
-            result = self.func({**self.parameters, **values}, times)
-        except Exception as exc:
-            raise ModelError(f"{self._who} raised {_describe(exc)}") from exc
-        return _check_point_result(result, self.outputs, times.size, f"the result of {self._who}")
-
-
-# --------------------------------------------------------------------------- command models
+        raise ModelError(f"{what} is not numeric: {describe_exception(exc)}") from exc
 
 
 @dataclass(frozen=True)
@@ -519,7 +131,7 @@ def _wait_unreaped(pid: int, timeout: float | None) -> bool:
 
 
 class CommandModel(PointwiseModel):
-    """An external executable as a model, run once per node (SPEC §3 ``command``).
+    """An external executable as a model, run once per node.
 
     Per node: a fresh work directory; template files rendered into it (``{{ name }}`` ->
     the exact float text, ``repr``; ``{{ times.start }}``, ``{{ times.stop }}`` and
@@ -573,6 +185,8 @@ class CommandModel(PointwiseModel):
     Processes the command leaves behind are killed with its process group when it ends.
     """
 
+    nominal_from_params = True
+
     def __init__(
         self,
         command: str | Sequence[str],
@@ -605,7 +219,7 @@ class CommandModel(PointwiseModel):
             raise _problem(
                 "model.timeout", f"expected a positive number of seconds, found {timeout}"
             )
-        if keep not in ("failed", "all", "none"):
+        if keep not in KEEP_POLICIES:
             raise _problem("model.keep", f"expected 'failed', 'all' or 'none', found {keep!r}")
         self.outputs = tuple(outputs)
         if not self.outputs:
@@ -651,10 +265,10 @@ class CommandModel(PointwiseModel):
                 "model.output.file", f"expected a plain file name, found {output_file!r}"
             )
         fmt = output_format or Path(output_file).suffix.lstrip(".").lower()
-        if fmt not in _FORMATS:
+        if fmt not in FORMATS:
             raise _problem(
                 "model.output.format",
-                f"expected one of {', '.join(_FORMATS)} (or an output file with such an "
+                f"expected one of {', '.join(FORMATS)} (or an output file with such an "
                 f"extension), found {fmt!r}",
             )
         return fmt
@@ -671,7 +285,7 @@ class CommandModel(PointwiseModel):
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
-            raise _problem(key, f"cannot read template {path}: {_describe(exc)}") from exc
+            raise _problem(key, f"cannot read template {path}: {describe_exception(exc)}") from exc
         return _Template(path.name, text)
 
     def _check_placeholders(self) -> None:
@@ -695,22 +309,24 @@ class CommandModel(PointwiseModel):
                     )
 
     def _check_names(self) -> None:
-        """Everything placed in a work directory needs its own name."""
-        names = [
-            _PARAMS_FILE,
-            _STDOUT_FILE,
-            _STDERR_FILE,
-            self.output_file,
-            *(t.name for t in self.templates),
-            *(f.name for f in self.files),
+        """Everything placed in a work directory needs its own name (reported where reused)."""
+        reserved = (_PARAMS_FILE, _STDOUT_FILE, _STDERR_FILE)
+        placed = [
+            ("model.output.file", self.output_file),
+            *((f"model.templates[{i}]", t.name) for i, t in enumerate(self.templates)),
+            *((f"model.files[{i}]", f.name) for i, f in enumerate(self.files)),
         ]
-        clashes = sorted({n for n in names if names.count(n) > 1})
-        if clashes:
-            raise _problem(
-                "model",
-                f"work-directory file name(s) used twice: {', '.join(clashes)} "
-                f"({_PARAMS_FILE}, {_STDOUT_FILE} and {_STDERR_FILE} are reserved)",
-            )
+        first: dict[str, str] = {}
+        for key, name in placed:
+            if name in reserved:
+                raise _problem(
+                    key, f"{name} is a reserved work-directory name ({', '.join(reserved)})"
+                )
+            if name in first:
+                raise _problem(
+                    key, f"work-directory file name {name} is already used by {first[name]}"
+                )
+            first[name] = key
 
     # -- one node
 
@@ -754,7 +370,7 @@ class CommandModel(PointwiseModel):
                     start_new_session=True,
                 )
             except OSError as exc:
-                raise ModelError(f"cannot start {argv[0]}: {_describe(exc)}") from exc
+                raise ModelError(f"cannot start {argv[0]}: {describe_exception(exc)}") from exc
             try:
                 finished = _wait_unreaped(process.pid, self.timeout)
             finally:
@@ -781,12 +397,11 @@ class CommandModel(PointwiseModel):
         try:
             columns = _READERS[self.output_format](path, self.outputs)
         except (ValueError, OSError, EOFError, zipfile.BadZipFile, csv.Error) as exc:
-            raise ModelError(
-                f"cannot parse {self.output_file} as {self.output_format}: {_describe(exc)}"
-            ) from exc
+            what = f"{self.output_file} as {self.output_format}"
+            raise ModelError(f"cannot parse {what}: {describe_exception(exc)}") from exc
         if self.time_column in columns:
             self._check_time_column(columns[self.time_column], times)
-        result = _check_point_result(columns, self.outputs, times.size, self.output_file)
+        result = check_point_result(columns, self.outputs, times.size, self.output_file)
         for name, values in result.items():
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
@@ -885,58 +500,8 @@ _READERS: dict[str, Callable[[Path, Sequence[str]], Mapping[str, Any]]] = {
 }
 
 
-# --------------------------------------------------------------------------- factories
-
-
 @dataclass(frozen=True)
-class PythonModelFactory:
-    """Builds a model from an entry point (``file.py:Name`` or ``package.module:Name``).
-
-    Picklable with plain pickle; each worker builds its own model.
-
-    Parameters
-    ----------
-    entry, base_dir:
-        See :func:`load_entry`.
-    params:
-        Nominal parameters (constructor keywords of a class, or a function's defaults).
-    outputs:
-        Output names of a per-point function (``None``: declared by the function).
-    """
-
-    entry: str
-    base_dir: Path
-    params: Mapping[str, Any]
-    outputs: tuple[str, ...] | None = None
-
-    def __call__(self) -> Model:
-        """Load and build the model (raises ConfigError as :func:`as_model` does)."""
-        return as_model(load_entry(self.entry, self.base_dir), self.params, self.outputs)
-
-
-@dataclass(frozen=True)
-class ObjectModelFactory:
-    """Builds a model from a Python object: a class, a model instance or a function.
-
-    Works in-process as is; joblib's workers receive it through cloudpickle.
-
-    Parameters
-    ----------
-    obj, params, outputs:
-        See :func:`as_model`.
-    """
-
-    obj: object
-    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
-    outputs: tuple[str, ...] | None = None
-
-    def __call__(self) -> Model:
-        """Build the model (raises ConfigError as :func:`as_model` does)."""
-        return as_model(self.obj, self.params, self.outputs)
-
-
-@dataclass(frozen=True)
-class CommandModelFactory:
+class CommandModelFactory(ModelFactory):
     """Builds a :class:`CommandModel`; the fields are its constructor's arguments."""
 
     command: tuple[str, ...]

@@ -1,0 +1,82 @@
+"""The ``model:`` section of ``kind: command``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BeforeValidator, Field
+
+from pcmb.adapters.command.model import (
+    CommandModelFactory,
+    KeepPolicy,
+    OutputFormat,
+    split_command,
+)
+from pcmb.config.types import ModelSection, Name, NameList, PositiveReal, Real, Section
+
+__all__ = ["CommandModelSpec", "CommandOutputSpec"]
+
+
+def _split_command(value: Any) -> Any:
+    """A command may be written as one string; it is split like a shell would, without one."""
+    if isinstance(value, str):
+        try:
+            return split_command(value)
+        except ValueError as exc:
+            raise ValueError(f"cannot split the command: {exc}") from None
+    return value
+
+
+Command = Annotated[
+    list[str],
+    Field(min_length=1),
+    BeforeValidator(_split_command, json_schema_input_type=str | list[str]),
+]
+
+
+class CommandOutputSpec(Section):
+    """The file an external command writes in its work directory."""
+
+    file: str
+    format: OutputFormat | None = Field(
+        default=None, description="default: from the file extension"
+    )
+    time_column: str = Field(default="time", description="checked against the grid if present")
+
+
+class CommandModelSpec(ModelSection):
+    """``kind: command``: an external executable run once per node."""
+
+    kind: Literal["command"]
+    command: Command = Field(description="argv list, or a string split like a shell would")
+    params: dict[Name, Real] = Field(default_factory=dict)
+    outputs: NameList
+    output: CommandOutputSpec
+    templates: list[str] = Field(default_factory=list, description="files rendered per node")
+    files: list[str] = Field(default_factory=list, description="files linked into each node dir")
+    timeout: PositiveReal | None = Field(default=None, description="seconds per run")
+    run_dir: str | None = Field(default=None, description="parent of node dirs (default: temp)")
+    keep: KeepPolicy = "failed"
+
+    def factory(self, base_dir: Path) -> CommandModelFactory:
+        """A factory of the :class:`~pcmb.adapters.command.model.CommandModel`."""
+        return CommandModelFactory(
+            command=tuple(self.command),
+            params=dict(self.params),
+            outputs=tuple(self.outputs),
+            output_file=self.output.file,
+            output_format=self.output.format,
+            templates=tuple(self.templates),
+            files=tuple(self.files),
+            base_dir=base_dir,
+            timeout=self.timeout,
+            run_dir=None if self.run_dir is None else Path(self.run_dir).resolve(),
+            keep=self.keep,
+            time_column=self.output.time_column,
+        )
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """``outputs``: a command model has exactly these."""
+        return tuple(self.outputs)

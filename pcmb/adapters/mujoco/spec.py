@@ -1,0 +1,211 @@
+"""The MuJoCo binding language and the ``model:`` section of ``kind: mujoco``.
+
+Defined once: the config schema validates with these classes, and
+:class:`~pcmb.adapters.mujoco.model.MujocoModel` parses a Python caller's plain dicts through
+them (:func:`parse_scene_io`). This module does not import mujoco.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
+
+from pydantic import BeforeValidator, Field, ValidationError
+
+from pcmb.config.messages import schema_problems
+from pcmb.config.types import (
+    ModelSection,
+    Name,
+    NonNegativeInt,
+    Real,
+    Section,
+    reject_text_and_bool,
+    tagged_by_key,
+)
+from pcmb.errors import ConfigError
+
+if TYPE_CHECKING:
+    from pcmb.adapters.mujoco.model import MujocoModelFactory
+
+__all__ = [
+    "BindEntry",
+    "FieldBind",
+    "InitSpec",
+    "MujocoModelSpec",
+    "MujocoOutput",
+    "Qpos0Bind",
+    "QposOutput",
+    "Qvel0Bind",
+    "QvelOutput",
+    "SceneIO",
+    "SensorOutput",
+    "SiteXposOutput",
+    "XposOutput",
+    "parse_scene_io",
+]
+
+Axis = Annotated[Literal[0, 1, 2], BeforeValidator(reject_text_and_bool("0, 1 or 2"))]
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+class FieldBind(Section):
+    """An input that sets a compiled MjModel field: ``{field: body_mass, name: bob}``."""
+
+    field: str
+    name: str | None = None
+    index: NonNegativeInt | None = None
+
+
+class Qpos0Bind(Section):
+    """An input that sets the initial position of a joint: ``{qpos0: joint}``."""
+
+    qpos0: str
+    state: ClassVar[str] = "qpos"
+
+    @property
+    def joint(self) -> str:
+        return self.qpos0
+
+
+class Qvel0Bind(Section):
+    """An input that sets the initial velocity of a joint: ``{qvel0: joint}``."""
+
+    qvel0: str
+    state: ClassVar[str] = "qvel"
+
+    @property
+    def joint(self) -> str:
+        return self.qvel0
+
+
+BindEntry = tagged_by_key(
+    FieldBind,
+    Qpos0Bind,
+    Qvel0Bind,
+    error="expected {field: ..., name: ..., index: ...}, {qpos0: joint} or {qvel0: joint}",
+)
+
+
+class InitSpec(Section):
+    """Fixed initial state by joint name (hinge and slide joints)."""
+
+    qpos: dict[str, Real] = Field(default_factory=dict)
+    qvel: dict[str, Real] = Field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+class QposOutput(Section):
+    """``{qpos: joint}``."""
+
+    qpos: str
+    source: ClassVar[str] = "qpos"
+
+
+class QvelOutput(Section):
+    """``{qvel: joint}``."""
+
+    qvel: str
+    source: ClassVar[str] = "qvel"
+
+
+class SensorOutput(Section):
+    """``{sensor: name}``, with ``index`` for a sensor of several values."""
+
+    sensor: str
+    index: NonNegativeInt | None = None
+    source: ClassVar[str] = "sensor"
+
+
+class XposOutput(Section):
+    """``{xpos: body, axis}``."""
+
+    xpos: str
+    axis: Axis
+    source: ClassVar[str] = "xpos"
+
+
+class SiteXposOutput(Section):
+    """``{site_xpos: site, axis}``."""
+
+    site_xpos: str
+    axis: Axis
+    source: ClassVar[str] = "site_xpos"
+
+
+MujocoOutput = tagged_by_key(
+    QposOutput,
+    QvelOutput,
+    SensorOutput,
+    XposOutput,
+    SiteXposOutput,
+    error="expected one of {qpos: joint}, {qvel: joint}, {sensor: name}, "
+    "{xpos: body, axis: 0-2}, {site_xpos: site, axis: 0-2}",
+)
+
+Bindings = dict[Name, Annotated[list[BindEntry], Field(min_length=1)]]
+Outputs = Annotated[dict[Name, MujocoOutput], Field(min_length=1)]
+
+
+# --------------------------------------------------------------------------- the sections
+
+
+class SceneIO(Section):
+    """What reaches a scene and what is read from it: ``bind``, ``init``, ``outputs``."""
+
+    bind: Bindings = Field(default_factory=dict)
+    init: InitSpec = Field(default_factory=InitSpec)
+    outputs: Outputs
+
+
+def parse_scene_io(bind: Any, init: Any, outputs: Any) -> SceneIO:
+    """Plain dicts (or parsed entries) in the binding language, validated.
+
+    Raises
+    ------
+    ConfigError
+        Every problem, at its config key path (``model.bind.m[0].name``, ...).
+    """
+    try:
+        return SceneIO.model_validate({"bind": bind, "init": init, "outputs": outputs})
+    except ValidationError as exc:
+        raise ConfigError(schema_problems(exc, SceneIO, prefix=("model",))) from None
+
+
+class MujocoModelSpec(ModelSection):
+    """``kind: mujoco``: an MJCF scene."""
+
+    kind: Literal["mujoco"]
+    xml: str = Field(description="MJCF file, relative to the config; may hold {{ name }}")
+    params: dict[Name, Real] = Field(default_factory=dict)
+    bind: Bindings = Field(default_factory=dict)
+    init: InitSpec = Field(default_factory=InitSpec)
+    outputs: Outputs
+
+    def factory(self, base_dir: Path) -> MujocoModelFactory:
+        """A factory of the :class:`~pcmb.adapters.mujoco.model.MujocoModel` (imports mujoco)."""
+        from pcmb.adapters.mujoco.model import MujocoModelFactory
+
+        return MujocoModelFactory(
+            xml=(base_dir / self.xml).resolve(),
+            params=dict(self.params),
+            bind={
+                name: [entry.model_dump(exclude_none=True) for entry in entries]
+                for name, entries in self.bind.items()
+            },
+            init=self.init.model_dump(),
+            outputs={name: out.model_dump(exclude_none=True) for name, out in self.outputs.items()},
+        )
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """The names under ``outputs``: a scene has exactly these."""
+        return tuple(self.outputs)
+
+    @property
+    def nominal_names(self) -> frozenset[str]:
+        """Placeholders' nominal values and bound inputs (whose nominal the scene holds)."""
+        return frozenset(self.params) | frozenset(self.bind)

@@ -1,0 +1,84 @@
+"""Fixtures shared by several test modules.
+
+Exact reference solutions live in :mod:`pcmb.references`; helpers that must be importable
+by path stay modules of their own (``executor_models``: model classes worker processes
+unpickle; ``model_loading``: the simulators of ``models/`` loaded at module level).
+"""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+LINEAR_MODEL = '''
+import os
+import time
+
+import numpy as np
+
+
+class Linear:
+    """y = a t + b², z = a b: closed-form statistics; optional failure and slowness."""
+
+    outputs = ("y", "z")
+
+    def __init__(self, a=1.0, b=0.0, fail_above=None, delay=0.0):
+        self.parameters = {"a": a, "b": b}
+        self.fail_above = fail_above
+        self.delay = delay
+
+    def simulate(self, params, times):
+        a = np.asarray(params.get("a", self.parameters["a"]), float)
+        b = np.asarray(params.get("b", self.parameters["b"]), float)
+        a, b = np.broadcast_arrays(a, b)
+        if self.delay:
+            time.sleep(self.delay * a.size)
+        y = a[:, None] * times + b[:, None] ** 2
+        if self.fail_above is not None:
+            if a.size == 1 and a[0] > self.fail_above:
+                raise RuntimeError(f"blew up at a={a[0]}")
+            y[a > self.fail_above] = np.nan
+        return {"y": y, "z": np.repeat((a * b)[:, None], times.size, axis=1)}
+'''
+
+
+@pytest.fixture
+def linear_study(tmp_path: Path) -> Callable[..., Path]:
+    """Write a python-kind study of the ``Linear`` model into ``tmp_path``.
+
+    Calling the fixture, ``linear_study(order=3, extra_params="", execution="jobs: 1",
+    name="linear")``, writes ``linear_model.py`` and ``<name>.yaml`` (a ~ U[1, 3],
+    b ~ N(0, 1), 5 times on [0, 2], output ``tmp_path / "out.h5"``) and returns the config
+    path. ``extra_params`` is appended to the model's params, e.g. ``", fail_above: 2.5"``.
+    """
+
+    def write(
+        *, order: int = 3, extra_params: str = "", execution: str = "jobs: 1", name: str = "linear"
+    ) -> Path:
+        (tmp_path / "linear_model.py").write_text(LINEAR_MODEL)
+        config = tmp_path / f"{name}.yaml"
+        config.write_text(
+            textwrap.dedent(
+                f"""\
+                name: {name}
+                model:
+                  kind: python
+                  entry: linear_model.py:Linear
+                  params: {{a: 1.0, b: 0.0{extra_params}}}
+                  outputs: [y, z]
+                time: {{start: 0.0, stop: 2.0, points: 5}}
+                inputs:
+                  a: {{dist: uniform, low: 1.0, high: 3.0}}
+                  b: {{dist: normal, mean: 0.0, std: 1.0}}
+                method: {{kind: collocation, order: {order}}}
+                execution: {{{execution}}}
+                output: {tmp_path / "out.h5"}
+                """
+            )
+        )
+        return config
+
+    return write
