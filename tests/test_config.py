@@ -271,7 +271,7 @@ BROKEN = [
         "backend: lokky",
         "execution.backend",
         "lokky",
-        "expected 'loky' or 'dask'",
+        "expected 'loky', 'dask' or 'inprocess'",
     ),
     (
         "address-without-dask",
@@ -289,6 +289,14 @@ BROKEN = [
         "method.samples",
         "method:",
         "required key is missing (needed by kind montecarlo)",
+    ),
+    (
+        "fit-with-collocation",
+        "kind: collocation",
+        "kind: collocation\n  fit: regression",
+        "method.fit",
+        "fit:",
+        "expected none: collocation recovers by projection",
     ),
     (
         "fit-needs-order",
@@ -320,7 +328,7 @@ BROKEN = [
         "order: 9999",
         "method.order",
         "order:",
-        "the tensor grid has 1e+08 nodes",
+        "the design asks for 1e+08 runs",
     ),
     ("stop<=start", "stop: 2.0", "stop: 0.0", "time.stop", "time:", "expected stop > start"),
     ("points<2", "points: 21", "points: 1", "time.points", "time:", "expected a value >= 2"),

@@ -76,7 +76,7 @@ def test_the_chaos_core_imports_no_heavy_library_and_no_pipeline():
     [
         ("h5py", ("pcmb.store",)),
         ("mujoco", ("pcmb.adapters.mujoco",)),
-        ("yaml", ("pcmb.config.loader", "pcmb.config.schema")),
+        ("yaml", ("pcmb.config.loader",)),
         ("matplotlib", ("pcmb.analysis.report",)),
     ],
 )

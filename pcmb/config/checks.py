@@ -5,11 +5,11 @@ Each yields ``(key path, message)``; the caller locates them in the file.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
-from pcmb.config.types import MAX_RUNS, MAX_VALUES, SAMPLING_KINDS
+from pcmb.config.types import MAX_RUNS, MAX_VALUES
+from pcmb.designs import MethodSettings, make_design
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -30,20 +30,28 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             yield "method.order", f"no order given for input(s) {', '.join(missing)}"
         if unknown or missing:
             return
-    if method.kind == "collocation" and config.orders is not None:
-        runs = math.prod(p + 1 for p in config.orders)
-        key, what = "method.order", "the tensor grid has"
-    elif method.kind in SAMPLING_KINDS and method.samples is not None:
-        runs, key, what = method.samples, "method.samples", "the study asks for"
-    else:
+    settings = MethodSettings(
+        kind=method.kind,
+        orders=config.orders,
+        basis=method.basis,
+        samples=method.samples,
+        seed=method.seed,
+        fit=method.fit,
+    )
+    try:
+        runs = make_design(dict(zip(names, config.distributions, strict=True)), settings).runs
+    except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
+        key, _, message = str(error).partition(": ")
+        yield key, message
         return
+    key = "method.samples" if method.samples is not None else "method.order"
     if runs > MAX_RUNS:
-        yield key, f"{what} {runs:.3g} nodes, more than the limit of {MAX_RUNS:.0e} runs"
+        yield key, f"the design asks for {runs:.3g} runs, more than the limit of {MAX_RUNS:.0e}"
     elif runs * config.time.points > MAX_VALUES:
         yield (
             key,
             (
-                f"{what} {runs} nodes x {config.time.points} time points = "
+                f"the design asks for {runs} runs x {config.time.points} time points = "
                 f"{runs * config.time.points:.3g} values per output, more than {MAX_VALUES:.0e}"
             ),
         )

@@ -29,7 +29,6 @@ from pydantic import (
     field_validator,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
@@ -40,7 +39,6 @@ from pcmb.config.messages import KeyPath, located, schema_problems
 from pcmb.config.types import (
     MAX_RUNS,
     MAX_VALUES,
-    SAMPLING_KINDS,
     ModelSection,
     Name,
     NonNegativeInt,
@@ -53,7 +51,11 @@ from pcmb.config.types import (
     count,
     unique,
 )
+from pcmb.designs import DESIGNS
+from pcmb.designs.collocation import BASES
+from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
+from pcmb.run.backends import BACKENDS
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import ModelFactory
@@ -61,7 +63,6 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_RUNS",
     "MAX_VALUES",
-    "SAMPLING_KINDS",
     "AnalysisSpec",
     "ExecutionSpec",
     "MethodSpec",
@@ -235,44 +236,23 @@ OrderSpec = Annotated[
 class MethodSpec(Section):
     """How nodes are chosen and coefficients recovered."""
 
-    kind: Literal["collocation", "montecarlo", "lhs", "sobol"]
-    fit: Literal["none", "regression"] = Field(
+    kind: Literal[tuple(DESIGNS)] = Field(description="how nodes are made (a registered design)")
+    fit: Literal[FITS] = Field(
         default="none", description="regression: least-squares chaos fit on sampled nodes"
     )
     order: OrderSpec | None = Field(
         default=None, validate_default=True, description="int, or a mapping input -> int"
     )
-    basis: Literal["tensor", "total"] = "tensor"
-    samples: PositiveInt | None = Field(default=None, validate_default=True)
-    seed: NonNegativeInt = 0
-
-    @field_validator("order")
-    @classmethod
-    def _order_needed(cls, order: Any, info: ValidationInfo) -> Any:
-        kind, fit = info.data.get("kind"), info.data.get("fit")
-        if order is None and (kind == "collocation" or fit == "regression"):
-            need = "kind collocation" if kind == "collocation" else "fit regression"
-            raise PydanticCustomError(
-                "missing", "required key is missing (needed by {need})", {"need": need}
-            )
-        return order
-
-    @field_validator("samples")
-    @classmethod
-    def _samples_needed(cls, samples: int | None, info: ValidationInfo) -> int | None:
-        kind = info.data.get("kind")
-        if samples is None and kind in SAMPLING_KINDS:
-            raise PydanticCustomError(
-                "missing", "required key is missing (needed by kind {kind})", {"kind": kind}
-            )
-        return samples
+    basis: Literal[BASES] = Field(default="tensor", description="chaos terms of collocation")
+    samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
+    seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
 
 
 class ExecutionSpec(Section):
     """Where and how the nodes run."""
 
     jobs: PositiveInt | None = Field(default=None, description="default: all cores")
-    backend: Literal["loky", "dask"] = "loky"
+    backend: Literal[tuple(BACKENDS)] = "loky"
     address: str | None = Field(default=None, description="dask scheduler (backend dask only)")
     on_failure: Literal["abort", "retry", "regress"] = "abort"
     retries: NonNegativeInt = 1

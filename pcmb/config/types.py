@@ -25,7 +25,6 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_RUNS",
     "MAX_VALUES",
-    "SAMPLING_KINDS",
     "ModelSection",
     "Name",
     "NameList",
@@ -48,7 +47,6 @@ MAX_RUNS = 10_000_000
 #: Largest number of stored values per output (runs x time points): 8 GB of float64.
 MAX_VALUES = 1_000_000_000
 #: ``method.kind`` values that sample their nodes (and need ``samples``).
-SAMPLING_KINDS = ("montecarlo", "lhs", "sobol")
 
 
 def reject_text_and_bool(expected: str) -> Callable[[Any], Any]:

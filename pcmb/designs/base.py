@@ -54,6 +54,11 @@ class NodeDesign(Protocol):
         """The nodes to run: ``.nodes`` (N, n) germ, ``.params`` (N, n) physical values."""
         ...
 
+    @property
+    def runs(self) -> int:
+        """Number of model runs the design asks for (known before any node is made)."""
+        ...
+
     def weights(self, nodes: TensorGrid | NodeSet) -> NDArray[np.float64] | None:
         """(N,) quadrature weights summing to 1, or ``None`` for random sampling."""
         ...

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
@@ -30,7 +31,7 @@ class TensorCollocation:
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.orders is None:
-            raise ValueError("method.order: collocation needs an order")
+            raise ValueError("method.order: required key is missing (needed by kind collocation)")
         if settings.basis not in BASES:
             raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
         if settings.fit != "none":
@@ -41,6 +42,10 @@ class TensorCollocation:
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.basis = settings.basis
+
+    @property
+    def runs(self) -> int:
+        return math.prod(order + 1 for order in self.orders)
 
     def nodes(self) -> TensorGrid:
         return TensorGrid(self.distributions, self.orders)

@@ -25,18 +25,26 @@ class Sampling:
     """
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        if settings.samples is None or settings.samples < 2:
+        if settings.samples is None:
+            raise ValueError(
+                f"method.samples: required key is missing (needed by kind {settings.kind})"
+            )
+        if settings.samples < 2:
             raise ValueError(
                 f"method.samples: {settings.kind} needs at least 2 samples, got {settings.samples}"
             )
         if settings.fit not in FITS:
             raise ValueError(f"method.fit: expected one of {', '.join(FITS)}")
         if settings.fit == "regression" and settings.orders is None:
-            raise ValueError("method.order: fit regression needs an order")
+            raise ValueError("method.order: required key is missing (needed by fit regression)")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.kind, self.samples, self.seed = settings.kind, settings.samples, settings.seed
         self.fit = settings.fit
         self.orders = settings.orders if self.fit == "regression" else None
+
+    @property
+    def runs(self) -> int:
+        return self.samples
 
     def nodes(self) -> NodeSet:
         return random_nodes(self.distributions, self.samples, self.kind, self.seed)
