@@ -1,4 +1,4 @@
-"""Small models for the executor tests, following the model protocol (SPEC §3).
+"""Small models for the executor tests, following the model protocol.
 
 They live in an importable module (not in the test files) so that worker processes can unpickle
 their factories by reference. Every model counts, per process, the nodes it simulated

@@ -1,4 +1,4 @@
-"""Tests of models/double_well.py against its closed form (SPEC §8.5)."""
+"""Tests of models/double_well.py against its closed form."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of models/lorenz.py (SPEC §8.6): equilibria, the stable case, chaotic accuracy."""
+"""Tests of models/lorenz.py: equilibria, the stable case, chaotic accuracy."""
 
 from __future__ import annotations
 

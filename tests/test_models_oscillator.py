@@ -1,4 +1,4 @@
-"""Tests of models/oscillator.py (SPEC §8.4): forcing, batching, and the paper's finding."""
+"""Tests of models/oscillator.py: forcing, batching, and the paper's finding."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ SAMPLE = np.array([[1.0, -0.5, 0.3, 2.0], [-2.3, 1.2, -1.0, 0.0], [0.7, 0.7, -0.
 
 
 def forcing(p):
-    """f(t) of SPEC §8.4 written out: the terrain process seen at speed v, ω_i = v / L_i."""
+    """f(t) of Part II Eq. 17 written out: the terrain process seen at speed v, ω_i = v / L_i."""
     w1, w2 = p["speed"] / p["L1"], p["speed"] / p["L2"]
 
     def f(t):

@@ -1,4 +1,4 @@
-"""Tests of models/pendulum.py against the exact elliptic-function solution (SPEC §8.7).
+"""Tests of models/pendulum.py against the exact elliptic-function solution.
 
 θ(t) = 2 asin(k sn(K(k) − √(g/L) t, k)), k = sin(θ0/2), for a release from rest at θ0
 (:func:`pcmb.references.pendulum_angle`).

@@ -1,6 +1,6 @@
 """Tests of models/quarter_car.py: physics against closed forms, batching against separate runs.
 
-The per-node references re-state the equations of SPEC §8.1–8.3 here, independently of the
+The per-node references re-state the equations of Part II (Eq. 1–5, 10, 11) here, apart from the
 model's code, and integrate one node at a time with plain ``solve_ivp`` (DOP853, rtol 1e-11).
 """
 
@@ -23,7 +23,7 @@ PROMISE = 1e-6
 
 
 def suspension_force(p, damper, d, dv, spring="cubic"):
-    """Force of the suspension on the wheel (minus that on the body), from SPEC §8.1–8.2."""
+    """Force of the suspension on the wheel (minus that on the body), Part II Eq. 1–5 and 10."""
     spring_force = p["k"] * d**3 if spring == "cubic" else p["k"] * d
     if damper == "linear":
         return spring_force + p["c"] * dv
@@ -147,7 +147,7 @@ def test_kl_terrain_batch_matches_tight_separate_runs_and_the_profile():
     out = model.simulate({n: germs[:, i] for i, n in enumerate(names)}, times)
 
     def profile(p):
-        # SPEC §8.3 written out: D = 100 m, L1 = D/(6π), L2 = D/(14π), s = 10 m/s · t.
+        # Part II Eq. 11 written out: D = 100 m, L1 = D/(6π), L2 = D/(14π), s = 10 m/s · t.
         def z(t):
             s = 10.0 * t
             l1, l2 = 100.0 / (6 * np.pi), 100.0 / (14 * np.pi)
@@ -171,7 +171,7 @@ def test_kl_terrain_batch_matches_tight_separate_runs_and_the_profile():
 
 
 def test_mr_damper_law_has_the_documented_strength():
-    """SPEC §8.2: about ±1 kN at I = 0 and ±5–6 kN at I = 2 A for |v| up to 1.5 m/s.
+    """Part II (MR damper): about ±1 kN at I = 0 and ±5–6 kN at I = 2 A for |v| up to 1.5 m/s.
 
     At t = 0 with both springs unstretched the only force on the body is the damper's, so
     Fd = -Ms·a1(0) for the initial relative velocity v1_0.
@@ -184,7 +184,7 @@ def test_mr_damper_law_has_the_documented_strength():
     assert force[0] == pytest.approx(1015.0, rel=1e-6) and force[1] == pytest.approx(-1015.0)
     assert force[2] == pytest.approx(5515.0, rel=1e-6) and force[3] == pytest.approx(-5515.0)
     assert force[4] == 0.0
-    assert 900 < force[0] < 1100 and 5000 < force[2] < 6000  # the SPEC's figures
+    assert 900 < force[0] < 1100 and 5000 < force[2] < 6000  # the figures Part II quotes
 
 
 def test_linear_suspension_matches_the_closed_form_response():

@@ -1,4 +1,4 @@
-"""The result file: SPEC §5 layout, round trip, named dimensions, atomic writes."""
+"""The result file: its layout, round trip, named dimensions, atomic writes."""
 
 import dataclasses
 import json

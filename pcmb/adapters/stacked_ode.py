@@ -5,7 +5,7 @@ with d states, held as one (d, B) array -- states x nodes -- and integrated in o
 with every right-hand side evaluated on whole (d, B) arrays. The explicit methods
 (:mod:`pcmb.adapters.runge_kutta`) control each node's error by its own norm; the implicit ones
 (scipy's Radau and BDF) get tolerances divided by sqrt(B), which bounds every node's RMS norm by
-the stacked one. :class:`StackedODEModel` builds the model protocol of SPEC §3 on top.
+the stacked one. :class:`StackedODEModel` builds the model protocol (docs/models.md) on top.
 """
 
 from __future__ import annotations
@@ -310,7 +310,7 @@ def _checked_projection(
 
 
 class StackedODEModel(ABC):
-    """Base class for batched ODE models that follow the model protocol (SPEC §3).
+    """Base class for batched ODE models that follow the model protocol (docs/models.md).
 
     A subclass is its physics: it sets ``outputs`` and implements :meth:`_initial_state`,
     :meth:`_rhs` and :meth:`_observe` on (d, B) state arrays and (B,) parameter arrays (and
