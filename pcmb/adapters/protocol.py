@@ -20,6 +20,7 @@ __all__ = [
     "ModelDefinitionError",
     "ModelFactory",
     "PointwiseModel",
+    "check_batch",
     "check_point_result",
     "describe_exception",
 ]
@@ -123,6 +124,32 @@ def check_point_result(
     return checked
 
 
+def check_batch(
+    params: Mapping[str, Any], times: Any, parameters: Mapping[str, Any]
+) -> tuple[dict[str, NDArray[Any]], NDArray[np.float64], int]:
+    """The batch's inputs as arrays, the grid as floats, and the batch size B.
+
+    Raises
+    ------
+    ValueError
+        Unknown parameter names, inputs not all (B,) or (B, m) with one B, or ``times`` not 1-D.
+    """
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1:
+        raise ValueError(f"times must be 1-D, got shape {times.shape}")
+    unknown = sorted(set(params) - set(parameters))
+    if unknown:
+        raise ValueError(
+            f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(parameters) or 'none'}"
+        )
+    arrays = {name: np.asarray(value) for name, value in params.items()}
+    sizes = {len(a) if a.ndim in (1, 2) else -1 for a in arrays.values()}
+    if len(sizes) > 1 or -1 in sizes:
+        shapes = {name: a.shape for name, a in arrays.items()}
+        raise ValueError(f"params must all be (B,) or (B, m) with one B, got {shapes}")
+    return arrays, times, sizes.pop() if sizes else 1
+
+
 class PointwiseModel(ABC):
     """A model that runs one node at a time; :meth:`simulate` loops over the batch.
 
@@ -189,21 +216,7 @@ class PointwiseModel(ABC):
         ModelDefinitionError
             A node showed that the model cannot work at any node.
         """
-        times = np.asarray(times, dtype=float)
-        if times.ndim != 1:
-            raise ValueError(f"times must be 1-D, got shape {times.shape}")
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise ValueError(
-                f"unknown parameter(s) {', '.join(unknown)}; "
-                f"known: {', '.join(self.parameters) or 'none'}"
-            )
-        arrays = {name: np.asarray(value) for name, value in params.items()}
-        sizes = {len(a) if a.ndim in (1, 2) else -1 for a in arrays.values()}
-        if len(sizes) > 1 or -1 in sizes:
-            shapes = {name: a.shape for name, a in arrays.items()}
-            raise ValueError(f"params must all be (B,) or (B, m) with one B, got {shapes}")
-        batch = sizes.pop() if sizes else 1
+        arrays, times, batch = check_batch(params, times, self.parameters)
         out = {name: np.full((batch, times.size), np.nan) for name in self.outputs}
         for i in range(batch):
             values = {name: a[i] if a.ndim == 2 else float(a[i]) for name, a in arrays.items()}

@@ -30,6 +30,7 @@ from pcmb.adapters.protocol import (
     ModelDefinitionError,
     ModelFactory,
     PointwiseModel,
+    check_batch,
     describe_exception,
 )
 from pcmb.errors import ConfigError, ConfigProblem, ModelError, UsageError
@@ -401,7 +402,42 @@ def _kind_of(value: Any) -> str:
     return f"a {type(value).__name__}" if np.ndim(value) == 0 else f"shape {np.shape(value)}"
 
 
-class FunctionModel(PointwiseModel):
+class _MarkedFunction:
+    """What the two function models share: the function, its outputs and nominal values."""
+
+    nominal_from_params = True
+    #: How messages name the function, e.g. "per-point function".
+    what = "function"
+
+    def __init__(
+        self,
+        func: Callable[[dict[str, Any], NDArray[np.float64]], Mapping[str, Any]],
+        params: Mapping[str, Any],
+        outputs: Sequence[str] | None = None,
+    ):
+        self.func = func
+        self.outputs = _function_outputs(func, outputs)
+        self.parameters = dict(params)
+        self._who = f"{self.what} {_name(func)}"
+
+    def _call(self, arguments: dict[str, Any], times: NDArray[np.float64], due: str) -> Mapping:
+        """The function's result at ``arguments``, checked to be a mapping of the outputs."""
+        try:
+            result = self.func(arguments, times)
+        except Exception as exc:
+            raise ModelError(f"{_name(self.func)} raised {describe_exception(exc)}") from exc
+        return _returned_mapping(result, self.outputs, self._who, due)
+
+    def _numeric(self, name: str, value: Any) -> NDArray[np.float64]:
+        try:
+            return np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ModelError(
+                f"output {name!r} of the {self._who} is not numeric: {describe_exception(exc)}"
+            ) from exc
+
+
+class FunctionModel(_MarkedFunction, PointwiseModel):
     """A per-point function ``f(params: dict, times) -> dict[str, (T,)]`` as a model.
 
     Parameters
@@ -421,18 +457,7 @@ class FunctionModel(PointwiseModel):
         not declared.
     """
 
-    nominal_from_params = True
-
-    def __init__(
-        self,
-        func: Callable[[dict[str, Any], NDArray[np.float64]], Mapping[str, Any]],
-        params: Mapping[str, Any],
-        outputs: Sequence[str] | None = None,
-    ):
-        self.func = func
-        self.outputs = _function_outputs(func, outputs)
-        self.parameters = dict(params)
-        self._who = f"per-point function {_name(func)}"
+    what = "per-point function"
 
     def run_point(
         self, values: Mapping[str, Any], times: NDArray[np.float64]
@@ -442,20 +467,11 @@ class FunctionModel(PointwiseModel):
         A result that no node could get right (not a dict, an output missing, a number or a
         2-D array where a (T,) array is due) raises :class:`ModelDefinitionError`.
         """
-        try:
-            result = self.func({**self.parameters, **values}, times)
-        except Exception as exc:
-            raise ModelError(f"{_name(self.func)} raised {describe_exception(exc)}") from exc
-        result = _returned_mapping(result, self.outputs, self._who, "(T,) array")
+        result = self._call({**self.parameters, **values}, times, "(T,) array")
         checked = {}
         for name in self.outputs:
             value = result[name]
-            try:
-                array = np.asarray(value, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ModelError(
-                    f"output {name!r} of the {self._who} is not numeric: {describe_exception(exc)}"
-                ) from exc
+            array = self._numeric(name, value)
             if array.ndim != 1:
                 raise _definition_error(
                     self._who,
@@ -484,7 +500,7 @@ def _batch_value(nominal: Any, batch: int) -> Any:
     return np.repeat(array.astype(float)[None], batch, axis=0)
 
 
-class BatchFunctionModel:
+class BatchFunctionModel(_MarkedFunction):
     """A batch function ``f(params: Mapping[str, (B,)], times) -> {name: (B, T)}`` as a model.
 
     Parameters
@@ -495,18 +511,7 @@ class BatchFunctionModel:
         the batch's values.
     """
 
-    nominal_from_params = True
-
-    def __init__(
-        self,
-        func: Callable[[dict[str, Any], NDArray[np.float64]], Mapping[str, Any]],
-        params: Mapping[str, Any],
-        outputs: Sequence[str] | None = None,
-    ):
-        self.func = func
-        self.outputs = _function_outputs(func, outputs)
-        self.parameters = dict(params)
-        self._who = f"batch function {_name(func)}"
+    what = "batch function"
 
     def simulate(
         self, params: Mapping[str, NDArray[np.float64]], times: NDArray[np.float64]
@@ -522,39 +527,16 @@ class BatchFunctionModel:
         ModelDefinitionError
             Its result is not a dict of (B, T) arrays.
         """
-        times = np.asarray(times, dtype=float)
-        if times.ndim != 1:
-            raise ValueError(f"times must be 1-D, got shape {times.shape}")
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise ValueError(
-                f"unknown parameter(s) {', '.join(unknown)}; "
-                f"known: {', '.join(self.parameters) or 'none'}"
-            )
-        arrays = {name: np.asarray(value) for name, value in params.items()}
-        sizes = {len(a) if a.ndim in (1, 2) else -1 for a in arrays.values()}
-        if len(sizes) > 1 or -1 in sizes:
-            shapes = {name: a.shape for name, a in arrays.items()}
-            raise ValueError(f"params must all be (B,) or (B, m) with one B, got {shapes}")
-        batch = sizes.pop() if sizes else 1
+        arrays, times, batch = check_batch(params, times, self.parameters)
         full = {
             name: arrays[name] if name in arrays else _batch_value(value, batch)
             for name, value in self.parameters.items()
         }
-        try:
-            result = self.func(full, times)
-        except Exception as exc:
-            raise ModelError(f"{_name(self.func)} raised {describe_exception(exc)}") from exc
-        result = _returned_mapping(result, self.outputs, self._who, "(B, T) array")
+        result = self._call(full, times, "(B, T) array")
         checked = {}
         for name in self.outputs:
             value = result[name]
-            try:
-                array = np.asarray(value, dtype=float)
-            except (TypeError, ValueError) as exc:
-                raise ModelError(
-                    f"output {name!r} of the {self._who} is not numeric: {describe_exception(exc)}"
-                ) from exc
+            array = self._numeric(name, value)
             if array.shape != (batch, times.size):
                 raise _definition_error(
                     self._who,
