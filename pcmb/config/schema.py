@@ -109,8 +109,8 @@ class UniformSpec(_InputSpec):
     """``{dist: uniform, low, high}``."""
 
     dist: Literal["uniform"]
-    low: Real
-    high: Real
+    low: Real = Field(description="lower end of the support")
+    high: Real = Field(description="upper end of the support")
 
     def _build(self) -> inputs.Distribution:
         return inputs.Uniform(self.low, self.high)
@@ -120,10 +120,10 @@ class BetaSpec(_InputSpec):
     """``{dist: beta, alpha, beta, low, high}`` in scipy's shape convention."""
 
     dist: Literal["beta"]
-    alpha: Real
-    beta: Real
-    low: Real
-    high: Real
+    alpha: Real = Field(description="first shape parameter (scipy's a)")
+    beta: Real = Field(description="second shape parameter (scipy's b)")
+    low: Real = Field(description="lower end of the support")
+    high: Real = Field(description="upper end of the support")
 
     def _build(self) -> inputs.Distribution:
         return inputs.Beta(self.alpha, self.beta, self.low, self.high)
@@ -133,8 +133,8 @@ class NormalSpec(_InputSpec):
     """``{dist: normal, mean, std}``."""
 
     dist: Literal["normal"]
-    mean: Real
-    std: Real
+    mean: Real = Field(description="mean")
+    std: Real = Field(description="standard deviation")
 
     def _build(self) -> inputs.Distribution:
         return inputs.Normal(self.mean, self.std)
@@ -144,9 +144,9 @@ class GammaSpec(_InputSpec):
     """``{dist: gamma, shape, scale, loc}``."""
 
     dist: Literal["gamma"]
-    shape: Real
-    scale: Real
-    loc: Real = 0.0
+    shape: Real = Field(description="shape parameter")
+    scale: Real = Field(description="scale")
+    loc: Real = Field(default=0.0, description="shift of the support")
 
     def _build(self) -> inputs.Distribution:
         return inputs.Gamma(self.shape, self.scale, self.loc)
@@ -156,9 +156,13 @@ class ScipySpec(_InputSpec):
     """``{dist: scipy, name: lognorm, params: {s: 0.25, scale: 2.0}, germ: normal}``."""
 
     dist: Literal["scipy"]
-    name: str
-    params: dict[str, Real] = Field(default_factory=dict)
-    germ: Literal["uniform", "normal"] = "normal"
+    name: str = Field(description="a scipy.stats continuous distribution")
+    params: dict[str, Real] = Field(
+        default_factory=dict, description="its shape, loc and scale arguments"
+    )
+    germ: Literal["uniform", "normal"] = Field(
+        default="normal", description="germ family of the chaos basis"
+    )
 
     def _build(self) -> inputs.Distribution:
         import scipy.stats  # deferred: ~1 s of import that only this input kind needs
@@ -207,9 +211,9 @@ ModelSpec = Annotated[
 class TimeSpec(Section):
     """The output grid ``numpy.linspace(start, stop, points)``."""
 
-    start: Real = 0.0
-    stop: Real
-    points: Points
+    start: Real = Field(default=0.0, description="first output time")
+    stop: Real = Field(description="last output time (> start)")
+    points: Points = Field(description="number of output times")
 
     @field_validator("stop")
     @classmethod
@@ -252,11 +256,21 @@ class ExecutionSpec(Section):
     """Where and how the nodes run."""
 
     jobs: PositiveInt | None = Field(default=None, description="default: all cores")
-    backend: Literal[tuple(BACKENDS)] = "loky"
+    backend: Literal[tuple(BACKENDS)] = Field(
+        default="loky", description="where workers run (a registered backend)"
+    )
     address: str | None = Field(default=None, description="dask scheduler (backend dask only)")
-    on_failure: Literal["abort", "retry", "regress"] = "abort"
-    retries: NonNegativeInt = 1
-    chunk_size: PositiveInt | None = None
+    on_failure: Literal["abort", "retry", "regress"] = Field(
+        default="abort",
+        description="abort; retry failed nodes `retries` times; regress: refit on survivors",
+    )
+    retries: NonNegativeInt = Field(
+        default=1, description="extra attempts per failed node (on_failure: retry)"
+    )
+    chunk_size: PositiveInt | None = Field(
+        default=None,
+        description="nodes per model call (default: the model's choice, else ~N/16, 1 to 256)",
+    )
 
     @field_validator("address")
     @classmethod
@@ -297,7 +311,7 @@ class AnalysisSpec(Section):
     samples: count(ge=MIN_SAMPLES) = Field(
         default=100_000, description="surrogate draws for PDFs and quantiles"
     )
-    seed: NonNegativeInt = 0
+    seed: NonNegativeInt = Field(default=0, description="seed of the surrogate draws")
     units: dict[Name, str] = Field(default_factory=dict, description="output -> unit, for figures")
     time_unit: str = Field(default="", description="unit of time, for figures")
 
@@ -313,8 +327,10 @@ class StudyConfig(Section):
     text); ``StudyConfig.model_validate(data)`` alone checks the schema only.
     """
 
-    name: Annotated[str, Field(min_length=1)]
-    model: ModelSpec
+    name: Annotated[str, Field(min_length=1)] = Field(
+        description="study name, stored in the result file"
+    )
+    model: ModelSpec = Field(description="the simulator: one section per model.kind")
     time: TimeSpec
     inputs: Annotated[dict[Name, InputSpec], Field(min_length=1)] = Field(
         description="ordered: the order is the germ order"

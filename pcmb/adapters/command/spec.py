@@ -38,7 +38,7 @@ Command = Annotated[
 class CommandOutputSpec(Section):
     """The file an external command writes in its work directory."""
 
-    file: str
+    file: str = Field(description="file the command writes in its work directory")
     format: OutputFormat | None = Field(
         default=None, description="default: from the file extension"
     )
@@ -50,14 +50,18 @@ class CommandModelSpec(ModelSection):
 
     kind: Literal["command"]
     command: Command = Field(description="argv list, or a string split like a shell would")
-    params: dict[Name, Real] = Field(default_factory=dict)
-    outputs: NameList
+    params: dict[Name, Real] = Field(
+        default_factory=dict, description="nominal values rendered into the templates and command"
+    )
+    outputs: NameList = Field(description="names of the outputs the command writes")
     output: CommandOutputSpec
     templates: list[str] = Field(default_factory=list, description="files rendered per node")
     files: list[str] = Field(default_factory=list, description="files linked into each node dir")
     timeout: PositiveReal | None = Field(default=None, description="seconds per run")
     run_dir: str | None = Field(default=None, description="parent of node dirs (default: temp)")
-    keep: KeepPolicy = "failed"
+    keep: KeepPolicy = Field(
+        default="failed", description="which node work directories survive: failed, all or none"
+    )
 
     def factory(self, base_dir: Path) -> CommandModelFactory:
         """A factory of the :class:`~pcmb.adapters.command.model.CommandModel`."""

@@ -53,15 +53,19 @@ Axis = Annotated[Literal[0, 1, 2], BeforeValidator(reject_text_and_bool("0, 1 or
 class FieldBind(Section):
     """An input that sets a compiled MjModel field: ``{field: body_mass, name: bob}``."""
 
-    field: str
-    name: str | None = None
-    index: NonNegativeInt | None = None
+    field: str = Field(description="MjModel field (body_mass, dof_damping, opt.gravity, ...)")
+    name: str | None = Field(
+        default=None, description="element of the field (omit for opt.* fields)"
+    )
+    index: NonNegativeInt | None = Field(
+        default=None, description="component of a multi-valued field"
+    )
 
 
 class Qpos0Bind(Section):
     """An input that sets the initial position of a joint: ``{qpos0: joint}``."""
 
-    qpos0: str
+    qpos0: str = Field(description="joint whose initial position the input sets")
     state: ClassVar[str] = "qpos"
 
     @property
@@ -72,7 +76,7 @@ class Qpos0Bind(Section):
 class Qvel0Bind(Section):
     """An input that sets the initial velocity of a joint: ``{qvel0: joint}``."""
 
-    qvel0: str
+    qvel0: str = Field(description="joint whose initial velocity the input sets")
     state: ClassVar[str] = "qvel"
 
     @property
@@ -91,8 +95,12 @@ BindEntry = tagged_by_key(
 class InitSpec(Section):
     """Fixed initial state by joint name (hinge and slide joints)."""
 
-    qpos: dict[str, Real] = Field(default_factory=dict)
-    qvel: dict[str, Real] = Field(default_factory=dict)
+    qpos: dict[str, Real] = Field(
+        default_factory=dict, description="joint -> fixed initial position"
+    )
+    qvel: dict[str, Real] = Field(
+        default_factory=dict, description="joint -> fixed initial velocity"
+    )
 
 
 # --------------------------------------------------------------------------- outputs
@@ -101,38 +109,40 @@ class InitSpec(Section):
 class QposOutput(Section):
     """``{qpos: joint}``."""
 
-    qpos: str
+    qpos: str = Field(description="joint whose position is recorded")
     source: ClassVar[str] = "qpos"
 
 
 class QvelOutput(Section):
     """``{qvel: joint}``."""
 
-    qvel: str
+    qvel: str = Field(description="joint whose velocity is recorded")
     source: ClassVar[str] = "qvel"
 
 
 class SensorOutput(Section):
     """``{sensor: name}``, with ``index`` for a sensor of several values."""
 
-    sensor: str
-    index: NonNegativeInt | None = None
+    sensor: str = Field(description="sensor recorded")
+    index: NonNegativeInt | None = Field(
+        default=None, description="component of a multi-valued sensor"
+    )
     source: ClassVar[str] = "sensor"
 
 
 class XposOutput(Section):
     """``{xpos: body, axis}``."""
 
-    xpos: str
-    axis: Axis
+    xpos: str = Field(description="body whose world position is recorded")
+    axis: Axis = Field(description="coordinate: 0 x, 1 y, 2 z")
     source: ClassVar[str] = "xpos"
 
 
 class SiteXposOutput(Section):
     """``{site_xpos: site, axis}``."""
 
-    site_xpos: str
-    axis: Axis
+    site_xpos: str = Field(description="site whose world position is recorded")
+    axis: Axis = Field(description="coordinate: 0 x, 1 y, 2 z")
     source: ClassVar[str] = "site_xpos"
 
 
@@ -156,9 +166,11 @@ Outputs = Annotated[dict[Name, MujocoOutput], Field(min_length=1)]
 class SceneIO(Section):
     """What reaches a scene and what is read from it: ``bind``, ``init``, ``outputs``."""
 
-    bind: Bindings = Field(default_factory=dict)
+    bind: Bindings = Field(
+        default_factory=dict, description="input -> the MjModel fields or initial states it sets"
+    )
     init: InitSpec = Field(default_factory=InitSpec)
-    outputs: Outputs
+    outputs: Outputs = Field(description="output name -> what it reads from the simulation")
 
 
 def parse_scene_io(bind: Any, init: Any, outputs: Any) -> SceneIO:
@@ -180,10 +192,15 @@ class MujocoModelSpec(ModelSection):
 
     kind: Literal["mujoco"]
     xml: str = Field(description="MJCF file, relative to the config; may hold {{ name }}")
-    params: dict[Name, Real] = Field(default_factory=dict)
-    bind: Bindings = Field(default_factory=dict)
+    params: dict[Name, Real] = Field(
+        default_factory=dict,
+        description="nominal values of the {{ name }} placeholders and of bound inputs",
+    )
+    bind: Bindings = Field(
+        default_factory=dict, description="input -> the MjModel fields or initial states it sets"
+    )
     init: InitSpec = Field(default_factory=InitSpec)
-    outputs: Outputs
+    outputs: Outputs = Field(description="output name -> what it reads from the simulation")
 
     def factory(self, base_dir: Path) -> MujocoModelFactory:
         """A factory of the :class:`~pcmb.adapters.mujoco.model.MujocoModel` (imports mujoco)."""

@@ -18,7 +18,10 @@ class PythonModelSpec(ModelSection):
 
     kind: Literal["python"]
     entry: str = Field(description="path/to/file.py:Name (relative to the config) or pkg.mod:Name")
-    params: dict[Name, Any] = Field(default_factory=dict)
+    params: dict[Name, Any] = Field(
+        default_factory=dict,
+        description="nominal parameters (constructor keywords, or every parameter of a function)",
+    )
     outputs: NameList | None = Field(default=None, description="outputs to keep (default: all)")
 
     def factory(self, base_dir: Path) -> PythonModelFactory:
