@@ -410,7 +410,12 @@ class Study:
                 journal.remove()
             raise
         if runs.failures and self.on_failure != "regress":
-            kept = f"; finished nodes are kept in {journal.directory}" if journal else ""
+            finished = int(np.sum(runs.status == Status.OK))
+            kept = (
+                f"; the {finished} finished node(s) are kept in {journal.directory}"
+                if journal is not None and finished
+                else ""
+            )
             raise ModelRunError(
                 runs.failures,
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "

@@ -8,7 +8,8 @@ Usage::
 Only the public command line is used (``pcmb run CONFIG -o FILE``), so the script checks
 the whole path a user takes. Every numeric dataset under ``/`` is compared byte for byte;
 attributes that record when or how a file was made (``created``, ``versions``,
-``command_line``, ``seconds``) are not. Exit status 1 when anything differs.
+``command_line``, ``seconds``) are not. A config without a baseline file is reported as
+new. Exit status 1 when anything differs.
 """
 
 from __future__ import annotations
@@ -77,10 +78,11 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as scratch:
         for stem, path in run_all(Path(scratch)).items():
             baseline = args.baseline / f"{stem}.h5"
-            problems = (
-                ["no baseline file"] if not baseline.is_file() else differences(baseline, path)
-            )
             count = len(datasets(path))
+            if not baseline.is_file():
+                print(f"{stem:<22} new: no baseline to compare with ({count} datasets)")
+                continue
+            problems = differences(baseline, path)
             print(f"{stem:<22} {'identical' if not problems else 'DIFFERENT'} ({count} datasets)")
             for problem in problems:
                 print(f"    {problem}")
