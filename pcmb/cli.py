@@ -18,14 +18,18 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
+from pcmb.adapters.registry import ADAPTERS
 from pcmb.errors import EXIT_OK, EXIT_UNEXPECTED, PcmbError, PcmbWarning, UsageError
 from pcmb.run.backends import BACKENDS
 
 
 def _parser() -> argparse.ArgumentParser:
+    kinds = "\n".join(f"  {kind:<9} {entry.summary}" for kind, entry in ADAPTERS.items())
     parser = argparse.ArgumentParser(
         prog="pcmb",
         description="Simulations with error bars: polynomial chaos by stochastic collocation.",
+        epilog=f"model kinds (model.kind):\n{kinds}\nevery config key: docs/config.md",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -77,7 +81,8 @@ def _summary(config) -> str:
     lines = [
         f"config   {config.path}",
         f"name     {config.name}",
-        f"model    {config.model.kind}, outputs: {', '.join(study.check_model())}",
+        f"model    {config.model.kind} ({ADAPTERS[config.model.kind].summary})",
+        f"outputs  {', '.join(study.check_model())}",
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]
