@@ -199,7 +199,12 @@ class QuarterCar(StackedODEModel):
         x1, x2, v1, v2 = y
         force = self._suspension(x1, x2, v1, v2, p)
         tire = p["kT"] * (self._terrain(t, p) - x2)
-        return np.stack([v1, v2, force / p["Ms"], (tire - force) / p["Mu"]])
+        out = np.empty_like(y)
+        out[0] = v1
+        out[1] = v2
+        np.divide(force, p["Ms"], out=out[2])
+        np.divide(tire - force, p["Mu"], out=out[3])
+        return out
 
     def _breakpoints(self, p: Params) -> Sequence[float]:
         if self.terrain != "bump":

@@ -277,3 +277,18 @@ def test_a_spectrum_needs_a_uniform_grid():
         AnalysisSettings(psd=("x",)).check(uneven, ("x",))
     # By default spectra are simply left out on such a grid.
     assert AnalysisSettings().spectrum_outputs(uneven, ("x",)) == []
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 20_000])
+@pytest.mark.parametrize("levels", [(0.05, 0.95), (0.5,), (1e-300, 1 - 1e-16)])
+def test_column_quantiles_are_numpys(n, levels):
+    from pcmb.analysis.statistics import _column_quantiles
+
+    values = np.random.default_rng(n).normal(size=(n, 7))
+    values[:, 3] = 0.0  # a constant column, where numpy's sign of zero is its own choice
+    values[: n // 2, 5] = np.nan
+    expected = np.quantile(values, levels, axis=0)
+    found = _column_quantiles(values, levels)
+    np.testing.assert_array_equal(found, expected)
+    finite = np.isfinite(expected)
+    assert found[finite].tobytes() == expected[finite].tobytes()

@@ -13,6 +13,7 @@ from pcmb.chaos.basis import (
 )
 from pcmb.chaos.inputs import Normal, Uniform
 from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.polynomials import Hermite, Legendre
 
 
 @pytest.mark.parametrize(
@@ -78,3 +79,21 @@ def test_basis_evaluation_is_the_product_of_1d_values():
     np.testing.assert_allclose(basis.evaluate(xi), expected)
     with pytest.raises(ValueError, match=r"\(M, 2\)"):
         basis.evaluate(np.zeros((3, 3)))
+
+
+@pytest.mark.parametrize(
+    "index",
+    [tensor_index_set((5, 5, 5)), tensor_index_set((0, 3, 2)), total_index_set(3, 4)],
+    ids=["tensor", "tensor-with-order-0", "total"],
+)
+def test_evaluate_is_the_product_of_the_factors_in_input_order(index):
+    """The fast paths give exactly the numbers of the plain product p_a0(x0) p_a1(x1) p_a2(x2)."""
+    families = (Legendre(), Hermite(), Legendre())
+    xi = np.random.default_rng(1).uniform(-1, 1, size=(50, 3))
+    expected = np.ones((50, index.shape[0]))
+    for k, family in enumerate(families):
+        top = int(index[:, k].max())
+        if top:
+            expected *= family.evaluate(xi[:, k], top)[:, index[:, k]]
+    found = PolynomialBasis(families, index).evaluate(xi)
+    assert found.tobytes() == expected.tobytes()

@@ -503,12 +503,42 @@ def _quantile_bands(
         if key not in phis:
             phis[key] = expansion.basis.evaluate(xi)
         parts = [
-            np.quantile(
-                phis[key] @ expansion.coefficients[:, start : start + block], levels, axis=0
-            )
+            _column_quantiles(phis[key] @ expansion.coefficients[:, start : start + block], levels)
             for start in range(0, n_times, block)
         ]
         bands[name] = np.concatenate(parts, axis=1).reshape(len(levels), n_times)
+    return bands
+
+
+def _column_quantiles(values: NDArray[np.float64], levels: Sequence[float]) -> NDArray[np.float64]:
+    """``np.quantile(values, levels, axis=0)`` (method "linear"), the same numbers, faster.
+
+    np.quantile partitions every column around several ranks at once, which is slow; a sort
+    is several times faster. Each level's value is numpy's own interpolation between the
+    two order statistics around its virtual index (n - 1)·q, obtained from np.quantile on
+    that pair with the same fractional part, so the arithmetic is numpy's. Columns with NaN
+    or with a zero order statistic (where numpy's choice of -0.0 or +0.0 depends on the
+    partition) go through np.quantile itself.
+    """
+    n = values.shape[0]
+    ordered = np.ascontiguousarray(values.T)
+    ordered.sort(axis=1)
+    if n < 2 or np.isnan(ordered[:, -1]).any():
+        return np.quantile(values, levels, axis=0)
+    bands = np.empty((len(levels), values.shape[1]))
+    fallback = np.zeros(values.shape[1], dtype=bool)
+    for i, level in enumerate(levels):
+        virtual = (n - 1) * np.float64(level)
+        low = int(np.floor(virtual))
+        if low >= n - 1:
+            bands[i] = ordered[:, -1]
+            fallback |= ordered[:, -1] == 0
+            continue
+        pair = ordered[:, low : low + 2]
+        bands[i] = np.quantile(pair, virtual - low, axis=1)
+        fallback |= (pair == 0).any(axis=1)
+    if fallback.any():
+        bands[:, fallback] = np.quantile(values[:, fallback], levels, axis=0)
     return bands
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -149,11 +150,37 @@ class PolynomialBasis:
         n = len(self.families)
         if xi.ndim != 2 or xi.shape[1] != n:
             raise ValueError(f"germ points must be (M, {n}), got shape {xi.shape}")
-        out = np.ones((xi.shape[0], self.size))
+        # Φ[:, j] = Π_k p_{α_jk}(ξ_k), multiplied in input order k = 0, 1, ... (inputs of
+        # degree 0 contribute the factor 1 and are skipped). The first factor is taken as is
+        # instead of 1·p: the same numbers, without filling and rescanning a ones matrix.
+        factors = []
         for k, family in enumerate(self.families):
-            degrees = self.multi_index[:, k]
-            top = int(degrees.max(initial=0))
-            if top == 0:
-                continue
-            out *= family.evaluate(xi[:, k], top)[:, degrees]
+            top = int(self.multi_index[:, k].max(initial=0))
+            if top > 0:
+                factors.append((k, family.evaluate(xi[:, k], top)))
+        if not factors:
+            return np.ones((xi.shape[0], self.size))
+        if self._tensor_orders is not None:
+            # Full tensor set in C order: Φ is the outer product of the factors, built by
+            # broadcasting, with no gather of (M, S) columns.
+            out = factors[0][1]
+            for _, values in factors[1:]:
+                product = out[:, :, None] * values[:, None, :]
+                out = product.reshape(xi.shape[0], out.shape[1] * values.shape[1])
+            return out
+        out = None
+        for k, values in factors:
+            column = np.take(values, self.multi_index[:, k], axis=1)
+            if out is None:
+                out = column
+            else:
+                out *= column
         return out
+
+    @cached_property
+    def _tensor_orders(self) -> tuple[int, ...] | None:
+        """The orders when the index set is the full tensor set in C order, else None."""
+        orders = tuple(int(p) for p in self.multi_index.max(axis=0, initial=0))
+        if self.multi_index.shape[0] and np.array_equal(self.multi_index, tensor_index_set(orders)):
+            return orders
+        return None
