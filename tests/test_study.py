@@ -250,3 +250,17 @@ def test_the_result_names_node_values_and_its_design():
     np.testing.assert_allclose(result.node_params["a"], 2.0 + result.germ[:, 0])
     with pytest.raises(ValueError, match="needs a chaos expansion"):
         pcmb.Study(pointwise, INPUTS, TIMES, method="lhs", samples=8).run().sobol_first("y")
+
+
+def test_a_function_returning_a_scalar_fails_once_with_one_message(tmp_path):
+    @pcmb.pointwise(outputs=("y",))
+    def scalar(params, times):
+        return {"y": params["a"] * params["b"]}
+
+    inputs = {**INPUTS, "c": pcmb.Uniform(0.0, 1.0)}
+    study = pcmb.Study(scalar, inputs, TIMES, order=2, params={"a": 2, "b": 0, "c": 0.5}, jobs=1)
+    with pytest.raises(pcmb.ModelDefinitionError) as caught:
+        study.run(tmp_path / "out.h5")
+    message = str(caught.value)
+    assert "\n" not in message and message.count("returned a float for output 'y'") == 1
+    assert list(tmp_path.iterdir()) == []  # no result, no journal
