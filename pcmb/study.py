@@ -34,6 +34,7 @@ from pcmb.errors import (
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS
 from pcmb.run.executor import RunResult, run_nodes
+from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
 
 if TYPE_CHECKING:
@@ -221,7 +222,7 @@ class Study:
             },
             analysis=config.analysis_settings,
         )
-        study.fingerprint_extra = config.sha256
+        study.fingerprint_extra = _run_settings(config)
         return study
 
     def replace(self, **changes: Any) -> Study:
@@ -298,15 +299,27 @@ class Study:
         """The nodes this study runs (made by its design)."""
         return self.design.nodes()
 
-    def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> str:
-        """Hash of everything that changes the results (for the resume journal)."""
+    def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> Fingerprint:
+        """What the resume journal belongs to: everything that changes the node values.
+
+        Its ``digest`` hashes the nodes' parameters, the time grid, the input names (the
+        order of the columns), the outputs, an explicit chunk size, ``fingerprint_extra``
+        (for a study built from a config: the run-relevant part of the validated config,
+        see :meth:`from_config`) and the pickled model factory (entry, params, or the object
+        itself). Its ``files`` table holds the SHA-256 of the content of every file the model
+        is known to depend on (:func:`pcmb.run.fingerprint.model_files`: the python entry
+        file, a command's program, templates and files, an MJCF scene and what it
+        references), so that editing one between a kill and a resume is refused, naming it.
+        Execution settings that cannot change a node's values (jobs, backend, failure
+        policy) and the analysis are left out: changing them keeps the finished work.
+        """
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
-        digest.update(json.dumps([list(outputs), self.chunk_size, self.fingerprint_extra]).encode())
-        # The model and its fixed parameters (entry, params, or the pickled object itself).
+        settings = [list(outputs), self.chunk_size, list(self.input_names), self.fingerprint_extra]
+        digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
-        return digest.hexdigest()
+        return Fingerprint(digest.hexdigest(), digest_files(model_files(self.model_factory)))
 
     # -- running ------------------------------------------------------------------------------
 
@@ -494,6 +507,23 @@ class Study:
             warnings=(*warnings, *recovery.warnings),
             seconds=runs.seconds,
         )
+
+
+#: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
+_EXECUTION_ONLY = frozenset({"jobs", "backend", "address", "on_failure", "retries"})
+#: Top-level config keys that cannot change a node's values.
+_NOT_RUN = frozenset({"name", "analysis", "output", "execution"})
+
+
+def _run_settings(config: StudyConfig) -> str:
+    """The run-relevant part of a validated config, as JSON: the ``model`` section, ``time``,
+    ``inputs``, ``method`` and ``execution.chunk_size`` (and any key added later that is not
+    known to be irrelevant). Its text is not used, so comments, layout and the settings that
+    cannot change node values (name, analysis, output, jobs, backend, address, on_failure,
+    retries) do not invalidate a journal."""
+    data = config.model_dump(mode="json", exclude=set(_NOT_RUN))
+    data["execution"] = config.execution.model_dump(mode="json", exclude=set(_EXECUTION_ONLY))
+    return json.dumps(data)
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

@@ -1,45 +1,183 @@
 """A crash-safe journal of finished model runs, so that an interrupted study can resume.
 
 A directory beside the output (``OUT.h5.journal/``): ``journal.json`` says what it belongs
-to, each ``record-NNNNNN.npz`` holds one finished chunk; every file is written atomically.
+to (a :class:`~pcmb.run.fingerprint.Fingerprint`: a settings digest and a table of the
+model files' digests), each ``record-NNNNNN.npz`` holds one finished chunk; every file is
+written atomically. ``lock`` holds an exclusive ``flock`` (and the holder's PID) for as long
+as a process writes the journal, so two runs never write the same journal.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
 import shutil
+import time
+import weakref
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.errors import ResultFileError
+from pcmb.errors import ResultFileError, UsageError
 from pcmb.result import Status
 from pcmb.run.files import replace_durably
+from pcmb.run.fingerprint import Fingerprint, changed_files
 
 __all__ = ["Journal"]
 
-_FORMAT = 1
+_FORMAT = 2
 _META = "journal.json"
+_LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
 _TEMP_PREFIX = ".tmp-"
+# How long taking the lock is retried before the holder is reported: long enough for a
+# process that only probes it (Journal.exists) to let go, short enough to go unnoticed.
+_LOCK_PATIENCE = 0.25
+_PID_PATIENCE = 0.5
+
+
+# --------------------------------------------------------------------------- the lock
+
+
+def _busy(directory: Path, lock_path: Path) -> UsageError:
+    """The refusal naming the process that holds the lock (its PID, once it has written it)."""
+    deadline = time.monotonic() + _PID_PATIENCE
+    pid = ""
+    while True:
+        try:
+            pid = lock_path.read_text().strip()
+        except OSError:
+            pid = ""
+        # The holder writes its PID just after taking the lock: give it a moment.
+        if pid or time.monotonic() >= deadline:
+            break
+        time.sleep(0.01)
+    return UsageError(
+        f"another pcmb run (PID {pid or 'unknown'}) is writing {directory}; wait for it to "
+        "finish, or give this run another output (-o)"
+    )
+
+
+class _Lock:
+    """An exclusive ``flock`` on ``<journal>/lock``, held by this process.
+
+    Every :class:`Journal` of one directory in one process shares it (so a process can reopen
+    its own journal); it is released when the last of them is gone, by :meth:`release`, or
+    by the operating system when the process ends, however it ends: a killed run leaves no
+    stale lock, only a ``lock`` file that the next run locks again.
+    """
+
+    _held: ClassVar[weakref.WeakValueDictionary[str, _Lock]] = weakref.WeakValueDictionary()
+
+    def __init__(self, key: str, path: Path, fd: int) -> None:
+        self.key, self.path, self.fd = key, path, fd
+        self._close = weakref.finalize(self, os.close, fd)
+
+    def valid(self) -> bool:
+        """Whether the lock is still held on the file at ``path`` (not deleted or replaced)."""
+        if not self._close.alive:
+            return False
+        try:
+            held, current = os.fstat(self.fd), os.stat(self.path)
+        except OSError:
+            return False
+        return (held.st_dev, held.st_ino) == (current.st_dev, current.st_ino)
+
+    def release(self) -> None:
+        """Let go of the lock (closing the file releases the ``flock``)."""
+        if _Lock._held.get(self.key) is self:
+            del _Lock._held[self.key]
+        self._close()
+
+    @classmethod
+    def _mine(cls, directory: Path) -> _Lock | None:
+        lock = cls._held.get(str(directory.resolve()))
+        return lock if lock is not None and lock.valid() else None
+
+    @classmethod
+    def acquire(cls, directory: Path) -> _Lock:
+        """Take the lock of ``directory`` (an existing folder) or share this process's.
+
+        Raises
+        ------
+        UsageError
+            Another process holds it ("another pcmb run (PID N) is writing ...").
+        """
+        mine = cls._mine(directory)
+        if mine is not None:
+            return mine
+        key = str(directory.resolve())
+        path = Path(key) / _LOCK  # absolute: valid() must not depend on the working directory
+        deadline = time.monotonic() + _LOCK_PATIENCE
+        while True:
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+            except FileNotFoundError:  # the folder was just removed by the run that held it
+                directory.mkdir(parents=True, exist_ok=True)
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                if time.monotonic() >= deadline:
+                    raise _busy(directory, path) from None
+                time.sleep(0.01)
+                continue
+            lock = cls(key, path, fd)
+            # The file may have been deleted (with its journal, by the run that held it
+            # until now) between opening and locking it: a lock on it would guard nothing.
+            if not lock.valid():
+                lock.release()
+                continue
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+            cls._held[lock.key] = lock
+            return lock
+
+    @classmethod
+    def check_free(cls, directory: Path) -> None:
+        """Raise if another process holds the lock of ``directory`` (this one may).
+
+        Probes with a shared lock, released at once, so that two probes never see each other.
+        """
+        if cls._mine(directory) is not None:
+            return
+        path = directory / _LOCK
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        except OSError:  # no lock file (or no folder): nobody holds it
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise _busy(directory, path) from None
+        finally:
+            os.close(fd)
 
 
 class Journal:
-    """Open the journal in ``directory``, creating it if it does not exist yet.
+    """Open the journal in ``directory``, creating it if it does not exist yet, and lock it.
+
+    The lock (an exclusive ``flock`` on ``<directory>/lock``, which holds the PID) is held
+    until :meth:`remove` or :meth:`close`, until every journal of the directory opened by
+    this process is gone, or until the process ends, however it ends. Journals of one
+    directory opened by one process share the lock.
 
     Parameters
     ----------
     directory:
         The journal directory (created with its parents when missing).
     fingerprint:
-        Identifies everything that changes the results: the config hash plus, for example, an
-        explicit chunk size. An existing journal is only reopened for the same fingerprint.
+        Identifies everything that changes the results: a
+        :class:`~pcmb.run.fingerprint.Fingerprint` (a settings digest and the digests of the
+        model's files) or a plain string (a digest, no files). An existing journal is only
+        reopened for the same digest and the same file contents.
     n_nodes:
         N, the number of nodes of the study.
     outputs:
@@ -49,10 +187,14 @@ class Journal:
 
     Raises
     ------
+    UsageError
+        If another process holds the journal's lock ("another pcmb run (PID N) is writing
+        ..."), or if a model file changed since the journal was written (the message names
+        it): the journal is intact, but this run cannot continue it.
     ResultFileError
-        If the directory holds a journal written for a different fingerprint, node count,
-        output list or time grid ("delete it or drop --resume"), or something that is not a
-        pcmb journal.
+        If the directory holds a journal written for a different digest, node count, output
+        list or time grid, or by another journal format, or something that is not a pcmb
+        journal.
     ValueError
         If ``n_nodes`` or ``n_times`` is not positive, or ``outputs`` is empty or repeats a name.
     """
@@ -60,7 +202,7 @@ class Journal:
     def __init__(
         self,
         directory: str | os.PathLike[str],
-        fingerprint: str,
+        fingerprint: str | Fingerprint,
         n_nodes: int,
         outputs: Sequence[str],
         n_times: int,
@@ -70,17 +212,34 @@ class Journal:
             raise ValueError(f"n_nodes and n_times must be positive, got {n_nodes} and {n_times}")
         if not outputs or len(set(outputs)) != len(outputs):
             raise ValueError(f"outputs must be non-empty and distinct, got {list(outputs)}")
+        if not isinstance(fingerprint, Fingerprint):
+            fingerprint = Fingerprint(str(fingerprint))
         self.directory = Path(directory)
-        self.fingerprint = str(fingerprint)
+        self.fingerprint = fingerprint.digest
+        self.files = dict(sorted(fingerprint.files.items()))
         self.n_nodes = int(n_nodes)
         self.outputs = outputs
         self.n_times = int(n_times)
         self._next_record = 0
-        self._open()
+        self._lock: _Lock | None = None
+        try:
+            self._open()
+        except BaseException:
+            self.close()  # the lock goes with the last journal holding it, not this one's
+            raise
 
     @staticmethod
     def exists(directory: str | os.PathLike[str]) -> bool:
-        """Whether ``directory`` holds a journal (with or without records)."""
+        """Whether ``directory`` holds a journal (with or without records).
+
+        Raises
+        ------
+        UsageError
+            If another process is writing it (holds its lock): whatever the answer, it would
+            be out of date at once, and the journal is not this process's to continue or
+            replace.
+        """
+        _Lock.check_free(Path(directory))
         return (Path(directory) / _META).is_file()
 
     # -- opening -------------------------------------------------------------------------------
@@ -92,12 +251,14 @@ class Journal:
             "n_nodes": self.n_nodes,
             "outputs": list(self.outputs),
             "n_times": self.n_times,
+            "files": self.files,
         }
 
     def _open(self) -> None:
         if self.directory.exists() and not self.directory.is_dir():
             raise ResultFileError(f"journal {self.directory} exists and is not a directory")
         self.directory.mkdir(parents=True, exist_ok=True)
+        self._lock = _Lock.acquire(self.directory)
         records = self._record_paths()
         meta_path = self.directory / _META
         if not meta_path.is_file():
@@ -115,18 +276,40 @@ class Journal:
             raise ResultFileError(
                 f"journal {self.directory}: cannot read {_META} ({exc}); delete it or drop --resume"
             ) from exc
-        expected = self._metadata()
-        if not isinstance(found, dict) or found.get("fingerprint") != self.fingerprint:
+        if not isinstance(found, dict):
+            found = {}
+        if found.get("format") != _FORMAT:
             raise ResultFileError(
-                f"journal {self.directory} was written for a different config; "
-                "delete it or drop --resume"
+                f"journal {self.directory} was written by another version of pcmb (journal "
+                f"format {found.get('format')!r}, this one reads {_FORMAT}); delete it to "
+                "start over"
             )
-        differing = [key for key in expected if found.get(key) != expected[key]]
+        if found.get("fingerprint") != self.fingerprint:
+            raise ResultFileError(
+                f"journal {self.directory} was written for a different config; delete it or "
+                "drop --resume (the model, inputs, method, time grid, outputs or chunk_size "
+                "differ)"
+            )
+        expected = self._metadata()
+        differing = [key for key in expected if key != "files" and found.get(key) != expected[key]]
         if differing:
             detail = ", ".join(f"{k}: {found.get(k)!r} != {expected[k]!r}" for k in differing)
             raise ResultFileError(
                 f"journal {self.directory} does not match this run ({detail}); "
                 "delete it or drop --resume"
+            )
+        recorded = found.get("files")
+        changed = changed_files(recorded if isinstance(recorded, dict) else {}, self.files)
+        if changed:
+            what = (
+                f"model file {changed[0]} has"
+                if len(changed) == 1
+                else f"model files {', '.join(changed)} have"
+            )
+            raise UsageError(
+                f"cannot resume: {what} changed since {self.directory} was written, so its "
+                "finished nodes may not be what this run would compute; restore the old "
+                f"contents, or delete {self.directory} to start over"
             )
         if records:
             self._next_record = int(_RECORD.fullmatch(records[-1].name).group(1)) + 1
@@ -169,7 +352,15 @@ class Journal:
         ------
         ValueError
             If the shapes, indices, status codes or output names do not match the journal.
+        ResultFileError
+            If this process no longer holds the journal's lock (it was closed or removed, or
+            its folder was deleted from outside).
         """
+        if self._lock is None or not self._lock.valid():
+            raise ResultFileError(
+                f"journal {self.directory} is no longer locked by this process (closed, or "
+                "deleted from outside); nothing more is written to it"
+            )
         idx = np.asarray(indices, dtype=np.int64)
         codes = np.asarray(status, dtype=np.int8)
         if idx.ndim != 1 or idx.size == 0 or codes.shape != idx.shape:
@@ -258,5 +449,27 @@ class Journal:
         return {i: text for i, (code, _, text) in self._latest().items() if code == Status.FAILED}
 
     def remove(self) -> None:
-        """Delete the journal directory (once the result file is safely written)."""
-        shutil.rmtree(self.directory, ignore_errors=False)
+        """Delete the journal directory (once the result file is safely written), then let go
+        of the lock.
+
+        The directory is first renamed aside, so that a run starting meanwhile finds no
+        journal (or makes a new one) instead of a half-deleted one.
+        """
+        doomed = self.directory.with_name(
+            f".{self.directory.name}.removed-{os.getpid()}-{time.monotonic_ns()}"
+        )
+        try:
+            os.rename(self.directory, doomed)
+            shutil.rmtree(doomed, ignore_errors=False)
+        except FileNotFoundError:
+            pass
+        finally:
+            # Gone for every journal of this process too: nothing is left to guard.
+            if self._lock is not None:
+                self._lock.release()
+            self._lock = None
+
+    def close(self) -> None:
+        """Stop writing: the journal can still be read, not written. The lock is released
+        once no journal of this process holds it (at once, for a journal opened alone)."""
+        self._lock = None
