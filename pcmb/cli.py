@@ -128,8 +128,11 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             progress=False if args.quiet else None,
             provenance=provenance,
         )
+    from pcmb.designs import RECORDED_ONLY
+
     for warning in result.warnings:
-        _log(f"pcmb: warning: {warning}")
+        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
+            _log(f"pcmb: warning: {warning}")
     _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
     return EXIT_OK
 
@@ -252,6 +255,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         _log("pcmb: interrupted; finished nodes are kept in the journal (use --resume)")
         return 128 + 2
+    except SystemExit as exit_:
+        # Raised by code pcmb ran on the user's behalf and could not attribute to a node (e.g.
+        # a model class calling sys.exit() while it is built): never a silent success.
+        _log(
+            f"pcmb: unexpected error: code run by pcmb called sys.exit({exit_.code!r}) "
+            "outside any node; nothing was written"
+        )
+        return EXIT_UNEXPECTED
     except Exception:
         _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
         return EXIT_UNEXPECTED

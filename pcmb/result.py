@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 
 if TYPE_CHECKING:
@@ -253,16 +253,19 @@ class StudyResult:
         return self.expansions[name]
 
     def mean(self, name: str) -> NDArray[np.float64]:
-        """(T,) mean of an output: from the expansion, else the sample mean."""
+        """(T,) mean of an output: from the expansion, else the sample mean (which does not
+        overflow where the exact one is a float, :func:`pcmb.chaos.expansion.sample_mean`)."""
         if name in self.expansions:
             return self.expansions[name].mean()
-        return self.values[name][self.ok].mean(axis=0)
+        return sample_mean(self.values[name][self.ok])
 
     def std(self, name: str) -> NDArray[np.float64]:
-        """(T,) standard deviation: from the expansion, else the sample std (ddof 1)."""
+        """(T,) standard deviation: from the expansion, else the sample std (ddof 1); exactly 0
+        where the output does not vary, finite where the exact one is a float
+        (:func:`pcmb.chaos.expansion.sample_std`)."""
         if name in self.expansions:
             return self.expansions[name].std()
-        return self.values[name][self.ok].std(axis=0, ddof=1)
+        return sample_std(self.values[name][self.ok], ddof=1)
 
     def sobol_first(self, name: str) -> NDArray[np.float64]:
         """(n, T) first-order Sobol' indices (needs an expansion)."""

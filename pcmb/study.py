@@ -22,7 +22,7 @@ from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
-from pcmb.designs import DESIGNS, MethodSettings, NodeDesign, make_design
+from pcmb.designs import DESIGNS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.errors import (
     ConfigProblem,
     IllPosedError,
@@ -376,7 +376,9 @@ class Study:
         -----
         PcmbWarning
             One per :class:`~pcmb.result.WarningRecord` of the result (also in
-            ``result.warnings`` and in the file).
+            ``result.warnings`` and in the file), except the records that only explain a
+            result (:data:`pcmb.designs.RECORDED_ONLY`: Sobol' indices undefined where an
+            output does not vary), which are kept in ``result.warnings`` and the file only.
 
         Raises
         ------
@@ -445,7 +447,8 @@ class Study:
             if journal is not None:
                 journal.remove()
         for record in result.warnings:
-            warnings.warn(str(record), PcmbWarning, stacklevel=2)
+            if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
+                warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
 
     def _with_nominal(self, result: StudyResult, outputs: Sequence[str]) -> StudyResult:
@@ -487,7 +490,7 @@ class Study:
                 )
             )
         try:
-            recovery = self.design.recover(nodes, runs.values, ok)
+            recovery = self.design.recover(nodes, runs.values, ok, times=self.times)
         except IllPosedError as error:
             message = f"on_failure regress could not refit: {error}:"
             raise ModelRunError(runs.failures, message) from error

@@ -145,3 +145,24 @@ def test_pcmb_compare_usage_errors(tmp_path, capsys):
     assert "missing.h5: no such file" in capsys.readouterr().err
     (tmp_path / "junk.h5").write_bytes(b"not hdf5")
     assert main(["compare", str(path), str(tmp_path / "junk.h5")]) == 2
+
+
+def test_comparisons_of_huge_outputs_do_not_overflow():
+    """The same laws at 1 and at 1e200: the same verdicts, every figure scaled by 1e200."""
+
+    def studies(magnitude):
+        @pcmb.pointwise(outputs=("y",))
+        def scaled(params, times):
+            return {"y": magnitude * (1.0 + params["a"] * times)}
+
+        study = pcmb.Study(scaled, {"a": pcmb.Uniform(1.0, 3.0)}, TIMES, order=1, params={"a": 2})
+        return study.run(), study.replace(method="montecarlo", samples=4000, seed=2).run()
+
+    plain = compare(*studies(1.0)).differences["y"]
+    with pytest.warns(pcmb.PcmbWarning, match=r"\[square-overflow\]"):
+        huge = compare(*studies(1e200)).differences["y"]
+    assert huge.not_finite == 0 and huge.verdict() == plain.verdict() == "within noise"
+    for field in ("mean_max", "mean_rms", "std_max", "std_rms", "scale", "mean_noise"):
+        assert getattr(huge, field) == pytest.approx(1e200 * getattr(plain, field), rel=1e-9)
+    assert huge.std_noise == pytest.approx(1e200 * plain.std_noise, rel=1e-9)
+    assert huge.mean_z == pytest.approx(plain.mean_z, rel=1e-6)

@@ -283,6 +283,125 @@ def test_retries_rerun_failed_nodes() -> None:
     np.testing.assert_array_equal(healed.values["y"], ramp_exact(params))
 
 
+# -- BaseExceptions of the model's code -------------------------------------------------------
+
+
+class LeavingRamp(em.Ramp):
+    """Raises a BaseException (``how``) when a node with ``a`` in ``bad`` is in its batch.
+
+    ``sigint`` sends the process a real SIGINT (what Ctrl-C does) and then, as models do, lets
+    the KeyboardInterrupt through (``sigint``), swallows it (``sigint-swallowed``), turns it
+    into ``sys.exit(1)`` (``sigint-exit``) or into an ordinary error (``sigint-error``).
+    ``replaced`` installs its own SIGINT handler before raising KeyboardInterrupt.
+    """
+
+    def __init__(self, bad: list[float], how: str) -> None:
+        self.bad, self.how = np.asarray(bad), how
+
+    def check(self, params: dict[str, np.ndarray]) -> None:
+        if not np.isin(params["a"], self.bad).any():
+            return
+        if self.how == "exit0":
+            sys.exit(0)
+        if self.how == "exit-text":
+            sys.exit("stopping here")
+        if self.how == "keyboard":
+            raise KeyboardInterrupt
+        if self.how == "generator":
+            raise GeneratorExit
+        if self.how == "replaced":
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            raise KeyboardInterrupt
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5.0)  # the handler interrupts the sleep
+        except KeyboardInterrupt:
+            if self.how == "sigint":
+                raise
+            if self.how == "sigint-exit":
+                sys.exit(1)
+            if self.how == "sigint-error":
+                raise RuntimeError("interrupted") from None
+
+
+class ExitingFactory:
+    """A factory whose model calls ``sys.exit(2)`` while it is built."""
+
+    def __call__(self) -> em.Ramp:
+        sys.exit(2)
+
+
+LEAVINGS = [
+    ("exit0", "SystemExit: 0"),
+    ("exit-text", "SystemExit: stopping here"),
+    ("keyboard", "KeyboardInterrupt raised by the model (no Ctrl-C reached pcmb)"),
+    ("generator", "GeneratorExit"),
+]
+
+
+@pytest.mark.parametrize(("how", "message"), LEAVINGS)
+def test_base_exceptions_of_the_model_are_failures_of_its_nodes(how: str, message: str) -> None:
+    params = ramp_params(32)
+    bad = [0, 13]  # in the first chunk (run in this process) and in a later one
+    factory = functools.partial(LeavingRamp, list(params["a"][bad]), how)
+    result = run_nodes(factory, params, TIMES, ["y"], jobs=1)
+    assert [(f.index, f.message) for f in result.failures] == [(i, message) for i in bad]
+    good = result.status == Status.OK
+    assert good.sum() == 30
+    np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # left as found
+
+
+@pytest.mark.usefixtures("workers_always")
+@pytest.mark.parametrize(("how", "message"), LEAVINGS[::2])
+def test_base_exceptions_in_workers_are_failures_of_their_nodes(how: str, message: str) -> None:
+    params = ramp_params(24)
+    bad = [13, 20]
+    factory = functools.partial(LeavingRamp, list(params["a"][bad]), how)
+    result = run_nodes(factory, params, TIMES, ["y", "pid"], jobs=2)
+    assert [(f.index, f.message) for f in result.failures] == [(i, message) for i in bad]
+    good = result.status == Status.OK
+    np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
+    assert (result.values["pid"][good][-1] != os.getpid()).all()  # run by workers
+
+
+@pytest.mark.parametrize("how", ["sigint", "sigint-swallowed", "sigint-exit", "sigint-error"])
+def test_a_sigint_while_the_model_runs_interrupts_the_run(how: str) -> None:
+    # Whatever the model makes of the user's Ctrl-C, the run stops with KeyboardInterrupt.
+    params = ramp_params(32)
+    factory = functools.partial(LeavingRamp, [params["a"][13]], how)
+    with pytest.raises(KeyboardInterrupt):
+        run_nodes(factory, params, TIMES, ["y"], jobs=1)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_keyboard_interrupt_pcmb_cannot_attribute_stays_the_users() -> None:
+    # The model replaced the SIGINT handler: a SIGINT could have raised it unseen.
+    params = ramp_params(32)
+    factory = functools.partial(LeavingRamp, [params["a"][13]], "replaced")
+    with pytest.raises(KeyboardInterrupt):
+        run_nodes(factory, params, TIMES, ["y"], jobs=1)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_keyboard_interrupt_outside_the_main_thread_is_the_models() -> None:
+    # Python delivers SIGINT to the main thread only (dask runs tasks in worker threads).
+    params = ramp_params(8)
+    found: list = []
+    factory = functools.partial(LeavingRamp, [params["a"][5]], "keyboard")
+    thread = threading.Thread(
+        target=lambda: found.append(run_nodes(factory, params, TIMES, ["y"], jobs=1))
+    )
+    thread.start()
+    thread.join()
+    assert [(f.index, f.message) for f in found[0].failures] == [(5, LEAVINGS[2][1])]
+
+
+def test_a_model_that_exits_while_it_is_built_raises_model_error() -> None:
+    with pytest.raises(ModelError, match=r"could not build the model: SystemExit: 2$"):
+        run_nodes(ExitingFactory(), ramp_params(4), TIMES, ["y"])
+
+
 @pytest.mark.slow
 @pytest.mark.usefixtures("workers_always")
 @pytest.mark.parametrize(

@@ -1,5 +1,6 @@
 """``pcmb report``: every expected figure, of the right size, not blank; the index page."""
 
+import dataclasses
 import subprocess
 import sys
 import textwrap
@@ -14,6 +15,8 @@ pytest.importorskip("matplotlib")
 from matplotlib.image import imread
 
 from pcmb.analysis.report import figure_pixels, write_report
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.store import write_result
 
 MODEL = '''
 import numpy as np
@@ -151,6 +154,73 @@ def test_report_errors(tmp_path, capsys, monkeypatch):
     assert main(["report", str(path), "-o", str(tmp_path / "no_mpl")]) == 2
     assert 'pip install "pcmb[plot]"' in capsys.readouterr().err
     assert not (tmp_path / "no_mpl").exists()
+
+
+# -- statistics that do not vary or are not finite -------------------------------------------
+
+EDGE_TIMES = np.linspace(0.0, 2.0, 9)
+
+
+@pcmb.batched(outputs=("huge", "flat", "z"))
+def edges(params, times):
+    """huge = 1e200 (1 + 0.1 a t + 0.05 b² t²); flat = 2.5; z = a b t (0 at t = 0)."""
+    a, b = params["a"][:, None], params["b"][:, None]
+    return {
+        "huge": 1e200 * (1.0 + 0.1 * a * times + 0.05 * b**2 * times**2),
+        "flat": np.full((a.size, times.size), 2.5),
+        "z": a * b * times,
+    }
+
+
+def _edges(path):
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
+    study = pcmb.Study(edges, inputs, EDGE_TIMES, order=2, params={"a": 2.0, "b": 0.0}, jobs=1)
+    with pytest.warns(pcmb.PcmbWarning, match=r"\[square-overflow\]"):
+        return study.run(path)
+
+
+def test_report_of_a_constant_and_a_huge_output(tmp_path, capsys):
+    path = tmp_path / "edges.h5"
+    _edges(path)
+    out = tmp_path / "edges_report"
+    assert main(["report", str(path), "-o", str(out)]) == 0  # and no numpy warning on the way
+    assert "wrote" in capsys.readouterr().err
+    page = (out / "index.html").read_text()
+    # The records are on the page; the PSD of huge (1e400 per Hz) is named as not drawn.
+    assert "[sobol-undefined]" in page and "[square-overflow]" in page
+    assert "huge: PSD not drawn: its mean is not finite (NaN or inf)" in page
+    assert not (out / "huge_psd.png").exists()
+    assert '<td>flat</td><td class="num">2.5 .. 2.5</td><td class="num">0</td>' in page
+    kinds = ("time", "pdf", "sobol", "psd_pdf")
+    assert {f"{name}_{kind}.png" for name in ("huge", "flat", "z") for kind in kinds} <= {
+        p.name for p in out.iterdir()
+    }
+    _check_png(out / "huge_time.png", 1)
+    _check_png(out / "z_sobol.png", 2)
+
+
+def test_report_and_compare_of_statistics_that_are_not_finite(tmp_path, capsys):
+    result = _edges(None)
+    expansion = result.expansions["z"]
+    coefficients = expansion.coefficients.copy()
+    coefficients[:, 4] = np.nan  # z at t = 1 is lost: mean, std and Sobol' indices are NaN
+    broken = ChaosExpansion(coefficients, expansion.multi_index, expansion.distributions)
+    broken = dataclasses.replace(result, expansions={**result.expansions, "z": broken})
+    assert np.isnan(broken.std("z")[4]) and np.isfinite(np.delete(broken.std("z"), 4)).all()
+    paths = [
+        write_result(tmp_path / f"{n}.h5", r, provenance={})
+        for n, r in (("a", broken), ("b", result))
+    ]
+    out = tmp_path / "report"
+    assert main(["report", str(paths[0]), "--compare", str(paths[1]), "-o", str(out)]) == 0
+    page = (out / "index.html").read_text()
+    assert "z: mean or std: not finite (NaN or inf) at 1 of 9 points" in page
+    assert "(not finite at some times)" in page and "not finite at 1 times" in page
+    _check_png(out / "z_time.png", 1)
+    capsys.readouterr()
+    assert main(["compare", str(paths[0]), str(paths[1])]) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("z "))
+    assert row.endswith("not finite at 1 times")
 
 
 def test_the_command_line_module_stays_light():

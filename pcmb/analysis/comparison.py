@@ -1,5 +1,9 @@
 """How far apart two studies of the same model are (chaos against Monte Carlo, ...), in
 units of the reference's largest std and of the sampling noise (``docs/architecture.md``).
+
+Statistics that are not finite (NaN or inf) are left out of the maxima and RMS values and
+counted (:attr:`OutputDifference.not_finite`); the verdict then says so. Nothing here
+overflows for outputs whose own statistics are finite (powers are taken of scaled values).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.chaos.expansion import sample_mean, unsafe_to_square
 from pcmb.errors import UsageError
 from pcmb.result import StudyResult
 
@@ -21,6 +26,8 @@ __all__ = ["NOISE_FACTOR", "Comparison", "OutputDifference", "compare", "method_
 NOISE_FACTOR = 4.0
 #: Differences below this fraction of the reference's largest std are round-off.
 _ROUND_OFF = 1e-9
+#: Magnitudes whose 4th powers may overflow (1e75⁴ = 1e300) or, inverted, underflow.
+_FOURTH = 1e75
 
 
 def method_label(result: StudyResult) -> str:
@@ -35,7 +42,15 @@ def _noise(result: StudyResult, name: str) -> tuple[NDArray[np.float64], NDArray
         runs = result.values[name][result.ok]
         count = runs.shape[0]
         if count >= 2:
-            centred = runs - runs.mean(axis=0)
+            centred = runs - sample_mean(runs)
+            # The kurtosis does not depend on the scale: where 4th powers would overflow or
+            # underflow, they are taken of the values divided by a power of two near their
+            # largest magnitude (exact, so the digits are those of the plain arithmetic).
+            top = np.max(np.abs(centred), axis=0)
+            risky = np.isfinite(top) & ((top > _FOURTH) | ((top < 1.0 / _FOURTH) & (top > 0)))
+            if risky.any():
+                top = np.where(risky, top, 1.0)
+                centred = centred / np.where(risky, np.ldexp(1.0, np.frexp(top)[1] - 1), 1.0)
             second = np.mean(centred**2, axis=0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 kurtosis = np.where(second > 0, np.mean(centred**4, axis=0) / second**2, 1.0)
@@ -68,6 +83,9 @@ class OutputDifference:
     departure:
         The first time at which the mean or the std leaves NOISE_FACTOR standard errors
         (NaN without sampling noise or if it never does): how long the two agree.
+    not_finite:
+        Number of times at which a mean or std of either result is not finite (NaN or inf);
+        the other attributes are computed over the remaining times.
     """
 
     mean_max: float
@@ -80,6 +98,7 @@ class OutputDifference:
     mean_z: float
     std_z: float
     departure: float
+    not_finite: int = 0
 
     @property
     def mean_relative(self) -> float:
@@ -96,8 +115,11 @@ class OutputDifference:
 
         ``"within noise"`` when the mean and the std differences stay below NOISE_FACTOR
         standard errors at every time, ``"beyond noise"`` otherwise, ``"no sampling noise"``
-        when both results come from collocation grids (then read the relative columns).
+        when both results come from collocation grids (then read the relative columns),
+        ``"not finite at K times"`` when statistics are NaN or inf at some times.
         """
+        if self.not_finite:
+            return f"not finite at {self.not_finite} times"
         if np.isnan(self.mean_z):
             return "no sampling noise"
         within = self.mean_z <= NOISE_FACTOR and self.std_z <= NOISE_FACTOR
@@ -141,6 +163,22 @@ def _z_scores(
     gap = np.where(gap <= _ROUND_OFF * scale, 0.0, gap)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(gap == 0.0, 0.0, gap / noise)
+
+
+def _largest(values: NDArray[np.float64]) -> float:
+    """max of the values (NaN when there are none)."""
+    return float(np.max(values)) if values.size else float("nan")
+
+
+def _rms(values: NDArray[np.float64]) -> float:
+    """sqrt(mean(values²)), of values divided by a power of two near their largest magnitude
+    where their squares would overflow or underflow (NaN when there are none)."""
+    if not values.size:
+        return float("nan")
+    if not unsafe_to_square(values):
+        return float(np.sqrt(np.mean(values**2)))
+    scale = np.ldexp(1.0, np.frexp(np.max(np.abs(values)))[1] - 1)
+    return float(np.sqrt(np.mean((values / scale) ** 2)) * scale)
 
 
 def _departure(times: NDArray[np.float64], *scores: NDArray[np.float64] | None) -> float:
@@ -200,25 +238,33 @@ def compare(
     _check_grids(reference, other)
     differences = {}
     for name in common_outputs([reference, other]):
-        mean_gap = np.abs(other.mean(name) - reference.mean(name))
-        std_gap = np.abs(other.std(name) - reference.std(name))
-        noise = [_noise(r, name) for r in (reference, other)]
-        mean_noise = np.hypot(noise[0][0], noise[1][0])
-        std_noise = np.hypot(noise[0][1], noise[1][1])
-        scale = float(np.max(reference.std(name)))
+        statistics = [r.mean(name) for r in (reference, other)]
+        statistics += [r.std(name) for r in (reference, other)]
+        finite = np.logical_and.reduce([np.isfinite(s) for s in statistics])
+        with np.errstate(over="ignore", invalid="ignore"):
+            mean_gap = np.abs(other.mean(name) - reference.mean(name))
+            std_gap = np.abs(other.std(name) - reference.std(name))
+            noise = [_noise(r, name) for r in (reference, other)]
+            mean_noise = np.hypot(noise[0][0], noise[1][0])
+            std_noise = np.hypot(noise[0][1], noise[1][1])
+        if not finite.all():  # leave those times out of every figure below
+            mean_gap, std_gap = mean_gap[finite], std_gap[finite]
+            mean_noise, std_noise = mean_noise[finite], std_noise[finite]
+        scale = _largest(reference.std(name)[finite])
         mean_z = _z_scores(mean_gap, mean_noise, scale)
         std_z = _z_scores(std_gap, std_noise, scale)
         differences[name] = OutputDifference(
-            mean_max=float(np.max(mean_gap)),
-            mean_rms=float(np.sqrt(np.mean(mean_gap**2))),
-            std_max=float(np.max(std_gap)),
-            std_rms=float(np.sqrt(np.mean(std_gap**2))),
+            mean_max=_largest(mean_gap),
+            mean_rms=_rms(mean_gap),
+            std_max=_largest(std_gap),
+            std_rms=_rms(std_gap),
             scale=scale,
-            mean_noise=float(np.max(mean_noise)),
-            std_noise=float(np.max(std_noise)),
-            mean_z=float("nan") if mean_z is None else float(np.max(mean_z)),
-            std_z=float("nan") if std_z is None else float(np.max(std_z)),
-            departure=_departure(reference.times, mean_z, std_z),
+            mean_noise=_largest(mean_noise),
+            std_noise=_largest(std_noise),
+            mean_z=float("nan") if mean_z is None else _largest(mean_z),
+            std_z=float("nan") if std_z is None else _largest(std_z),
+            departure=_departure(reference.times[finite], mean_z, std_z),
+            not_finite=int(np.sum(~finite)),
         )
     names = labels or (method_label(reference), method_label(other))
     return Comparison(names[0], names[1], differences)

@@ -4,6 +4,11 @@
 nominal run, comparisons), ``_pdf.png``, ``_sobol.png``, ``_psd.png``, ``_psd_pdf.png`` and
 ``_compare.png`` where they apply, and an ``index.html`` with the key numbers and warnings.
 The only module that imports matplotlib (object-oriented API and the Agg canvas).
+
+Statistics that are not finite (NaN or inf: an output beyond the floating-point range when
+squared, values the model returned) are never plotted: curves have gaps there, a panel with
+nothing finite to show is left out, and each case is named in the figure's title and in the
+index page's "Not drawn" list.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.comparison import Comparison, compare, method_label
 from pcmb.analysis.statistics import (
@@ -111,12 +116,18 @@ class _Labels:
 
 
 class _Canvas:
-    """Creates figures of the report's sizes and saves them."""
+    """Creates figures of the report's sizes and saves them; collects notes on what could not
+    be drawn."""
 
     def __init__(self, directory: Path):
         self.directory = directory
         self.figure_class, self.canvas_class = _matplotlib()
         self.written: list[Path] = []
+        self.notes: list[str] = []
+
+    def note(self, text: str) -> None:
+        """Record what a figure leaves out (shown on the index page)."""
+        self.notes.append(text)
 
     def figure(self, panels: int) -> tuple[Any, list[Any]]:
         width, height = figure_pixels(panels)
@@ -153,6 +164,30 @@ class _Other:
     color: str
 
 
+def _gaps(values: ArrayLike) -> NDArray[np.float64]:
+    """The values with NaN where they are not finite: a line has a gap there."""
+    values = np.asarray(values, dtype=float)
+    return np.where(np.isfinite(values), values, np.nan)
+
+
+def _not_finite(canvas: _Canvas, what: str, *arrays: ArrayLike) -> str:
+    """A title note (and an index note) when some of the arrays' values are not finite."""
+    bad = np.zeros(np.shape(arrays[0]), dtype=bool)
+    for array in arrays:
+        bad |= ~np.isfinite(np.asarray(array, dtype=float))
+    if not bad.any():
+        return ""
+    canvas.note(f"{what}: not finite (NaN or inf) at {int(bad.sum())} of {bad.size} points")
+    return f"\n(not finite at {int(bad.sum())} of {bad.size} points: not drawn there)"
+
+
+def _extent(values: ArrayLike) -> tuple[float, float] | None:
+    """(min, max) of the finite values, ``None`` without any."""
+    values = np.asarray(values, dtype=float)
+    finite = values[np.isfinite(values)]
+    return (float(finite.min()), float(finite.max())) if finite.size else None
+
+
 def _legend(figure: Any, panels: Sequence[Any]) -> None:
     """One legend for the figure, below the panels: it never hides a curve.
 
@@ -183,38 +218,54 @@ def _time_figure(
 ) -> Path:
     figure, (axes,) = canvas.figure(1)
     times, mean, std = result.times, result.mean(name), result.std(name)
-    axes.fill_between(
-        times, mean - std, mean + std, color=_COLORS[0], alpha=0.3, lw=0, label="mean ± 1σ"
-    )
-    axes.plot(times, mean, color=_COLORS[0], lw=1.8, label=f"mean: {method_label(result)}")
+    note = _not_finite(canvas, f"{name}: mean or std", mean, std)
+    with np.errstate(over="ignore", invalid="ignore"):
+        low, high = _gaps(mean - std), _gaps(mean + std)
+    axes.fill_between(times, low, high, color=_COLORS[0], alpha=0.3, lw=0, label="mean ± 1σ")
+    axes.plot(times, _gaps(mean), color=_COLORS[0], lw=1.8, label=f"mean: {method_label(result)}")
     levels = analysis.settings.quantiles
     bands = analysis.outputs[name].quantiles
     names = f"quantiles {', '.join(f'{q:.0%}' for q in levels)}"
     for i, band in enumerate(bands):
-        axes.plot(times, band, color=_COLORS[0], lw=0.9, ls=":", label=names if i == 0 else None)
+        axes.plot(
+            times, _gaps(band), color=_COLORS[0], lw=0.9, ls=":", label=names if i == 0 else None
+        )
     if name in result.nominal:
-        axes.plot(times, result.nominal[name], color="black", lw=1.2, ls="--", label="nominal run")
+        axes.plot(
+            times, _gaps(result.nominal[name]), color="black", lw=1.2, ls="--", label="nominal run"
+        )
     for other in others:
         o_mean, o_std = other.result.mean(name), other.result.std(name)
-        axes.plot(times, o_mean, color=other.color, lw=1.2, label=f"mean: {other.label}")
-        axes.plot(
-            times, o_mean + o_std, color=other.color, lw=1.0, ls="-.", label=f"± 1σ: {other.label}"
-        )
-        axes.plot(times, o_mean - o_std, color=other.color, lw=1.0, ls="-.")
+        with np.errstate(over="ignore", invalid="ignore"):
+            o_low, o_high = _gaps(o_mean - o_std), _gaps(o_mean + o_std)
+        axes.plot(times, _gaps(o_mean), color=other.color, lw=1.2, label=f"mean: {other.label}")
+        axes.plot(times, o_high, color=other.color, lw=1.0, ls="-.", label=f"± 1σ: {other.label}")
+        axes.plot(times, o_low, color=other.color, lw=1.0, ls="-.")
     axes.set_xlabel(labels.time())
     axes.set_ylabel(labels.output(name))
-    axes.set_title(f"{name}: mean with error bars")
+    axes.set_title(f"{name}: mean with error bars{note}")
     axes.set_xlim(times[0], times[-1])
     _legend(figure, [axes])
     return canvas.save(figure, f"{name}_time.png")
 
 
-def _plot_density(axes: Any, density: Density, row: int, color: str, label: str) -> None:
+def _plot_density(axes: Any, density: Density, row: int, color: str, label: str) -> bool:
+    """Draw one density (a line, or a vertical line for a point mass); False when it has
+    nothing finite to draw."""
     value, table = density.value[row], density.density[row]
     if np.all(np.isnan(table)):
+        if not np.isfinite(value[0]):
+            return False
         axes.axvline(value[0], color=color, lw=2.0, label=f"{label} (point mass)")
     else:
-        axes.plot(value, table, color=color, lw=1.8, label=label)
+        axes.plot(_gaps(value), _gaps(table), color=color, lw=1.8, label=label)
+    return True
+
+
+def _no_density(axes: Any, canvas: _Canvas, what: str) -> None:
+    """Say on the panel and on the index page that a density had nothing finite to draw."""
+    axes.text(0.5, 0.5, "no finite values", ha="center", va="center", transform=axes.transAxes)
+    canvas.note(f"{what}: no finite values to draw")
 
 
 def _bandwidth_note(density: Density, row: int) -> str:
@@ -228,6 +279,8 @@ def _plot_other_draws(
     """A sampled comparison as a histogram; a chaos comparison as its KDE with the same
     bandwidth as the result's, so that the two curves are smoothed alike."""
     draws = draws[np.isfinite(draws)]
+    if draws.size == 0:
+        return
     if is_runs:
         axes.hist(
             draws,
@@ -239,8 +292,13 @@ def _plot_other_draws(
             label=other.label,
         )
         return
-    h = None if np.isnan(bandwidth) else bandwidth
-    value, density, _ = kernel_density(draws, nonnegative=nonnegative, bandwidth=h)
+    h = None if not np.isfinite(bandwidth) else bandwidth
+    with np.errstate(over="ignore", invalid="ignore"):
+        value, density, _ = kernel_density(draws, nonnegative=nonnegative, bandwidth=h)
+    if np.all(np.isnan(density)):
+        if np.isfinite(value[0]):
+            axes.axvline(value[0], color=other.color, lw=1.3, ls="--", label=other.label)
+        return
     axes.plot(value, density, color=other.color, lw=1.3, ls="--", label=other.label)
 
 
@@ -256,7 +314,8 @@ def _pdf_figure(
     figure, panels = canvas.figure(pdf.at.size)
     source = "surrogate" if not draws_are_runs(result, name) else "runs"
     for row, (axes, at) in enumerate(zip(panels, pdf.at, strict=True)):
-        _plot_density(axes, pdf, row, _COLORS[0], f"{method_label(result)}, {source}")
+        if not _plot_density(axes, pdf, row, _COLORS[0], f"{method_label(result)}, {source}"):
+            _no_density(axes, canvas, f"{name}: PDF at t = {at:.4g}")
         for other in others:
             _, draws = output_draws(other.result, name, [at], analysis.settings)
             is_runs = draws_are_runs(other.result, name)
@@ -264,7 +323,10 @@ def _pdf_figure(
             _plot_other_draws(axes, draws[:, 0], is_runs, other, nonnegative=False, bandwidth=h)
         if name in result.nominal:
             k = int(np.argmin(np.abs(result.times - at)))
-            axes.axvline(result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal")
+            if np.isfinite(result.nominal[name][k]):
+                axes.axvline(
+                    result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal"
+                )
         axes.set_xlabel(labels.output(name))
         axes.set_ylabel("probability density")
         axes.set_title(f"{name} at t = {at:.4g}{_bandwidth_note(pdf, row)}")
@@ -297,13 +359,17 @@ def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labe
 
 
 def _psd_limits(mean: NDArray, std: NDArray, frequency: NDArray, keep: Sequence[float]) -> tuple:
-    """x limit where mean + std stays above _PSD_FLOOR of its peak, and y limits."""
-    upper = mean + std
-    peak = float(np.max(upper))
+    """x limit where mean + std stays above _PSD_FLOOR of its peak, and y limits (from the
+    finite values only)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        upper = np.where(np.isfinite(mean + std), mean + std, mean)
+    upper = np.where(np.isfinite(upper), upper, np.nan)
+    peak = float(np.nanmax(upper))
     above = np.flatnonzero(upper > _PSD_FLOOR * peak)
+    keep = [f for f in keep if np.isfinite(f)]
     f_max = max([frequency[above[-1]] if above.size else frequency[-1], *keep])
     f_max = min(1.1 * f_max, frequency[-1]) if f_max > 0 else frequency[-1]
-    return f_max, (_PSD_FLOOR * peak * 0.1, peak * 3.0)
+    return f_max, (_PSD_FLOOR * peak * 0.1, min(peak * 3.0, np.finfo(float).max))
 
 
 def _psd_figure(
@@ -315,40 +381,59 @@ def _psd_figure(
     labels: _Labels,
 ) -> Path | None:
     spec = analysis.outputs[name].spectrum
-    if spec is None or not np.max(spec.mean) > 0:
+    if spec is None:
+        return None
+    finite = np.isfinite(spec.mean)
+    if not np.any(spec.mean[finite] > 0):
+        if not finite.all():
+            canvas.note(f"{name}: PSD not drawn: its mean is not finite (NaN or inf)")
         return None
     figure, (axes,) = canvas.figure(1)
+    note = _not_finite(canvas, f"{name}: PSD mean or std", spec.mean, spec.std)
     f_max, (low, high) = _psd_limits(spec.mean, spec.std, spec.frequency, spec.pdf.at)
     # A log axis cannot show mean - σ <= 0: the band is drawn from the floor.
-    lower = np.clip(spec.mean - spec.std, low, None)
+    with np.errstate(over="ignore", invalid="ignore"):
+        lower = _gaps(np.clip(spec.mean - spec.std, low, None))
+        upper = _gaps(spec.mean + spec.std)
     axes.fill_between(
         spec.frequency,
         lower,
-        spec.mean + spec.std,
+        upper,
         color=_COLORS[0],
         alpha=0.3,
         lw=0,
         label="mean ± 1σ (lower edge clipped at the axis)",
     )
-    axes.plot(spec.frequency, spec.mean, color=_COLORS[0], lw=1.6, label="mean PSD")
+    axes.plot(spec.frequency, _gaps(spec.mean), color=_COLORS[0], lw=1.6, label="mean PSD")
     if spec.nominal is not None:
         axes.plot(
-            spec.frequency, spec.nominal, color="black", ls="--", lw=1.1, label="nominal run PSD"
+            spec.frequency,
+            _gaps(spec.nominal),
+            color="black",
+            ls="--",
+            lw=1.1,
+            label="nominal run PSD",
         )
     for other in others:
         theirs = spectrum(other.result, name, analysis.settings, frequencies=spec.pdf.at)
         axes.plot(
-            theirs.frequency, theirs.mean, color=other.color, lw=1.2, label=f"mean: {other.label}"
+            theirs.frequency,
+            _gaps(theirs.mean),
+            color=other.color,
+            lw=1.2,
+            label=f"mean: {other.label}",
         )
+        with np.errstate(over="ignore", invalid="ignore"):
+            their_upper = _gaps(theirs.mean + theirs.std)
         axes.plot(
             theirs.frequency,
-            theirs.mean + theirs.std,
+            their_upper,
             color=other.color,
             lw=0.9,
             ls="-.",
             label=f"mean + 1σ: {other.label}",
         )
-    for f in spec.pdf.at:
+    for f in spec.pdf.at[np.isfinite(spec.pdf.at)]:
         axes.axvline(f, color="grey", lw=0.8, ls=":")
     axes.set_yscale("log")
     axes.set_xlim(0.0, f_max)
@@ -357,7 +442,7 @@ def _psd_figure(
     axes.set_ylabel(labels.psd(name))
     axes.set_title(
         f"{name}: power spectral density ({spec.window} window, one-sided); "
-        "dotted: frequencies of the PSD PDFs"
+        f"dotted: frequencies of the PSD PDFs{note}"
     )
     _legend(figure, [axes])
     return canvas.save(figure, f"{name}_psd.png")
@@ -379,7 +464,8 @@ def _psd_pdf_figure(
     unit, per = labels.psd_unit(name), labels.frequency_unit()
     per = per if per == "Hz" else ""
     for row, (axes, at) in enumerate(zip(panels, spec.pdf.at, strict=True)):
-        _plot_density(axes, spec.pdf, row, _COLORS[0], f"{method_label(result)}, {source}")
+        if not _plot_density(axes, spec.pdf, row, _COLORS[0], f"{method_label(result)}, {source}"):
+            _no_density(axes, canvas, f"{name}: PDF of the PSD at {at:.4g} {per}".rstrip())
         for other in others:
             _, draws = psd_draws(other.result, name, [at], analysis.settings)
             is_runs = psd_draws_are_runs(other.result, name)
@@ -387,7 +473,8 @@ def _psd_pdf_figure(
             _plot_other_draws(axes, draws[:, 0], is_runs, other, nonnegative=True, bandwidth=h)
         if spec.nominal is not None:
             k = int(np.argmin(np.abs(spec.frequency - at)))
-            axes.axvline(spec.nominal[k], color="black", ls="--", lw=1.0, label="nominal")
+            if np.isfinite(spec.nominal[k]):
+                axes.axvline(spec.nominal[k], color="black", ls="--", lw=1.0, label="nominal")
         axes.set_xlabel(f"PSD at {at:.4g} {per} [{unit}]")
         axes.set_ylabel("probability density")
         axes.set_title(f"{name}: PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
@@ -408,14 +495,20 @@ def _compare_figure(
         return None
     figure, (mean_axes, std_axes) = canvas.figure(2)
     times = result.times
-    mean_axes.plot(times, result.mean(name), color=_COLORS[0], lw=1.8, label=method_label(result))
-    std_axes.plot(times, result.std(name), color=_COLORS[0], lw=1.8, label=method_label(result))
+    own = method_label(result)
+    mean_axes.plot(times, _gaps(result.mean(name)), color=_COLORS[0], lw=1.8, label=own)
+    std_axes.plot(times, _gaps(result.std(name)), color=_COLORS[0], lw=1.8, label=own)
     for other in others:
         mean_axes.plot(
-            times, other.result.mean(name), color=other.color, ls="--", label=other.label
+            times, _gaps(other.result.mean(name)), color=other.color, ls="--", label=other.label
         )
-        std_axes.plot(times, other.result.std(name), color=other.color, ls="--", label=other.label)
-    worst = max(comparisons, key=lambda c: c.differences[name].mean_max).differences[name]
+        std_axes.plot(
+            times, _gaps(other.result.std(name)), color=other.color, ls="--", label=other.label
+        )
+    # The worst comparison; a NaN difference (statistics not finite) counts as the worst.
+    worst = max(
+        comparisons, key=lambda c: np.nan_to_num(c.differences[name].mean_max, nan=np.inf)
+    ).differences[name]
     unit = labels.settings.units.get(name, "")
     unit = f" {unit}" if unit else ""
     mean_axes.set_title(f"mean of {name} (largest |Δ| {worst.mean_max:.3g}{unit})")
@@ -436,6 +529,7 @@ def _index_page(
     comparisons: Sequence[Comparison],
     figures: dict[str, list[Path]],
     directory: Path,
+    notes: Sequence[str] = (),
 ) -> str:
     e = html.escape
     status = np.bincount(result.status.astype(int), minlength=3)
@@ -474,7 +568,11 @@ def _index_page(
     ]
     if result.warnings:
         parts.append("<h2>Warnings</h2><ul>")
-        parts += [f'<li class="warn">{e(w)}</li>' for w in result.warnings]
+        parts += [f'<li class="warn">{e(str(w))}</li>' for w in result.warnings]
+        parts.append("</ul>")
+    if notes:
+        parts.append("<h2>Not drawn</h2><ul>")
+        parts += [f'<li class="warn">{e(note)}</li>' for note in notes]
         parts.append("</ul>")
     header = "<tr><th>output</th><th>mean range</th><th>largest std</th>"
     header += "".join(
@@ -485,10 +583,17 @@ def _index_page(
     parts += ["<h2>Key numbers</h2>", "<table>", header + "</tr>"]
     for name in result.outputs:
         mean, std = result.mean(name), result.std(name)
+        mean_range, std_range = _extent(mean), _extent(std)
+        mean_text = "not finite" if mean_range is None else "{:.4g} .. {:.4g}".format(*mean_range)
+        std_text = "not finite" if std_range is None else f"{std_range[1]:.4g}"
+        if mean_range is not None and not np.isfinite(mean).all():
+            mean_text += " (not finite at some times)"
+        if std_range is not None and not np.isfinite(std).all():
+            std_text += " (not finite at some times)"
         cells = [
             f"<td>{e(name)}</td>",
-            f'<td class="num">{mean.min():.4g} .. {mean.max():.4g}</td>',
-            f'<td class="num">{np.nanmax(std):.4g}</td>',
+            f'<td class="num">{e(mean_text)}</td>',
+            f'<td class="num">{e(std_text)}</td>',
         ]
         for comparison in comparisons:
             d = comparison.differences.get(name)
@@ -542,6 +647,17 @@ def _shared(
     return [o for o, _ in pairs], [c for _, c in pairs]
 
 
+def _draw(canvas: _Canvas, name: str, kind: str, figure: Any, *args: Any) -> Path | None:
+    """``figure(canvas, *args)``; a figure matplotlib cannot draw (values at the edge of the
+    floating-point range, e.g. near 1e308, overflow its axis arithmetic) is left out with a
+    note on the index page instead of stopping the report."""
+    try:
+        return figure(canvas, *args)
+    except (ValueError, OverflowError) as error:
+        canvas.note(f"{name}: {kind} figure not drawn: {type(error).__name__}: {error}")
+        return None
+
+
 def write_comparison_figures(
     reference: StudyResult,
     comparisons: Sequence[StudyResult],
@@ -566,7 +682,10 @@ def write_comparison_figures(
     for name in reference.outputs:
         shared, matched = _shared(name, others, found)
         if shared:
-            _compare_figure(canvas, reference, name, shared, matched, _Labels(settings))
+            text = _Labels(settings)
+            _draw(
+                canvas, name, "comparison", _compare_figure, reference, name, shared, matched, text
+            )
     return canvas.written
 
 
@@ -615,16 +734,17 @@ def write_report(
     for name in result.outputs:
         shared, matched = _shared(name, others, found)
         drawn = [
-            _time_figure(canvas, result, name, analysis, shared, text),
-            _pdf_figure(canvas, result, name, analysis, shared, text),
-            _sobol_figure(canvas, result, name, text),
-            _psd_figure(canvas, result, name, analysis, shared, text),
-            _psd_pdf_figure(canvas, result, name, analysis, shared, text),
-            _compare_figure(canvas, result, name, shared, matched, text),
+            _draw(canvas, name, "time", _time_figure, result, name, analysis, shared, text),
+            _draw(canvas, name, "PDF", _pdf_figure, result, name, analysis, shared, text),
+            _draw(canvas, name, "Sobol'", _sobol_figure, result, name, text),
+            _draw(canvas, name, "PSD", _psd_figure, result, name, analysis, shared, text),
+            _draw(canvas, name, "PSD PDF", _psd_pdf_figure, result, name, analysis, shared, text),
+            _draw(canvas, name, "comparison", _compare_figure, result, name, shared, matched, text),
         ]
         figures[name] = [path for path in drawn if path is not None]
     index = directory / "index.html"
     index.write_text(
-        _index_page(result, source, others, found, figures, directory), encoding="utf-8"
+        _index_page(result, source, others, found, figures, directory, canvas.notes),
+        encoding="utf-8",
     )
     return [*canvas.written, index]

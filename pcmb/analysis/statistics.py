@@ -6,16 +6,18 @@ its file gives the same numbers (what each is: ``docs/architecture.md``).
 
 from __future__ import annotations
 
+import functools
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.chaos.basis import PolynomialBasis
 from pcmb.chaos.density import DENSITY_POINTS, kernel_density
+from pcmb.chaos.expansion import sample_mean, sample_std, unsafe_to_square
 from pcmb.chaos.nodes import TensorGrid, draw_germs
 from pcmb.chaos.spectral import chaos_spectrum, periodogram, taper, uniform_step
 from pcmb.errors import ConfigError, ConfigProblem
@@ -39,6 +41,8 @@ __all__ = [
     "spectrum",
     "tensor_grid_of",
 ]
+
+_R = TypeVar("_R")
 
 #: Fewest surrogate draws allowed for PDFs and quantiles.
 MIN_SAMPLES = 100
@@ -287,9 +291,20 @@ def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
     return TensorGrid(result.distributions, design.orders)
 
 
+def _kde(samples: NDArray[np.float64], *, nonnegative: bool) -> tuple[NDArray, NDArray, float]:
+    """:func:`kernel_density` of (M,) samples; Scott's bandwidth computed without overflow
+    for samples whose squares would overflow or underflow (e.g. an output near 1e200)."""
+    finite = samples[np.isfinite(samples)]
+    if finite.size < 2 or not unsafe_to_square(finite):
+        return kernel_density(samples, nonnegative=nonnegative)
+    bandwidth = float(sample_std(finite)) * finite.size ** (-0.2)
+    with np.errstate(over="ignore", under="ignore"):
+        return kernel_density(samples, nonnegative=nonnegative, bandwidth=bandwidth)
+
+
 def _density_table(at: NDArray[np.float64], columns: NDArray, *, nonnegative: bool) -> Density:
     """KDEs of each column of (M, P) samples, at the P locations ``at``."""
-    tables = [kernel_density(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
+    tables = [_kde(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
     value = np.array([t[0] for t in tables]).reshape(at.size, DENSITY_POINTS)
     density = np.array([t[1] for t in tables]).reshape(at.size, DENSITY_POINTS)
     bandwidth = np.array([t[2] for t in tables], dtype=float).reshape(at.size)
@@ -346,9 +361,23 @@ class _Surrogates:
         return found
 
 
+def _quiet_overflow(method: Callable[..., _R]) -> Callable[..., _R]:
+    """A PSD is in output units squared: for an output beyond ~1e154 it exceeds the largest
+    float and becomes inf, without numpy's overflow warnings (the recovery's
+    "square-overflow" warning record says so once)."""
+
+    @functools.wraps(method)
+    def quiet(*args: Any, **kwargs: Any) -> _R:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return method(*args, **kwargs)
+
+    return quiet
+
+
 class _PsdSource:
     """The PSD of one output: chaos on a tensor grid, else per-run periodograms."""
 
+    @_quiet_overflow
     def __init__(self, result: StudyResult, name: str, settings: AnalysisSettings):
         expansion = result.expansions.get(name)
         grid = tensor_grid_of(result)
@@ -364,7 +393,7 @@ class _PsdSource:
         else:
             ok = result.values[name][result.ok]
             self.frequency, self.per_run = periodogram(ok, result.times, settings.window)
-            self.mean, self.std = self.per_run.mean(axis=0), self.per_run.std(axis=0, ddof=1)
+            self.mean, self.std = sample_mean(self.per_run), sample_std(self.per_run)
 
     def bins(self, frequencies: Sequence[float] | None) -> NDArray[np.int64]:
         """Bins nearest ``frequencies``; ``None``: the highest peak above f = 0 (the DC bin
@@ -378,6 +407,7 @@ class _PsdSource:
         spectra = self.chaos.spectra[:, bins]
         surrogates.add(key, self.basis, np.concatenate([spectra.real, spectra.imag], axis=1))
 
+    @_quiet_overflow
     def draws(self, bins: NDArray[np.int64], parts: NDArray | None) -> NDArray[np.float64]:
         """(M, P) PSD draws: per run, or s(f) |Ŷ(f, ξ)|² from the requested parts."""
         if self.chaos is None:
@@ -385,6 +415,7 @@ class _PsdSource:
         real, imaginary = parts[:, : bins.size], parts[:, bins.size :]
         return self.chaos.scale[bins] * (real**2 + imaginary**2)
 
+    @_quiet_overflow
     def spectrum(self, result: StudyResult, name: str, settings: AnalysisSettings, pdf: Density):
         nominal = result.nominal.get(name)
         psd = None if nominal is None else periodogram(nominal, result.times, settings.window)[1]

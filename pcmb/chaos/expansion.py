@@ -9,8 +9,17 @@ from the coefficients alone, because the basis is orthonormal:
 - Sobol' first index of input k = Σ c_α² over α involving only input k, divided by the variance;
   total index = Σ c_α² over α involving input k (at all), divided by the variance.
 
-Where the output does not vary (e.g. at t = 0 with a deterministic initial state), the
-Sobol' indices are undefined and returned as NaN rather than as round-off noise.
+Where the output does not vary (e.g. at t = 0 with a deterministic initial state), its
+standard deviation is exactly 0 and its Sobol' indices are undefined, returned as NaN rather
+than as round-off noise: "does not vary" is a variance below (1e-12)² of the output's mean
+square, :meth:`ChaosExpansion.varies`.
+
+No statistic overflows where the exact one is representable: coefficients beyond ±1e150
+(whose squares could overflow) or below ±1e-150 (whose squares lose digits to underflow) are
+divided by a power of two near their size before squaring, column by column, which leaves
+the other columns — every ordinary output — to the plain arithmetic, bit for bit. The
+standard deviation of an output near 1e200 is then finite (its variance, 1e400, is not).
+:func:`sample_mean` and :func:`sample_std` do the same for the statistics of sampled runs.
 
 Quantiles and densities come from sampling the surrogate, which is cheap.
 """
@@ -29,10 +38,14 @@ from pcmb.chaos.density import kernel_density
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import draw_germs
 
-__all__ = ["ChaosExpansion"]
+__all__ = ["ChaosExpansion", "sample_mean", "sample_std", "unsafe_to_square"]
 
-#: A standard deviation below this fraction of the output's RMS is round-off: Sobol' -> NaN.
+#: A standard deviation below this fraction of the output's RMS is round-off: the output does
+#: not vary there (std 0, Sobol' NaN).
 _RELATIVE_NOISE = 1e-12
+#: Magnitudes beyond which squares may overflow (1e150² = 1e300, with room for 1e8 terms),
+#: and below which they underflow into subnormals: such columns are scaled before squaring.
+_HUGE, _TINY = 1e150, 1e-150
 #: Surrogate evaluations per block when sampling (bounds memory at ~block × S doubles).
 _BLOCK = 16_384
 
@@ -121,17 +134,58 @@ class ChaosExpansion:
         return self.coefficients[self._zero].copy()
 
     @cached_property
+    def _scale(self) -> NDArray[np.float64] | None:
+        """(P,) powers of two to divide each column by before squaring, trailing axes
+        flattened; ``None`` when no column needs it (then the plain arithmetic is used)."""
+        return _power_of_two_scale(self.coefficients.reshape(self.multi_index.shape[0], -1))
+
+    @cached_property
     def _squares(self) -> NDArray[np.float64]:
-        """(S, P) squared fluctuation coefficients, trailing axes flattened (shared by Sobol')."""
-        return (self._fluctuations**2).reshape(self.multi_index.shape[0], -1)
+        """(S, P) squared fluctuation coefficients, trailing axes flattened (shared by Sobol'),
+        of the coefficients divided by :attr:`_scale` when there is one."""
+        if self._scale is None:
+            return (self._fluctuations**2).reshape(self.multi_index.shape[0], -1)
+        return (self._fluctuations.reshape(self.multi_index.shape[0], -1) / self._scale) ** 2
+
+    @cached_property
+    def _sum_of_squares(self) -> NDArray[np.float64]:
+        """(P,) Σ_{α≠0} c_α², scaled like :attr:`_squares`."""
+        return self._squares.sum(axis=0)
+
+    @cached_property
+    def _defined(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """(P,) where the variance is above round-off, and (P,) where it is not (neither
+        where it is NaN or infinite)."""
+        variance = self._sum_of_squares
+        mean = self.coefficients[self._zero].reshape(-1)
+        if self._scale is not None:
+            mean = mean / self._scale
+        with np.errstate(over="ignore", invalid="ignore"):
+            threshold = _RELATIVE_NOISE**2 * (variance + mean**2)
+        return variance > threshold, np.isfinite(variance) & (variance <= threshold)
+
+    def varies(self) -> NDArray[np.bool_]:
+        """Where the output varies beyond round-off, shape (...): elsewhere its std is 0 and its
+        Sobol' indices are NaN. False where a coefficient is not finite."""
+        return self._defined[0].reshape(self.shape)
 
     def variance(self) -> NDArray[np.float64]:
-        """Var[y] = Σ_{α≠0} c_α², shape (...)."""
-        return self._squares.sum(axis=0).reshape(self.shape)
+        """Var[y] = Σ_{α≠0} c_α², shape (...); 0 where the output does not vary, inf where the
+        variance exceeds the largest float (the std may still be finite)."""
+        variance = self._sum_of_squares
+        if self._scale is not None:
+            with np.errstate(over="ignore"):
+                scaled = (np.sqrt(variance) * self._scale) ** 2
+            variance = np.where(self._scale == 1.0, variance, scaled)
+        return np.where(self._defined[1], 0.0, variance).reshape(self.shape)
 
     def std(self) -> NDArray[np.float64]:
-        """Standard deviation, shape (...)."""
-        return np.sqrt(self.variance())
+        """Standard deviation, shape (...); exactly 0 where the output does not vary."""
+        std = np.sqrt(self._sum_of_squares)
+        if self._scale is not None:
+            with np.errstate(over="ignore"):
+                std = std * self._scale
+        return np.where(self._defined[1], 0.0, std).reshape(self.shape)
 
     def covariance(self, other: ChaosExpansion) -> NDArray[np.float64]:
         """Cov[y, z] = Σ_{α≠0} c_α d_α for another output z on the same basis, shape (...).
@@ -150,11 +204,9 @@ class ChaosExpansion:
     def _sobol(self, masks: NDArray[np.bool_]) -> NDArray[np.float64]:
         """Σ c_α² over each row's mask, divided by the variance: (n, ...)."""
         partial = masks.astype(float) @ self._squares
-        variance = self._squares.sum(axis=0)
-        mean_square = self.coefficients[self._zero].reshape(-1) ** 2
-        defined = variance > _RELATIVE_NOISE**2 * (variance + mean_square)
+        variance = self._sum_of_squares
         with np.errstate(divide="ignore", invalid="ignore"):
-            indices = np.where(defined, partial / variance, np.nan)
+            indices = np.where(self._defined[0], partial / variance, np.nan)
         return indices.reshape(self.n, *self.shape)
 
     def sobol_first(self) -> NDArray[np.float64]:
@@ -237,3 +289,69 @@ class ChaosExpansion:
         if not np.isfinite(bandwidth):
             raise ValueError("the output does not vary: its distribution is a point mass")
         return np.interp(np.asarray(points, dtype=float), value, density, left=0.0, right=0.0)
+
+
+# -- overflow-safe squares ---------------------------------------------------------------------
+
+
+def _power_of_two(top: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The power of two 2^(e-1) with top = m 2^e, 0.5 <= m < 1: top / 2^(e-1) is in [1, 2),
+    and 2^(e-1) is a float for every finite top > 0 (2^e is not for top near 1.8e308)."""
+    return np.ldexp(1.0, np.frexp(top)[1] - 1)
+
+
+def _power_of_two_scale(columns: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """(P,) a power of two near the largest |value| of each column of (M, P) values whose
+    squares could overflow or underflow (1 for the other columns), or ``None`` when there is
+    none.
+
+    Dividing by a power of two is exact, so a scaled column keeps every digit; the scale is
+    that of the column's finite values (its NaN and inf stay what they are).
+    """
+    magnitude = np.abs(columns)
+    magnitude = np.where(np.isfinite(magnitude), magnitude, 0.0)
+    top = np.max(magnitude, axis=0) if columns.shape[0] else np.zeros(columns.shape[1])
+    risky = (top > _HUGE) | ((top < _TINY) & (top > 0))
+    if not risky.any():
+        return None
+    return np.where(risky, _power_of_two(np.where(risky, top, 1.0)), 1.0)
+
+
+def unsafe_to_square(values: ArrayLike) -> bool:
+    """Whether some finite values are so large (> 1e150) or so small (< 1e-150, not 0) in
+    magnitude that their squares could overflow or lose digits to underflow."""
+    values = np.asarray(values, dtype=float)
+    return _power_of_two_scale(values.reshape(1, -1)) is not None
+
+
+def sample_mean(values: ArrayLike) -> NDArray[np.float64]:
+    """Mean over the first axis of (M, ...) values, ``values.mean(axis=0)`` unless that
+    overflows with finite values, where the values are scaled by a power of two first."""
+    values = np.asarray(values, dtype=float)
+    with np.errstate(over="ignore"):
+        mean = np.asarray(values.mean(axis=0))
+    flat, columns = mean.reshape(-1), values.reshape(values.shape[0], -1)
+    overflowed = np.isinf(flat) & np.isfinite(columns).all(axis=0)
+    if overflowed.any():
+        scale = _power_of_two(np.max(np.abs(columns[:, overflowed]), axis=0))
+        flat[overflowed] = (columns[:, overflowed] / scale).mean(axis=0) * scale
+    return flat.reshape(mean.shape)
+
+
+def sample_std(values: ArrayLike, ddof: int = 1) -> NDArray[np.float64]:
+    """Standard deviation over the first axis of (M, ...) values, ``values.std(axis=0,
+    ddof=ddof)``, exactly 0 where every value is the same, and computed on values scaled by
+    a power of two where their squares could overflow or underflow."""
+    values = np.asarray(values, dtype=float)
+    columns = values.reshape(values.shape[0], -1)
+    scale = _power_of_two_scale(columns)
+    if scale is None:
+        std = values.std(axis=0, ddof=ddof)
+    else:
+        with np.errstate(over="ignore"):
+            std = (columns / scale).std(axis=0, ddof=ddof) * scale
+        std = std.reshape(values.shape[1:])
+    if values.shape[0]:
+        constant = np.all(values == values[:1], axis=0)
+        std = np.where(constant, 0.0, std)
+    return np.asarray(std, dtype=float)

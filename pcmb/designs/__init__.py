@@ -10,11 +10,25 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from pcmb.chaos.inputs import Distribution
-from pcmb.designs.base import MethodSettings, NodeDesign, Recovery
+from pcmb.designs.base import (
+    RECORDED_ONLY,
+    MethodSettings,
+    NodeDesign,
+    Recovery,
+    statistics_warnings,
+)
 from pcmb.designs.collocation import TensorCollocation
 from pcmb.designs.sampling import Sampling
 
-__all__ = ["DESIGNS", "MethodSettings", "NodeDesign", "Recovery", "make_design"]
+__all__ = [
+    "DESIGNS",
+    "RECORDED_ONLY",
+    "MethodSettings",
+    "NodeDesign",
+    "Recovery",
+    "make_design",
+    "statistics_warnings",
+]
 
 #: ``method.kind`` -> design class; the config schema, ``pcmb validate`` and the docs read
 #: their lists from here.

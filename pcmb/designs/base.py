@@ -9,13 +9,27 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["MethodSettings", "NodeDesign", "Recovery", "least_squares_recovery"]
+__all__ = [
+    "RECORDED_ONLY",
+    "MethodSettings",
+    "NodeDesign",
+    "Recovery",
+    "least_squares_recovery",
+    "statistics_warnings",
+]
+
+#: Codes of warning records that explain a result without questioning it (a Sobol' index that
+#: cannot exist where an output does not vary): kept in the result, its file and its report,
+#: and not worth a Python warning at every run of a model with a fixed initial state.
+RECORDED_ONLY = frozenset({"sobol-undefined"})
+#: Magnitudes whose squares exceed the largest float.
+_SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 
 
 @dataclass(frozen=True)
@@ -72,8 +86,12 @@ class NodeDesign(Protocol):
         nodes: TensorGrid | NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         """Expansions of every output from (N, T) values; ``ok`` marks the nodes that ran.
+
+        The warnings include :func:`statistics_warnings` (located in time with ``times``, the
+        (T,) grid, when given).
 
         Raises
         ------
@@ -117,3 +135,103 @@ def least_squares_recovery(
         f"{float(np.nanmax(fit.loo_error, initial=0.0)):.3g}"
     )
     return Recovery(expansions, (WarningRecord("least-squares-fit", message),))
+
+
+def statistics_warnings(
+    expansions: Mapping[str, ChaosExpansion],
+    values: Mapping[str, NDArray[np.float64]],
+    ok: NDArray[np.bool_],
+    times: NDArray[np.float64] | None = None,
+) -> tuple[WarningRecord, ...]:
+    """Records of where the statistics of an output are undefined or not finite.
+
+    - ``sobol-undefined`` (one per output with an expansion that does not vary somewhere):
+      there its variance is 0 up to round-off, its std exactly 0 and its Sobol' indices NaN.
+    - ``statistic-non-finite`` (one per output with a NaN or infinite mean or std): values
+      that are not finite among the runs kept, or magnitudes whose statistics exceed the
+      floating-point range even when computed with scaling.
+    - ``square-overflow`` (one per output with values beyond ~1.3e154, whose squares exceed
+      the largest float): its mean, std and Sobol' indices are computed with scaling, but
+      quantities in squared units (the variance, power spectra) are inf.
+
+    Parameters
+    ----------
+    expansions:
+        Output name -> expansion (sample statistics for the outputs without one).
+    values:
+        Output name -> (N, T) runs.
+    ok:
+        (N,) the runs that count.
+    times:
+        (T,) the grid, for the records' time ranges; without it the message names the
+        time indices instead.
+    """
+    records = []
+    for name, runs in values.items():
+        expansion = expansions.get(name)
+        kept = np.asarray(runs)[ok]
+        if expansion is not None:
+            mean, std = expansion.mean(), expansion.std()
+        else:
+            mean, std = sample_mean(kept), sample_std(kept)
+        mean, std = np.atleast_1d(mean), np.atleast_1d(std)
+        broken = ~(np.isfinite(mean) & np.isfinite(std))
+        if broken.any():
+            if not np.isfinite(kept).all():
+                cause = "the runs kept hold values that are not finite"
+            else:
+                top = float(np.max(np.abs(kept)))
+                cause = f"values up to {top:.3g} put them beyond the floating-point range"
+            where, span = _where(broken, times)
+            sobol = "; its Sobol' indices there are NaN" if expansion is not None else ""
+            records.append(
+                WarningRecord(
+                    "statistic-non-finite",
+                    f"the mean or std is not finite (NaN or inf) at {where}: {cause}{sobol}",
+                    name,
+                    span,
+                )
+            )
+        finite = kept[np.isfinite(kept)]
+        top = float(np.max(np.abs(finite))) if finite.size else 0.0
+        if top > _SQUARE_LIMIT:
+            records.append(
+                WarningRecord(
+                    "square-overflow",
+                    f"values up to {top:.3g}: quantities in squared units (the variance, power "
+                    "spectra) exceed the floating-point range and are inf; the mean, std and any "
+                    "Sobol' indices are computed with scaling",
+                    name,
+                )
+            )
+        constant = std == 0
+        if expansion is not None and constant.any():
+            where, span = _where(constant, times)
+            records.append(
+                WarningRecord(
+                    "sobol-undefined",
+                    f"the output does not vary (variance 0 up to round-off) at {where}: its "
+                    "std is 0 and its Sobol' indices are undefined there (stored as NaN)",
+                    name,
+                    span,
+                )
+            )
+    return tuple(records)
+
+
+def _where(
+    mask: NDArray[np.bool_], times: NDArray[np.float64] | None
+) -> tuple[str, tuple[float, float] | None]:
+    """Words for the points of ``mask`` and, given ``times``, their (first, last) times."""
+    hits = np.flatnonzero(mask)
+    first, last = int(hits[0]), int(hits[-1])
+    count, size = hits.size, mask.size
+    if count == size:
+        words = f"all {size} times" if size > 1 else "its only time"
+    elif count == last - first + 1:
+        words = f"{count} consecutive times" if count > 1 else "1 time"
+    else:
+        words = f"{count} of the {last - first + 1} times in this range"
+    if times is None:
+        return f"{words} (time indices {first}..{last})", None
+    return words, (float(times[first]), float(times[last]))

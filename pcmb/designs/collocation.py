@@ -13,7 +13,12 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.chaos.recovery import project_tensor
-from pcmb.designs.base import MethodSettings, Recovery, least_squares_recovery
+from pcmb.designs.base import (
+    MethodSettings,
+    Recovery,
+    least_squares_recovery,
+    statistics_warnings,
+)
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["TensorCollocation"]
@@ -73,6 +78,7 @@ class TensorCollocation:
         grid: TensorGrid,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         flat = [name for name, order in zip(self.names, self.orders, strict=True) if order == 0]
         warnings: tuple[WarningRecord, ...] = ()
@@ -104,4 +110,5 @@ class TensorCollocation:
                     "contributes no variance",
                 ),
             )
+        warnings += statistics_warnings(recovery.expansions, values, ok, times)
         return Recovery(recovery.expansions, warnings)

@@ -9,7 +9,12 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, random_nodes
-from pcmb.designs.base import MethodSettings, Recovery, least_squares_recovery
+from pcmb.designs.base import (
+    MethodSettings,
+    Recovery,
+    least_squares_recovery,
+    statistics_warnings,
+)
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["Sampling"]
@@ -68,6 +73,7 @@ class Sampling:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         warnings: tuple[WarningRecord, ...] = ()
         if self.kind == "sobol" and self.samples & (self.samples - 1):
@@ -79,7 +85,7 @@ class Sampling:
                 ),
             )
         if self.orders is None:
-            return Recovery({}, warnings)
+            return Recovery({}, warnings + statistics_warnings({}, values, ok, times))
         recovery = least_squares_recovery(
             self.distributions,
             self.names,
@@ -87,4 +93,5 @@ class Sampling:
             {name: y[ok] for name, y in values.items()},
             max(self.orders),
         )
-        return Recovery(recovery.expansions, warnings + recovery.warnings)
+        found = statistics_warnings(recovery.expansions, values, ok, times)
+        return Recovery(recovery.expansions, warnings + recovery.warnings + found)

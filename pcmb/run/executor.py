@@ -3,12 +3,19 @@
 Chunk boundaries depend only on N, the config and the model class, never on workers or
 backend, so results are bit-identical however they run; a worker that dies costs only its
 chunk, and its killer node is named. See ``docs/architecture.md``.
+
+Whatever the model's code raises while it builds or simulates is a failure of the nodes it was
+running, described by type and message — ``BaseException`` s included: ``sys.exit()`` in a
+model is ``SystemExit: 0`` at its node, never an exit of pcmb. The one exception is the user's
+Ctrl-C: a ``KeyboardInterrupt`` (or anything else) raised while a SIGINT reached the process
+stops the run, as does a SIGINT the model swallowed (see :class:`_SigintWatch`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
+import signal
 import sys
 import threading
 import time
@@ -16,7 +23,7 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import cloudpickle
 import numpy as np
@@ -37,6 +44,8 @@ TARGET_CHUNKS = 16
 MAX_CHUNK_SIZE = 256
 # Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
 # Seconds between progress-line updates.
+
+_T = TypeVar("_T")
 
 
 # -- results ---------------------------------------------------------------------------------
@@ -118,6 +127,109 @@ class _Outcome:
     seconds: float
 
 
+# -- calls into the model's code -------------------------------------------------------------
+
+
+class _SigintWatch:
+    """Tells the user's Ctrl-C from a ``KeyboardInterrupt`` the model's code raised itself.
+
+    Python turns SIGINT into ``KeyboardInterrupt`` in the main thread through the SIGINT
+    handler. While the model runs, the watch puts a handler in front of the current one that
+    notes the signal and passes it on, so the model sees exactly what it would without it.
+    Afterwards the watch knows whether a SIGINT reached this process during the call
+    (:attr:`signalled`), or whether it cannot tell (:attr:`blind`): the model replaced the
+    handler, or Python's handler is not a Python callable. Where no Python handler raises
+    ``KeyboardInterrupt`` on SIGINT (a thread other than the main one, as in dask workers, or
+    the signal ignored), a ``KeyboardInterrupt`` can only come from the code itself.
+
+    Loky workers share the terminal's process group, so a Ctrl-C reaches them too: there the
+    watch sees the signal as in the main process and the interrupt stays the user's.
+    """
+
+    def __init__(self) -> None:
+        self.signalled = False
+        self._unknown_handler = False
+        self._previous: Any = None
+
+    def _note(self, signum: int, frame: Any) -> None:
+        self.signalled = True
+        self._previous(signum, frame)  # Python's default handler raises KeyboardInterrupt
+
+    def __enter__(self) -> _SigintWatch:
+        if threading.current_thread() is not threading.main_thread():
+            return self
+        current = signal.getsignal(signal.SIGINT)
+        if current is None:  # a handler installed outside Python: it may raise anything
+            self._unknown_handler = True
+        elif callable(current):
+            self._previous = current
+            signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        if self._previous is not None:  # the handler of before the call, whatever the model did
+            signal.signal(signal.SIGINT, self._previous)
+
+    @property
+    def blind(self) -> bool:
+        """Whether a SIGINT may have gone unseen: the handler is not (or no longer) ours."""
+        if self._previous is None:
+            return self._unknown_handler
+        return signal.getsignal(signal.SIGINT) != self._note
+
+    @property
+    def interrupts(self) -> bool:
+        """Whether a SIGINT raises ``KeyboardInterrupt`` here (Python's default handler)."""
+        return self._previous is signal.default_int_handler
+
+    def users(self, error: BaseException) -> bool:
+        """Whether ``error``, raised by the model's code, is the user's interrupt: a
+        ``KeyboardInterrupt`` after a SIGINT or one the watch may have missed, or anything the
+        model made of a Ctrl-C (``sys.exit()``, an error) where SIGINT means interrupt."""
+        if isinstance(error, KeyboardInterrupt):
+            return self.signalled or self.blind
+        return self.signalled and self.interrupts
+
+
+class _ModelExit(Exception):
+    """A ``BaseException`` (``SystemExit``, ``KeyboardInterrupt``, ``GeneratorExit``, ...) the
+    model's code raised, carried as an ordinary failure; the message describes it."""
+
+
+def _describe(error: BaseException) -> str:
+    """``Type: message`` of an error raised by the model's code."""
+    if isinstance(error, _ModelExit):
+        return str(error)
+    if isinstance(error, SystemExit):
+        return f"SystemExit: {error.code}"
+    if isinstance(error, KeyboardInterrupt):
+        return "KeyboardInterrupt raised by the model (no Ctrl-C reached pcmb)"
+    if not isinstance(error, Exception):
+        text = str(error)
+        return f"{type(error).__name__}: {text}" if text else type(error).__name__
+    return f"{type(error).__name__}: {error}"
+
+
+def _model_code(function: Callable[..., _T], *args: Any) -> _T:
+    """``function(*args)``, code of the model: a ``BaseException`` it raises becomes
+    :class:`_ModelExit`, unless it is the user's interrupt, which becomes (or stays)
+    ``KeyboardInterrupt`` — also when the model swallowed the SIGINT and returned."""
+    with _SigintWatch() as watch:
+        try:
+            result = function(*args)
+        except BaseException as error:
+            if watch.users(error):
+                if isinstance(error, KeyboardInterrupt):
+                    raise
+                raise KeyboardInterrupt from error
+            if isinstance(error, Exception):
+                raise
+            raise _ModelExit(_describe(error)) from error
+    if watch.signalled and watch.interrupts:
+        raise KeyboardInterrupt  # the model swallowed the user's Ctrl-C
+    return result
+
+
 # One model per thread of each process (a dask worker may run several threads; MuJoCo data is
 # not thread-safe). Building can be expensive (loading a scene), so it happens once per worker.
 _MODEL_CACHE = threading.local()
@@ -131,11 +243,11 @@ def _cached_model(token: str, factory: Callable[[], Model]) -> tuple[Model, floa
     _MODEL_CACHE.held = None  # release the previous model before building the next one
     start = time.perf_counter()
     try:
-        model = factory()
+        model = _model_code(factory)
     except PcmbError:
         raise
     except Exception as exc:
-        raise ModelError(f"could not build the model: {type(exc).__name__}: {exc}") from exc
+        raise ModelError(f"could not build the model: {_describe(exc)}") from exc
     _MODEL_CACHE.held = (token, model)
     return model, time.perf_counter() - start
 
@@ -150,25 +262,15 @@ def _run_batch(
     n = len(next(iter(params.values())))
     values = np.full((n, len(outputs), times.size), np.nan)
     try:
-        result = model.simulate(params, times)
+        result = _model_code(model.simulate, params, times)
+        # Reading the result runs the model's code too (a mapping's lookup, an __array__).
+        problem = _model_code(_collect, result, outputs, times, values)
     except ModelDefinitionError:
         raise  # the same at every node: stop with its one message
     except Exception as exc:  # the model's own failure, whatever its type, is data here
-        return values, [f"{type(exc).__name__}: {exc}"] * n
-    if not isinstance(result, Mapping):
-        return values, [f"simulate returned {type(result).__name__}, expected a mapping"] * n
-    for k, name in enumerate(outputs):
-        if name not in result:
-            return values, [f"the model returned no output {name!r}"] * n
-        try:
-            array = np.asarray(result[name], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            return values, [f"output {name!r} is not a float array ({exc})"] * n
-        if array.shape != (n, times.size):
-            return values, [
-                f"output {name!r} has shape {array.shape}, expected {(n, times.size)}"
-            ] * n
-        values[:, k] = array
+        return values, [_describe(exc)] * n
+    if problem:
+        return values, [problem] * n
     messages = []
     for row in values:
         bad = ~np.isfinite(row)  # (n_outputs, T)
@@ -179,6 +281,29 @@ def _run_batch(
         else:
             messages.append("")
     return values, messages
+
+
+def _collect(
+    result: object,
+    outputs: Sequence[str],
+    times: NDArray[np.float64],
+    values: NDArray[np.float64],
+) -> str:
+    """Copy a ``simulate`` result into (B, n_outputs, T) ``values``; what is wrong, or ""."""
+    n = values.shape[0]
+    if not isinstance(result, Mapping):
+        return f"simulate returned {type(result).__name__}, expected a mapping"
+    for k, name in enumerate(outputs):
+        if name not in result:
+            return f"the model returned no output {name!r}"
+        try:
+            array = np.asarray(result[name], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            return f"output {name!r} is not a float array ({exc})"
+        if array.shape != (n, times.size):
+            return f"output {name!r} has shape {array.shape}, expected {(n, times.size)}"
+        values[:, k] = array
+    return ""
 
 
 def _execute(

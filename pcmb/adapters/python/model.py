@@ -311,7 +311,7 @@ def as_model(obj: object, params: Mapping[str, Any], outputs: Sequence[str] | No
     if inspect.isclass(obj):
         try:
             instance = obj(**params)
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:
             raise _problem(
                 "model.params", f"{name}(**params) failed: {describe_exception(exc)}"
             ) from exc

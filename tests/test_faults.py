@@ -1,0 +1,284 @@
+"""Faults at the edges: ``sys.exit`` inside a model, statistics that overflow or do not vary.
+
+The first tests run ``python -m pcmb.cli run CONFIG`` in a real process: a model that calls
+``sys.exit(0)`` or ``sys.exit(3)`` at one node is a failure of that node, named with its
+index and ``SystemExit: <code>``; the failure policy decides what follows (abort: exit 3, no
+result file; regress: exit 0 and a complete file). pcmb itself never exits with the model's
+code, never exits 0 without writing its result, and still stops at the user's Ctrl-C.
+
+The last ones check the statistics of outputs near 1e200 (finite, exact to 1e-12) and of
+outputs that do not vary (std exactly 0, Sobol' indices undefined, with a warning record).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.designs import MethodSettings, make_design, statistics_warnings
+from pcmb.result import Status
+
+MODEL = '''
+import os
+import sys
+import time
+
+import numpy as np
+
+
+class Exiting:
+    """y = a t; calls sys.exit(code) when its batch holds a node with low < a < high.
+
+    Each call sleeps ``sleep`` s per node, so that with jobs: 2 the executor finds worker
+    processes worth starting; the process that exits writes its pid to ``marker``.
+    """
+
+    outputs = ("y",)
+
+    def __init__(self, a=0.3, low=2.0, high=2.0, code=0, sleep=0.0, marker=""):
+        self.parameters = {"a": a}
+        self.low, self.high, self.code = low, high, code
+        self.sleep, self.marker = sleep, marker
+
+    def simulate(self, params, times):
+        a = np.asarray(params["a"], dtype=float)
+        time.sleep(self.sleep * a.size)
+        if np.any((a > self.low) & (a < self.high)):
+            with open(self.marker, "a") as marker:
+                marker.write(f"{os.getpid()}\\n")
+            sys.exit(self.code)
+        return {"y": a[:, None] * times}
+'''
+
+#: Order 8 on one input: 9 nodes, cut into 9 chunks of one node (the default rule).
+ORDER = 8
+NODES = pcmb.TensorGrid([pcmb.Uniform(0.0, 1.0)], (ORDER,)).params[:, 0]
+#: The first node runs in the calling process (the timed first chunk); node 4 is a middle one.
+FIRST, MIDDLE = 0, 4
+#: Seconds per node with jobs: 2: the first chunk's timing must promise that two workers beat
+#: this process on the other 8 nodes (1 s start-up + 4 x 0.45 s < 8 x 0.45 s).
+SLEEP = 0.45
+
+
+def _study(folder: Path, index: int | None, code: int, jobs: int, policy: str) -> Path:
+    """A study whose model exits with ``code`` at node ``index`` (``None``: never); returns
+    the config."""
+    (folder / "exiting.py").write_text(MODEL)
+    gap = 0.5 * np.min(np.diff(NODES))
+    low, high = (2.0, 2.0) if index is None else (NODES[index] - gap, NODES[index] + gap)
+    low, high = float(low), float(high)
+    sleep = SLEEP if jobs > 1 else 0.0
+    config = folder / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: exiting
+            model:
+              kind: python
+              entry: exiting.py:Exiting
+              params: {{a: 0.3, low: {low!r}, high: {high!r}, code: {code}, sleep: {sleep},
+                        marker: {str(folder / "marker")!r}}}
+              outputs: [y]
+            time: {{start: 0.0, stop: 1.0, points: 5}}
+            inputs:
+              a: {{dist: uniform, low: 0.0, high: 1.0}}
+            method: {{kind: collocation, order: {ORDER}}}
+            execution: {{jobs: {jobs}, backend: loky, on_failure: {policy}}}
+            output: {str(folder / "out" / "result.h5")!r}
+            """
+        )
+    )
+    (folder / "out").mkdir()
+    return config
+
+
+def _run(config: Path) -> tuple[int, str, int]:
+    """Exit code, stderr and pid of ``python -m pcmb.cli run CONFIG --quiet``."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    _, stderr = process.communicate(timeout=300)
+    return process.returncode, stderr, process.pid
+
+
+CASES = [
+    pytest.param(index, code, jobs, id=f"{where}-exit{code}-jobs{jobs}")
+    for index, where in ((FIRST, "first"), (MIDDLE, "middle"))
+    for code in (0, 3)
+    for jobs in (1, 2)
+]
+
+
+def _check_where_it_ran(folder: Path, index: int, jobs: int, pid: int) -> None:
+    """The node exited in pcmb's process, or in a worker for a middle node with jobs: 2."""
+    exited = {int(line) for line in (folder / "marker").read_text().split()}
+    if jobs > 1 and index != FIRST:
+        assert pid not in exited, "the middle node was expected to run in a worker process"
+    else:
+        assert exited == {pid}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+def test_sys_exit_in_the_model_aborts_with_exit_3(
+    tmp_path: Path, index: int, code: int, jobs: int
+) -> None:
+    config = _study(tmp_path, index, code, jobs, "abort")
+    returncode, stderr, pid = _run(config)
+    assert returncode == 3, stderr
+    assert "the model failed at 1 of 9 node(s) (on_failure: abort)" in stderr
+    assert f"  node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
+    assert "Traceback" not in stderr
+    # No result, not even half of one: only the journal of the finished nodes is left.
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
+    _check_where_it_ran(tmp_path, index, jobs, pid)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
+    tmp_path: Path, index: int, code: int, jobs: int
+) -> None:
+    config = _study(tmp_path, index, code, jobs, "regress")
+    returncode, stderr, pid = _run(config)
+    assert returncode == 0, stderr
+    assert f"node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
+    assert "pcmb: wrote" in stderr
+    # A complete file and nothing else: no journal, no temporary file.
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5"}
+    result = pcmb.load(tmp_path / "out" / "result.h5")
+    expected = np.full(ORDER + 1, Status.OK)
+    expected[index] = Status.FAILED
+    np.testing.assert_array_equal(result.status, expected)
+    assert [(f.index, f.message) for f in result.failures] == [(index, f"SystemExit: {code}")]
+    assert "nodes-failed" in {w.code for w in result.warnings}
+    ok = result.status == Status.OK
+    np.testing.assert_array_equal(result.values["y"][ok], NODES[ok, None] * result.times)
+    # y = a t with a ~ U[0, 1]: the refit on the 8 surviving nodes is exact.
+    np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
+    np.testing.assert_allclose(result.std("y"), result.times / np.sqrt(12.0), atol=1e-12)
+    _check_where_it_ran(tmp_path, index, jobs, pid)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_the_users_ctrl_c_still_interrupts_the_run(tmp_path: Path, jobs: int) -> None:
+    # A terminal sends SIGINT to its whole foreground process group: pcmb and its workers.
+    config = _study(tmp_path, None, 0, 2, "abort")  # SLEEP s per node: the pool is used
+    config.write_text(config.read_text().replace("jobs: 2", f"jobs: {jobs}"))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    journal = tmp_path / "out" / "result.h5.journal"
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(journal.glob("record-*.npz"))) < jobs:
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline, "no node finished in time"
+            time.sleep(0.02)
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=120)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    assert process.returncode == 130, stderr
+    assert "pcmb: interrupted; finished nodes are kept in the journal" in stderr
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
+
+
+# -- statistics at the edges: outputs near 1e200 and outputs that do not vary -----------------
+
+EDGE_TIMES = np.linspace(0.0, 2.0, 5)
+EDGE_INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
+
+
+@pcmb.batched(outputs=("huge", "flat", "z"))
+def edges(params, times):
+    """huge = 1e200 (1 + 0.1 a t + 0.05 b² t²); flat = 2.5; z = a b t (0 at t = 0)."""
+    a, b = params["a"][:, None], params["b"][:, None]
+    return {
+        "huge": 1e200 * (1.0 + 0.1 * a * times + 0.05 * b**2 * times**2),
+        "flat": np.full((a.size, times.size), 2.5),
+        "z": a * b * times,
+    }
+
+
+def _edge_study() -> pcmb.Study:
+    return pcmb.Study(
+        edges, EDGE_INPUTS, EDGE_TIMES, order={"a": 1, "b": 2}, params={"a": 2.0, "b": 0.0}, jobs=1
+    )
+
+
+def test_huge_and_constant_outputs_get_honest_statistics_and_records(tmp_path: Path) -> None:
+    path = tmp_path / "edges.h5"
+    with pytest.warns(pcmb.PcmbWarning) as issued:
+        result = _edge_study().run(path)
+    # Only the loud record is issued; "does not vary" is recorded, not issued at every run.
+    assert [str(w.message).endswith("[square-overflow]") for w in issued] == [True]
+    # huge: Var = 1e400 (0.01 t²/3 + 2 · 0.0025 t⁴) is no float; its std is, to 1e-12.
+    exact = 1e200 * np.sqrt(0.01 * EDGE_TIMES**2 / 3.0 + 0.005 * EDGE_TIMES**4)
+    np.testing.assert_allclose(result.std("huge"), exact, rtol=1e-12, atol=0.0)
+    assert np.isfinite(result.sobol_first("huge")[:, 1:]).all()
+    np.testing.assert_allclose(result.sobol_total("huge")[:, 1:].sum(axis=0), 1.0, rtol=1e-12)
+    # flat never varies: std exactly 0, Sobol' indices undefined, and a record saying so.
+    assert np.all(result.std("flat") == 0.0) and np.isnan(result.sobol_first("flat")).all()
+    records = {(w.code, w.output): w for w in result.warnings}
+    assert records["sobol-undefined", "flat"].time_range == (0.0, 2.0)
+    assert "at all 5 times" in records["sobol-undefined", "flat"].message
+    for name in ("huge", "z"):  # both are fixed at t = 0 only
+        assert records["sobol-undefined", name].time_range == (0.0, 0.0)
+        assert result.std(name)[0] == 0.0 and np.isnan(result.sobol_first(name)[:, 0]).all()
+    top = np.max(result.values["huge"])
+    assert f"values up to {top:.3g}" in records["square-overflow", "huge"].message
+    assert not any(w.code == "statistic-non-finite" for w in result.warnings)
+    # The file keeps the same numbers and records.
+    loaded = pcmb.load(path)
+    assert set(loaded.warnings) == set(result.warnings)
+    for name in result.outputs:
+        np.testing.assert_array_equal(loaded.std(name), result.std(name))
+        np.testing.assert_array_equal(loaded.sobol_total(name), result.sobol_total(name))
+
+
+def test_non_finite_statistics_are_recorded_with_their_cause() -> None:
+    grid = pcmb.TensorGrid(list(EDGE_INPUTS.values()), (1, 2))
+    values = edges(dict(zip(EDGE_INPUTS, grid.params.T, strict=True)), EDGE_TIMES)
+    values["z"][3, 2:] = np.nan  # a NaN run the executor would have refused, kept anyway
+    ok = np.ones(grid.size, dtype=bool)
+    design = make_design(EDGE_INPUTS, MethodSettings("collocation", (1, 2)))
+    recovered = design.recover(grid, values, ok, EDGE_TIMES)
+    found = {(w.code, w.output): w for w in recovered.warnings}
+    z = found["statistic-non-finite", "z"]
+    assert z.time_range == (1.0, 2.0)
+    assert z.message.startswith("the mean or std is not finite (NaN or inf) at 3 consecutive")
+    assert "the runs kept hold values that are not finite" in z.message
+    # Without the grid, the records name time indices instead.
+    bare = {(w.code, w.output): w for w in design.recover(grid, values, ok).warnings}
+    assert bare["statistic-non-finite", "z"].time_range is None
+    assert "time indices 2..4" in bare["statistic-non-finite", "z"].message
+    # Finite runs whose statistics still are not (here: coefficients beyond the float range).
+    expansion = recovered.expansions["huge"]
+    coefficients = expansion.coefficients.copy()
+    coefficients[1, 4] = np.inf
+    beyond = ChaosExpansion(coefficients, expansion.multi_index, expansion.distributions)
+    (record, *_) = statistics_warnings({"huge": beyond}, {"huge": values["huge"]}, ok, EDGE_TIMES)
+    assert (record.code, record.time_range) == ("statistic-non-finite", (2.0, 2.0))
+    top = np.max(values["huge"])
+    assert f"values up to {top:.3g} put them beyond the floating-point range" in record.message
