@@ -417,6 +417,7 @@ class Study:
                 retries=self.retries if self.on_failure == "retry" else 0,
                 journal=journal,
                 progress=progress,
+                stop_on_failure=self.on_failure == "abort",
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -431,10 +432,17 @@ class Study:
                 if journal is not None and finished
                 else ""
             )
+            pending = int(np.sum(runs.status == Status.PENDING))
+            stopped = (
+                f"; stopped at the first failure, {pending} node(s) not run"
+                + (" (--resume runs them)" if journal is not None else "")
+                if pending
+                else ""
+            )
             raise ModelRunError(
                 runs.failures,
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
-                f"(on_failure: {self.on_failure}){kept}:",
+                f"(on_failure: {self.on_failure}){kept}{stopped}:",
             )
         result = self._recover(nodes, runs)
         result = self._with_nominal(result, outputs)

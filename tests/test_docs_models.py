@@ -225,6 +225,8 @@ def test_command_failed_runs_keep_their_work_directory(tmp_path):
     text = text.replace("../../models/oscillator_cli.py", str(CLI_SCRIPT))
     text = text.replace("order: 4", "order: 1")
     text = text.replace("keep: failed", f"run_dir: {tmp_path / 'nodes'}\n  keep: failed")
+    # One chunk, so abort sees every node of it fail (it stops dispatching after a failure).
+    text = text.replace("on_failure: abort}", "on_failure: abort, chunk_size: 4}")
     (tmp_path / "broken.yaml").write_text(text, encoding="utf-8")
     out = tmp_path / "out.h5"
     assert main(["run", str(tmp_path / "broken.yaml"), "-o", str(out), "--quiet"]) == 3

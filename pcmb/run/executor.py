@@ -257,8 +257,10 @@ def _run_batch(
     params: Mapping[str, NDArray[np.float64]],
     times: NDArray[np.float64],
     outputs: Sequence[str],
-) -> tuple[NDArray[np.float64], list[str]]:
-    """One ``simulate`` call: (B, n_outputs, T) values and per-node messages ("" = ok)."""
+) -> tuple[NDArray[np.float64], list[str], bool]:
+    """One ``simulate`` call: (B, n_outputs, T) values, per-node messages ("" = ok), and
+    whether the call as a whole failed (it raised or returned a wrong result), so that which
+    node made it fail is unknown."""
     n = len(next(iter(params.values())))
     values = np.full((n, len(outputs), times.size), np.nan)
     try:
@@ -268,9 +270,9 @@ def _run_batch(
     except ModelDefinitionError:
         raise  # the same at every node: stop with its one message
     except Exception as exc:  # the model's own failure, whatever its type, is data here
-        return values, [_describe(exc)] * n
+        return values, [_describe(exc)] * n, True
     if problem:
-        return values, [problem] * n
+        return values, [problem] * n, True
     messages = []
     for row in values:
         bad = ~np.isfinite(row)  # (n_outputs, T)
@@ -280,7 +282,7 @@ def _run_batch(
             messages.append(f"non-finite output {outputs[k]!r} at t={times[j]:.6g}")
         else:
             messages.append("")
-    return values, messages
+    return values, messages, False
 
 
 def _collect(
@@ -315,7 +317,14 @@ def _execute(
     batched: bool,
     retries: int,
 ) -> _Outcome:
-    """Run one task (in a worker or in-process), narrowing a failed batch down to its nodes."""
+    """Run one task (in a worker or in-process), narrowing a failed batch down to its nodes.
+
+    A per-point model (one with ``run_point``, see
+    :class:`~pcmb.adapters.protocol.PointwiseModel`) is called node by node: its batch is a
+    loop over the nodes anyway, and a one-node call raises the node's own reason where a
+    batch would only return a NaN row, so each node runs once (``1 + retries`` times if it
+    fails) and its failure keeps its message.
+    """
     model, _ = _cached_model(token, factory)
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
@@ -323,23 +332,62 @@ def _execute(
     times = _read_only(times)
     start = time.perf_counter()
     n = len(next(iter(params.values())))
-    if batched and n > 1:
-        values, messages = _run_batch(model, params, times, outputs)
+    values = np.full((n, len(outputs), times.size), np.nan)
+    messages = ["not run"] * n
+    narrow = _Narrowing(model, params, times, outputs, retries, values, messages)
+    if batched and n > 1 and not callable(getattr(model, "run_point", None)):
+        narrow.batch(0, n)
     else:
-        values = np.full((n, len(outputs), times.size), np.nan)
-        messages = ["not run"] * n
-    # A node without a valid row from the batch (the call failed, or its row is not finite) is
-    # re-run on its own, to name its failure or to succeed alone. The finite rows of a batch
-    # are kept: nodes interact only through a stacked solver's shared step control, and a
-    # non-finite node makes that fail the whole call rather than bias the other rows.
-    for i in [i for i, message in enumerate(messages) if message]:
-        single = {name: array[i : i + 1] for name, array in params.items()}
-        for _ in range(1 + retries):
-            row, (message,) = _run_batch(model, single, times, outputs)
+        for i in range(n):
+            narrow.alone(i)
+    return _Outcome(values, tuple(messages), time.perf_counter() - start)
+
+
+@dataclass
+class _Narrowing:
+    """Runs the nodes of one task into ``values`` and ``messages`` (see :func:`_execute`)."""
+
+    model: Model
+    params: Mapping[str, NDArray[np.float64]]
+    times: NDArray[np.float64]
+    outputs: Sequence[str]
+    retries: int
+    values: NDArray[np.float64]
+    messages: list[str]
+
+    def alone(self, i: int) -> None:
+        """Run node ``i`` in a one-node batch, ``1 + retries`` times at most."""
+        single = {name: array[i : i + 1] for name, array in self.params.items()}
+        for _ in range(1 + self.retries):
+            row, (message,), _ = _run_batch(self.model, single, self.times, self.outputs)
             if not message:
                 break
-        values[i], messages[i] = row[0], message
-    return _Outcome(values, tuple(messages), time.perf_counter() - start)
+        self.values[i], self.messages[i] = row[0], message
+
+    def batch(self, start: int, stop: int) -> None:
+        """Run nodes ``[start, stop)`` in one batched call; narrow it down if it fails.
+
+        A call that fails as a whole (it raised or returned a wrong shape) does not say which
+        node made it fail: it is split in halves, each run again the same way, so one bad node
+        among B costs about 2 log2(B) more calls instead of B. A node with a non-finite row in
+        a call that worked is re-run alone, to name its failure or to succeed alone. The finite
+        rows of a batch are kept: nodes interact only through a stacked solver's shared step
+        control, and a non-finite node makes that fail the whole call rather than bias the
+        other rows.
+        """
+        if stop - start == 1:
+            self.alone(start)
+            return
+        part = {name: array[start:stop] for name, array in self.params.items()}
+        rows, found, failed = _run_batch(self.model, part, self.times, self.outputs)
+        if failed:
+            middle = (start + stop) // 2
+            self.batch(start, middle)
+            self.batch(middle, stop)
+            return
+        self.values[start:stop], self.messages[start:stop] = rows, found
+        for i in [start + k for k, message in enumerate(found) if message]:
+            self.alone(i)
 
 
 def _read_only(array: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -488,14 +536,22 @@ def _isolate(campaign: _Campaign, pool: Pool, task: _Task) -> None:
         _isolate(campaign, pool, _Task(np.array([index]), batched=False))
 
 
-def _run_pooled(campaign: _Campaign, pool: Pool, tasks: Sequence[_Task]) -> None:
-    """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead workers."""
+def _run_pooled(
+    campaign: _Campaign, pool: Pool, tasks: Sequence[_Task], stop_on_failure: bool = False
+) -> None:
+    """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead workers.
+
+    With ``stop_on_failure``, no task is started once a node has failed; the tasks in flight
+    finish (and are journaled), the others stay pending.
+    """
     queue = deque(tasks)
     in_flight: dict[Future[_Outcome], _Task] = {}
     lost: list[_Task] = []
     try:
         while queue or in_flight:
             # After a death, feed nothing more: let the chunks in flight finish or fail first.
+            if stop_on_failure and campaign.messages:
+                queue.clear()
             while queue and not lost and len(in_flight) < pool.slots:
                 task = queue.popleft()
                 in_flight[pool.submit(_execute, *campaign.arguments(task))] = task
@@ -656,6 +712,7 @@ def run_nodes(
     retries: int = 0,
     journal: Journal | None = None,
     progress: bool | None = None,
+    stop_on_failure: bool = False,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -687,6 +744,10 @@ def run_nodes(
         Persists every finished chunk; its successful nodes are taken instead of being run.
     progress:
         Progress line on stderr; default: only when stderr is a terminal.
+    stop_on_failure:
+        Start no more chunks once a node has failed (the policy ``abort``): the chunks in
+        flight finish and every failure found in them is reported; the nodes never run stay
+        pending (status 0), in the journal too, so a resumed run runs them.
 
     Returns
     -------
@@ -730,7 +791,7 @@ def run_nodes(
         if tasks:
             trial = _execute(*campaign.arguments(tasks[0]))
             campaign.accept_outcome(tasks[0], trial)
-            rest = tasks[1:]
+            rest = [] if stop_on_failure and campaign.messages else tasks[1:]
             workers = jobs or _default_workers()
             n_rest = sum(task.indices.size for task in rest)
             n_trial = tasks[0].indices.size
@@ -740,7 +801,7 @@ def run_nodes(
                 pool_type = InProcessPool
             pool: Pool = pool_type(jobs, workers, address)
             try:
-                _run_pooled(campaign, pool, rest)
+                _run_pooled(campaign, pool, rest, stop_on_failure)
             finally:
                 pool.close()
     finally:
