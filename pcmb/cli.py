@@ -95,7 +95,31 @@ def _summary(config) -> str:
     lines.append(f"runs     {nodes.size} model runs ({config.execution.on_failure} on failure)")
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
+    lines.append(_space_line(study, nodes.size, config.output))
     return "\n".join(lines)
+
+
+def _estimate(study, n_nodes: int):
+    """The space a run of ``study`` writes (see :func:`pcmb.run.output.estimate_size`)."""
+    from pcmb.run.output import estimate_size
+
+    outputs = study.outputs or study.check_model()
+    return estimate_size(n_nodes, study.times.size, len(outputs), len(study.inputs))
+
+
+def _space_line(study, n_nodes: int, output: str | None) -> str:
+    """The ``size`` line of the summary; checks the output (raises ResultFileError)."""
+    from pcmb.run.output import check_output, format_bytes
+
+    estimate = _estimate(study, n_nodes)
+    size = (
+        f"size     about {format_bytes(estimate.total)} at most: result file "
+        f"{format_bytes(estimate.result)} + journal {format_bytes(estimate.journal)} while it runs"
+    )
+    if output is None:
+        return size
+    free = check_output(output, estimate)
+    return size if free is None else f"{size}; {format_bytes(free)} free there"
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:

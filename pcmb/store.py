@@ -4,8 +4,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime as dt
+import io
 import json
 import os
 import platform
@@ -24,6 +26,7 @@ from pcmb.chaos.inputs import from_description
 from pcmb.errors import ResultFileError
 from pcmb.result import Design, NodeFailure, StudyResult, WarningRecord
 from pcmb.run.files import replace_durably
+from pcmb.run.output import write_error
 
 __all__ = ["SCHEMA_VERSION", "load", "write_result"]
 
@@ -247,22 +250,50 @@ def write_result(
         The written file.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    # mkstemp creates the file private (0600); a result file gets the usual umask mode.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(handle, 0o666 & ~umask)
-    os.close(handle)
+    journal = Path(f"{path}.journal")
+    # Built in memory, then written by ordinary Python I/O: a full disk (or a quota, or a
+    # file system turned read-only) is then an OSError here, never a failure inside HDF5's
+    # C code (h5py crashed with SIGSEGV on ENOSPC while flushing to a full disk).
+    image = _image(result, provenance)
+    temporary: Path | None = None
     try:
-        with h5py.File(temporary, "w") as file:
-            _write(file, result, provenance)
-            file.flush()
-        replace_durably(Path(temporary), path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        temporary = Path(name)
+        with os.fdopen(handle, "wb") as file:
+            # mkstemp creates the file private (0600); a result file gets the umask mode.
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(file.fileno(), 0o666 & ~umask)
+            file.write(image)
+        replace_durably(temporary, path)
+    except OSError as error:
+        _discard(temporary)
+        kept = (
+            f"the finished nodes are kept in {journal}: free some space (or fix the folder) "
+            "and run again with --resume, which runs no node again"
+            if journal.is_dir()
+            else "free some space (or fix the folder) and write it again"
+        )
+        raise write_error(error, path, "result file", kept) from error
     except BaseException:
-        Path(temporary).unlink(missing_ok=True)
+        _discard(temporary)
         raise
     return path
+
+
+def _image(result: StudyResult, provenance: Mapping[str, str]) -> bytes:
+    """The bytes of the HDF5 file of ``result``, built in memory (HDF5's core driver)."""
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as file:
+        _write(file, result, provenance)
+    return buffer.getvalue()
+
+
+def _discard(temporary: Path | None) -> None:
+    if temporary is not None:
+        with contextlib.suppress(OSError):
+            temporary.unlink(missing_ok=True)
 
 
 def _text(value: Any) -> str:

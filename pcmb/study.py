@@ -36,6 +36,7 @@ from pcmb.run.backends import BACKENDS
 from pcmb.run.executor import RunResult, run_nodes
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
+from pcmb.run.output import check_output, estimate_size
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -384,6 +385,9 @@ class Study:
         ------
         UsageError
             Bad settings, or an unfinished journal exists and ``resume`` is False.
+        ResultFileError
+            The output cannot be written (a folder, read-only, not enough space), before any
+            node runs; or a write failed during the run (the journal keeps finished nodes).
         ModelRunError
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
@@ -394,6 +398,10 @@ class Study:
         journal = None
         fresh_journal = False
         if output is not None:
+            # Before any node runs and before a journal exists: an output that cannot be
+            # written (a folder, a read-only or full file system) is found now.
+            size = estimate_size(nodes.size, self.times.size, len(outputs), len(self.inputs))
+            check_output(output, size, create=True)
             journal_dir = Path(f"{output}.journal")
             fresh_journal = not Journal.exists(journal_dir)
             if not fresh_journal and not resume:

@@ -42,6 +42,7 @@ def test_validate_prints_a_summary_and_runs_nothing(tmp_path, linear_study, caps
     summary = capsys.readouterr().out
     assert "method   collocation: chaos order 3, tensor-gauss nodes" in summary
     assert "16 model runs" in summary and "uniform(low=1.0, high=3.0)" in summary
+    assert "\nsize     about " in summary and "free there" in summary
     assert not (tmp_path / "out.h5").exists()
 
 

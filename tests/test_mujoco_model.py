@@ -603,7 +603,7 @@ def test_pcmb_run_names_the_diverged_nodes_and_exits_3(tmp_path, capsys):
         "inputs:\n"
         "  k: {dist: uniform, low: 1.0e2, high: 1.0e5}\n"  # unstable above 4e4
         "method: {kind: collocation, order: 3}\n"
-        "execution: {jobs: 1}\n"
+        "execution: {jobs: 1, chunk_size: 4}\n"  # one batch: abort sees both failures
         f"output: {tmp_path / 'out.h5'}\n",
         encoding="utf-8",
     )

@@ -9,6 +9,7 @@ as a process writes the journal, so two runs never write the same journal.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import json
 import os
@@ -28,6 +29,7 @@ from pcmb.errors import ResultFileError, UsageError
 from pcmb.result import Status
 from pcmb.run.files import replace_durably
 from pcmb.run.fingerprint import Fingerprint, changed_files
+from pcmb.run.output import write_error
 
 __all__ = ["Journal"]
 
@@ -257,8 +259,13 @@ class Journal:
     def _open(self) -> None:
         if self.directory.exists() and not self.directory.is_dir():
             raise ResultFileError(f"journal {self.directory} exists and is not a directory")
-        self.directory.mkdir(parents=True, exist_ok=True)
-        self._lock = _Lock.acquire(self.directory)
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            self._lock = _Lock.acquire(self.directory)
+        except OSError as error:  # a read-only or full file system, a missing permission
+            raise write_error(
+                error, self.directory, "journal", "give another output (-o) or free space"
+            ) from error
         records = self._record_paths()
         meta_path = self.directory / _META
         if not meta_path.is_file():
@@ -323,9 +330,24 @@ class Journal:
     def _write_atomically(self, path: Path, write: Callable[[BinaryIO], object]) -> None:
         """Write ``path`` through ``write(handle)`` so that it appears complete or not at all."""
         temp = self.directory / f"{_TEMP_PREFIX}{os.getpid()}-{path.name}"
-        with open(temp, "wb") as handle:
-            write(handle)
-        replace_durably(temp, path)
+        try:
+            with open(temp, "wb") as handle:
+                write(handle)
+            replace_durably(temp, path)
+        except OSError as error:
+            if error.errno is None:  # not the operating system's answer: not ours to name
+                raise
+            # A full disk (ENOSPC, EDQUOT), a file system turned read-only, ...: the records
+            # written so far stay; only this one is lost, and its partial file is removed.
+            with contextlib.suppress(OSError):
+                temp.unlink(missing_ok=True)
+            raise write_error(
+                error,
+                path,
+                "journal record" if _RECORD.fullmatch(path.name) else "journal file",
+                f"the nodes finished before are kept in {self.directory}; free some space "
+                "and run again with --resume",
+            ) from error
 
     def record(
         self,
