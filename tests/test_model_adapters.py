@@ -574,3 +574,9 @@ def test_the_python_and_command_adapters_load_no_pydantic_yaml_or_mujoco():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_a_missing_output_column_lists_the_columns_found(tmp_path):
+    model = command(tmp_path, outputs=["y", "dy", "z"])
+    with pytest.raises(ModelError, match=r"output\(s\) 'z' missing from out.csv \(found: [^)]*y"):
+        model.simulate({"k": np.array([1.5])}, TIMES)

@@ -112,7 +112,10 @@ def check_point_result(
         raise ModelError(f"{where} is a {type(result).__name__}, expected a dict of outputs")
     missing = [name for name in outputs if name not in result]
     if missing:
-        raise ModelError(f"output(s) {', '.join(map(repr, missing))} missing from {where}")
+        found = ", ".join(map(str, result)) or "none"
+        raise ModelError(
+            f"output(s) {', '.join(map(repr, missing))} missing from {where} (found: {found})"
+        )
     checked = {}
     for name in outputs:
         values = _float_array(result[name], f"output {name!r} in {where}")
