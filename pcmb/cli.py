@@ -78,11 +78,12 @@ def _summary(config) -> str:
 
     study = Study.from_config(config)
     nodes = study.node_set()
+    outputs = study.check_model()
     lines = [
         f"config   {config.path}",
         f"name     {config.name}",
         f"model    {config.model.kind} ({ADAPTERS[config.model.kind].summary})",
-        f"outputs  {', '.join(study.check_model())}",
+        f"outputs  {', '.join(outputs)}",
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]
@@ -95,23 +96,15 @@ def _summary(config) -> str:
     lines.append(f"runs     {nodes.size} model runs ({config.execution.on_failure} on failure)")
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
-    lines.append(_space_line(study, nodes.size, config.output))
+    lines.append(_space_line(study, nodes.size, outputs, config.output))
     return "\n".join(lines)
 
 
-def _estimate(study, n_nodes: int):
-    """The space a run of ``study`` writes (see :func:`pcmb.run.output.estimate_size`)."""
-    from pcmb.run.output import estimate_size
-
-    outputs = study.outputs or study.check_model()
-    return estimate_size(n_nodes, study.times.size, len(outputs), len(study.inputs))
-
-
-def _space_line(study, n_nodes: int, output: str | None) -> str:
+def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
     """The ``size`` line of the summary; checks the output (raises ResultFileError)."""
     from pcmb.run.output import check_output, format_bytes
 
-    estimate = _estimate(study, n_nodes)
+    estimate = study.size_estimate(n_nodes, outputs)
     size = (
         f"size     about {format_bytes(estimate.total)} at most: result file "
         f"{format_bytes(estimate.result)} + journal {format_bytes(estimate.journal)} while it runs"

@@ -36,7 +36,7 @@ from pcmb.run.backends import BACKENDS
 from pcmb.run.executor import RunResult, run_nodes
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
-from pcmb.run.output import check_output, estimate_size
+from pcmb.run.output import SizeEstimate, check_output, estimate_size
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -324,6 +324,10 @@ class Study:
 
     # -- running ------------------------------------------------------------------------------
 
+    def size_estimate(self, n_nodes: int, outputs: Sequence[str]) -> SizeEstimate:
+        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`)."""
+        return estimate_size(n_nodes, self.times.size, len(outputs), len(self.inputs))
+
     def check_model(self) -> tuple[str, ...]:
         """Build the model once, check it against the study, and return the outputs to keep.
 
@@ -400,9 +404,9 @@ class Study:
         if output is not None:
             # Before any node runs and before a journal exists: an output that cannot be
             # written (a folder, a read-only or full file system) is found now.
-            size = estimate_size(nodes.size, self.times.size, len(outputs), len(self.inputs))
-            check_output(output, size, create=True)
+            check_output(output, self.size_estimate(nodes.size, outputs), create=True)
             journal_dir = Path(f"{output}.journal")
+            Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
             fresh_journal = not Journal.exists(journal_dir)
             if not fresh_journal and not resume:
                 raise UsageError(

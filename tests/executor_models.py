@@ -15,6 +15,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb import batched
+
 # Node counts of every simulate call made in this process, in order.
 SIMULATED: list[int] = []
 
@@ -187,3 +189,14 @@ class MutatingRamp(Ramp):
 
     def check(self, params: Mapping[str, NDArray[np.float64]]) -> None:
         params["a"][0] = 0.0
+
+
+@batched(outputs=("huge", "flat", "z"))
+def edges(params, times):
+    """huge = 1e200 (1 + 0.1 a t + 0.05 b² t²); flat = 2.5; z = a b t (0 at t = 0)."""
+    a, b = params["a"][:, None], params["b"][:, None]
+    return {
+        "huge": 1e200 * (1.0 + 0.1 * a * times + 0.05 * b**2 * times**2),
+        "flat": np.full((a.size, times.size), 2.5),
+        "z": a * b * times,
+    }

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from executor_models import edges
 
 import pcmb
 from pcmb.chaos.expansion import ChaosExpansion
@@ -208,17 +209,6 @@ def test_the_users_ctrl_c_still_interrupts_the_run(tmp_path: Path, jobs: int) ->
 
 EDGE_TIMES = np.linspace(0.0, 2.0, 5)
 EDGE_INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
-
-
-@pcmb.batched(outputs=("huge", "flat", "z"))
-def edges(params, times):
-    """huge = 1e200 (1 + 0.1 a t + 0.05 b² t²); flat = 2.5; z = a b t (0 at t = 0)."""
-    a, b = params["a"][:, None], params["b"][:, None]
-    return {
-        "huge": 1e200 * (1.0 + 0.1 * a * times + 0.05 * b**2 * times**2),
-        "flat": np.full((a.size, times.size), 2.5),
-        "z": a * b * times,
-    }
 
 
 def _edge_study() -> pcmb.Study:

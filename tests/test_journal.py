@@ -218,7 +218,7 @@ def test_a_refused_reopening_leaves_this_processs_open_journal_locked(tmp_path: 
     with pytest.raises(ResultFileError, match="different config"):
         make(tmp_path / "j", fingerprint="xyz")
     journal.record([0], chunk([0], 0), [Status.OK])  # still holds the lock
-    assert Journal.exists(tmp_path / "j")  # its own lock is no obstacle
+    Journal.check_free(tmp_path / "j")  # its own lock is no obstacle
 
 
 _HOLDER = """
@@ -247,7 +247,8 @@ def test_another_process_holding_the_journal_is_named_and_its_death_frees_it(
         busy = rf"another pcmb run \(PID {holder.pid}\) is writing {directory}; wait for it"
         files = sorted(p.name for p in directory.iterdir())
         with pytest.raises(UsageError, match=busy):
-            Journal.exists(directory)
+            Journal.check_free(directory)
+        assert Journal.exists(directory)  # a query, whoever holds the lock
         with pytest.raises(UsageError, match=busy):
             make(directory)
         assert sorted(p.name for p in directory.iterdir()) == files

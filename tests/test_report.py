@@ -7,6 +7,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from executor_models import edges
 
 import pcmb
 from pcmb.cli import main
@@ -159,17 +160,6 @@ def test_report_errors(tmp_path, capsys, monkeypatch):
 # -- statistics that do not vary or are not finite -------------------------------------------
 
 EDGE_TIMES = np.linspace(0.0, 2.0, 9)
-
-
-@pcmb.batched(outputs=("huge", "flat", "z"))
-def edges(params, times):
-    """huge = 1e200 (1 + 0.1 a t + 0.05 b² t²); flat = 2.5; z = a b t (0 at t = 0)."""
-    a, b = params["a"][:, None], params["b"][:, None]
-    return {
-        "huge": 1e200 * (1.0 + 0.1 * a * times + 0.05 * b**2 * times**2),
-        "flat": np.full((a.size, times.size), 2.5),
-        "z": a * b * times,
-    }
 
 
 def _edges(path):

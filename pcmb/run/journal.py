@@ -39,7 +39,7 @@ _LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
 _TEMP_PREFIX = ".tmp-"
 # How long taking the lock is retried before the holder is reported: long enough for a
-# process that only probes it (Journal.exists) to let go, short enough to go unnoticed.
+# process that only probes it (Journal.check_free) to let go, short enough to go unnoticed.
 _LOCK_PATIENCE = 0.25
 _PID_PATIENCE = 0.5
 
@@ -232,17 +232,19 @@ class Journal:
 
     @staticmethod
     def exists(directory: str | os.PathLike[str]) -> bool:
-        """Whether ``directory`` holds a journal (with or without records).
+        """Whether ``directory`` holds a journal (with or without records)."""
+        return (Path(directory) / _META).is_file()
+
+    @staticmethod
+    def check_free(directory: str | os.PathLike[str]) -> None:
+        """Raise if another process is writing the journal in ``directory`` (holds its lock).
 
         Raises
         ------
         UsageError
-            If another process is writing it (holds its lock): whatever the answer, it would
-            be out of date at once, and the journal is not this process's to continue or
-            replace.
+            Naming the PID of the run that holds it.
         """
         _Lock.check_free(Path(directory))
-        return (Path(directory) / _META).is_file()
 
     # -- opening -------------------------------------------------------------------------------
 
