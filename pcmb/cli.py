@@ -2,8 +2,10 @@
 
 Exit codes come from the error kinds (:mod:`pcmb.errors`): 0 success; 2 invalid config,
 usage, missing dependency or result file; 3 the model failed at one or more nodes (policy
-abort); 1 anything unexpected. Logs and progress go to stderr; stdout carries only requested
-data. Heavy modules are imported inside the commands, so ``pcmb --help`` starts fast.
+abort); 1 anything unexpected; 128 + the signal's number when stopped by SIGINT (Ctrl-C),
+SIGTERM or SIGHUP, after killing the workers (finished nodes stay in the journal). Logs and
+progress go to stderr; stdout carries only requested data. Heavy modules are imported inside
+the commands, so ``pcmb --help`` starts fast.
 """
 
 from __future__ import annotations
@@ -12,10 +14,13 @@ import argparse
 import json
 import os
 import shlex
+import signal
 import sys
+import threading
 import traceback
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 from pcmb.adapters.registry import ADAPTERS
@@ -116,11 +121,35 @@ def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from pcmb.config.schema import load_config
-    from pcmb.study import Study
+    from pcmb.run.backends import start_pool
 
     if args.jobs is not None and args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
+    # Workers start (and import what they need) while this process reads the config.
+    warm = start_pool("loky", args.jobs) if args.backend in (None, "loky") else None
+    try:
+        result, output = _run_study(args, argv, warm)
+    except BaseException:
+        if warm is not None:
+            warm.close(kill=True)
+        raise
+    if warm is not None:
+        warm.close()
+    from pcmb.designs import RECORDED_ONLY
+
+    for warning in result.warnings:
+        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
+            _log(f"pcmb: warning: {warning}")
+    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
+    return EXIT_OK
+
+
+def _run_study(args: argparse.Namespace, argv: Sequence[str], warm):
+    """Load the config and run its study (on ``warm`` if it fits); the result and its file."""
+    from pcmb.config.schema import load_config
+    from pcmb.run.backends import fits
+    from pcmb.study import Study
+
     config = load_config(args.config)
     output = args.output or config.output
     if output is None:
@@ -132,6 +161,12 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         study.backend = args.backend
         if args.backend != "dask":
             study.address = None  # a scheduler address only means something to dask
+    pool = None
+    if warm is not None:
+        if fits(warm, study.backend, study.jobs, study.address):
+            pool = warm
+        else:
+            warm.close(kill=True)  # the config asks for other workers: study.run starts them
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,
@@ -144,14 +179,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             resume=args.resume,
             progress=False if args.quiet else None,
             provenance=provenance,
+            pool=pool,
         )
-    from pcmb.designs import RECORDED_ONLY
-
-    for warning in result.warnings:
-        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
-            _log(f"pcmb: warning: {warning}")
-    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
-    return EXIT_OK
+    return result, output
 
 
 def _load(path: str):
@@ -232,6 +262,57 @@ def _inspect(path: str) -> str:
     return "\n".join(lines)
 
 
+def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """Run the parsed command; its exit code."""
+    if args.command == "run":
+        return _run(args, argv)
+    if args.command == "validate":
+        from pcmb.config.schema import load_config
+
+        print(_summary(load_config(args.config)))
+    elif args.command == "inspect":
+        print(_inspect(args.result))
+    elif args.command == "report":
+        return _report(args)
+    elif args.command == "compare":
+        return _compare(args)
+    elif args.command == "schema":
+        from pcmb.config.schema import config_json_schema
+
+        print(json.dumps(config_json_schema(), indent=2))
+    return EXIT_OK
+
+
+class _Stopped(BaseException):
+    """A stop signal (SIGTERM, SIGHUP), raised like Ctrl-C's ``KeyboardInterrupt`` so that
+    everything running unwinds: workers killed, journal kept."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _raise_stopped(signum: int, frame: object) -> None:
+    raise _Stopped(signum)
+
+
+@contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """Turn SIGTERM and SIGHUP into :class:`_Stopped` while the command runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, _raise_stopped) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+_RESUME_HINT = "finished nodes are kept in the journal (run the same command with --resume)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``pcmb`` command; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -240,23 +321,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        if args.command == "run":
-            return _run(args, argv)
-        if args.command == "validate":
-            from pcmb.config.schema import load_config
-
-            print(_summary(load_config(args.config)))
-        elif args.command == "inspect":
-            print(_inspect(args.result))
-        elif args.command == "report":
-            return _report(args)
-        elif args.command == "compare":
-            return _compare(args)
-        elif args.command == "schema":
-            from pcmb.config.schema import config_json_schema
-
-            print(json.dumps(config_json_schema(), indent=2))
-        return EXIT_OK
+        with _stopped_by_signals():
+            return _command(args, argv)
     except PcmbError as error:
         _log(
             f"pcmb: {error.label}:\n{error}"
@@ -270,8 +336,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
     except KeyboardInterrupt:
-        _log("pcmb: interrupted; finished nodes are kept in the journal (use --resume)")
-        return 128 + 2
+        _log(f"pcmb: interrupted (SIGINT); {_RESUME_HINT}")
+        return 128 + signal.SIGINT
+    except _Stopped as stop:
+        _log(f"pcmb: stopped by {signal.Signals(stop.signum).name}; {_RESUME_HINT}")
+        return 128 + stop.signum
     except SystemExit as exit_:
         # Raised by code pcmb ran on the user's behalf and could not attribute to a node (e.g.
         # a model class calling sys.exit() while it is built): never a silent success.

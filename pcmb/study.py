@@ -32,8 +32,8 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.result import Status, StudyResult, WarningRecord
-from pcmb.run.backends import BACKENDS
-from pcmb.run.executor import RunResult, run_nodes
+from pcmb.run.backends import BACKENDS, Pool, open_pool
+from pcmb.run.executor import ModelFacts, RunResult, chunk_bounds, describe_model, run_nodes
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
@@ -89,7 +89,7 @@ class Study:
         Nominal parameters for a model class or function (ignored for a factory).
     name:
         Free text stored in the result.
-    jobs, backend, address, chunk_size:
+    jobs, backend, address, chunk_size, timeout:
         Execution settings (see :func:`pcmb.run.executor.run_nodes`).
     on_failure, retries:
         Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
@@ -129,6 +129,7 @@ class Study:
         backend: str = "loky",
         address: str | None = None,
         chunk_size: int | None = None,
+        timeout: float | None = None,
         on_failure: FailurePolicy = "abort",
         retries: int = 1,
         nominal: Mapping[str, float] | None = None,
@@ -146,7 +147,7 @@ class Study:
         self.fit = fit
         self.name = name
         self.jobs, self.backend, self.address = jobs, backend, address
-        self.chunk_size = chunk_size
+        self.chunk_size, self.timeout = chunk_size, timeout
         self.on_failure, self.retries = on_failure, retries
         self.params = dict(params or {})
         if is_function_model(model):
@@ -214,6 +215,7 @@ class Study:
             backend=execution.backend,
             address=execution.address,
             chunk_size=execution.chunk_size,
+            timeout=execution.timeout,
             on_failure=execution.on_failure,
             retries=execution.retries,
             nominal={
@@ -253,6 +255,7 @@ class Study:
             "backend": self.backend,
             "address": self.address,
             "chunk_size": self.chunk_size,
+            "timeout": self.timeout,
             "on_failure": self.on_failure,
             "retries": self.retries,
             "params": self.params,
@@ -328,23 +331,38 @@ class Study:
         """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`)."""
         return estimate_size(n_nodes, self.times.size, len(outputs), len(self.inputs))
 
-    def check_model(self) -> tuple[str, ...]:
-        """Build the model once, check it against the study, and return the outputs to keep.
+    def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
+        """Build the model in a worker, check it against the study, and return the outputs
+        to keep.
+
+        Parameters
+        ----------
+        pool:
+            Workers to build it in (default: one worker of the study's backend, started and
+            stopped here).
 
         Raises
         ------
         UsageError
             A requested output the model lacks, or an uncertain input that names none of the
             model's parameters (when the model lists them) — before anything runs.
+        ModelError
+            The model's code failed or killed its worker while building.
         """
-        model = self.model_factory()
-        declared = tuple(model.outputs)
+        if pool is None:
+            with open_pool(self.backend, self.jobs, self.address, tasks=1) as own:
+                return self.check_model(own)
+        return self._outputs(describe_model(self.model_factory, pool))
+
+    def _outputs(self, facts: ModelFacts) -> tuple[str, ...]:
+        """The outputs to keep, checked against what the model says of itself."""
+        declared = facts.outputs
         unknown = [name for name in self.outputs or () if name not in declared]
         if unknown:
             raise _usage(
                 "outputs", f"the model has no output(s) {unknown}; it has {list(declared)}"
             )
-        parameters = getattr(model, "parameters", None)
+        parameters = facts.parameters
         if parameters is not None:
             strangers = [name for name in self.inputs if name not in parameters]
             if strangers:
@@ -362,6 +380,7 @@ class Study:
         resume: bool = False,
         progress: bool | None = None,
         provenance: Mapping[str, str] | None = None,
+        pool: Pool | None = None,
     ) -> StudyResult:
         """Run the model at every node and recover the statistics.
 
@@ -376,6 +395,9 @@ class Study:
             Progress bar on stderr (default: when stderr is a terminal).
         provenance:
             Extra attributes for the file (config text, command line).
+        pool:
+            Workers of the study's backend to run on, already started (the command line
+            starts them while it reads the config); default: started and stopped here.
 
         Warns
         -----
@@ -396,7 +418,42 @@ class Study:
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
         nodes = self.node_set()
-        outputs = self.check_model()
+        if pool is None:
+            tasks = len(chunk_bounds(nodes.size, self.chunk_size))
+            with open_pool(self.backend, self.jobs, self.address, tasks=tasks) as own:
+                return self.run(
+                    output, resume=resume, progress=progress, provenance=provenance, pool=own
+                )
+        facts = describe_model(self.model_factory, pool)
+        outputs = self._outputs(facts)
+        runs, journal = self._run_nodes(nodes, facts, outputs, pool, output, resume, progress)
+        nominal = self._run_nominal(facts, outputs, pool)
+        result = self._with_nominal(self._recover(nodes, runs), nominal)
+        if self.analysis is not None:
+            result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
+        if output is not None:
+            from pcmb.store import write_result  # h5py only when a file is written
+
+            write_result(output, result, provenance=provenance or {})
+            if journal is not None:
+                journal.remove()
+        for record in result.warnings:
+            if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
+                warnings.warn(str(record), PcmbWarning, stacklevel=2)
+        return result
+
+    def _run_nodes(
+        self,
+        nodes: TensorGrid | NodeSet,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        pool: Pool,
+        output: str | Path | None,
+        resume: bool,
+        progress: bool | None,
+    ) -> tuple[RunResult, Journal | None]:
+        """Run every node, journaled when there is an output (the journal is returned, to be
+        removed once the result is written); raise by the failure policy."""
         if self.analysis is not None:
             self.analysis.check(self.times, outputs)
         journal = None
@@ -427,9 +484,12 @@ class Study:
                 address=self.address,
                 chunk_size=self.chunk_size,
                 retries=self.retries if self.on_failure == "retry" else 0,
+                timeout=self.timeout,
                 journal=journal,
                 progress=progress,
                 stop_on_failure=self.on_failure == "abort",
+                pool=pool,
+                facts=facts,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -456,35 +516,25 @@ class Study:
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
                 f"(on_failure: {self.on_failure}){kept}{stopped}:",
             )
-        result = self._recover(nodes, runs)
-        result = self._with_nominal(result, outputs)
-        if self.analysis is not None:
-            result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
-        if output is not None:
-            from pcmb.store import write_result  # h5py only when a file is written
+        return runs, journal
 
-            write_result(output, result, provenance=provenance or {})
-            if journal is not None:
-                journal.remove()
-        for record in result.warnings:
-            if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
-                warnings.warn(str(record), PcmbWarning, stacklevel=2)
-        return result
-
-    def _with_nominal(self, result: StudyResult, outputs: Sequence[str]) -> StudyResult:
-        """The result with the deterministic run at the nominal parameters added.
-
-        It is not part of any statistic, so a failure is recorded as a warning, not raised.
-        """
-        params = self.nominal_params()
-        run = run_nodes(
+    def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
+        """The deterministic run at the nominal parameters (not part of any statistic)."""
+        return run_nodes(
             self.model_factory,
-            {name: np.array([value]) for name, value in params.items()},
+            {name: np.array([value]) for name, value in self.nominal_params().items()},
             self.times,
             outputs,
-            jobs=1,
+            backend=self.backend,
+            timeout=self.timeout,
             progress=False,
+            pool=pool,
+            facts=facts,
         )
+
+    def _with_nominal(self, result: StudyResult, run: RunResult) -> StudyResult:
+        """The result with the nominal run added; its failure is a warning, not an error."""
+        params = self.nominal_params()
         if run.failures:
             warning = WarningRecord(
                 "nominal-failed",
@@ -533,7 +583,7 @@ class Study:
 
 
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
-_EXECUTION_ONLY = frozenset({"jobs", "backend", "address", "on_failure", "retries"})
+_EXECUTION_ONLY = frozenset({"jobs", "backend", "address", "on_failure", "retries", "timeout"})
 #: Top-level config keys that cannot change a node's values.
 _NOT_RUN = frozenset({"name", "analysis", "output", "execution"})
 

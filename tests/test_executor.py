@@ -41,15 +41,6 @@ def ramp_exact(params: dict[str, np.ndarray]) -> np.ndarray:
     return params["a"][:, None] * TIMES
 
 
-@pytest.fixture
-def workers_always(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Send the rest of every run to the pool when jobs >= 2, whatever the timings say.
-
-    (Zeroing the start-up cost alone still compares microsecond timings on a shared machine.)
-    """
-    monkeypatch.setattr(executor, "_workers_pay", lambda *args: True)
-
-
 @pytest.fixture(scope="module")
 def dask_address():
     distributed = pytest.importorskip("distributed")
@@ -90,7 +81,6 @@ def test_explicit_chunk_size_and_bad_values() -> None:
         chunk_bounds(5, 0)
 
 
-@pytest.mark.usefixtures("workers_always")
 def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     params = ramp_params(24)
     serial = run_nodes(em.Ramp, params, TIMES, ["batch_size", "batch_first", "pid"], jobs=1)
@@ -103,10 +93,7 @@ def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     for result in (serial, pooled):
         np.testing.assert_array_equal(result.values["batch_size"][:, 0], expected_size)
         np.testing.assert_array_equal(result.values["batch_first"][:, 0], expected_first)
-    # The pooled run really used workers (beyond the timed first chunk run in-process).
-    first_stop = chunk_bounds(24)[0][1]
-    assert (pooled.values["pid"][:first_stop] == os.getpid()).all()
-    assert (pooled.values["pid"][first_stop:] != os.getpid()).all()
+    assert (pooled.values["pid"] != os.getpid()).all()
 
 
 def test_a_model_preferred_chunk_size_is_used_unless_the_config_sets_one() -> None:
@@ -117,7 +104,6 @@ def test_a_model_preferred_chunk_size_is_used_unless_the_config_sets_one() -> No
     np.testing.assert_array_equal(explicit.values["batch_size"][:, 0], [4] * 12)
 
 
-@pytest.mark.usefixtures("workers_always")
 def test_joblib_parallel_still_works_after_a_pooled_run() -> None:
     import joblib
 
@@ -125,10 +111,15 @@ def test_joblib_parallel_still_works_after_a_pooled_run() -> None:
     assert joblib.Parallel(n_jobs=2)(joblib.delayed(abs)(-k) for k in range(4)) == [0, 1, 2, 3]
 
 
-def test_small_work_stays_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
-    # With start-up costlier than any possible gain, the timed first chunk decides: in-process.
-    monkeypatch.setattr(executor.BACKENDS["loky"], "startup_seconds", 1e9)
-    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], jobs=2)
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_the_model_never_runs_in_this_process(jobs: int) -> None:
+    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], jobs=jobs)
+    assert (result.values["pid"] != os.getpid()).all()
+    assert len(np.unique(result.values["pid"])) <= jobs
+
+
+def test_backend_inprocess_runs_here_for_debugging() -> None:
+    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], backend="inprocess")
     assert (result.values["pid"] == os.getpid()).all()
 
 
@@ -160,7 +151,6 @@ def test_batch_composition_changes_the_last_bits(oscillator_serial) -> None:
     np.testing.assert_allclose(single.values["x"], oscillator_serial.values["x"], atol=2e-6)
 
 
-@pytest.mark.usefixtures("workers_always")
 def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=2)
@@ -168,7 +158,6 @@ def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
         np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
 
 
-@pytest.mark.usefixtures("workers_always")
 def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(
@@ -183,7 +172,6 @@ def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("workers_always")
 def test_dask_local_cluster_is_started_and_bit_identical(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(em.StackedOscillator, params, times, ["x", "v"], backend="dask", jobs=2)
@@ -219,7 +207,6 @@ def test_exceptions_are_narrowed_to_the_failing_nodes() -> None:
     assert np.isnan(result.values["y"][~good]).all()
 
 
-@pytest.mark.usefixtures("workers_always")
 def test_non_finite_rows_are_narrowed_in_workers() -> None:
     params = ramp_params(32)
     factory = functools.partial(em.NanRamp, params["a"][[9, 30]], t_bad=0.55)
@@ -352,7 +339,6 @@ def test_base_exceptions_of_the_model_are_failures_of_its_nodes(how: str, messag
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # left as found
 
 
-@pytest.mark.usefixtures("workers_always")
 @pytest.mark.parametrize(("how", "message"), LEAVINGS[::2])
 def test_base_exceptions_in_workers_are_failures_of_their_nodes(how: str, message: str) -> None:
     params = ramp_params(24)
@@ -403,7 +389,6 @@ def test_a_model_that_exits_while_it_is_built_raises_model_error() -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("workers_always")
 @pytest.mark.parametrize(
     ("how", "cause"), [("segv", "signal 11, SIGSEGV"), ("exit", "exit code 7")]
 )
@@ -423,7 +408,6 @@ def test_a_dying_worker_costs_only_its_node(how: str, cause: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.usefixtures("workers_always")
 def test_a_dying_dask_worker_costs_only_its_node() -> None:
     dask = pytest.importorskip("dask")
     distributed = pytest.importorskip("distributed")
@@ -492,7 +476,7 @@ class _ScriptedPool:
     def rebuild(self) -> None:
         self.rebuilds += 1
 
-    def close(self) -> None:
+    def close(self, kill: bool = False) -> None:
         pass
 
 
@@ -506,7 +490,7 @@ def test_isolation_names_the_killer_and_retries_it(retries: int, survives: bool)
     tasks = campaign.plan(chunk_bounds(24))
     # Deaths: chunk [12, 14) in the pool, that chunk alone, node 13 alone; then it survives.
     pool = _ScriptedPool(victim=13.0, deaths=3)
-    executor._run_pooled(campaign, pool, tasks)
+    executor._run_pooled(campaign, pool, tasks, executor._Limits())
     result = campaign.result(0.0)
     assert [f.index for f in result.failures] == ([] if survives else [13])
     good = result.status == Status.OK
@@ -564,19 +548,20 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
     params = ramp_params(32)
     flaky = functools.partial(em.FlakyRamp, params["a"][[3]], failures=2, nonce=uuid.uuid4().hex)
     journal = Journal(tmp_path / "run.journal", "fp", 32, ["y"], TIMES.size)
-    first = run_nodes(flaky, params, TIMES, ["y"], jobs=1, journal=journal)
+    # In this process, to count the calls (SIMULATED) and keep the model's state.
+    first = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
     assert [f.index for f in first.failures] == [3] and first.resumed == 0
     assert Journal(tmp_path / "run.journal", "fp", 32, ["y"], TIMES.size).messages() == {
         3: first.failures[0].message
     }
     em.SIMULATED.clear()
     # Same factory, same cached model: its third call for node 3 succeeds.
-    second = run_nodes(flaky, params, TIMES, ["y"], jobs=1, journal=journal)
+    second = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
     assert second.resumed == 31 and second.failures == ()
     assert em.SIMULATED == [1]  # only node 3, alone as in its narrowed chunk
     np.testing.assert_array_equal(second.values["y"], ramp_exact(params))
     em.SIMULATED.clear()
-    third = run_nodes(flaky, params, TIMES, ["y"], jobs=1, journal=journal)
+    third = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
     assert third.resumed == 32 and em.SIMULATED == []
     np.testing.assert_array_equal(third.values["y"], ramp_exact(params))
 
@@ -632,7 +617,9 @@ def test_a_run_killed_with_sigkill_resumes_to_identical_results(
     journaled = journal.completed()[0].size
     assert 15 <= journaled < 48  # >= 5 chunks of 3 nodes, not all of them
     em.SIMULATED.clear()
-    resumed = run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=1, journal=journal)
+    resumed = run_nodes(
+        em.StackedOscillator, params, times, ["x", "v"], backend="inprocess", journal=journal
+    )
     assert resumed.resumed == journaled
     assert sum(em.SIMULATED) == 48 - journaled
     assert (resumed.status == Status.OK).all()

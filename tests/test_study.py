@@ -211,16 +211,14 @@ def test_order_zero_is_reported():
 
 
 @pytest.mark.slow
-def test_coefficients_are_bit_identical_for_one_or_two_workers(monkeypatch):
+def test_coefficients_are_bit_identical_for_one_or_two_workers():
     """The default quarter car (stacked solves, whose last bits depend on the batch) at order 2."""
     from pathlib import Path
 
     from pcmb.config.schema import load_config
-    from pcmb.run import executor
 
     config = load_config(Path(__file__).resolve().parents[1] / "configs" / "quarter_car.yaml")
     study = pcmb.Study.from_config(config).replace(order=2, chunk_size=7, analysis=None)
-    monkeypatch.setattr(executor, "_workers_pay", lambda *args: True)  # really use the pool
     serial = study.replace(jobs=1).run()
     pooled = study.replace(jobs=2).run()
     for name in serial.outputs:

@@ -45,6 +45,7 @@ from pcmb.config.types import (
     NonNegativeReal,
     Points,
     PositiveInt,
+    PositiveReal,
     Probability,
     Real,
     Section,
@@ -271,6 +272,20 @@ class ExecutionSpec(Section):
         default=None,
         description="nodes per model call (default: the model's choice, else ~N/16, 1 to 256)",
     )
+    timeout: PositiveReal | None = Field(
+        default=None,
+        description="seconds a node may take before its worker is killed (backend loky)",
+    )
+
+    @field_validator("timeout")
+    @classmethod
+    def _killable(cls, timeout: float | None, info: ValidationInfo) -> float | None:
+        backend = info.data.get("backend")
+        if timeout is not None and backend in BACKENDS and not BACKENDS[backend].kills:
+            raise ValueError(
+                f"a timeout needs workers pcmb can kill (backend: loky), found backend {backend!r}"
+            )
+        return timeout
 
     @field_validator("address")
     @classmethod

@@ -1,20 +1,32 @@
-"""Where chunks run: this process, a private loky pool, or a dask.distributed cluster.
+"""Where chunks run: a private loky pool of child processes, a dask.distributed cluster, or
+(for debugging only) this process.
 
 :data:`BACKENDS` maps ``execution.backend`` to its pool class; the config schema and the
-command line take their choices from it.
+command line take their choices from it. :func:`open_pool` starts one for a campaign, warm:
+its workers start while the caller goes on preparing the nodes.
 """
 
 from __future__ import annotations
 
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from contextlib import contextmanager
 from typing import Any, Protocol, TypeVar
 
 from pcmb.errors import MissingDependencyError
+from pcmb.run.lifeline import die_with_parent
 
-__all__ = ["BACKENDS", "DaskPool", "InProcessPool", "LokyPool", "Pool"]
+__all__ = [
+    "BACKENDS",
+    "DaskPool",
+    "InProcessPool",
+    "LokyPool",
+    "Pool",
+    "default_workers",
+    "open_pool",
+]
 
 _T = TypeVar("_T")
 
@@ -22,25 +34,37 @@ _T = TypeVar("_T")
 class Pool(Protocol):
     """Where chunks run: submit callables, report worker deaths, rebuild, close.
 
-    Built as ``Pool(jobs, workers, address)``; ``startup_seconds`` is the estimated cost of
-    starting it, which the executor weighs against running the rest in this process.
+    Built as ``Pool(jobs, workers, address)``. ``startup_seconds`` is the estimated time its
+    workers take to start (allowed on top of a task's timeout); ``kills`` says whether
+    :meth:`rebuild` kills the workers running tasks, which a timeout needs.
     """
 
     slots: int
     startup_seconds: float
+    kills: bool
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]: ...
 
     def death(self, error: BaseException) -> str | None:
         """A message if ``error`` means the worker running the task died, else None."""
 
-    def rebuild(self) -> None: ...
+    def rebuild(self) -> None:
+        """Replace broken or stuck workers; tasks in flight are lost."""
 
-    def close(self) -> None: ...
+    def close(self, kill: bool = False) -> None:
+        """Release the workers: after their tasks end, or at once with ``kill``."""
 
 
 #: Environment variables that cap native thread pools in worker processes.
 _THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _warm_up() -> None:
+    """Import what tasks need (the executor, and what python models commonly build on: their
+    adapter and pcmb's batched integrator), so that the first task does not wait for it."""
+    import pcmb.adapters.python.model
+    import pcmb.adapters.stacked_ode
+    import pcmb.run.executor  # noqa: F401
 
 
 class LokyPool:
@@ -51,6 +75,7 @@ class LokyPool:
     """
 
     startup_seconds = 1.0
+    kills = True
 
     def __init__(self, jobs: int | None, workers: int, address: str | None = None) -> None:
         self.slots = workers
@@ -67,8 +92,15 @@ class LokyPool:
         if self._executor is not None:
             self._executor.shutdown(wait=False, kill_workers=True)
         self._executor = ProcessPoolExecutor(
-            max_workers=self.slots, env={name: share for name in _THREAD_LIMITS}
+            max_workers=self.slots,
+            env={name: share for name in _THREAD_LIMITS},
+            # A worker must not go on running a model after pcmb died (kill -9, a crash).
+            initializer=die_with_parent,
+            initargs=(os.getpid(),),
         )
+        # Start the workers now, while the caller prepares the work.
+        for _ in range(self.slots):
+            self._executor.submit(_warm_up)
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
         return self._executor.submit(fn, *args)
@@ -86,14 +118,16 @@ class LokyPool:
         ]
         return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
 
-    def close(self) -> None:
-        self._executor.shutdown(wait=True)
+    def close(self, kill: bool = False) -> None:
+        # Idle workers exit by themselves on the shutdown message; there is no need to wait.
+        self._executor.shutdown(wait=False, kill_workers=kill)
 
 
 class DaskPool:
     """A dask.distributed cluster: ``address``, or a local cluster that is closed afterwards."""
 
     startup_seconds = 3.0
+    kills = False
 
     def __init__(self, jobs: int | None, workers: int, address: str | None = None) -> None:
         try:
@@ -133,17 +167,19 @@ class DaskPool:
     def rebuild(self) -> None:
         """Nothing to do: dask's nannies restart dead workers."""
 
-    def close(self) -> None:
+    def close(self, kill: bool = False) -> None:
         self._client.close()
         if self._cluster is not None:
             self._cluster.close()
 
 
 class InProcessPool:
-    """Runs each task in this process, one at a time (no start-up cost, no isolation)."""
+    """Runs each task in this process, one at a time: for debugging and profiling a model, with
+    no isolation (a crash of the model is a crash of pcmb) and no timeout."""
 
     slots = 1
     startup_seconds = 0.0
+    kills = False
 
     def __init__(self, jobs: int | None = None, workers: int = 1, address: str | None = None):
         pass
@@ -162,7 +198,7 @@ class InProcessPool:
     def rebuild(self) -> None:
         """Nothing to rebuild."""
 
-    def close(self) -> None:
+    def close(self, kill: bool = False) -> None:
         """Nothing to close."""
 
 
@@ -172,3 +208,52 @@ BACKENDS: dict[str, type[Pool]] = {
     "dask": DaskPool,
     "inprocess": InProcessPool,
 }
+
+
+def default_workers() -> int:
+    """Worker processes when ``jobs`` is not given: the cores this process may use."""
+    from joblib import cpu_count
+
+    return max(1, cpu_count())
+
+
+def start_pool(
+    backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None
+) -> Pool:
+    """Start a pool of ``backend``; the caller closes it (see :func:`open_pool`).
+
+    Parameters
+    ----------
+    jobs:
+        Worker processes (default: :func:`default_workers`).
+    tasks:
+        Most tasks that will run at once, if known: no more workers than that are started.
+    """
+    workers = jobs or (1 if backend == "inprocess" else default_workers())
+    if tasks is not None:
+        workers = max(1, min(workers, tasks))
+    return BACKENDS[backend](jobs, workers, address)
+
+
+def fits(pool: Pool, backend: str, jobs: int | None, address: str | None) -> bool:
+    """Whether ``pool`` is the pool :func:`start_pool` would start for these settings."""
+    return (
+        type(pool) is BACKENDS[backend]
+        and address is None
+        and pool.slots == (jobs or default_workers())
+    )
+
+
+@contextmanager
+def open_pool(
+    backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None
+) -> Iterator[Pool]:
+    """A pool from :func:`start_pool`, closed on exit; its workers killed on an error or an
+    interrupt, so that none is left running."""
+    pool = start_pool(backend, jobs, address, tasks)
+    try:
+        yield pool
+    except BaseException:
+        pool.close(kill=True)
+        raise
+    pool.close()

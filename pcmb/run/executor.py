@@ -1,8 +1,10 @@
 """Run a model at every node, in parallel chunks, with failure capture and a resumable journal.
 
 Chunk boundaries depend only on N, the config and the model class, never on workers or
-backend, so results are bit-identical however they run; a worker that dies costs only its
-chunk, and its killer node is named. See ``docs/architecture.md``.
+backend, so results are bit-identical however they run. The model's code runs only in worker
+processes (unless the backend is ``inprocess``): building it, checking it and every chunk. A
+worker that dies (a segfault, ``os._exit``) or overruns its timeout costs only its chunk, and
+the node that killed it is named. See ``docs/architecture.md``.
 
 Whatever the model's code raises while it builds or simulates is a failure of the nodes it was
 running, described by type and message — ``BaseException`` s included: ``sys.exit()`` in a
@@ -22,6 +24,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -31,19 +34,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.errors import ConfigProblem, ModelDefinitionError, ModelError, PcmbError, UsageError
 from pcmb.result import NodeFailure, Status
-from pcmb.run.backends import BACKENDS, InProcessPool, Pool
+from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import Journal
 from pcmb.run.progress import Progress
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
 
-__all__ = ["RunResult", "chunk_bounds", "run_nodes"]
+__all__ = ["ModelFacts", "RunResult", "chunk_bounds", "describe_model", "run_nodes"]
 
 TARGET_CHUNKS = 16
 MAX_CHUNK_SIZE = 256
-# Rough cost of getting workers ready to take the first chunk (spawn + imports), in seconds.
-# Seconds between progress-line updates.
 
 _T = TypeVar("_T")
 
@@ -250,6 +251,80 @@ def _cached_model(token: str, factory: Callable[[], Model]) -> tuple[Model, floa
         raise ModelError(f"could not build the model: {_describe(exc)}") from exc
     _MODEL_CACHE.held = (token, model)
     return model, time.perf_counter() - start
+
+
+@dataclass(frozen=True)
+class ModelFacts:
+    """What a model says about itself, learnt by building it in a worker.
+
+    Attributes
+    ----------
+    outputs:
+        The outputs it offers.
+    parameters:
+        The parameters it takes, when it lists them (``None`` otherwise).
+    chunk_size:
+        Its preferred nodes per call (model protocol), or ``None``.
+    build_seconds:
+        Time the build took (each worker builds the model once).
+    """
+
+    outputs: tuple[str, ...]
+    parameters: tuple[str, ...] | None
+    chunk_size: int | None
+    build_seconds: float
+
+
+def _model_facts(token: str, factory: Callable[[], Model]) -> ModelFacts:
+    """Build (or reuse) the model in this process and describe it."""
+    model, seconds = _cached_model(token, factory)
+    offered = getattr(model, "outputs", None)
+    if offered is None or not callable(getattr(model, "simulate", None)):
+        raise UsageError(
+            [ConfigProblem("model_factory", "must build an object with outputs and simulate()")],
+            source="run_nodes",
+        )
+    parameters = getattr(model, "parameters", None)
+    return ModelFacts(
+        outputs=tuple(offered),
+        parameters=None if parameters is None else tuple(parameters),
+        chunk_size=getattr(model, "chunk_size", None),
+        build_seconds=seconds,
+    )
+
+
+def _token(model_factory: Callable[[], Model]) -> str:
+    """The factory's identity: the model cached in a worker is reused for the same token."""
+    try:
+        return hashlib.sha256(cloudpickle.dumps(model_factory)).hexdigest()
+    except Exception as exc:  # pickling can fail with almost any exception type
+        raise UsageError(
+            [ConfigProblem("model_factory", f"cannot be sent to worker processes: {exc}")],
+            source="run_nodes",
+        ) from exc
+
+
+def describe_model(model_factory: Callable[[], Model], pool: Pool) -> ModelFacts:
+    """Build the model in one of ``pool``'s workers and say what it offers.
+
+    Raises
+    ------
+    UsageError
+        The factory cannot be sent to a worker, or builds no model.
+    ModelError
+        The model's code failed while building, or killed its worker (named by its signal or
+        exit code); this process is unharmed.
+    """
+    token = _token(model_factory)
+    future = pool.submit(_model_facts, token, model_factory)
+    error = future.exception()
+    if error is None:
+        return future.result()
+    death = pool.death(error)
+    if death is None:
+        raise error
+    pool.rebuild()
+    raise ModelError(f"could not build the model: {death}")
 
 
 def _run_batch(
@@ -508,10 +583,35 @@ class _Campaign:
         )
 
 
-def _run_alone(campaign: _Campaign, pool: Pool, task: _Task) -> _Outcome | str:
-    """Run ``task`` as the only task in the pool: its outcome, or a death message."""
+@dataclass(frozen=True)
+class _Limits:
+    """How long a task may run: ``timeout`` seconds per node (``None``: no limit), plus
+    ``grace`` for a fresh worker to start and build the model."""
+
+    timeout: float | None = None
+    grace: float = 0.0
+
+    def deadline(self, task: _Task, now: float) -> float:
+        if self.timeout is None:
+            return math.inf
+        return now + self.grace + self.timeout * task.indices.size
+
+    def message(self, task: _Task) -> str:
+        return (
+            f"timed out after {self.timeout * task.indices.size:g} s "
+            f"({self.timeout:g} s per node; its worker process was killed)"
+        )
+
+
+def _run_alone(campaign: _Campaign, pool: Pool, task: _Task, limits: _Limits) -> _Outcome | str:
+    """Run ``task`` as the only task in the pool: its outcome, or why it did not finish."""
     future = pool.submit(_execute, *campaign.arguments(task))
-    error = future.exception()
+    seconds = limits.deadline(task, 0.0)
+    try:
+        error = future.exception(timeout=None if math.isinf(seconds) else seconds)
+    except FutureTimeout:
+        pool.rebuild()  # kills the stuck worker
+        return limits.message(task)
     if error is None:
         return future.result()
     death = pool.death(error)
@@ -521,11 +621,11 @@ def _run_alone(campaign: _Campaign, pool: Pool, task: _Task) -> _Outcome | str:
     return death
 
 
-def _isolate(campaign: _Campaign, pool: Pool, task: _Task) -> None:
-    """Re-run a task that was in flight when a worker died, alone, down to single nodes."""
+def _isolate(campaign: _Campaign, pool: Pool, task: _Task, limits: _Limits) -> None:
+    """Re-run a task whose worker died or overran, alone, down to single nodes."""
     attempts = 1 + campaign.retries if task.indices.size == 1 else 1
     for _ in range(attempts):
-        found = _run_alone(campaign, pool, task)
+        found = _run_alone(campaign, pool, task, limits)
         if isinstance(found, _Outcome):
             campaign.accept_outcome(task, found)
             return
@@ -533,62 +633,66 @@ def _isolate(campaign: _Campaign, pool: Pool, task: _Task) -> None:
         campaign.accept_death(task, found)
         return
     for index in task.indices:
-        _isolate(campaign, pool, _Task(np.array([index]), batched=False))
+        _isolate(campaign, pool, _Task(np.array([index]), batched=False), limits)
 
 
 def _run_pooled(
-    campaign: _Campaign, pool: Pool, tasks: Sequence[_Task], stop_on_failure: bool = False
+    campaign: _Campaign,
+    pool: Pool,
+    tasks: Sequence[_Task],
+    limits: _Limits,
+    stop_on_failure: bool = False,
 ) -> None:
-    """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead workers.
+    """Run ``tasks`` with at most ``pool.slots`` in flight, handling dead and stuck workers.
 
+    A task past its deadline has its workers killed (the pool is rebuilt); the other tasks
+    in flight then are run again, and the late task is isolated like one whose worker died.
     With ``stop_on_failure``, no task is started once a node has failed; the tasks in flight
     finish (and are journaled), the others stay pending.
     """
     queue = deque(tasks)
-    in_flight: dict[Future[_Outcome], _Task] = {}
+    # A second task queued per worker hides the round trip between tasks; with a timeout each
+    # task's clock must start when it starts, so then a worker gets one at a time.
+    depth = 2 if limits.timeout is None else 1
+    in_flight: dict[Future[_Outcome], tuple[_Task, float]] = {}
     lost: list[_Task] = []
-    try:
-        while queue or in_flight:
-            # After a death, feed nothing more: let the chunks in flight finish or fail first.
-            if stop_on_failure and campaign.messages:
-                queue.clear()
-            while queue and not lost and len(in_flight) < pool.slots:
-                task = queue.popleft()
-                in_flight[pool.submit(_execute, *campaign.arguments(task))] = task
-            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
-            for future in done:
-                task = in_flight.pop(future)
-                error = future.exception()
-                if error is None:
-                    campaign.accept_outcome(task, future.result())
-                elif pool.death(error) is None:
-                    raise error
+    while queue or in_flight:
+        # After a death, feed nothing more: let the chunks in flight finish or fail first.
+        if stop_on_failure and campaign.messages:
+            queue.clear()
+        while queue and not lost and len(in_flight) < depth * pool.slots:
+            task = queue.popleft()
+            future = pool.submit(_execute, *campaign.arguments(task))
+            in_flight[future] = (task, limits.deadline(task, time.monotonic()))
+        first = min((deadline for _, deadline in in_flight.values()), default=0.0)
+        wait_for = None if math.isinf(first) else max(0.0, first - time.monotonic())
+        done, _ = wait(list(in_flight), timeout=wait_for, return_when=FIRST_COMPLETED)
+        for future in done:
+            task, _ = in_flight.pop(future)
+            error = future.exception()
+            if error is None:
+                campaign.accept_outcome(task, future.result())
+            elif pool.death(error) is None:
+                raise error
+            else:
+                lost.append(task)
+        now = time.monotonic()
+        late = [task for task, deadline in in_flight.values() if deadline <= now]
+        if late:
+            # The pool cannot kill one worker: all go, and the tasks on time run again.
+            queue.extendleft(t for t, d in reversed(in_flight.values()) if d > now)
+            in_flight.clear()
+            pool.rebuild()
+            for task in late:
+                if task.indices.size == 1 and not campaign.retries:  # known to hang
+                    campaign.accept_death(task, limits.message(task))
                 else:
-                    lost.append(task)
-            if lost and not in_flight:
-                pool.rebuild()
-                for task in lost:
-                    _isolate(campaign, pool, task)
-                lost = []
-    finally:
-        for future in in_flight:
-            future.cancel()
-
-
-def _workers_pay(
-    trial_seconds: float,
-    n_trial: int,
-    n_rest: int,
-    build_seconds: float,
-    workers: int,
-    startup_seconds: float,
-) -> bool:
-    """Whether workers are estimated to finish the remaining nodes sooner than this process."""
-    if workers < 2 or n_rest == 0:
-        return False
-    serial = trial_seconds / n_trial * n_rest
-    parallel = startup_seconds + build_seconds + serial / workers
-    return parallel < serial
+                    _isolate(campaign, pool, task, limits)
+        if lost and not in_flight:
+            pool.rebuild()
+            for task in lost:
+                _isolate(campaign, pool, task, limits)
+            lost = []
 
 
 # -- argument checks -------------------------------------------------------------------------
@@ -603,6 +707,7 @@ def _check_arguments(
     address: str | None,
     chunk_size: int | None,
     retries: int,
+    timeout: float | None = None,
 ) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64], tuple[str, ...]]:
     """Validate the arguments of :func:`run_nodes` as a whole; return them as arrays."""
     problems: list[ConfigProblem] = []
@@ -666,23 +771,31 @@ def _check_arguments(
         )
     if not integer_at_least(retries, 0):
         problems.append(ConfigProblem("retries", f"must be an integer >= 0, got {retries!r}"))
+    if timeout is not None and not (
+        isinstance(timeout, int | float)
+        and not isinstance(timeout, bool)
+        and 0 < timeout < math.inf
+    ):
+        problems.append(ConfigProblem("timeout", f"must be a positive number, got {timeout!r}"))
+    elif timeout is not None and backend in BACKENDS and not BACKENDS[backend].kills:
+        problems.append(
+            ConfigProblem("timeout", f"needs workers pcmb can kill (backend loky), not {backend}")
+        )
     if problems:
         raise UsageError(problems, source="run_nodes")
     return arrays, time_grid, tuple(outputs)
 
 
-def _check_model(model: object, outputs: Sequence[str]) -> None:
-    """Check the protocol and that the model offers every requested output."""
-    offered = getattr(model, "outputs", None)
-    if offered is None or not callable(getattr(model, "simulate", None)):
-        raise UsageError(
-            [ConfigProblem("model_factory", "must build an object with outputs and simulate()")],
-            source="run_nodes",
-        )
-    missing = [name for name in outputs if name not in offered]
+def _check_outputs(facts: ModelFacts, outputs: Sequence[str]) -> None:
+    """Check that the model offers every requested output."""
+    missing = [name for name in outputs if name not in facts.outputs]
     if missing:
         raise UsageError(
-            [ConfigProblem("outputs", f"the model has no output {missing} (it has {offered})")],
+            [
+                ConfigProblem(
+                    "outputs", f"the model has no output {missing} (it has {list(facts.outputs)})"
+                )
+            ],
             source="run_nodes",
         )
 
@@ -710,9 +823,12 @@ def run_nodes(
     address: str | None = None,
     chunk_size: int | None = None,
     retries: int = 0,
+    timeout: float | None = None,
     journal: Journal | None = None,
     progress: bool | None = None,
     stop_on_failure: bool = False,
+    pool: Pool | None = None,
+    facts: ModelFacts | None = None,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -720,7 +836,7 @@ def run_nodes(
     ----------
     model_factory:
         Picklable callable returning a model (``outputs``, ``simulate(params, times)``); it is
-        called once per worker process (and once in this process).
+        called once per worker process.
     params:
         Input name -> (N,) values, or (N, m) for a field input; node i is row i.
     times:
@@ -729,9 +845,10 @@ def run_nodes(
         Names of the outputs to keep.
     jobs:
         Worker processes (slots); default: all cores (for dask with ``address``: all threads
-        of the cluster). ``1`` runs everything in this process.
+        of the cluster).
     backend:
-        ``"loky"`` or ``"dask"``.
+        ``"loky"`` (child processes), ``"dask"``, or ``"inprocess"`` (this process: no
+        isolation, for debugging).
     address:
         Scheduler address of a dask cluster; with ``backend="dask"`` and no address a local
         cluster of ``jobs`` processes is started and closed.
@@ -740,6 +857,10 @@ def run_nodes(
         (batched integrators), so a journal fingerprint must include an explicit chunk size.
     retries:
         How many more times a failed node is tried before it is reported.
+    timeout:
+        Seconds a node may take (a chunk of B nodes: B times that, plus the time a fresh
+        worker takes to start and build the model); a node past it is a failed run and its
+        worker is killed. Needs a backend whose workers pcmb can kill (``loky``).
     journal:
         Persists every finished chunk; its successful nodes are taken instead of being run.
     progress:
@@ -748,6 +869,11 @@ def run_nodes(
         Start no more chunks once a node has failed (the policy ``abort``): the chunks in
         flight finish and every failure found in them is reported; the nodes never run stay
         pending (status 0), in the journal too, so a resumed run runs them.
+    pool:
+        Workers to run on (see :func:`pcmb.run.backends.open_pool`), shared by several
+        campaigns; default: a pool of ``backend`` opened and closed by this call.
+    facts:
+        What :func:`describe_model` said of this factory on ``pool``, to skip asking again.
 
     Returns
     -------
@@ -764,52 +890,50 @@ def run_nodes(
     """
     start = time.perf_counter()
     arrays, time_grid, names = _check_arguments(
-        params, times, outputs, jobs, backend, address, chunk_size, retries
+        params, times, outputs, jobs, backend, address, chunk_size, retries, timeout
     )
     n_nodes = len(next(iter(arrays.values())))
-    try:
-        token = hashlib.sha256(cloudpickle.dumps(model_factory)).hexdigest()
-    except Exception as exc:  # pickling can fail with almost any exception type
-        raise UsageError(
-            [ConfigProblem("model_factory", f"cannot be sent to worker processes: {exc}")],
-            source="run_nodes",
-        ) from exc
+    token = _token(model_factory)
     if journal is not None:
         _check_journal(journal, n_nodes, names, time_grid.size)
-    model, build_seconds = _cached_model(token, model_factory)
-    _check_model(model, names)
+    if pool is None:
+        with open_pool(backend, jobs, address, tasks=len(chunk_bounds(n_nodes, chunk_size))) as own:
+            return run_nodes(
+                model_factory,
+                arrays,
+                time_grid,
+                names,
+                chunk_size=chunk_size,
+                retries=retries,
+                timeout=timeout,
+                journal=journal,
+                progress=progress,
+                stop_on_failure=stop_on_failure,
+                pool=own,
+            )
+    if timeout is not None and not pool.kills:
+        raise UsageError(
+            [
+                ConfigProblem(
+                    "timeout",
+                    f"needs workers pcmb can kill (backend loky), not {type(pool).__name__}",
+                )
+            ],
+            source="run_nodes",
+        )
+    facts = facts or describe_model(model_factory, pool)
+    _check_outputs(facts, names)
     campaign = _Campaign(token, model_factory, arrays, time_grid, names, retries, journal)
     if journal is not None:
         campaign.resume(journal)
     # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
     # boundaries depend on N, the config and the model class only, never on jobs or backend.
-    preferred = getattr(model, "chunk_size", None)
-    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or preferred))
+    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or facts.chunk_size))
+    limits = _Limits(timeout, pool.startup_seconds + 2 * facts.build_seconds)
     show = sys.stderr.isatty() if progress is None else progress
     campaign.progress = Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
     try:
-        if tasks:
-            trial = _execute(*campaign.arguments(tasks[0]))
-            campaign.accept_outcome(tasks[0], trial)
-            rest = [] if stop_on_failure and campaign.messages else tasks[1:]
-            workers = jobs or _default_workers()
-            n_rest = sum(task.indices.size for task in rest)
-            n_trial = tasks[0].indices.size
-            pool_type = BACKENDS[backend]
-            startup = pool_type.startup_seconds
-            if not _workers_pay(trial.seconds, n_trial, n_rest, build_seconds, workers, startup):
-                pool_type = InProcessPool
-            pool: Pool = pool_type(jobs, workers, address)
-            try:
-                _run_pooled(campaign, pool, rest, stop_on_failure)
-            finally:
-                pool.close()
+        _run_pooled(campaign, pool, tasks, limits, stop_on_failure)
     finally:
         campaign.progress.close()
     return campaign.result(time.perf_counter() - start)
-
-
-def _default_workers() -> int:
-    from joblib import cpu_count
-
-    return max(1, cpu_count())

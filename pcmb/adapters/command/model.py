@@ -37,6 +37,7 @@ from pcmb.adapters.protocol import (
     describe_exception,
 )
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
+from pcmb.run.lifeline import kernel_kills_orphans
 
 __all__ = ["FORMATS", "KEEP_POLICIES", "CommandModel", "CommandModelFactory", "split_command"]
 
@@ -368,6 +369,8 @@ class CommandModel(PointwiseModel):
                     stdout=stdout,
                     stderr=stderr,
                     start_new_session=True,
+                    # The simulator dies with the worker that runs it (kill -9 of pcmb).
+                    preexec_fn=kernel_kills_orphans,
                 )
             except OSError as exc:
                 raise ModelError(f"cannot start {argv[0]}: {describe_exception(exc)}") from exc
