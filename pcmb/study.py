@@ -22,7 +22,7 @@ from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
-from pcmb.designs import DESIGNS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
+from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.errors import (
     ConfigProblem,
     IllPosedError,
@@ -117,11 +117,21 @@ class Study:
         times: ArrayLike,
         *,
         order: int | Mapping[str, int] = 3,
-        basis: str = "tensor",
+        basis: str | None = None,
         method: str = "collocation",
         samples: int | None = None,
         seed: int = 0,
         fit: str = "none",
+        grid: str = "tensor",
+        level: int | None = None,
+        rule: str = "auto",
+        elements: Mapping[str, Sequence[float]] | str | None = None,
+        max_elements: int = 16,
+        selection: str = "lars",
+        sampling: str = "sobol",
+        q: float = 1.0,
+        tolerance: float | None = None,
+        max_samples: int | None = None,
         outputs: Sequence[str] | None = None,
         params: Mapping[str, Any] | None = None,
         name: str = "study",
@@ -145,6 +155,18 @@ class Study:
         self.samples = samples
         self.seed = seed
         self.fit = fit
+        self.method_options = {
+            "grid": grid,
+            "level": level,
+            "rule": rule,
+            "elements": elements,
+            "max_elements": max_elements,
+            "selection": selection,
+            "sampling": sampling,
+            "q": q,
+            "tolerance": tolerance,
+            "max_samples": max_samples,
+        }
         self.name = name
         self.jobs, self.backend, self.address = jobs, backend, address
         self.chunk_size, self.timeout = chunk_size, timeout
@@ -166,7 +188,7 @@ class Study:
         if unknown:
             raise _usage("nominal", f"values given for unknown input(s) {unknown}")
         choices = {
-            "method": (method, tuple(DESIGNS)),
+            "method": (method, METHOD_KINDS),
             "on_failure": (on_failure, FAILURE_POLICIES),
             "backend": (backend, tuple(BACKENDS)),
         }
@@ -175,14 +197,21 @@ class Study:
                 raise _usage(key, f"expected one of {', '.join(allowed)}, got {value!r}")
         self.design = self._design()
 
+    def _uses_order(self) -> bool:
+        """Whether the method takes ``order`` (a Smolyak grid takes a level instead)."""
+        if self.method == "collocation":
+            return self.method_options["grid"] == "tensor"
+        return self.method == "regression" or self.fit != "none"
+
     def _design(self) -> NodeDesign:
         settings = MethodSettings(
             kind=self.method,
-            orders=self.orders if self.method == "collocation" or self.fit != "none" else None,
+            orders=self.orders if self._uses_order() else None,
             basis=self.basis,
             samples=self.samples,
             seed=self.seed,
             fit=self.fit,
+            **self.method_options,
         )
         try:
             return make_design(self.inputs, settings)
@@ -209,6 +238,16 @@ class Study:
             samples=method.samples,
             seed=method.seed,
             fit=method.fit,
+            grid=method.grid,
+            level=method.level,
+            rule=method.rule,
+            elements=method.elements,
+            max_elements=method.max_elements,
+            selection=method.selection,
+            sampling=method.sampling,
+            q=method.q,
+            tolerance=method.tolerance,
+            max_samples=method.max_samples,
             outputs=config.output_names,
             name=config.name,
             jobs=execution.jobs,
@@ -249,6 +288,7 @@ class Study:
             "samples": self.samples,
             "seed": self.seed,
             "fit": self.fit,
+            **self.method_options,
             "outputs": self.outputs,
             "name": self.name,
             "jobs": self.jobs,

@@ -92,7 +92,7 @@ def test_valid_config_loads_with_everything_derived():
 def test_defaults():
     text = BASE.split("execution:")[0].replace("  basis: tensor\n", "")
     config = load(text)
-    assert config.method.basis == "tensor"
+    assert config.method.basis is None  # the method's own default: tensor for collocation
     assert config.method.fit == "none"
     assert config.output is None
     execution = config.execution

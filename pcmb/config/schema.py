@@ -33,6 +33,7 @@ from pydantic import (
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs
+from pcmb.chaos.nested import RULES
 from pcmb.config.checks import cross_check, model_check
 from pcmb.config.loader import parse_yaml
 from pcmb.config.messages import KeyPath, located, schema_problems
@@ -52,8 +53,10 @@ from pcmb.config.types import (
     count,
     unique,
 )
-from pcmb.designs import DESIGNS
+from pcmb.designs import GRIDS, METHOD_KINDS
 from pcmb.designs.collocation import BASES
+from pcmb.designs.regression import BASES as REGRESSION_BASES
+from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
@@ -241,16 +244,44 @@ OrderSpec = Annotated[
 class MethodSpec(Section):
     """How nodes are chosen and coefficients recovered."""
 
-    kind: Literal[tuple(DESIGNS)] = Field(description="how nodes are made (a registered design)")
+    kind: Literal[METHOD_KINDS] = Field(description="how nodes are made (a registered design)")
     fit: Literal[FITS] = Field(
         default="none", description="regression: least-squares chaos fit on sampled nodes"
     )
     order: OrderSpec | None = Field(
         default=None, validate_default=True, description="int, or a mapping input -> int"
     )
-    basis: Literal[BASES] = Field(default="tensor", description="chaos terms of collocation")
+    basis: Literal[tuple(dict.fromkeys((*BASES, *REGRESSION_BASES)))] | None = Field(
+        default=None,
+        description="chaos terms (default: tensor for collocation, hyperbolic for regression)",
+    )
     samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
     seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
+    grid: Literal[GRIDS] = Field(
+        default="tensor", description="collocation nodes: tensor grid or Smolyak"
+    )
+    level: NonNegativeInt | None = Field(default=None, description="level of a Smolyak grid")
+    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of a Smolyak grid")
+    elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
+        default=None,
+        description="multi-element collocation: input -> split points (physical units), or auto",
+    )
+    max_elements: PositiveInt = Field(default=16, description="most elements of elements: auto")
+    selection: Literal[tuple(SELECTIONS)] = Field(
+        default="lars", description="term selection of kind regression"
+    )
+    sampling: Literal[tuple(SAMPLINGS)] = Field(
+        default="sobol", description="how kind regression samples its nodes"
+    )
+    q: Annotated[float, Field(gt=0, le=1)] = Field(
+        default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
+    )
+    tolerance: PositiveReal | None = Field(
+        default=None, description="kind regression: add samples until the LOO error meets it"
+    )
+    max_samples: PositiveInt | None = Field(
+        default=None, description="kind regression with tolerance: most samples in all"
+    )
 
 
 class ExecutionSpec(Section):

@@ -18,38 +18,77 @@ from pcmb.designs.base import (
     statistics_warnings,
 )
 from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.multi_element import MultiElementCollocation
+from pcmb.designs.regression import SparseRegression
 from pcmb.designs.sampling import Sampling
+from pcmb.designs.smolyak import SparseCollocation
 
 __all__ = [
     "DESIGNS",
+    "GRIDS",
+    "METHOD_KINDS",
     "RECORDED_ONLY",
     "MethodSettings",
     "NodeDesign",
     "Recovery",
+    "design_key",
     "make_design",
     "statistics_warnings",
 ]
 
-#: ``method.kind`` -> design class; the config schema, ``pcmb validate`` and the docs read
-#: their lists from here.
+#: Design key -> design class: ``method.kind``, or ``collocation:<grid>`` for a collocation
+#: grid other than the tensor one, or ``collocation:elements`` for multi-element collocation
+#: (see :func:`design_key`). The config schema, ``pcmb validate`` and the docs read their
+#: lists from here.
 DESIGNS: dict[str, type[NodeDesign]] = {
     "collocation": TensorCollocation,
+    "collocation:smolyak": SparseCollocation,
+    "collocation:elements": MultiElementCollocation,
     "montecarlo": Sampling,
     "lhs": Sampling,
     "sobol": Sampling,
+    "regression": SparseRegression,
 }
+#: ``method.kind`` values.
+METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
+#: ``method.grid`` values of collocation.
+GRIDS = (
+    "tensor",
+    *(
+        key.partition(":")[2]
+        for key in DESIGNS
+        if key.startswith("collocation:") and key != "collocation:elements"
+    ),
+)
+
+
+def design_key(settings: MethodSettings) -> str:
+    """The :data:`DESIGNS` key of these settings."""
+    if settings.kind == "collocation":
+        if settings.elements is not None:
+            return "collocation:elements"
+        if settings.grid != "tensor":
+            return f"collocation:{settings.grid}"
+    return settings.kind
 
 
 def make_design(inputs: Mapping[str, Distribution], settings: MethodSettings) -> NodeDesign:
-    """The design registered for ``settings.kind``, built for these inputs.
+    """The design registered for these settings, built for these inputs.
 
     Raises
     ------
     ValueError
-        An unknown kind, or settings the design cannot use (the message starts with the key).
+        An unknown kind or grid, or settings the design cannot use (the message starts with
+        the key).
     """
-    design = DESIGNS.get(settings.kind)
-    if design is None:
-        known = ", ".join(DESIGNS)
-        raise ValueError(f"method.kind: expected one of {known}, got {settings.kind!r}")
-    return design(inputs, settings)
+    if settings.kind not in METHOD_KINDS:
+        raise ValueError(
+            f"method.kind: expected one of {', '.join(METHOD_KINDS)}, got {settings.kind!r}"
+        )
+    if settings.kind == "collocation" and settings.grid not in GRIDS:
+        raise ValueError(f"method.grid: expected one of {', '.join(GRIDS)}, got {settings.grid!r}")
+    if settings.elements is not None and settings.grid != "tensor":
+        raise ValueError(
+            "method.elements: multi-element collocation uses tensor grids (grid: tensor)"
+        )
+    return DESIGNS[design_key(settings)](inputs, settings)

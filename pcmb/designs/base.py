@@ -37,14 +37,26 @@ class MethodSettings:
     """The ``method:`` settings a design is built from (config keys of the same names).
 
     ``orders`` is one order per input (germ order), ``None`` when the method has none.
+    :func:`pcmb.designs.design_key` picks the design from ``kind`` (and, for collocation,
+    ``grid`` and ``elements``); each design reads the fields it uses.
     """
 
     kind: str
     orders: tuple[int, ...] | None = None
-    basis: str = "tensor"
+    basis: str | None = None
     samples: int | None = None
     seed: int = 0
     fit: str = "none"
+    grid: str = "tensor"
+    level: int | None = None
+    rule: str = "auto"
+    elements: Mapping[str, Sequence[float]] | str | None = None
+    max_elements: int = 16
+    selection: str = "lars"
+    sampling: str = "sobol"
+    q: float = 1.0
+    tolerance: float | None = None
+    max_samples: int | None = None
 
 
 @dataclass(frozen=True)

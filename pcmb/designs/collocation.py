@@ -37,7 +37,7 @@ class TensorCollocation:
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind collocation)")
-        if settings.basis not in BASES:
+        if (settings.basis or "tensor") not in BASES:
             raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
         if settings.fit != "none":
             raise ValueError(
@@ -46,7 +46,7 @@ class TensorCollocation:
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
-        self.basis = settings.basis
+        self.basis = settings.basis or "tensor"
 
     @property
     def runs(self) -> int:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from contextlib import contextmanager
@@ -90,6 +91,7 @@ class LokyPool:
         # so that `slots` workers do not each start one thread per core.
         share = str(max(1, (os.cpu_count() or 1) // self.slots))
         if self._executor is not None:
+            self._settle()
             self._executor.shutdown(wait=False, kill_workers=True)
         self._executor = ProcessPoolExecutor(
             max_workers=self.slots,
@@ -99,11 +101,21 @@ class LokyPool:
             initargs=(os.getpid(),),
         )
         # Start the workers now, while the caller prepares the work.
-        for _ in range(self.slots):
-            self._executor.submit(_warm_up)
+        self._submitted = [self._executor.submit(_warm_up) for _ in range(self.slots)]
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
-        return self._executor.submit(fn, *args)
+        future = self._executor.submit(fn, *args)
+        self._submitted = [f for f in self._submitted if not f.done()] + [future]
+        return future
+
+    def _settle(self, seconds: float = 1.0) -> None:
+        """Wait (briefly) until loky has moved every task submitted to its call queue: killing
+        its workers while a task still waits outside the queue breaks its manager thread."""
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline and any(
+            not (f.running() or f.done()) for f in self._submitted
+        ):
+            time.sleep(0.005)
 
     def death(self, error: BaseException) -> str | None:
         from joblib.externals.loky.process_executor import TerminatedWorkerError
@@ -119,8 +131,9 @@ class LokyPool:
         return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
 
     def close(self, kill: bool = False) -> None:
-        # Idle workers exit by themselves on the shutdown message; there is no need to wait.
-        self._executor.shutdown(wait=False, kill_workers=kill)
+        if kill:
+            self._settle()
+        self._executor.shutdown(wait=not kill, kill_workers=kill)
 
 
 class DaskPool:

@@ -651,16 +651,17 @@ def _run_pooled(
     finish (and are journaled), the others stay pending.
     """
     queue = deque(tasks)
-    # A second task queued per worker hides the round trip between tasks; with a timeout each
-    # task's clock must start when it starts, so then a worker gets one at a time.
-    depth = 2 if limits.timeout is None else 1
+    # One task queued beyond the workers hides the round trip between tasks (no more: loky's
+    # queue takes one extra, and a kill must not find tasks waiting outside it). With a
+    # timeout each task's clock must start when the task does: no task waits then.
+    most = pool.slots + (1 if limits.timeout is None else 0)
     in_flight: dict[Future[_Outcome], tuple[_Task, float]] = {}
     lost: list[_Task] = []
     while queue or in_flight:
         # After a death, feed nothing more: let the chunks in flight finish or fail first.
         if stop_on_failure and campaign.messages:
             queue.clear()
-        while queue and not lost and len(in_flight) < depth * pool.slots:
+        while queue and not lost and len(in_flight) < most:
             task = queue.popleft()
             future = pool.submit(_execute, *campaign.arguments(task))
             in_flight[future] = (task, limits.deadline(task, time.monotonic()))

@@ -1,0 +1,204 @@
+"""Sparse regression design: sampled nodes, a chaos basis selected by LARS or OMP."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import NodeSet, random_nodes
+from pcmb.chaos.sparse_regression import (
+    SELECTIONS,
+    SparseFit,
+    fit_sparse,
+    minimum_samples,
+    next_batch,
+)
+from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
+from pcmb.result import Design, WarningRecord
+
+__all__ = ["SparseRecovery", "SparseRegression"]
+
+#: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
+SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
+BASES = ("total", "hyperbolic")
+#: ``method.selection`` -> the ``fit`` recorded in :class:`pcmb.result.Design`.
+FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
+#: Worst corrected LOO error reported as a warning when no tolerance is set.
+LOO_WARNING = 1e-2
+#: Largest total samples, as a multiple of ``method.samples``, when a tolerance is set.
+MAX_GROWTH = 16
+
+
+@dataclass(frozen=True)
+class SparseRecovery(Recovery):
+    """A :class:`Recovery` with the sparse fit of every output (selected terms, corrected LOO
+    error per time, condition number); the expansions hold the union of the selected terms,
+    with zero coefficients for the terms an output did not select."""
+
+    fits: dict[str, SparseFit] = field(default_factory=dict)
+
+    @property
+    def worst_loo(self) -> float:
+        """The largest corrected LOO error over outputs and times (0 without an output)."""
+        return max(
+            (float(np.nanmax(f.loo_error, initial=0.0)) for f in self.fits.values()), default=0.0
+        )
+
+
+class SparseRegression:
+    """``method: {kind: regression, samples, sampling, selection, basis, q, order, seed,
+    tolerance, max_samples}``.
+
+    The candidate terms are the hyperbolic set (Σ α_k^q)^(1/q) <= order (``basis: total``:
+    q = 1), capped per input by its order; every output gets the terms its LARS or OMP path
+    selects (:func:`pcmb.chaos.sparse_regression.fit_sparse`), shared by all its times.
+    """
+
+    def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
+        selection = getattr(settings, "selection", "lars")
+        sampling = getattr(settings, "sampling", "sobol")
+        q = getattr(settings, "q", 1.0)
+        tolerance = getattr(settings, "tolerance", None)
+        if settings.samples is None:
+            raise ValueError("method.samples: required key is missing (needed by kind regression)")
+        if settings.orders is None:
+            raise ValueError("method.order: required key is missing (needed by kind regression)")
+        if selection not in SELECTIONS:
+            raise ValueError(f"method.selection: expected one of {', '.join(SELECTIONS)}")
+        if sampling not in SAMPLINGS:
+            raise ValueError(f"method.sampling: expected one of {', '.join(SAMPLINGS)}")
+        if (settings.basis or "hyperbolic") not in BASES:
+            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
+        if not 0.0 < q <= 1.0:
+            raise ValueError(f"method.q: must be in (0, 1], got {q}")
+        if tolerance is not None and not tolerance > 0:
+            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
+        self.names, self.distributions = tuple(inputs), tuple(inputs.values())
+        self.orders = tuple(settings.orders)
+        caps = np.asarray(self.orders)
+        index = hyperbolic_index_set(
+            len(caps), max(self.orders), q if settings.basis != "total" else 1.0
+        )
+        self.candidates = PolynomialBasis(
+            tuple(d.family for d in self.distributions), index[np.all(index <= caps, axis=1)]
+        )
+        least = minimum_samples(self.candidates.size, selection)
+        if settings.samples < least:
+            raise ValueError(
+                f"method.samples: selection {selection} over the {self.candidates.size} candidate "
+                f"terms needs at least {least} samples, got {settings.samples}"
+            )
+        self.samples, self.seed, self.basis = (
+            settings.samples,
+            settings.seed,
+            settings.basis or "hyperbolic",
+        )
+        self.selection, self.sampling, self.tolerance = selection, sampling, tolerance
+        self.max_samples = getattr(settings, "max_samples", None) or MAX_GROWTH * self.samples
+
+    @property
+    def runs(self) -> int:
+        return self.samples
+
+    def nodes(self) -> NodeSet:
+        return random_nodes(self.distributions, self.samples, SAMPLINGS[self.sampling], self.seed)
+
+    def weights(self, nodes: NodeSet) -> None:
+        return None
+
+    def record(self) -> Design:
+        return Design(
+            kind="regression",
+            grid=self.sampling,
+            basis=self.basis,
+            orders=self.orders,
+            samples=self.samples,
+            seed=self.seed,
+            fit=FITS[self.selection],
+        )
+
+    def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
+        """The next batch of nodes while the tolerance is not met, else ``None``.
+
+        Parameters
+        ----------
+        done:
+            Nodes made so far (the batch continues them: the Sobol' sequence is extended; LHS
+            and random batches are drawn afresh with a seed derived from ``seed`` and ``done``).
+        history:
+            (samples, :attr:`SparseRecovery.worst_loo`) of every fit so far.
+        """
+        if self.tolerance is None:
+            return None
+        size = next_batch(history, self.tolerance, self.max_samples)
+        if size == 0:
+            return None
+        method = SAMPLINGS[self.sampling]
+        if method == "sobol":
+            every = random_nodes(self.distributions, done + size, method, self.seed)
+            return NodeSet(self.distributions, every.nodes[done:], every.params[done:])
+        seed = int(np.random.SeedSequence((self.seed, done)).generate_state(1)[0])
+        return random_nodes(self.distributions, size, method, seed)
+
+    def recover(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
+    ) -> SparseRecovery:
+        germ = nodes.nodes[ok]
+        fits = {
+            name: fit_sparse(self.candidates, germ, y[ok], self.selection)
+            for name, y in values.items()
+        }
+        expansions = {}
+        if fits:
+            union, where = np.unique(
+                np.concatenate([f.multi_index for f in fits.values()]),
+                axis=0,
+                return_inverse=True,
+            )
+            start = 0
+            for name, fit in fits.items():
+                coefficients = np.zeros((union.shape[0], *fit.coefficients.shape[1:]))
+                coefficients[where[start : start + fit.multi_index.shape[0]]] = fit.coefficients
+                start += fit.multi_index.shape[0]
+                expansions[name] = ChaosExpansion(
+                    coefficients, union, self.distributions, self.names
+                )
+        records = tuple(
+            record
+            for name, fit in fits.items()
+            if (record := self._loo_warning(name, fit, germ.shape[0], times)) is not None
+        )
+        return SparseRecovery(
+            expansions, records + statistics_warnings(expansions, values, ok, times), fits
+        )
+
+    def _loo_warning(
+        self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None
+    ) -> WarningRecord | None:
+        """A ``regression-loo`` record where the corrected LOO error exceeds the tolerance (or
+        :data:`LOO_WARNING`), else ``None``."""
+        limit = self.tolerance or LOO_WARNING
+        loo = np.atleast_1d(fit.loo_error)
+        large = np.flatnonzero(loo > limit)
+        if large.size == 0:
+            return None
+        span = None if times is None else (float(times[large[0]]), float(times[large[-1]]))
+        return WarningRecord(
+            "regression-loo",
+            f"corrected leave-one-out error up to {float(np.nanmax(loo)):.3g} (> {limit:.3g}) at "
+            f"{large.size} of {loo.size} times, with {fit.multi_index.shape[0]} of "
+            f"{self.candidates.size} candidate terms selected ({self.selection}) from {runs} "
+            "runs: the expansion may be inaccurate; use more samples or another order",
+            name,
+            span,
+        )

@@ -1,0 +1,319 @@
+"""Multi-element chaos: truncated families, element partitions, piecewise statistics, the
+multi-element collocation design and its adaptive refinement, against exact references."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+import scipy.special as sp
+import scipy.stats as st
+from model_loading import model_class
+from numpy.polynomial import Polynomial
+
+import pcmb
+from pcmb.chaos.elements import Partition
+from pcmb.chaos.polynomials import Jacobi, Legendre
+from pcmb.chaos.truncated import Conditional, TruncatedFamily
+from pcmb.designs.base import MethodSettings
+from pcmb.designs.multi_element import MultiElementCollocation, refine
+from pcmb.references import double_well
+from pcmb.result import Design
+
+#: Round-off of recurrences and statistics built from a few hundred double-precision sums.
+ROUND_OFF = 1e-12
+
+
+@dataclass(frozen=True)
+class Settings(MethodSettings):
+    """``method:`` settings with the multi-element keys (the schema's are added separately)."""
+
+    elements: Any = None
+    max_elements: int = 16
+    element_threshold: float = 1e-4
+
+
+def _design(inputs, orders, partition=None, **keys):
+    settings = Settings("multi_element", orders=orders, **keys)
+    return MultiElementCollocation(inputs, settings, partition)
+
+
+def _recover(design, response, ok=None):
+    nodes = design.nodes()
+    values = {"y": response(nodes.params)}
+    ok = np.ones(nodes.size, dtype=bool) if ok is None else ok
+    return design.recover(nodes, values, ok)
+
+
+# -- truncated families ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("lower", "upper"), [(-1.0, 1.0), (-0.3, 0.7), (0.9, 1.0)])
+def test_a_truncated_uniform_is_legendre_on_its_interval(lower, upper):
+    family = TruncatedFamily(Legendre(), lower, upper)
+    a, b = family.recurrence(40)
+    expected_a, expected_b = Legendre().recurrence(40)
+    assert np.abs(a - expected_a).max() < ROUND_OFF and np.abs(b - expected_b).max() < ROUND_OFF
+    assert (family.shift, family.scale) == pytest.approx(
+        (0.5 * (lower + upper), 0.5 * (upper - lower))
+    )
+    # The element's Gauss nodes are the rescaled Gauss-Legendre nodes, in physical units too.
+    element = Conditional(pcmb.Uniform(2.0, 6.0), 3.0, 4.5)
+    rule, legendre = element.family.gauss_rule(6), Legendre().gauss_rule(6)
+    np.testing.assert_allclose(element.to_physical(rule.nodes), 3.75 + 0.75 * legendre.nodes)
+    np.testing.assert_allclose(rule.weights, legendre.weights, atol=ROUND_OFF)
+    assert element.probability == pytest.approx(0.375)
+
+
+@pytest.mark.parametrize(("alpha", "beta"), [(0.5, -0.5), (2.0, 3.0), (-0.7, 1.5), (0.0, 0.0)])
+def test_the_whole_jacobi_interval_gives_jacobi_to_round_off(alpha, beta):
+    a, b = TruncatedFamily(Jacobi(alpha, beta), -1.0, 1.0).recurrence(40)
+    expected_a, expected_b = Jacobi(alpha, beta).recurrence(40)
+    assert np.abs(a - expected_a).max() < 1e-12 and np.abs(b - expected_b).max() < 1e-12
+
+
+def _rule_moments(element, q, degrees):
+    rule = element.family.gauss_rule(q)
+    theta = element.to_physical(rule.nodes)
+    return np.array([rule.weights @ theta**m for m in degrees])
+
+
+def test_a_beta_conditioned_on_its_singular_end_has_exact_gauss_moments():
+    # θ ~ Beta(0.5, 2) on [0, 1] (density ∝ θ^-1/2 (1-θ), singular at 0), given θ <= 0.3:
+    # E[θ^m 1{θ <= c}] = B(a + m, b) / B(a, b) · I_c(a + m, b).
+    a, b, c, q = 0.5, 2.0, 0.3, 6
+    element = Conditional(pcmb.Beta(a, b, 0.0, 1.0), 0.0, c)
+    degrees = np.arange(2 * q)
+    raw = sp.beta(a + degrees, b) / sp.beta(a, b) * sp.betainc(a + degrees, b, c)
+    exact = raw / raw[0]
+    assert element.probability == pytest.approx(sp.betainc(a, b, c), rel=ROUND_OFF)
+    np.testing.assert_allclose(_rule_moments(element, q, degrees), exact, rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("low", "high"), [(1.0, np.inf), (-np.inf, 1.0), (2.0, 5.0), (6.0, np.inf)]
+)
+def test_a_truncated_normal_has_the_moments_of_scipy_truncnorm(low, high):
+    # The q-point rule of the conditional measure is exact to degree 2q - 1.
+    mean, std, q = 1.0, 2.0, 8
+    element = Conditional(pcmb.Normal(mean, std), low, high)
+    law = st.truncnorm((low - mean) / std, (high - mean) / std, loc=mean, scale=std)
+    degrees = np.arange(2 * q)
+    exact = np.array([law.moment(m) for m in degrees])
+    np.testing.assert_allclose(_rule_moments(element, q, degrees), exact, rtol=1e-11)
+    parent = st.norm(mean, std)
+    mass = parent.sf(low) - parent.sf(high) if low > mean else parent.cdf(high) - parent.cdf(low)
+    assert element.probability == pytest.approx(mass, rel=1e-12)
+
+
+def test_a_truncated_gamma_has_exact_gauss_moments():
+    # θ ~ Gamma(k = 2.5) given 1 <= θ <= 4: E[θ^m 1{...}] = Γ(k+m)/Γ(k) [P(k+m, 4) - P(k+m, 1)].
+    k, q = 2.5, 7
+    element = Conditional(pcmb.Gamma(k, 1.0), 1.0, 4.0)
+    degrees = np.arange(2 * q)
+    raw = sp.poch(k, degrees) * (sp.gammainc(k + degrees, 4.0) - sp.gammainc(k + degrees, 1.0))
+    np.testing.assert_allclose(_rule_moments(element, q, degrees), raw / raw[0], rtol=1e-12)
+
+
+def test_unbounded_elements_split_at_their_conditional_median():
+    normal = pcmb.Normal(1.0, 2.0)
+    partition = Partition.whole([normal]).split(0, [0]).split(1, [0])
+    quartile = 1.0 + 2.0 * st.norm.ppf(0.75)
+    np.testing.assert_allclose(partition.edges[0], [-np.inf, 1.0, quartile, np.inf], rtol=1e-12)
+    np.testing.assert_allclose(partition.probability, [0.5, 0.25, 0.25], rtol=1e-12)
+    element = partition.inputs[1][0]
+    draws = element.sample(1000, np.random.default_rng(0))
+    assert np.all((draws >= 1.0) & (draws <= quartile))
+
+
+# -- a jump: closed-form statistics ------------------------------------------------------------
+
+# y(x, z) = a(x) + b(x) z, x ~ U[-1, 1], z ~ N(0, 1); a, b jump at x = C.
+C = 0.25
+A = (Polynomial([0.0, 0.0, 1.0]), Polynomial([1.0, -1.0]))  # x² below C, 1 - x above
+B = (Polynomial([0.0, 1.0]), Polynomial([2.0]))  # x below C, 2 above
+JUMP_INPUTS = {"x": pcmb.Uniform(-1.0, 1.0), "z": pcmb.Normal(0.0, 1.0)}
+
+
+def _jump(params):
+    x, z = params[:, 0], params[:, 1]
+    below = x < C
+    a = np.where(below, A[0](x), A[1](x))
+    b = np.where(below, B[0](x), B[1](x))
+    return a + b * z
+
+
+def _expect(pieces):
+    """E[f(x)] for a piecewise polynomial f, x ~ U[-1, 1] (exact integrals)."""
+    low, high = pieces
+    return 0.5 * ((low.integ()(C) - low.integ()(-1.0)) + (high.integ()(1.0) - high.integ()(C)))
+
+
+def _jump_statistics():
+    mean_a, mean_b = _expect(A), _expect(B)
+    var_a = _expect((A[0] ** 2, A[1] ** 2)) - mean_a**2
+    square_b = _expect((B[0] ** 2, B[1] ** 2))
+    variance = var_a + square_b  # Var[a] + E[b²] Var[z]
+    first = np.array([var_a, mean_b**2]) / variance  # Var E[y|x], Var E[y|z]
+    total = np.array([1.0 - mean_b**2 / variance, square_b / variance])
+    return mean_a, variance, first, total
+
+
+def test_a_jump_is_poor_with_one_element_and_exact_with_two_at_the_jump():
+    mean, variance, first, total = _jump_statistics()
+    one = _recover(_design(JUMP_INPUTS, (5, 1)), _jump).expansions["y"]
+    two = _recover(_design(JUMP_INPUTS, (2, 1), elements={"x": [C]}), _jump).expansions["y"]
+    assert abs(one.mean() - mean) > 1e-3 and abs(one.variance() - variance) > 1e-2
+    assert two.mean() == pytest.approx(mean, abs=ROUND_OFF)
+    assert two.variance() == pytest.approx(variance, abs=ROUND_OFF)
+    np.testing.assert_allclose(two.sobol_first(), first, atol=ROUND_OFF)
+    np.testing.assert_allclose(two.sobol_total(), total, atol=ROUND_OFF)
+
+
+def test_sobol_indices_of_a_non_tensor_partition_are_exact():
+    # Cut at the jump, then the upper element again along z: no longer a tensor product.
+    partition = Partition.from_splits(tuple(JUMP_INPUTS.values()), [[C], []]).split(1, [1])
+    assert partition.size == 3 and not partition.is_tensor
+    design = _design(JUMP_INPUTS, (2, 1), partition)
+    expansion = _recover(design, _jump).expansions["y"]
+    mean, variance, first, total = _jump_statistics()
+    assert expansion.mean() == pytest.approx(mean, abs=ROUND_OFF)
+    assert expansion.variance() == pytest.approx(variance, abs=ROUND_OFF)
+    np.testing.assert_allclose(expansion.sobol_first(), first, atol=ROUND_OFF)
+    np.testing.assert_allclose(expansion.sobol_total(), total, atol=ROUND_OFF)
+
+
+def test_the_piecewise_surrogate_evaluates_samples_and_combines_outputs():
+    design = _design(JUMP_INPUTS, (2, 1), elements={"x": [C]})
+    nodes = design.nodes()
+    values = {"y": _jump(nodes.params), "w": nodes.params[:, 0]}
+    recovery = design.recover(nodes, values, np.ones(nodes.size, dtype=bool))
+    y, w = recovery.expansions["y"], recovery.expansions["w"]
+    points = np.column_stack([np.linspace(-1.0, 1.0, 9), np.linspace(-2.0, 2.0, 9)])
+    np.testing.assert_allclose(y(points), _jump(points), atol=ROUND_OFF)
+    draws = y.sample(1000, seed=3)
+    assert np.array_equal(draws, y.sample(1000, seed=3)) and draws.shape == (1000,)
+    # Cov[y, x] = E[x a(x)] - E[x] E[a] = E[x a(x)] (E[x] = 0).
+    exact = _expect((A[0] * Polynomial([0.0, 1.0]), A[1] * Polynomial([0.0, 1.0])))
+    assert y.covariance(w) == pytest.approx(exact, abs=ROUND_OFF)
+    # x itself is linear across the cut: its quantiles are the uniform's, up to sampling.
+    np.testing.assert_allclose(w.quantile([0.1, 0.9], size=40_000), [-0.8, 0.8], atol=0.02)
+    # The quadrature weights are a rule of the inputs' law: Σ w y is the mean.
+    assert design.weights(nodes) @ values["y"] == pytest.approx(float(y.mean()), abs=ROUND_OFF)
+
+
+def test_the_design_contract_and_the_element_files():
+    design = _design(JUMP_INPUTS, (2, 1), elements={"x": [-0.5, C], "z": [0.0]})
+    nodes = design.nodes()
+    assert design.runs == nodes.size == 6 * 6
+    for k, dist in enumerate(JUMP_INPUTS.values()):
+        np.testing.assert_allclose(nodes.params[:, k], dist.to_physical(nodes.nodes[:, k]))
+    assert design.partition.bounds.shape == (6, 2, 2)
+    assert design.partition.probability.sum() == pytest.approx(1.0, abs=ROUND_OFF)
+    assert design.node_elements.shape == (nodes.size,)
+    np.testing.assert_array_equal(design.partition.locate(nodes.params), design.node_elements)
+    weights = design.weights(nodes)
+    assert weights.sum() == pytest.approx(1.0, abs=ROUND_OFF) and np.all(weights > 0)
+    record = design.record()
+    assert record.elements == 6 and record.grid == "element-gauss"
+    assert Design.from_description(record.describe()) == record
+    with pytest.raises(ValueError, match=r"method\.elements\.x"):
+        _design(JUMP_INPUTS, (2, 1), elements={"x": [1.5]})
+    with pytest.raises(ValueError, match=r"method\.elements: unknown"):
+        _design(JUMP_INPUTS, (2, 1), elements={"q": [0.0]})
+
+
+def test_failed_nodes_are_refitted_in_their_element():
+    design = _design(JUMP_INPUTS, (3, 2), elements={"x": [C]})
+    ok = np.ones(design.runs, dtype=bool)
+    ok[design.runs - 1] = False  # the last node of the upper element
+    recovery = _recover(design, _jump, ok)
+    assert recovery.expansions["y"].mean() == pytest.approx(_jump_statistics()[0], abs=1e-10)
+    assert any(w.message.startswith("element 1:") for w in recovery.warnings)
+
+
+# -- the double well ---------------------------------------------------------------------------
+
+TIMES = np.linspace(0.0, 4.0, 41)
+X0 = {"x0": pcmb.Uniform(-0.625, 0.375)}
+
+
+def _double_well_mean():
+    """E[x(t)] by Gauss-Legendre on each side of the jump at 0 (analytic there)."""
+    t, w = sp.roots_legendre(400)
+    mean = 0.0
+    for low, high in ((-0.625, 0.0), (0.0, 0.375)):
+        x0 = 0.5 * (low + high) + 0.5 * (high - low) * t
+        mean = mean + (0.5 * (high - low) * w / 1.0) @ double_well(TIMES, x0)
+    return mean
+
+
+def _double_well_error(design):
+    expansion = _recover(design, lambda p: double_well(TIMES, p[:, 0])).expansions["y"]
+    return np.abs(expansion.mean() - _double_well_mean()).max()
+
+
+def test_two_elements_at_zero_beat_one_element_tenfold_on_the_double_well():
+    # 16 runs each: one element of order 15, two of order 7 (measured ratio ~87).
+    one, two = _design(X0, (15,)), _design(X0, (7,), elements={"x0": [0.0]})
+    assert one.runs == two.runs == 16
+    assert _double_well_error(two) * 10 <= _double_well_error(one)
+
+
+# -- adaptive refinement -----------------------------------------------------------------------
+
+
+def _run(response):
+    return lambda params: {"y": response(params)}
+
+
+def test_auto_refinement_finds_the_jump_and_splits_only_its_input():
+    design = _design(JUMP_INPUTS, (4, 4), elements="auto", max_elements=8)
+    found = refine(design, _run(_jump))
+    edges = found.design.partition.edges
+    assert C in edges[0] and not found.exhausted
+    assert np.array_equal(edges[1], [-np.inf, np.inf])  # smooth (quadratic) in z: never cut
+    nodes = found.design.nodes()
+    np.testing.assert_array_equal(found.values["y"], _jump(nodes.params))
+    recovery = found.design.recover(nodes, found.values, np.ones(nodes.size, dtype=bool))
+    mean, variance, _, _ = _jump_statistics()
+    assert recovery.expansions["y"].mean() == pytest.approx(mean, abs=ROUND_OFF)
+    assert recovery.expansions["y"].variance() == pytest.approx(variance, abs=ROUND_OFF)
+    assert not [w for w in recovery.warnings if w.code == "element-decay"]
+    assert found.runs >= nodes.size
+
+
+def test_auto_refinement_finds_the_double_well_jump():
+    found = refine(
+        _design(X0, (7,), elements="auto", max_elements=8),
+        _run(lambda p: double_well(TIMES, p[:, 0])),
+    )
+    assert 0.0 in found.design.partition.edges[0]
+
+
+def test_the_chaotic_lorenz_case_stays_flagged():
+    # configs/lorenz_chaotic.yaml (looser tolerances, a coarser grid): the ensemble spreads
+    # over the attractor, no element of a usable size holds a smooth piece, and splitting only
+    # exhausts the budget; every output keeps its element-decay warning.
+    model = model_class("lorenz", "Lorenz")(
+        rtol=1e-6, atol=1e-6, sigma=10.0, rho=28.0, beta=8.0 / 3.0, x0=0.5, y0=0.5, z0=15.0
+    )
+    times = np.linspace(0.0, 15.0, 151)
+    inputs = {
+        "x0": pcmb.Uniform(0.0, 1.0),
+        "y0": pcmb.Uniform(0.0, 1.0),
+        "z0": pcmb.Uniform(14.5, 15.5),
+    }
+
+    def run(params):
+        return model.simulate({name: params[:, k] for k, name in enumerate(inputs)}, times)
+
+    design = _design(inputs, (2, 2, 2), elements="auto", max_elements=16, basis="total")
+    found = refine(design, run)
+    assert found.exhausted and found.design.partition.size <= 16
+    nodes = found.design.nodes()
+    recovery = found.design.recover(nodes, found.values, np.ones(nodes.size, dtype=bool), times)
+    flagged = {w.output for w in recovery.warnings if w.code == "element-decay"}
+    assert flagged == {"x", "y", "z"}
