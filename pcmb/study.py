@@ -21,7 +21,7 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.errors import (
     ConfigProblem,
@@ -33,7 +33,14 @@ from pcmb.errors import (
 )
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS, Pool, open_pool
-from pcmb.run.executor import ModelFacts, RunResult, chunk_bounds, describe_model, run_nodes
+from pcmb.run.executor import (
+    ModelFacts,
+    RunResult,
+    chunk_bounds,
+    describe_model,
+    join_runs,
+    run_nodes,
+)
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
@@ -466,7 +473,22 @@ class Study:
                 )
         facts = describe_model(self.model_factory, pool)
         outputs = self._outputs(facts)
-        runs, journal = self._run_nodes(nodes, facts, outputs, pool, output, resume, progress)
+        if self.analysis is not None:
+            self.analysis.check(self.times, outputs)
+        journal_dir = None
+        if output is not None:
+            # Before any node runs and before a journal exists: an output that cannot be
+            # written (a folder, a read-only or full file system) is found now.
+            check_output(output, self.size_estimate(nodes.size, outputs), create=True)
+            journal_dir = Path(f"{output}.journal")
+            Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
+            if Journal.exists(journal_dir) and not resume:
+                raise UsageError(
+                    f"{journal_dir} holds the finished nodes of an interrupted run: "
+                    "continue with --resume, or delete it to start over"
+                )
+        runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+        nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool)
         result = self._with_nominal(self._recover(nodes, runs), nominal)
         if self.analysis is not None:
@@ -482,34 +504,48 @@ class Study:
                 warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
 
+    def _run_rounds(
+        self,
+        nodes: TensorGrid | NodeSet,
+        runs: RunResult,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        pool: Pool,
+        journal_dir: Path | None,
+        progress: bool | None,
+    ) -> tuple[TensorGrid | NodeSet, RunResult]:
+        """Run the further rounds an adaptive design asks for (its ``more`` method, see
+        :class:`~pcmb.designs.base.AdaptiveDesign`), each journaled in its own folder of the
+        journal; all nodes and runs so far."""
+        more = getattr(self.design, "more", None)
+        round_number = 0
+        while more is not None:
+            batch = more(nodes, runs.values, runs.status == Status.OK)
+            if batch is None:
+                break
+            round_number += 1
+            folder = None if journal_dir is None else journal_dir / f"round-{round_number}"
+            found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress)
+            if journal is not None:
+                journal.close()  # the folder goes with the whole journal at the end
+            nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
+        return nodes, runs
+
     def _run_nodes(
         self,
         nodes: TensorGrid | NodeSet,
         facts: ModelFacts,
         outputs: tuple[str, ...],
         pool: Pool,
-        output: str | Path | None,
-        resume: bool,
+        journal_dir: Path | None,
         progress: bool | None,
     ) -> tuple[RunResult, Journal | None]:
-        """Run every node, journaled when there is an output (the journal is returned, to be
-        removed once the result is written); raise by the failure policy."""
-        if self.analysis is not None:
-            self.analysis.check(self.times, outputs)
+        """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
+        be removed once the result is written); raise by the failure policy."""
         journal = None
         fresh_journal = False
-        if output is not None:
-            # Before any node runs and before a journal exists: an output that cannot be
-            # written (a folder, a read-only or full file system) is found now.
-            check_output(output, self.size_estimate(nodes.size, outputs), create=True)
-            journal_dir = Path(f"{output}.journal")
-            Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
+        if journal_dir is not None:
             fresh_journal = not Journal.exists(journal_dir)
-            if not fresh_journal and not resume:
-                raise UsageError(
-                    f"{journal_dir} holds the finished nodes of an interrupted run: "
-                    "continue with --resume, or delete it to start over"
-                )
             journal = Journal(
                 journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, self.times.size
             )

@@ -181,3 +181,12 @@ def random_nodes(
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
     return NodeSet(distributions, germ, _physical(distributions, germ))
+
+
+def join_nodes(first: TensorGrid | NodeSet, second: TensorGrid | NodeSet) -> NodeSet:
+    """The nodes of ``first`` followed by those of ``second`` (same inputs), as a NodeSet."""
+    return NodeSet(
+        first.distributions,
+        np.concatenate([first.nodes, second.nodes]),
+        np.concatenate([first.params, second.params]),
+    )

@@ -17,6 +17,7 @@ from pcmb.result import Design, WarningRecord
 
 __all__ = [
     "RECORDED_ONLY",
+    "AdaptiveDesign",
     "MethodSettings",
     "NodeDesign",
     "Recovery",
@@ -110,6 +111,22 @@ class NodeDesign(Protocol):
         IllPosedError
             No trustworthy expansion exists for the surviving nodes.
         """
+        ...
+
+
+class AdaptiveDesign(NodeDesign, Protocol):
+    """A design that runs in rounds: after each, it may ask for more nodes (sparse regression
+    to a tolerance, multi-element refinement). ``Study.run`` runs each round through the same
+    workers and journals it in its own folder of the journal, so a resumed run recomputes the
+    same rounds from the journaled values."""
+
+    def more(
+        self,
+        nodes: TensorGrid | NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> NodeSet | None:
+        """The next round's nodes, given every node run so far, or ``None`` when done."""
         ...
 
 

@@ -15,6 +15,7 @@ stops the run, as does a SIGINT the model swallowed (see :class:`_SigintWatch`).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import signal
@@ -41,7 +42,7 @@ from pcmb.run.progress import Progress
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
 
-__all__ = ["ModelFacts", "RunResult", "chunk_bounds", "describe_model", "run_nodes"]
+__all__ = ["ModelFacts", "RunResult", "chunk_bounds", "describe_model", "join_runs", "run_nodes"]
 
 TARGET_CHUNKS = 16
 MAX_CHUNK_SIZE = 256
@@ -75,6 +76,21 @@ class RunResult:
     failures: tuple[NodeFailure, ...]
     seconds: float
     resumed: int
+
+
+def join_runs(first: RunResult, second: RunResult) -> RunResult:
+    """The runs of ``first`` followed by those of ``second`` (its node indices shifted)."""
+    offset = first.status.size
+    return RunResult(
+        values={
+            name: np.concatenate([first.values[name], second.values[name]]) for name in first.values
+        },
+        status=np.concatenate([first.status, second.status]),
+        failures=first.failures
+        + tuple(dataclasses.replace(f, index=f.index + offset) for f in second.failures),
+        seconds=first.seconds + second.seconds,
+        resumed=first.resumed + second.resumed,
+    )
 
 
 # -- chunking --------------------------------------------------------------------------------
