@@ -2,7 +2,8 @@
 
 Exit codes come from the error kinds (:mod:`pcmb.errors`): 0 success; 2 invalid config,
 usage, missing dependency or result file; 3 the model failed at one or more nodes (policy
-abort); 1 anything unexpected; 128 + the signal's number when stopped by SIGINT (Ctrl-C),
+abort); 4 with ``--strict``, an expansion the diagnostics call unreliable (the file is
+written); 1 anything unexpected; 128 + the signal's number when stopped by SIGINT (Ctrl-C),
 SIGTERM or SIGHUP, after killing the workers (finished nodes stay in the journal). Logs and
 progress go to stderr; stdout carries only requested data. Heavy modules are imported inside
 the commands, so ``pcmb --help`` starts fast.
@@ -24,7 +25,14 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from pcmb.adapters.registry import ADAPTERS
-from pcmb.errors import EXIT_OK, EXIT_UNEXPECTED, PcmbError, PcmbWarning, UsageError
+from pcmb.errors import (
+    EXIT_OK,
+    EXIT_UNEXPECTED,
+    EXIT_UNRELIABLE,
+    PcmbError,
+    PcmbWarning,
+    UsageError,
+)
 from pcmb.run.backends import BACKENDS
 
 
@@ -45,6 +53,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
     run.add_argument("--resume", action="store_true", help="continue an interrupted run")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument(
+        "--strict",
+        action="store_true",
+        help=f"exit {EXIT_UNRELIABLE} when the diagnostics call an expansion unreliable",
+    )
 
     validate = commands.add_parser("validate", help="check a config without running anything")
     validate.add_argument("config")
@@ -98,7 +111,14 @@ def _summary(config) -> str:
     design = study.design.record()
     seed = f", seed {design.seed}" if design.seed is not None else ""
     lines.append(f"method   {design.kind}: {design.label}, {design.grid} nodes{seed}")
-    lines.append(f"runs     {nodes.size} model runs ({config.execution.on_failure} on failure)")
+    budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
+    rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
+    held_out = study.validation if design.basis is not None else 0
+    checks = f" + {held_out} held-out runs that check the expansion" if held_out else ""
+    lines.append(
+        f"runs     {nodes.size} model runs{rounds}{checks} "
+        f"({config.execution.on_failure} on failure)"
+    )
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
@@ -121,33 +141,14 @@ def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    from pcmb.run.backends import start_pool
+    from pcmb.run.backends import warm_up
 
     if args.jobs is not None and args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
-    # Workers start (and import what they need) while this process reads the config.
-    warm = start_pool("loky", args.jobs) if args.backend in (None, "loky") else None
-    try:
-        result, output = _run_study(args, argv, warm)
-    except BaseException:
-        if warm is not None:
-            warm.close(kill=True)
-        raise
-    if warm is not None:
-        warm.close()
-    from pcmb.designs import RECORDED_ONLY
+    if args.backend in (None, "loky"):
+        warm_up(args.jobs)  # workers start while this process reads the config
 
-    for warning in result.warnings:
-        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
-            _log(f"pcmb: warning: {warning}")
-    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
-    return EXIT_OK
-
-
-def _run_study(args: argparse.Namespace, argv: Sequence[str], warm):
-    """Load the config and run its study (on ``warm`` if it fits); the result and its file."""
     from pcmb.config.schema import load_config
-    from pcmb.run.backends import fits
     from pcmb.study import Study
 
     config = load_config(args.config)
@@ -161,12 +162,6 @@ def _run_study(args: argparse.Namespace, argv: Sequence[str], warm):
         study.backend = args.backend
         if args.backend != "dask":
             study.address = None  # a scheduler address only means something to dask
-    pool = None
-    if warm is not None:
-        if fits(warm, study.backend, study.jobs, study.address):
-            pool = warm
-        else:
-            warm.close(kill=True)  # the config asks for other workers: study.run starts them
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,
@@ -179,9 +174,18 @@ def _run_study(args: argparse.Namespace, argv: Sequence[str], warm):
             resume=args.resume,
             progress=False if args.quiet else None,
             provenance=provenance,
-            pool=pool,
         )
-    return result, output
+    from pcmb.designs import RECORDED_ONLY
+
+    for warning in result.warnings:
+        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
+            _log(f"pcmb: warning: {warning}")
+    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
+    unreliable = [name for name, found in result.diagnostics.items() if not found.reliable]
+    if args.strict and unreliable:
+        _log(f"pcmb: --strict: the expansion of {', '.join(unreliable)} is unreliable")
+        return EXIT_UNRELIABLE
+    return EXIT_OK
 
 
 def _load(path: str):
@@ -241,11 +245,34 @@ def _inspect(path: str) -> str:
     lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
     if result.multi_index is not None:
         lines.append(f"chaos    {result.multi_index.shape[0]} terms")
+    if result.partition is not None:
+        lines.append(f"elements {result.partition.describe(result.input_names)}")
     lines.append(f"{'output':<12}{'mean min':>12}{'mean max':>12}{'std min':>12}{'std max':>12}")
     for name in result.outputs:
         mean, std = result.mean(name), result.std(name)
         lines.append(
             f"{name:<12}{mean.min():>12.4g}{mean.max():>12.4g}{std.min():>12.4g}{std.max():>12.4g}"
+        )
+    for name, found in result.diagnostics.items():
+        held = (
+            f"held-out error up to {np.nanmax(found.holdout.error, initial=0.0):.3g} "
+            f"({found.holdout.count} runs)"
+            if found.holdout is not None
+            else "no held-out runs"
+        )
+        verdict = (
+            "reliable at every time"
+            if found.reliable
+            else f"UNRELIABLE from t = {found.failing_from:.4g}"
+        )
+        lines.append(
+            f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
+            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
+        )
+    for name, fit in result.regression.items():
+        lines.append(
+            f"fit      {name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
+            f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}"
         )
     if result.nominal_params:
         nominal = ", ".join(f"{k}={v:.6g}" for k, v in result.nominal_params.items())

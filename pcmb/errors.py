@@ -12,6 +12,8 @@ from typing import ClassVar
 
 #: Exit codes of the command line, by kind of outcome.
 EXIT_OK, EXIT_UNEXPECTED, EXIT_INVALID, EXIT_MODEL = 0, 1, 2, 3
+#: ``pcmb run --strict``: the result is written, but an expansion is called unreliable.
+EXIT_UNRELIABLE = 4
 
 
 class PcmbError(Exception):

@@ -121,6 +121,43 @@ def double_well(t: ArrayLike, x0: ArrayLike) -> Array:
     return np.where(x0 == 0, 0.0, x)
 
 
+def double_well_moments(t: ArrayLike, low: float, high: float) -> tuple[Array, Array]:
+    """Mean and standard deviation of the double well's x(t) for x0 ~ U[low, high].
+
+    With a = e^{−2t}, b = 1 − a and r(x0) = √(b x0² + a), x = x0 / r(x0), so
+    E[x] = (r(high) − r(low)) / (b (high − low)) = (low + high) / (r(low) + r(high)) (no
+    cancellation at small t) and, from x² = (1 − a / r²) / b,
+    E[x²] = [G(high) − G(low)] / (high − low), G(x0) = (x0 − √(a/b) arctan(x0 √(b/a))) / b,
+    whose cancellation for b < 1e-4 is avoided by its series x0³/(3a) − b x0⁵/(5a²) + b² x0⁷/(7a³).
+
+    Parameters
+    ----------
+    t : array_like, shape (T,)
+        Times, t >= 0.
+    low, high : float
+        The uniform's support.
+
+    Returns
+    -------
+    mean, std : ndarray, shape (T,)
+    """
+    a = np.exp(-2.0 * np.asarray(t, dtype=float))
+    b = -np.expm1(-2.0 * np.asarray(t, dtype=float))
+    roots = [np.sqrt(b * x0**2 + a) for x0 in (low, high)]
+    mean = (high + low) / (roots[0] + roots[1])
+    small = b < 1e-4
+    safe = np.where(small, 1.0, b)
+
+    def antiderivative(x0: float) -> Array:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            exact = (x0 - np.sqrt(a / safe) * np.arctan(x0 * np.sqrt(safe / a))) / safe
+        series = x0**3 / (3 * a) - b * x0**5 / (5 * a**2) + b**2 * x0**7 / (7 * a**3)
+        return np.where(small, series, exact)
+
+    square = (antiderivative(high) - antiderivative(low)) / (high - low)
+    return mean, np.sqrt(np.maximum(square - mean**2, 0.0))
+
+
 def damped_oscillator(t: ArrayLike, k: ArrayLike, c: ArrayLike, x0: ArrayLike = 1.0) -> Array:
     """Free underdamped oscillator x'' + c x' + k x = 0 from rest at x(0) = x0.
 

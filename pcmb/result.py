@@ -13,13 +13,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 
 if TYPE_CHECKING:
+    from pcmb.analysis.diagnostics import HeldOut, OutputDiagnostics
     from pcmb.analysis.statistics import Analysis
 
-__all__ = ["Design", "NodeFailure", "Status", "StudyResult", "WarningRecord"]
+__all__ = ["Design", "NodeFailure", "RegressionFit", "Status", "StudyResult", "WarningRecord"]
 
 
 class Status(enum.IntEnum):
@@ -47,12 +49,25 @@ class Design:
         Largest degree per input, germ order (``None`` without an expansion).
     level:
         Level of a sparse grid (``None`` otherwise).
+    rule:
+        The nested 1-D rule(s) of a sparse grid, resolved (``"gauss-patterson"``; one per
+        input family, comma-separated, when they differ), ``None`` otherwise.
     elements:
         Number of elements the germ domain is split into (1: one global expansion).
     samples, seed:
         Size and seed of a sampled design (``None`` for a grid).
     fit:
-        How coefficients come from the runs: ``"projection"``, ``"regression"`` or ``"none"``.
+        How coefficients come from the runs: ``"projection"``, ``"regression"`` (least
+        squares), ``"lars"``, ``"omp"`` (sparse regression), ``"ols"`` (least squares on
+        every candidate term) or ``"none"``.
+    q:
+        Hyperbolic exponent of sparse regression's candidate terms (``None`` otherwise).
+    tolerance, max_samples:
+        Sparse regression adding samples until its leave-one-out error meets ``tolerance``,
+        within ``max_samples`` runs in all (``None``: one round); ``samples`` is then the
+        number of runs made.
+
+    Records written before a field existed load with its default.
     """
 
     kind: str
@@ -64,6 +79,10 @@ class Design:
     samples: int | None = None
     seed: int | None = None
     fit: str = "none"
+    rule: str | None = None
+    q: float | None = None
+    tolerance: float | None = None
+    max_samples: int | None = None
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -80,7 +99,19 @@ class Design:
     @property
     def label(self) -> str:
         """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
-        ``lhs`` or ``lhs + chaos fit, total order 3``."""
+        ``lhs``, ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule
+        gauss-patterson`` or ``LARS on hyperbolic order 5, q=0.75, 256 samples``."""
+        if self.grid == "smolyak":
+            return f"Smolyak level {self.level}, rule {self.rule}"
+        if self.kind == "regression" and self.orders is not None:
+            shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
+            label = (
+                f"{self.fit.upper()} on {self.basis} order {max(self.orders)}{shape}, "
+                f"{self.samples} samples"
+            )
+            if self.tolerance is not None:
+                label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
+            return label
         if self.orders is None:
             return self.kind
         if self.basis == "tensor":
@@ -93,6 +124,26 @@ class Design:
         else:
             order = f"total order {max(self.orders)}"
         return f"chaos {order}" if self.fit == "projection" else f"{self.kind} + chaos fit, {order}"
+
+
+@dataclass(frozen=True)
+class RegressionFit:
+    """What sparse regression found for one output (stored under ``/outputs/<name>``).
+
+    Attributes
+    ----------
+    selected:
+        (S_k, n) the terms selected for this output (a subset of the expansion's terms).
+    loo:
+        (T,) corrected relative leave-one-out error per time (NaN where the output does not
+        vary).
+    condition:
+        Condition number of the information matrix of the selected terms.
+    """
+
+    selected: NDArray[np.int64]
+    loo: NDArray[np.float64]
+    condition: float
 
 
 @dataclass(frozen=True)
@@ -179,7 +230,8 @@ class StudyResult:
     values:
         Output name -> (N, T) model values (NaN rows for failed nodes).
     expansions:
-        Output name -> :class:`ChaosExpansion` (empty for sampling without a fit).
+        Output name -> :class:`ChaosExpansion` (empty for sampling without a fit), or
+        :class:`~pcmb.chaos.elements.PiecewiseExpansion` for multi-element collocation.
     failures:
         The failed nodes.
     warnings:
@@ -193,6 +245,18 @@ class StudyResult:
         failed: see ``warnings``).
     analysis:
         Quantile bands, PDFs and spectra (:func:`pcmb.analysis.statistics.analyse`).
+    regression:
+        Output name -> :class:`RegressionFit` (selected terms, leave-one-out error, condition
+        number) of a sparse regression study; empty for other methods.
+    node_elements:
+        (N,) the element of every node of a multi-element study, -1 for the nodes of
+        elements split by ``elements: auto`` (not used by the recovery); ``None`` otherwise.
+    diagnostics:
+        Output name -> how far its chaos expansion can be trusted, time by time
+        (:class:`pcmb.analysis.diagnostics.OutputDiagnostics`: ``failing_from``, ``decay``,
+        ``holdout``...); empty without an expansion.
+    held_out:
+        The held-out runs that checked the expansions (``None``: none were made).
     """
 
     name: str
@@ -212,6 +276,10 @@ class StudyResult:
     nominal_params: dict[str, float] = field(default_factory=dict)
     nominal: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     analysis: Analysis | None = None
+    regression: dict[str, RegressionFit] = field(default_factory=dict)
+    node_elements: NDArray[np.intp] | None = None
+    diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
+    held_out: HeldOut | None = None
 
     @property
     def method(self) -> str:
@@ -230,6 +298,12 @@ class StudyResult:
     def node_params(self) -> dict[str, NDArray[np.float64]]:
         """Input name -> (N,) physical value at every node."""
         return {name: self.params[:, k] for k, name in enumerate(self.input_names)}
+
+    @property
+    def partition(self) -> Partition | None:
+        """The elements of a multi-element study (``None`` otherwise)."""
+        first = next(iter(self.expansions.values()), None)
+        return first.partition if isinstance(first, PiecewiseExpansion) else None
 
     @property
     def multi_index(self) -> NDArray[np.int64] | None:

@@ -20,11 +20,13 @@ from typing import Any
 import h5py
 import numpy as np
 
+from pcmb.analysis.diagnostics import CODES, HeldOut, Holdout, OutputDiagnostics
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
+from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import from_description
 from pcmb.errors import ResultFileError
-from pcmb.result import Design, NodeFailure, StudyResult, WarningRecord
+from pcmb.result import Design, NodeFailure, RegressionFit, Status, StudyResult, WarningRecord
 from pcmb.run.files import replace_durably
 from pcmb.run.output import write_error
 
@@ -137,6 +139,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     time_ = _scale(file, "time", result.times)
     node = _scale(file, "node", np.arange(n_nodes))
     input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
+    _write_diagnostics(file, result, time_, input_)
 
     inputs = file.create_group("inputs")
     inputs.attrs["names"] = json.dumps(list(result.input_names))
@@ -149,6 +152,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     _attach(nodes.create_dataset("status", data=result.status.astype(np.int8)), node)
     if result.weights is not None:
         _attach(nodes.create_dataset("weights", data=result.weights), node)
+    _write_elements(file, result, node, input_)
 
     index = result.multi_index
     term = None
@@ -170,7 +174,8 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
         _attach(group.create_dataset("std", data=result.std(name)), time_)
         expansion = result.expansions.get(name)
         if expansion is not None and term is not None:
-            _attach(group.create_dataset("coefficients", data=expansion.coefficients), term, time_)
+            coefficients = group.create_dataset("coefficients", data=expansion.coefficients)
+            _attach(coefficients, *_element_scale(file, expansion), term, time_)
             _attach(
                 group.create_dataset("sobol_first", data=expansion.sobol_first()), input_, time_
             )
@@ -179,9 +184,60 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
             )
         if name in result.nominal:
             _attach(group.create_dataset("nominal", data=result.nominal[name]), time_)
+        if name in result.regression:
+            _write_regression(group, result.regression[name], time_, input_)
         if analysis is not None:
             unit = analysis.settings.units.get(name, "")
             _write_analysis(file, group, analysis.outputs[name], time_, unit)
+
+
+def _write_regression(
+    group: h5py.Group, fit: RegressionFit, time_: h5py.Dataset, input_: h5py.Dataset
+) -> None:
+    """A sparse regression fit of one output: ``loo`` (T,), ``selected`` (S_k, n), attribute
+    ``condition``."""
+    _attach(group.create_dataset("loo", data=fit.loo), time_)
+    selected = group.create_dataset("selected", data=fit.selected)
+    selected.dims[1].attach_scale(input_)
+    group.attrs["condition"] = fit.condition
+
+
+def _read_regression(group: h5py.Group) -> RegressionFit | None:
+    if "loo" not in group:
+        return None
+    return RegressionFit(group["selected"][()], group["loo"][()], float(group.attrs["condition"]))
+
+
+def _write_elements(
+    file: h5py.File, result: StudyResult, node: h5py.Dataset, input_: h5py.Dataset
+) -> None:
+    """A multi-element study's ``/elements/bounds`` (E, n, 2) in physical units,
+    ``/elements/probability`` (E,) and ``/nodes/element`` (N,), -1 for nodes of split
+    elements; its coefficients are (E, S, T)."""
+    partition = result.partition
+    if partition is None:
+        return
+    element = _scale(file, "element", np.arange(partition.size))
+    group = file.create_group("elements")
+    _attach(group.create_dataset("bounds", data=partition.bounds), element, input_)
+    _attach(group.create_dataset("probability", data=partition.probability), element)
+    if result.node_elements is not None:
+        _attach(file.create_dataset("nodes/element", data=result.node_elements), node)
+
+
+def _element_scale(file: h5py.File, expansion: ChaosExpansion) -> tuple[h5py.Dataset, ...]:
+    """The ``element`` axis of a piecewise expansion's coefficients (none otherwise)."""
+    return (file["element"],) if isinstance(expansion, PiecewiseExpansion) else ()
+
+
+def _read_expansion(
+    group: h5py.Group, index: np.ndarray, partition: Partition | None, dists: tuple, names: tuple
+) -> ChaosExpansion | PiecewiseExpansion:
+    """An output's expansion: piecewise on ``partition`` (from ``/elements``) if given."""
+    coefficients = group["coefficients"][()]
+    if partition is None:
+        return ChaosExpansion(coefficients, index, dists, names)
+    return PiecewiseExpansion(partition, coefficients, index, names)
 
 
 def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> None:
@@ -192,6 +248,82 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
         records = [dataclasses.asdict(w) for w in warnings if w.output == output]
         owner = group if output is None else group.require_group(output)
         owner.attrs["warnings"] = json.dumps(records)
+
+
+#: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
+_DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimate": "estimate"}
+
+
+def _write_diagnostics(
+    file: h5py.File, result: StudyResult, time_: h5py.Dataset, input_: h5py.Dataset
+) -> None:
+    """/diagnostics/<output>: per-time indicators and the verdict; /validation: the held-out
+    runs (germ, params, status, and values per output)."""
+    for name, found in result.diagnostics.items():
+        group = file["diagnostics"].require_group(name)
+        for key, field in _DIAGNOSTIC_ARRAYS.items():
+            _attach(group.create_dataset(key, data=getattr(found, field)), time_)
+        if found.holdout is not None:
+            _attach(group.create_dataset("holdout_error", data=found.holdout.error), time_)
+            _attach(group.create_dataset("holdout_upper", data=found.holdout.upper), time_)
+            group.attrs["holdout_count"] = found.holdout.count
+            group.attrs["confidence"] = found.holdout.confidence
+        group.attrs["failing_from"] = found.failing_from
+        group.attrs["tolerance"] = found.tolerance
+        group.attrs["scale"] = found.scale
+    held_out = result.held_out
+    if held_out is None:
+        return
+    group = file.create_group("validation")
+    group.attrs["seed"] = held_out.seed
+    run = _scale(file, "validation_run", np.arange(held_out.germ.shape[0]))
+    _attach(group.create_dataset("germ", data=held_out.germ), run, input_)
+    _attach(group.create_dataset("params", data=held_out.params), run, input_)
+    status = np.where(held_out.ok, Status.OK, Status.FAILED).astype(np.int8)
+    _attach(group.create_dataset("status", data=status), run)
+    for name, values in held_out.values.items():
+        _attach(group.create_dataset(f"{name}/values", data=values), run, time_)
+
+
+def _read_diagnostics(
+    file: h5py.File, warnings: tuple[WarningRecord, ...]
+) -> tuple[dict[str, OutputDiagnostics], HeldOut | None]:
+    found: dict[str, OutputDiagnostics] = {}
+    for name, group in file.get("diagnostics", {}).items():
+        if not isinstance(group, h5py.Group) or "decay" not in group:
+            continue
+        attrs = group.attrs
+        holdout = None
+        if "holdout_error" in group:
+            holdout = Holdout(
+                group["holdout_error"][()],
+                group["holdout_upper"][()],
+                int(attrs["holdout_count"]),
+                float(attrs["confidence"]),
+            )
+        arrays = {field: group[key][()] for key, field in _DIAGNOSTIC_ARRAYS.items()}
+        found[name] = OutputDiagnostics(
+            output=name,
+            scale=float(attrs["scale"]),
+            holdout=holdout,
+            tolerance=float(attrs["tolerance"]),
+            failing_from=float(attrs["failing_from"]),
+            warnings=tuple(w for w in warnings if w.output == name and w.code in CODES),
+            **arrays,
+        )
+    if "validation" not in file:
+        return found, None
+    group = file["validation"]
+    held_out = HeldOut(
+        seed=int(group.attrs["seed"]),
+        germ=group["germ"][()],
+        params=group["params"][()],
+        values={
+            name: group[name]["values"][()] for name in group if isinstance(group[name], h5py.Group)
+        },
+        ok=group["status"][()] == Status.OK,
+    )
+    return found, held_out
 
 
 def _read_warnings(file: h5py.File) -> tuple[WarningRecord, ...]:
@@ -333,21 +465,27 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             from_description(d) for d in json.loads(_text(file["inputs"].attrs["distributions"]))
         )
         index = file["basis/multi_index"][()] if "basis" in file else None
+        partition = Partition(dists, file["elements/bounds"][()]) if "elements" in file else None
         values: dict[str, np.ndarray] = {}
         expansions: dict[str, ChaosExpansion] = {}
         nominal: dict[str, np.ndarray] = {}
+        regression: dict[str, RegressionFit] = {}
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
         for name in outputs:
             group = file["outputs"][name]
             values[name] = group["values"][()]
             if "coefficients" in group and index is not None:
-                expansions[name] = ChaosExpansion(group["coefficients"][()], index, dists, names)
+                expansions[name] = _read_expansion(group, index, partition, dists, names)
             if "nominal" in group:
                 nominal[name] = group["nominal"][()]
+            if (fit := _read_regression(group)) is not None:
+                regression[name] = fit
         failures = tuple(
             NodeFailure(f["index"], f["params"], f["message"])
             for f in json.loads(_text(attrs.get("failures", "[]")))
         )
+        warnings = _read_warnings(file)
+        diagnostics, held_out = _read_diagnostics(file, warnings)
         return StudyResult(
             name=_text(attrs["name"]),
             design=_read_design(file, index),
@@ -361,9 +499,13 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             values=values,
             expansions=expansions,
             failures=failures,
-            warnings=_read_warnings(file),
+            warnings=warnings,
             seconds=float(attrs.get("seconds", 0.0)),
             nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
             nominal=nominal,
             analysis=_read_analysis(file, outputs),
+            regression=regression,
+            node_elements=file["nodes/element"][()] if "element" in file["nodes"] else None,
+            diagnostics=diagnostics,
+            held_out=held_out,
         )

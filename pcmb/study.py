@@ -19,9 +19,16 @@ from numpy.typing import ArrayLike
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
+from pcmb.analysis.diagnostics import (
+    HELD_OUT_SEED,
+    TOLERANCE,
+    VALIDATION,
+    HeldOut,
+    diagnose_all,
+)
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.errors import (
     ConfigProblem,
@@ -84,12 +91,17 @@ class Study:
     order:
         Chaos order, one for all inputs or a mapping input -> order.
     basis:
-        ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P).
+        ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P);
+        for regression ``"total"`` or ``"hyperbolic"`` candidates (default: tensor for
+        collocation, hyperbolic for regression).
     method:
-        A registered ``method.kind`` (:data:`pcmb.designs.DESIGNS`): ``"collocation"``
-        (tensor Gauss nodes) or a sampling method ``"montecarlo"``, ``"lhs"``, ``"sobol"``
-        (with ``samples`` and ``seed``; ``fit="regression"`` adds a least-squares chaos fit
-        of total order ``order``).
+        A ``method.kind`` (:data:`pcmb.designs.METHOD_KINDS`): ``"collocation"`` (tensor
+        Gauss nodes; ``grid="smolyak"`` with ``level`` and ``rule``: a Smolyak sparse grid),
+        ``"regression"`` (sparse regression: ``samples``, ``sampling``, ``selection``,
+        ``basis``, ``q``, ``order``, ``seed``, optionally ``tolerance`` and ``max_samples``)
+        or a sampling method ``"montecarlo"``, ``"lhs"``, ``"sobol"`` (with ``samples`` and
+        ``seed``; ``fit="regression"`` adds a least-squares chaos fit of total order
+        ``order``). The keys are those of the config's ``method:`` (``docs/config.md``).
     outputs:
         Outputs to keep (default: all the model declares).
     params:
@@ -109,6 +121,13 @@ class Study:
     analysis:
         Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
         can still be computed later with :func:`pcmb.analysis.statistics.analyse`).
+    validation:
+        Held-out runs at inputs drawn from their distribution (seed ``seed`` + 7919) that
+        check a chaos expansion (``method.validation``; 0: none; see
+        :mod:`pcmb.analysis.diagnostics`).
+    diagnostics_tolerance:
+        Accepted error of an expansion, relative to the output's largest standard deviation
+        (``diagnostics.tolerance``): the diagnostics' verdict.
 
     Raises
     ------
@@ -151,6 +170,8 @@ class Study:
         retries: int = 1,
         nominal: Mapping[str, float] | None = None,
         analysis: AnalysisSettings | None = None,
+        validation: int = VALIDATION,
+        diagnostics_tolerance: float = TOLERANCE,
     ):
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
@@ -190,6 +211,7 @@ class Study:
         self.outputs = _tuple(outputs)
         self.nominal = dict(nominal or {})
         self.analysis = analysis
+        self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
@@ -270,6 +292,8 @@ class Study:
                 if name in config.model.params
             },
             analysis=config.analysis_settings,
+            validation=method.validation,
+            diagnostics_tolerance=config.diagnostics.tolerance,
         )
         study.fingerprint_extra = _run_settings(config)
         return study
@@ -308,6 +332,8 @@ class Study:
             "params": self.params,
             "nominal": self.nominal,
             "analysis": self.analysis,
+            "validation": self.validation,
+            "diagnostics_tolerance": self.diagnostics_tolerance,
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
@@ -443,8 +469,8 @@ class Study:
         provenance:
             Extra attributes for the file (config text, command line).
         pool:
-            Workers of the study's backend to run on, already started (the command line
-            starts them while it reads the config); default: started and stopped here.
+            Workers of the study's backend to run on; default: those of
+            :func:`pcmb.run.backends.open_pool`.
 
         Warns
         -----
@@ -489,8 +515,9 @@ class Study:
                 )
         runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
         nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
+        held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool)
-        result = self._with_nominal(self._recover(nodes, runs), nominal)
+        result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -594,6 +621,45 @@ class Study:
             )
         return runs, journal
 
+    def _run_held_out(
+        self,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        pool: Pool,
+        journal_dir: Path | None,
+        progress: bool | None,
+    ) -> HeldOut | None:
+        """The held-out runs that check a chaos expansion (none for plain sampling), journaled
+        in the journal's ``validation`` folder, under the failure policy."""
+        if not self.validation or self.design.record().basis is None:
+            return None
+        seed = self.seed + HELD_OUT_SEED
+        batch = random_nodes(tuple(self.inputs.values()), self.validation, "montecarlo", seed)
+        folder = None if journal_dir is None else journal_dir / "validation"
+        found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress)
+        if journal is not None:
+            journal.close()  # the folder goes with the whole journal at the end
+        return HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+
+    def _diagnosed(self, result: StudyResult, held_out: HeldOut | None) -> StudyResult:
+        """The result with its diagnostics (per output) and their warning records."""
+        found = diagnose_all(
+            result.expansions,
+            result.germ,
+            result.values,
+            result.status == Status.OK,
+            result.times,
+            held_out,
+            self.diagnostics_tolerance,
+        )
+        records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
+        return dataclasses.replace(
+            result,
+            diagnostics=found,
+            held_out=held_out,
+            warnings=(*result.warnings, *records),
+        )
+
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
         """The deterministic run at the nominal parameters (not part of any statistic)."""
         return run_nodes(
@@ -655,23 +721,27 @@ class Study:
             failures=runs.failures,
             warnings=(*warnings, *recovery.warnings),
             seconds=runs.seconds,
+            regression=recovery.regression,
+            node_elements=recovery.node_elements,
         )
 
 
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
 _EXECUTION_ONLY = frozenset({"jobs", "backend", "address", "on_failure", "retries", "timeout"})
 #: Top-level config keys that cannot change a node's values.
-_NOT_RUN = frozenset({"name", "analysis", "output", "execution"})
+_NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution"})
 
 
 def _run_settings(config: StudyConfig) -> str:
     """The run-relevant part of a validated config, as JSON: the ``model`` section, ``time``,
     ``inputs``, ``method`` and ``execution.chunk_size`` (and any key added later that is not
     known to be irrelevant). Its text is not used, so comments, layout and the settings that
-    cannot change node values (name, analysis, output, jobs, backend, address, on_failure,
-    retries) do not invalidate a journal."""
+    cannot change node values (name, analysis, diagnostics, method.validation, output, jobs,
+    backend, address, on_failure, retries, timeout) do not invalidate a journal."""
     data = config.model_dump(mode="json", exclude=set(_NOT_RUN))
     data["execution"] = config.execution.model_dump(mode="json", exclude=set(_EXECUTION_ONLY))
+    # The held-out runs have their own journal folder, fingerprinted by their own nodes.
+    data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
 
 

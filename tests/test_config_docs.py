@@ -15,7 +15,7 @@ import pytest
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.config import config_json_schema, load_config
 from pcmb.config.reference import EXAMPLE, config_reference, undescribed_keys
-from pcmb.designs import DESIGNS
+from pcmb.designs import METHOD_KINDS
 from pcmb.run.backends import BACKENDS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,7 +143,7 @@ def test_every_registered_kind_is_listed(page):
     method_kinds = set(_enum(schema, "MethodSpec", "kind"))
     backends = set(_enum(schema, "ExecutionSpec", "backend"))
     assert model_kinds == set(ADAPTERS)
-    assert method_kinds == set(DESIGNS)
+    assert method_kinds == set(METHOD_KINDS)
     assert backends and backends <= set(BACKENDS)
     assert dist_kinds
     for kind in ADAPTERS:
@@ -151,7 +151,7 @@ def test_every_registered_kind_is_listed(page):
     for dist in dist_kinds:
         assert f"`inputs.<name>` with `dist: {dist}`" in page
     rows = {line.split(" | ")[0]: line for line in page.splitlines() if line.startswith("| `")}
-    for kind in DESIGNS:
+    for kind in METHOD_KINDS:
         assert f"`{kind}`" in rows["| `method.kind`"]
     for backend in backends:
         assert f"`{backend}`" in rows["| `execution.backend`"]
@@ -170,7 +170,7 @@ def test_kinds_come_from_the_schema_not_from_the_generator():
         if isinstance(node, ast.Constant) and isinstance(node.value, str)
     }
     dists = config_json_schema()["properties"]["inputs"]["additionalProperties"]["discriminator"]
-    kinds = {*DESIGNS, *BACKENDS, *ADAPTERS, *dists["mapping"]}
+    kinds = {*METHOD_KINDS, *BACKENDS, *ADAPTERS, *dists["mapping"]}
     assert not kinds & texts
 
 

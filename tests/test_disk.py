@@ -72,7 +72,7 @@ def write_config(folder: Path, output: Path, points: int = N_TIMES) -> Path:
             inputs:
               a: {{dist: uniform, low: 1.0, high: 3.0}}
               b: {{dist: normal, mean: 0.0, std: 1.0}}
-            method: {{kind: collocation, order: 7}}
+            method: {{kind: collocation, order: 7, validation: 0}}  # counts runs: no held-out ones
             execution: {{jobs: 1}}
             output: {output}
             """

@@ -452,7 +452,7 @@ class _ScriptedPool:
 
     def submit(self, fn, *args) -> Future:
         future: Future = Future()
-        if self.victim in args[2]["a"] and self.deaths > 0:
+        if self.victim in args[1]["a"] and self.deaths > 0:
             self.deaths -= 1
             for other, timer in self.in_flight:
                 timer.cancel()
@@ -485,7 +485,7 @@ def test_isolation_names_the_killer_and_retries_it(retries: int, survives: bool)
     params = ramp_params(24)
     params["a"][13] = 13.0  # a unique value to recognise the victim's batches
     campaign = executor._Campaign(
-        "scripted", em.Ramp, params, TIMES, ("y", "batch_size"), retries, None
+        executor._factory(em.Ramp), params, TIMES, ("y", "batch_size"), retries, None
     )
     tasks = campaign.plan(chunk_bounds(24))
     # Deaths: chunk [12, 14) in the pool, that chunk alone, node 13 alone; then it survives.

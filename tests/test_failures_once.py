@@ -210,7 +210,7 @@ def test_abort_keeps_finished_chunks_and_resume_runs_the_rest(tmp_path: Path, ca
             inputs:
               a: {{dist: uniform, low: 1.0, high: 3.0}}
               b: {{dist: normal, mean: 0.0, std: 1.0}}
-            method: {{kind: collocation, order: 7}}
+            method: {{kind: collocation, order: 7, validation: 0}}  # counts runs: no held-out ones
             execution: {{jobs: 1, chunk_size: 4, on_failure: abort}}
             output: {out}
             """

@@ -45,14 +45,16 @@ import numpy as np
 class Faulty:
     """y = a t; misbehaves (``how``) when its batch holds a node with low < a < high.
 
-    ``how``: "exit" (sys.exit(code)), "os_exit" (os._exit(code)), "segfault", or "hang"
-    (an endless loop). Each call sleeps ``sleep`` s per node; the process that misbehaves
-    writes its pid to ``marker``.
+    ``how``: "exit" (sys.exit(code)), "os_exit" (os._exit(code)), "segfault", "hang" (an
+    endless loop), or "segfault-on-build" (in the constructor, whatever the nodes). Each call
+    sleeps ``sleep`` s per node; the process that misbehaves writes its pid to ``marker``.
     """
 
     outputs = ("y",)
 
     def __init__(self, a=0.3, low=2.0, high=2.0, how="exit", code=0, sleep=0.0, marker=""):
+        if how == "segfault-on-build":
+            ctypes.string_at(0)
         self.parameters = {"a": a}
         self.low, self.high, self.how, self.code = low, high, how, code
         self.sleep, self.marker = sleep, marker
@@ -122,7 +124,7 @@ def _study(
             time: {{start: 0.0, stop: 1.0, points: 5}}
             inputs:
               a: {{dist: uniform, low: 0.0, high: 1.0}}
-            method: {{kind: collocation, order: {ORDER}}}
+            method: {{kind: collocation, order: {ORDER}, validation: 0}}  # faults at chosen nodes
             execution: {{jobs: {jobs}, backend: loky, on_failure: {policy}{limit}}}
             output: {str(folder / "out" / "result.h5")!r}
             """
@@ -198,6 +200,190 @@ def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
     np.testing.assert_allclose(result.std("y"), result.times / np.sqrt(12.0), atol=1e-12)
     _check_where_it_ran(tmp_path, pid)
+
+
+# -- crashes and hangs: the worker dies, pcmb goes on ----------------------------------------
+
+CRASHES = {"segfault": "worker process died (signal 11, SIGSEGV)", "os_exit": "exit code 7"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("jobs", [1, 2])
+@pytest.mark.parametrize("index", [FIRST, MIDDLE], ids=["first", "middle"])
+@pytest.mark.parametrize("how", sorted(CRASHES))
+def test_a_crash_costs_only_its_node(tmp_path: Path, how: str, index: int, jobs: int) -> None:
+    config = _study(tmp_path, index, 7, jobs, "abort", how=how)
+    returncode, stderr, pid = _run(config)
+    assert returncode == 3, stderr
+    assert f"node {index} (a={NODES[index]:.6g}): " in stderr and CRASHES[how] in stderr
+    assert "Traceback" not in stderr
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
+    _check_where_it_ran(tmp_path, pid)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("policy", "how"), [("regress", "segfault"), ("retry", "os_exit")])
+def test_a_crash_follows_the_failure_policy(tmp_path: Path, policy: str, how: str) -> None:
+    config = _study(tmp_path, MIDDLE, 7, 2, policy, how=how)
+    returncode, stderr, pid = _run(config)
+    runs = (tmp_path / "marker").read_text().split()
+    if policy == "regress":  # a complete file without the node
+        assert returncode == 0, stderr
+        result = pcmb.load(tmp_path / "out" / "result.h5")
+        assert np.flatnonzero(result.status == Status.FAILED).tolist() == [MIDDLE]
+        assert CRASHES[how] in result.failures[0].message
+        np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
+    else:  # retries: 1, then abort; run in the pool, alone, and once more
+        assert returncode == 3, stderr
+        assert CRASHES[how] in stderr
+        assert len(runs) == 3
+    assert pid not in {int(r) for r in runs}
+
+
+@pytest.mark.slow
+def test_a_crash_in_the_nominal_run_is_a_warning(tmp_path: Path) -> None:
+    config = _study(tmp_path, NOMINAL, 7, 2, "abort", how="segfault")
+    returncode, stderr, pid = _run(config)
+    assert returncode == 0, stderr
+    assert "the nominal run failed, so none is stored: worker process died (signal 11" in stderr
+    result = pcmb.load(tmp_path / "out" / "result.h5")
+    assert "nominal-failed" in {w.code for w in result.warnings}
+    assert (result.status == Status.OK).all()
+    _check_where_it_ran(tmp_path, pid)
+
+
+@pytest.mark.slow
+def test_a_crash_while_building_the_model_is_a_model_error(tmp_path: Path) -> None:
+    config = _study(tmp_path, None, 7, 2, "abort", how="segfault-on-build")
+    for command in ("validate", "run"):
+        process = subprocess.run(
+            [sys.executable, "-m", "pcmb.cli", command, str(config)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        assert process.returncode == 3, process.stderr
+        assert "could not build the model: worker process died (signal 11" in process.stderr
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+@pytest.mark.slow
+def test_a_hang_past_the_timeout_is_a_failed_node(tmp_path: Path) -> None:
+    config = _study(tmp_path, MIDDLE, 0, 2, "regress", how="hang", timeout=2.0)
+    start = time.monotonic()
+    returncode, stderr, _ = _run(config)
+    assert returncode == 0, stderr
+    assert time.monotonic() - start < 60
+    result = pcmb.load(tmp_path / "out" / "result.h5")
+    assert np.flatnonzero(result.status == Status.FAILED).tolist() == [MIDDLE]
+    assert "timed out after 2 s (2 s per node; its worker process was killed)" in (
+        result.failures[0].message
+    )
+    assert len((tmp_path / "marker").read_text().split()) == 1  # known to hang: not run again
+
+
+# -- stop signals: nothing left running, nothing lost ----------------------------------------
+
+
+def _session_processes(session: int) -> list[int]:
+    """Pids of the live processes of a session (zombies excluded)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            if int(fields[3]) == session and fields[0] != "Z":
+                found.append(int(stat.parent.name))
+    return found
+
+
+def _no_survivors(session: int) -> None:
+    deadline = time.monotonic() + 10
+    while (alive := _session_processes(session)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert alive == [], f"processes of the run still alive: {alive}"
+
+
+STOPS = {
+    "sigint-group": (signal.SIGINT, True, 130, "interrupted (SIGINT)"),
+    "sigterm": (signal.SIGTERM, False, 143, "stopped by SIGTERM"),
+    "sighup": (signal.SIGHUP, False, 129, "stopped by SIGHUP"),
+    "sigkill": (signal.SIGKILL, False, -9, ""),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads processes from /proc (Linux)")
+@pytest.mark.parametrize("stop", sorted(STOPS))
+def test_a_stopped_run_leaves_nothing_behind_and_resumes_to_the_same_bits(
+    tmp_path: Path, stop: str
+) -> None:
+    number, group, code, words = STOPS[stop]
+    (tmp_path / "whole").mkdir()
+    reference = _study(tmp_path / "whole", None, 0, 2, "abort", sleep=0.0)
+    assert _run(reference)[0] == 0
+    config = _study(tmp_path, None, 0, 2, "abort", sleep=SLEEP)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own session: the test finds every process it started
+    )
+    journal = tmp_path / "out" / "result.h5.journal"
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(journal.glob("record-*.npz"))) < 2:
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline, "no node finished in time"
+            time.sleep(0.02)
+        (os.killpg if group else os.kill)(process.pid, number)
+        _, stderr = process.communicate(timeout=60)
+        assert process.returncode == code, stderr
+        assert words in stderr
+        _no_survivors(process.pid)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
+    resumed = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet", "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    whole = pcmb.load(tmp_path / "whole" / "out" / "result.h5")
+    again = pcmb.load(tmp_path / "out" / "result.h5")
+    np.testing.assert_array_equal(again.values["y"], whole.values["y"])
+    np.testing.assert_array_equal(
+        again.expansions["y"].coefficients, whole.expansions["y"].coefficients
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads processes from /proc (Linux)")
+def test_sigint_to_pcmb_alone_stops_it_despite_a_stuck_worker(tmp_path: Path) -> None:
+    config = _study(tmp_path, MIDDLE, 0, 2, "abort", how="hang")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "marker").exists():  # the worker is stuck in its endless loop
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline, "the hanging node did not start in time"
+            time.sleep(0.02)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=30)
+        assert process.returncode == 130, stderr
+        _no_survivors(process.pid)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
 
 
 @pytest.mark.slow

@@ -3,9 +3,6 @@ multi-element collocation design and its adaptive refinement, against exact refe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
-
 import numpy as np
 import pytest
 import scipy.special as sp
@@ -18,25 +15,21 @@ from pcmb.chaos.elements import Partition
 from pcmb.chaos.polynomials import Jacobi, Legendre
 from pcmb.chaos.truncated import Conditional, TruncatedFamily
 from pcmb.designs.base import MethodSettings
-from pcmb.designs.multi_element import MultiElementCollocation, refine
-from pcmb.references import double_well
+from pcmb.designs.multi_element import (
+    THRESHOLD,
+    MultiElementCollocation,
+    decay_scores,
+    refine,
+)
+from pcmb.references import double_well, double_well_moments
 from pcmb.result import Design
 
 #: Round-off of recurrences and statistics built from a few hundred double-precision sums.
 ROUND_OFF = 1e-12
 
 
-@dataclass(frozen=True)
-class Settings(MethodSettings):
-    """``method:`` settings with the multi-element keys (the schema's are added separately)."""
-
-    elements: Any = None
-    max_elements: int = 16
-    element_threshold: float = 1e-4
-
-
 def _design(inputs, orders, partition=None, **keys):
-    settings = Settings("multi_element", orders=orders, **keys)
+    settings = MethodSettings("collocation", orders=orders, **keys)
     return MultiElementCollocation(inputs, settings, partition)
 
 
@@ -221,8 +214,16 @@ def test_the_design_contract_and_the_element_files():
     assert Design.from_description(record.describe()) == record
     with pytest.raises(ValueError, match=r"method\.elements\.x"):
         _design(JUMP_INPUTS, (2, 1), elements={"x": [1.5]})
-    with pytest.raises(ValueError, match=r"method\.elements: unknown"):
+    with pytest.raises(ValueError, match=r"method\.elements\.q: names no input"):
         _design(JUMP_INPUTS, (2, 1), elements={"q": [0.0]})
+    with pytest.raises(ValueError, match=r"method\.elements\.x: .*strictly increasing"):
+        _design(JUMP_INPUTS, (2, 1), elements={"x": [0.5, -0.5]})
+    with pytest.raises(ValueError, match=r"method\.elements\.x: .*strictly increasing"):
+        _design(JUMP_INPUTS, (2, 1), elements={"x": [0.5, 0.5]})
+    with pytest.raises(ValueError, match=r"method\.max_elements: must be >= 1"):
+        _design(JUMP_INPUTS, (2, 1), elements="auto", max_elements=0)
+    # Fixed elements run in one round.
+    assert design.more(nodes, {"y": _jump(nodes.params)}, np.ones(nodes.size, bool)) is None
 
 
 def test_failed_nodes_are_refitted_in_their_element():
@@ -240,26 +241,21 @@ TIMES = np.linspace(0.0, 4.0, 41)
 X0 = {"x0": pcmb.Uniform(-0.625, 0.375)}
 
 
-def _double_well_mean():
-    """E[x(t)] by Gauss-Legendre on each side of the jump at 0 (analytic there)."""
-    t, w = sp.roots_legendre(400)
-    mean = 0.0
-    for low, high in ((-0.625, 0.0), (0.0, 0.375)):
-        x0 = 0.5 * (low + high) + 0.5 * (high - low) * t
-        mean = mean + (0.5 * (high - low) * w / 1.0) @ double_well(TIMES, x0)
-    return mean
-
-
-def _double_well_error(design):
-    expansion = _recover(design, lambda p: double_well(TIMES, p[:, 0])).expansions["y"]
-    return np.abs(expansion.mean() - _double_well_mean()).max()
+def _double_well(design):
+    return _recover(design, lambda p: double_well(TIMES, p[:, 0])).expansions["y"]
 
 
 def test_two_elements_at_zero_beat_one_element_tenfold_on_the_double_well():
     # 16 runs each: one element of order 15, two of order 7 (measured ratio ~87).
-    one, two = _design(X0, (15,)), _design(X0, (7,), elements={"x0": [0.0]})
+    one, two = _design(X0, (15,), elements={}), _design(X0, (7,), elements={"x0": [0.0]})
     assert one.runs == two.runs == 16
-    assert _double_well_error(two) * 10 <= _double_well_error(one)
+    exact = double_well_moments(TIMES, -0.625, 0.375)[0]
+    errors = [np.abs(_double_well(d).mean() - exact).max() for d in (one, two)]
+    assert errors[1] * 10 <= errors[0]
+    # The one element is flagged: its tail holds far more than the threshold (it would take
+    # more elements to clear it).
+    scores, _ = decay_scores(one.partition, {"y": _double_well(one).coefficients}, one.multi_index)
+    assert scores[0] > 10 * THRESHOLD
 
 
 # -- adaptive refinement -----------------------------------------------------------------------
@@ -271,26 +267,32 @@ def _run(response):
 
 def test_auto_refinement_finds_the_jump_and_splits_only_its_input():
     design = _design(JUMP_INPUTS, (4, 4), elements="auto", max_elements=8)
-    found = refine(design, _run(_jump))
-    edges = found.design.partition.edges
-    assert C in edges[0] and not found.exhausted
+    assert design.runs == 25 and design.budget == 15 * 25
+    nodes, values = refine(design, _run(_jump))
+    edges = design.partition.edges
+    assert C in edges[0] and not design.exhausted
     assert np.array_equal(edges[1], [-np.inf, np.inf])  # smooth (quadratic) in z: never cut
-    nodes = found.design.nodes()
-    np.testing.assert_array_equal(found.values["y"], _jump(nodes.params))
-    recovery = found.design.recover(nodes, found.values, np.ones(nodes.size, dtype=bool))
+    np.testing.assert_array_equal(values["y"], _jump(nodes.params))
+    # The nodes of split elements leave the recovery: element -1, weight 0.
+    elements, weights = design.node_elements, design.weights(nodes)
+    assert elements.shape == (nodes.size,) and (elements == -1).any()
+    assert np.all(weights[elements == -1] == 0) and weights.sum() == pytest.approx(1.0)
+    live = elements >= 0
+    np.testing.assert_array_equal(design.partition.locate(nodes.params[live]), elements[live])
+    recovery = design.recover(nodes, values, np.ones(nodes.size, dtype=bool))
     mean, variance, _, _ = _jump_statistics()
     assert recovery.expansions["y"].mean() == pytest.approx(mean, abs=ROUND_OFF)
     assert recovery.expansions["y"].variance() == pytest.approx(variance, abs=ROUND_OFF)
-    assert not [w for w in recovery.warnings if w.code == "element-decay"]
-    assert found.runs >= nodes.size
+    assert not {w.code for w in recovery.warnings} & {"element-decay", "element-budget"}
+    np.testing.assert_array_equal(recovery.node_elements, elements)
+    # A new run starts from the first round again.
+    assert design.nodes().size == design.runs and design.partition.size == 1
 
 
 def test_auto_refinement_finds_the_double_well_jump():
-    found = refine(
-        _design(X0, (7,), elements="auto", max_elements=8),
-        _run(lambda p: double_well(TIMES, p[:, 0])),
-    )
-    assert 0.0 in found.design.partition.edges[0]
+    design = _design(X0, (7,), elements="auto", max_elements=8)
+    refine(design, _run(lambda p: double_well(TIMES, p[:, 0])))
+    assert 0.0 in design.partition.edges[0]
 
 
 def test_the_chaotic_lorenz_case_stays_flagged():
@@ -311,9 +313,9 @@ def test_the_chaotic_lorenz_case_stays_flagged():
         return model.simulate({name: params[:, k] for k, name in enumerate(inputs)}, times)
 
     design = _design(inputs, (2, 2, 2), elements="auto", max_elements=16, basis="total")
-    found = refine(design, run)
-    assert found.exhausted and found.design.partition.size <= 16
-    nodes = found.design.nodes()
-    recovery = found.design.recover(nodes, found.values, np.ones(nodes.size, dtype=bool), times)
+    nodes, values = refine(design, run)
+    assert design.exhausted and design.partition.size <= 16
+    recovery = design.recover(nodes, values, np.ones(nodes.size, dtype=bool), times)
     flagged = {w.output for w in recovery.warnings if w.code == "element-decay"}
     assert flagged == {"x", "y", "z"}
+    assert [w.code for w in recovery.warnings].count("element-budget") == 1

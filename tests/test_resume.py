@@ -122,12 +122,12 @@ def pcmb_run(folder: Path, *args: str, **env: str) -> subprocess.CompletedProces
 
 
 def records(folder: Path) -> list[Path]:
-    return sorted((folder / "out.h5.journal").glob("record-*.npz"))
+    """Every journaled chunk, of every round."""
+    return sorted((folder / "out.h5.journal").rglob("record-*.npz"))
 
 
 def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
     """Start ``pcmb run`` blocking after ``after`` more nodes, wait for them, SIGKILL it."""
-    journal = folder / "out.h5.journal"
     wanted = len(records(folder)) + after
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
@@ -138,7 +138,7 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
     )
     try:
         deadline = time.monotonic() + 60
-        while len(list(journal.glob("record-*.npz"))) < wanted:
+        while len(records(folder)) < wanted:
             assert process.poll() is None, process.stderr.read().decode()
             assert time.monotonic() < deadline, "the run journaled too few nodes in time"
             time.sleep(0.01)

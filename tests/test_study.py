@@ -205,6 +205,9 @@ def test_misspelled_settings_are_rejected():
         pcmb.Study(pointwise, INPUTS, TIMES, method="montecarlo", samples=1)
 
 
+@pytest.mark.filterwarnings(
+    "ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"
+)  # b held fixed
 def test_order_zero_is_reported():
     study = pcmb.Study(pointwise, INPUTS, TIMES, order={"a": 2, "b": 0}, params={"a": 2, "b": 0})
     with pytest.warns(pcmb.PcmbWarning, match=r"\['b'\] have order 0"):
@@ -213,6 +216,9 @@ def test_order_zero_is_reported():
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings(
+    "ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"
+)  # order 2
 def test_coefficients_are_bit_identical_for_one_or_two_workers():
     """The default quarter car (stacked solves, whose last bits depend on the batch) at order 2."""
     from pathlib import Path

@@ -545,6 +545,9 @@ def _index_page(
         )
         + "</td></tr>",
     ]
+    if result.partition is not None:
+        elements = result.partition.describe(result.input_names)
+        rows.append(f"<tr><th>elements</th><td>{e(elements)}</td></tr>")
     if result.nominal_params:
         nominal = ", ".join(f"{k} = {v:.6g}" for k, v in result.nominal_params.items())
         rows.append(f"<tr><th>nominal run</th><td>{e(nominal)}</td></tr>")

@@ -17,9 +17,10 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.basis import PolynomialBasis
 from pcmb.chaos.density import DENSITY_POINTS, kernel_density
-from pcmb.chaos.expansion import sample_mean, sample_std, unsafe_to_square
+from pcmb.chaos.elements import PiecewiseExpansion, piecewise_spectrum
+from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std, unsafe_to_square
 from pcmb.chaos.nodes import TensorGrid, draw_germs
-from pcmb.chaos.spectral import chaos_spectrum, periodogram, taper, uniform_step
+from pcmb.chaos.spectral import ChaosSpectrum, chaos_spectrum, periodogram, taper, uniform_step
 from pcmb.errors import ConfigError, ConfigProblem
 
 if TYPE_CHECKING:
@@ -327,35 +328,71 @@ def _block_rows(terms: int) -> int:
     return max(1, _BLOCK_VALUES // max(terms, 1))
 
 
-class _Surrogates:
-    """Surrogate values of many (S, K) coefficient columns at the same germ draws.
+Surrogate = ChaosExpansion | PiecewiseExpansion
 
-    Evaluating the basis matrix is the costly part, so all requests on the same basis
-    are evaluated together, one block of draws at a time.
+
+def _pieces(
+    expansion: Surrogate, xi: NDArray[np.float64]
+) -> list[tuple[NDArray[np.intp], NDArray[np.float64], PolynomialBasis]]:
+    """(rows, germ, basis) per piece of a surrogate at the global germ draws ``xi``: all
+    rows for a chaos expansion; for a piecewise one, per element the draws inside it, in the
+    element's own germ."""
+    if not isinstance(expansion, PiecewiseExpansion):
+        return [(np.arange(xi.shape[0]), xi, expansion.basis)]
+    distributions = expansion.distributions
+    theta = np.column_stack([d.to_physical(xi[:, k]) for k, d in enumerate(distributions)])
+    where = expansion.partition.locate(theta)
+    pieces = []
+    for e, element in enumerate(expansion.elements):
+        rows = np.flatnonzero(where == e)
+        pieces.append((rows, element.to_germ(theta[rows]), element.basis))
+    return pieces
+
+
+def _piece_key(expansion: Surrogate) -> bytes:
+    """Surrogates with equal keys share their basis matrices at the same draws."""
+    key = expansion.multi_index.tobytes()
+    if isinstance(expansion, PiecewiseExpansion):
+        key += expansion.partition.bounds.tobytes()
+    return key
+
+
+def _stacked(columns: NDArray) -> NDArray[np.float64]:
+    """Coefficient columns (S, K) or (E, S, K) as (E, S, K), E = 1 for a chaos expansion."""
+    columns = np.asarray(columns, dtype=float)
+    return columns.reshape(-1, *columns.shape[-2:])
+
+
+class _Surrogates:
+    """Surrogate values of many coefficient columns at the same global germ draws: (S, K)
+    of a chaos expansion, (E, S, K) of a piecewise one.
+
+    Evaluating the basis matrices is the costly part, so all requests on the same basis
+    (and elements) are evaluated together, one block of draws at a time.
     """
 
     def __init__(self, xi: NDArray[np.float64]):
         self.xi = xi
-        self._requests: list[tuple[Any, PolynomialBasis, NDArray[np.float64]]] = []
+        self._requests: list[tuple[Any, Surrogate, NDArray[np.float64]]] = []
 
-    def add(self, key: Any, basis: PolynomialBasis, columns: NDArray[np.float64]) -> None:
-        self._requests.append((key, basis, np.asarray(columns, dtype=float)))
+    def add(self, key: Any, expansion: Surrogate, columns: NDArray[np.float64]) -> None:
+        self._requests.append((key, expansion, _stacked(columns)))
 
     def evaluate(self) -> dict[Any, NDArray[np.float64]]:
         """Key -> (M, K) values."""
-        groups: dict[bytes, list[tuple[Any, PolynomialBasis, NDArray[np.float64]]]] = {}
+        groups: dict[bytes, list[tuple[Any, Surrogate, NDArray[np.float64]]]] = {}
         for request in self._requests:
-            groups.setdefault(request[1].multi_index.tobytes(), []).append(request)
+            groups.setdefault(_piece_key(request[1]), []).append(request)
         found = {}
         for requests in groups.values():
-            basis = requests[0][1]
-            columns = np.concatenate([r[2] for r in requests], axis=1)
-            values = np.empty((self.xi.shape[0], columns.shape[1]))
-            rows = _block_rows(basis.size)
-            for start in range(0, self.xi.shape[0], rows):
-                block = slice(start, start + rows)
-                values[block] = basis.evaluate(self.xi[block]) @ columns
-            offsets = np.cumsum([0, *(r[2].shape[1] for r in requests)])
+            columns = np.concatenate([r[2] for r in requests], axis=2)
+            values = np.empty((self.xi.shape[0], columns.shape[2]))
+            for e, (rows, germ, basis) in enumerate(_pieces(requests[0][1], self.xi)):
+                step = _block_rows(basis.size)
+                for start in range(0, rows.size, step):
+                    block = slice(start, start + step)
+                    values[rows[block]] = basis.evaluate(germ[block]) @ columns[e]
+            offsets = np.cumsum([0, *(r[2].shape[2] for r in requests)])
             for (key, _, _), low, high in zip(requests, offsets[:-1], offsets[1:], strict=True):
                 found[key] = values[:, low:high]
         return found
@@ -374,17 +411,27 @@ def _quiet_overflow(method: Callable[..., _R]) -> Callable[..., _R]:
     return quiet
 
 
+def _chaos_spectrum(result: StudyResult, name: str, window: str) -> ChaosSpectrum | None:
+    """The chaos PSD of an output: on the study's tensor grid, on each element's for a
+    piecewise expansion; ``None`` without either."""
+    expansion, grid = result.expansions.get(name), tensor_grid_of(result)
+    if isinstance(expansion, PiecewiseExpansion):
+        return piecewise_spectrum(expansion, result.times, window)
+    if expansion is None or grid is None:
+        return None
+    return chaos_spectrum(expansion, grid, result.times, window)
+
+
 class _PsdSource:
-    """The PSD of one output: chaos on a tensor grid, else per-run periodograms."""
+    """The PSD of one output: chaos on a tensor grid (or each element's), else per-run
+    periodograms."""
 
     @_quiet_overflow
     def __init__(self, result: StudyResult, name: str, settings: AnalysisSettings):
-        expansion = result.expansions.get(name)
-        grid = tensor_grid_of(result)
-        self.chaos = self.per_run = self.basis = None
-        if grid is not None and expansion is not None:
-            self.chaos = chaos_spectrum(expansion, grid, result.times, settings.window)
-            self.basis = expansion.basis
+        self.chaos = _chaos_spectrum(result, name, settings.window)
+        self.expansion = result.expansions.get(name)
+        self.per_run = None
+        if self.chaos is not None:
             self.frequency, self.mean, self.std = (
                 self.chaos.frequency,
                 self.chaos.mean,
@@ -404,8 +451,8 @@ class _PsdSource:
 
     def request(self, surrogates: _Surrogates, key: Any, bins: NDArray[np.int64]) -> None:
         """Ask for the surrogate's Re and Im of Ŷ(f, ξ) at ``bins`` (chaos only)."""
-        spectra = self.chaos.spectra[:, bins]
-        surrogates.add(key, self.basis, np.concatenate([spectra.real, spectra.imag], axis=1))
+        spectra = self.chaos.spectra[..., bins]
+        surrogates.add(key, self.expansion, np.concatenate([spectra.real, spectra.imag], axis=-1))
 
     @_quiet_overflow
     def draws(self, bins: NDArray[np.int64], parts: NDArray | None) -> NDArray[np.float64]:
@@ -440,7 +487,7 @@ def output_draws(
     if expansion is None:
         return result.times[indices], result.values[name][result.ok][:, indices]
     surrogates = _Surrogates(_germ_draws(result, settings))
-    surrogates.add(name, expansion.basis, expansion.coefficients[:, indices])
+    surrogates.add(name, expansion, expansion.coefficients[..., indices])
     return result.times[indices], surrogates.evaluate()[name]
 
 
@@ -486,7 +533,10 @@ def psd_draws(
 
 def psd_draws_are_runs(result: StudyResult, name: str) -> bool:
     """Whether :func:`psd_draws` returns per-run periodograms (no collocation expansion)."""
-    return tensor_grid_of(result) is None or name not in result.expansions
+    expansion = result.expansions.get(name)
+    return expansion is None or (
+        tensor_grid_of(result) is None and not isinstance(expansion, PiecewiseExpansion)
+    )
 
 
 def spectrum(
@@ -518,10 +568,10 @@ def spectrum(
 def _quantile_bands(
     result: StudyResult, xi: NDArray[np.float64], levels: Sequence[float]
 ) -> dict[str, NDArray[np.float64]]:
-    """Output -> (Q, T) quantiles over time; the basis matrix of the draws is evaluated once
-    per basis and the values in time blocks that bound memory."""
+    """Output -> (Q, T) quantiles over time; the basis matrices of the draws are evaluated
+    once per basis (and elements) and the values in time blocks that bound memory."""
     bands = {}
-    phis: dict[bytes, NDArray[np.float64]] = {}
+    phis: dict[bytes, list[tuple[NDArray[np.intp], NDArray[np.float64]]]] = {}
     n_times = result.times.size
     block = max(1, _BLOCK_VALUES // xi.shape[0])
     for name in result.outputs:
@@ -530,13 +580,18 @@ def _quantile_bands(
             runs = result.values[name][result.ok]
             bands[name] = np.quantile(runs, levels, axis=0).reshape(len(levels), n_times)
             continue
-        key = expansion.multi_index.tobytes()
+        key = _piece_key(expansion)
         if key not in phis:
-            phis[key] = expansion.basis.evaluate(xi)
-        parts = [
-            _column_quantiles(phis[key] @ expansion.coefficients[:, start : start + block], levels)
-            for start in range(0, n_times, block)
-        ]
+            phis[key] = [
+                (rows, basis.evaluate(germ)) for rows, germ, basis in _pieces(expansion, xi)
+            ]
+        coefficients = _stacked(expansion.coefficients)
+        parts = []
+        for start in range(0, n_times, block):
+            values = np.empty((xi.shape[0], min(block, n_times - start)))
+            for e, (rows, phi) in enumerate(phis[key]):
+                values[rows] = phi @ coefficients[e][:, start : start + block]
+            parts.append(_column_quantiles(values, levels))
         bands[name] = np.concatenate(parts, axis=1).reshape(len(levels), n_times)
     return bands
 
@@ -605,7 +660,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     # Every surrogate draw of every output in one pass over the basis matrix.
     surrogates = _Surrogates(xi)
     for name, expansion in result.expansions.items():
-        surrogates.add(("time", name), expansion.basis, expansion.coefficients[:, indices])
+        surrogates.add(("time", name), expansion, expansion.coefficients[..., indices])
     for name, source in sources.items():
         if source.chaos is not None:
             source.request(surrogates, ("psd", name), bins[name])

@@ -18,7 +18,8 @@ P_e (Σ P_e = 1):
   Averaging the elements' own indices would be wrong: it ignores the variance *between*
   elements, which is where a jump puts most of it.
 
-Quantiles and densities come from sampling the surrogate, as for :class:`ChaosExpansion`.
+Quantiles and densities come from sampling the surrogate, as for :class:`ChaosExpansion`;
+spectra from each element's coefficient spectra (:func:`piecewise_spectrum`).
 """
 
 from __future__ import annotations
@@ -36,9 +37,10 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid, draw_germs
 from pcmb.chaos.recovery import project_tensor
+from pcmb.chaos.spectral import ChaosSpectrum, chaos_spectrum
 from pcmb.chaos.truncated import Conditional
 
-__all__ = ["Partition", "PiecewiseExpansion"]
+__all__ = ["Partition", "PiecewiseExpansion", "piecewise_spectrum"]
 
 #: A variance below this fraction squared of the mean square is round-off (as in
 #: :class:`ChaosExpansion`): the output does not vary there.
@@ -173,6 +175,16 @@ class Partition:
         """Whether the elements are exactly the tensor product of :attr:`edges`, in C order."""
         tensor = Partition.from_splits(self.distributions, [e[1:-1] for e in self.edges])
         return tensor.size == self.size and np.array_equal(tensor.bounds, self.bounds)
+
+    def describe(self, names: Sequence[str]) -> str:
+        """In words: ``2 elements, split at x0 = 0`` (every split point of each input)."""
+        splits = [
+            f"{name} = {', '.join(f'{v:.6g}' for v in edges[1:-1])}"
+            for name, edges in zip(names, self.edges, strict=True)
+            if edges.size > 2
+        ]
+        where = f", split at {'; '.join(splits)}" if splits else ""
+        return f"{self.size} element{'s' if self.size > 1 else ''}{where}"
 
     def tensor_refinement(self) -> tuple[Partition, NDArray[np.intp]]:
         """The tensor partition cut at every element edge, and (E',) the element of this
@@ -455,3 +467,29 @@ def _restrict(
         values = expansion.elements[holder](grid.params).reshape(grid.size, -1)
         restricted[e] = project_tensor(grid, values, expansion.multi_index)
     return tensor, restricted
+
+
+def piecewise_spectrum(
+    expansion: PiecewiseExpansion, times: ArrayLike, window: str = "hann"
+) -> ChaosSpectrum:
+    """:func:`~pcmb.chaos.spectral.chaos_spectrum` of a piecewise (E, S, T) expansion.
+
+    Each element's PSD is projected on its own tensor Gauss grid (of the basis' largest
+    degrees, the grid it was recovered on); the mean PSD combines the elements by probability,
+    ``psd_expansion`` is the :class:`PiecewiseExpansion` of the PSD and ``spectra`` (E, S, F)
+    holds each element's coefficient spectra.
+    """
+    orders = tuple(int(p) for p in expansion.multi_index.max(axis=0))
+    parts = [
+        chaos_spectrum(element, TensorGrid(inputs, orders), times, window)
+        for element, inputs in zip(expansion.elements, expansion.partition.inputs, strict=True)
+    ]
+    psd = PiecewiseExpansion(
+        expansion.partition,
+        np.stack([part.psd_expansion.coefficients for part in parts]),
+        expansion.multi_index,
+        expansion.names,
+    )
+    mean = expansion.partition.probability @ np.stack([part.mean for part in parts])
+    spectra = np.stack([part.spectra for part in parts])
+    return ChaosSpectrum(parts[0].frequency, mean, psd.std(), psd, spectra, parts[0].scale)

@@ -30,21 +30,23 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             yield "method.order", f"no order given for input(s) {', '.join(missing)}"
         if unknown or missing:
             return
+    # MethodSpec's keys are MethodSettings' fields, but for order (one per input there) and
+    # the held-out runs (the study's, not the design's).
     settings = MethodSettings(
-        kind=method.kind,
-        orders=config.orders,
-        basis=method.basis,
-        samples=method.samples,
-        seed=method.seed,
-        fit=method.fit,
+        orders=config.orders, **method.model_dump(exclude={"order", "validation"})
     )
     try:
-        runs = make_design(dict(zip(names, config.distributions, strict=True)), settings).runs
+        design = make_design(dict(zip(names, config.distributions, strict=True)), settings)
     except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
         key, _, message = str(error).partition(": ")
         yield key, message
         return
-    key = "method.samples" if method.samples is not None else "method.order"
+    if method.tolerance is not None:  # adaptive: bounded by its budget, not its first round
+        key, runs = "method.max_samples", getattr(design, "budget", design.runs)
+    elif method.samples is not None:
+        key, runs = "method.samples", design.runs
+    else:
+        key, runs = ("method.level" if method.level is not None else "method.order"), design.runs
     if runs > MAX_RUNS:
         yield key, f"the design asks for {runs:.3g} runs, more than the limit of {MAX_RUNS:.0e}"
     elif runs * config.time.points > MAX_VALUES:
@@ -58,18 +60,24 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
 
 
 def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
-    """Build the model as a worker would (the adapter reports its own keys), then check the
-    inputs, the analysis and the time grid against it."""
+    """Build the model in a worker, as a run would (the adapter reports its own keys), then
+    check the inputs, the analysis and the time grid against what it says of itself."""
+    from pcmb.run.backends import open_pool
+    from pcmb.run.executor import describe_model
+
+    # A model is only ever built in a worker process, here too: its crash is not pcmb's.
+    backend = "inprocess" if config.execution.backend == "inprocess" else "loky"
     try:
-        model = config.model_factory()()
+        with open_pool(backend, config.execution.jobs) as pool:
+            facts = describe_model(config.model_factory(), pool, config.times)
     except ConfigError as exc:
         for problem in exc.problems:
             yield problem.path, problem.message
         return
     section = config.model
-    label = type(model).__name__
-    declared = getattr(model, "parameters", None)
-    if declared is None or getattr(model, "nominal_from_params", False):
+    label = facts.name
+    declared = facts.parameters
+    if declared is None or facts.nominal_from_params:
         why = (
             f"{label} does not declare its parameters"
             if declared is None
@@ -89,12 +97,6 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
     if config.analysis is not None:
-        kept = config.output_names or tuple(model.outputs)
+        kept = config.output_names or facts.outputs
         yield from config.analysis.settings().problems(config.times, kept)
-    check_times = getattr(model, "check_times", None)
-    if callable(check_times):
-        try:
-            check_times(config.times)
-        except ConfigError as exc:
-            for problem in exc.problems:
-                yield problem.path or "time", problem.message
+    yield from facts.time_problems

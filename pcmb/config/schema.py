@@ -31,6 +31,7 @@ from pydantic import (
 )
 
 from pcmb.adapters.registry import ADAPTERS
+from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs
 from pcmb.chaos.nested import RULES
@@ -282,6 +283,10 @@ class MethodSpec(Section):
     max_samples: PositiveInt | None = Field(
         default=None, description="kind regression with tolerance: most samples in all"
     )
+    validation: NonNegativeInt = Field(
+        default=VALIDATION,
+        description="held-out runs at random inputs that check a chaos expansion (0: none)",
+    )
 
 
 class ExecutionSpec(Section):
@@ -336,6 +341,15 @@ def _window(value: str) -> str:
     return value
 
 
+class DiagnosticsSpec(Section):
+    """When a chaos expansion is called unreliable (see ``docs/diagnostics.md``)."""
+
+    tolerance: Annotated[float, Field(gt=0, lt=1)] = Field(
+        default=TOLERANCE,
+        description="accepted error, relative to the output's largest standard deviation",
+    )
+
+
 class AnalysisSpec(Section):
     """What to compute beyond mean, std and Sobol' indices (see :mod:`pcmb.analysis.statistics`)."""
 
@@ -383,6 +397,7 @@ class StudyConfig(Section):
     )
     method: MethodSpec
     execution: ExecutionSpec = Field(default_factory=ExecutionSpec)
+    diagnostics: DiagnosticsSpec = Field(default_factory=DiagnosticsSpec)
     analysis: AnalysisSpec | None = Field(
         default=None, description="quantile bands, PDFs and spectra to store"
     )

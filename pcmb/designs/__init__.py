@@ -87,6 +87,11 @@ def make_design(inputs: Mapping[str, Distribution], settings: MethodSettings) ->
         )
     if settings.kind == "collocation" and settings.grid not in GRIDS:
         raise ValueError(f"method.grid: expected one of {', '.join(GRIDS)}, got {settings.grid!r}")
+    if settings.elements is not None and settings.kind != "collocation":
+        raise ValueError(
+            "method.elements: multi-element designs are collocation (kind: collocation), "
+            f"got kind {settings.kind!r}"
+        )
     if settings.elements is not None and settings.grid != "tensor":
         raise ValueError(
             "method.elements: multi-element collocation uses tensor grids (grid: tensor)"

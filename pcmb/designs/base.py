@@ -13,7 +13,7 @@ from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
-from pcmb.result import Design, WarningRecord
+from pcmb.result import Design, RegressionFit, WarningRecord
 
 __all__ = [
     "RECORDED_ONLY",
@@ -26,9 +26,10 @@ __all__ = [
 ]
 
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
-#: cannot exist where an output does not vary): kept in the result, its file and its report,
-#: and not worth a Python warning at every run of a model with a fixed initial state.
-RECORDED_ONLY = frozenset({"sobol-undefined"})
+#: cannot exist where an output does not vary; surrogate values beyond the runs' range, which
+#: the verdict of the diagnostics already weighs): kept in the result, its file, ``pcmb
+#: inspect`` and the report, and not worth a Python warning at every run.
+RECORDED_ONLY = frozenset({"sobol-undefined", "surrogate-out-of-range"})
 #: Magnitudes whose squares exceed the largest float.
 _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 
@@ -62,10 +63,14 @@ class MethodSettings:
 
 @dataclass(frozen=True)
 class Recovery:
-    """What a design recovered from the runs: expansions per output and warnings."""
+    """What a design recovered from the runs: expansions per output, warnings and, for sparse
+    regression, each output's fit (selected terms, leave-one-out error, condition number)."""
 
     expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
     warnings: tuple[WarningRecord, ...] = ()
+    regression: dict[str, RegressionFit] = field(default_factory=dict)
+    #: Multi-element collocation: (N,) the element of every node (-1: left out).
+    node_elements: NDArray[np.intp] | None = None
 
 
 class NodeDesign(Protocol):

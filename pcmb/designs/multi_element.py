@@ -1,10 +1,10 @@
 """Multi-element collocation: a tensor Gauss grid in every element, recovered element by element.
 
-``method: {kind: ..., order, basis, elements, max_elements, element_threshold}``:
+``method: {kind: collocation, order, basis, elements, max_elements}``:
 
 - ``elements: {x0: [0.0]}`` cuts input x0 at the physical value 0 (a tensor partition of all
-  the inputs' cuts); ``elements: auto`` refines adaptively (:func:`refine`); no ``elements``
-  is one element, plain collocation.
+  the inputs' cuts); ``elements: auto`` refines adaptively, in rounds
+  (:meth:`MultiElementCollocation.more`); no ``elements`` is one element, plain collocation.
 - Each element runs the (P_k + 1)-point Gauss grid of its own conditional inputs and is
   recovered by projection (least squares over its survivors when some failed); the
   expansions are :class:`~pcmb.chaos.elements.PiecewiseExpansion` s.
@@ -12,29 +12,28 @@
 The decay indicator of an element (Wan & Karniadakis, J. Comput. Phys. 209 (2005)) is the
 share η_e of its variance in the outer two degree layers of its basis (two, because a
 response even about the element's centre has zero odd coefficients), at the worst time and
-output; weighted by the element's probability, P_e η_e above ``element_threshold`` marks an
-element whose chaos has not converged. ``auto`` splits such elements, along the inputs that
-hold at least half the largest per-input share of that energy, until none is above the
-threshold or ``max_elements`` is reached; :meth:`MultiElementCollocation.recover` warns
-(``element-decay``) about every output left above it. A response chaotic in its inputs (the
-Lorenz attractor) has no smooth piece to find: splitting only exhausts the budget, and the
-warning stays.
+output; weighted by the element's probability, P_e η_e above :data:`THRESHOLD` marks an
+element whose chaos has not converged. ``auto`` starts from one element and, after each
+round, splits such elements, along the inputs that hold at least half the largest per-input
+share of that energy, while the partition stays within ``max_elements``; the split
+elements' nodes leave the recovery (``/nodes/element`` -1) and the children's nodes are the
+next round. :meth:`MultiElementCollocation.recover` warns (``element-decay``) about every
+output left above the threshold, and (``element-budget``) when ``max_elements`` stopped the
+refinement. A response chaotic in its inputs (the Lorenz attractor) has no smooth piece to
+find: splitting only exhausts the budget, and the warnings stay.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from functools import cached_property
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes
 from pcmb.chaos.recovery import project_tensor
 from pcmb.designs.base import (
     MethodSettings,
@@ -45,12 +44,10 @@ from pcmb.designs.base import (
 from pcmb.designs.collocation import TensorCollocation
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["MultiElementCollocation", "Refinement", "decay_scores", "refine"]
+__all__ = ["MultiElementCollocation", "decay_scores", "refine"]
 
-#: Default largest weighted decay indicator P_e η_e accepted (``method.element_threshold``).
+#: Largest weighted decay indicator P_e η_e accepted.
 THRESHOLD = 1e-4
-#: Default element budget of ``elements: auto`` (``method.max_elements``).
-MAX_ELEMENTS = 16
 #: Tail energies below this fraction squared of the mean square are round-off.
 _RELATIVE_NOISE = 1e-12
 
@@ -61,17 +58,21 @@ Runner = Callable[[NDArray[np.float64]], Mapping[str, NDArray[np.float64]]]
 class MultiElementCollocation:
     """Tensor Gauss collocation in every element of a partition of the inputs' support.
 
+    The design runs in rounds (:class:`~pcmb.designs.base.AdaptiveDesign`): :meth:`nodes`
+    starts a run on the starting partition, :meth:`more` refines it (``elements: auto``),
+    and :attr:`partition`, :attr:`node_elements`, :meth:`weights`, :meth:`record` and
+    :meth:`recover` describe the partition reached.
+
     Parameters
     ----------
     inputs:
         Input name -> distribution, germ order.
     settings:
-        The ``method:`` settings: ``orders``, ``basis``, ``fit`` as for collocation, and
-        (read with ``getattr``) ``elements`` (a mapping input -> physical split points,
-        ``"auto"`` or ``None``), ``max_elements`` and ``element_threshold``.
+        The ``method:`` settings: ``orders``, ``basis``, ``fit`` as for collocation,
+        ``elements`` (a mapping input -> increasing physical split points, ``"auto"`` or
+        ``None``) and ``max_elements``.
     partition:
-        The elements to use instead of those the settings describe (e.g. from
-        :func:`refine`).
+        The starting elements instead of those the settings describe.
 
     Raises
     ------
@@ -89,30 +90,35 @@ class MultiElementCollocation:
         self.settings = settings
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders, self.basis = self._collocation.orders, self._collocation.basis
-        self.elements: Any = getattr(settings, "elements", None)
-        self.max_elements = int(getattr(settings, "max_elements", MAX_ELEMENTS))
-        self.threshold = float(getattr(settings, "element_threshold", THRESHOLD))
+        self.elements = settings.elements
+        self.max_elements = settings.max_elements
         if self.max_elements < 1:
             raise ValueError(f"method.max_elements: must be >= 1, got {self.max_elements}")
-        if not self.threshold > 0:
-            raise ValueError(f"method.element_threshold: must be > 0, got {self.threshold}")
         if self.elements == "auto" and max(self.orders) < 2:
             raise ValueError(
                 "method.order: elements: auto needs order >= 2 (its decay indicator reads the "
                 "top two degrees)"
             )
-        self.partition = partition if partition is not None else self._partition()
+        self.start = partition if partition is not None else self._partition()
+        self.multi_index = self._collocation._index(TensorGrid(self.distributions, self.orders))
+        self.nodes()  # the state of the first round
 
     def _partition(self) -> Partition:
         if self.elements is None or self.elements == "auto":
             return Partition.whole(self.distributions)
         if not isinstance(self.elements, Mapping):
             raise ValueError("method.elements: expected auto or a mapping input -> split points")
-        unknown = set(self.elements) - set(self.names)
-        if unknown:
-            raise ValueError(f"method.elements: unknown input(s) {sorted(unknown)}")
+        for name in self.elements:
+            if name not in self.names:
+                raise ValueError(
+                    f"method.elements.{name}: names no input (inputs: {', '.join(self.names)})"
+                )
         cuts = [np.atleast_1d(self.elements.get(name, [])).tolist() for name in self.names]
         for name, dist, cut in zip(self.names, self.distributions, cuts, strict=True):
+            if np.any(np.diff(cut) <= 0):
+                raise ValueError(
+                    f"method.elements.{name}: split points must be strictly increasing, got {cut}"
+                )
             try:
                 Partition.from_splits([dist], [cut])
             except ValueError as error:
@@ -121,32 +127,92 @@ class MultiElementCollocation:
 
     # -- nodes ------------------------------------------------------------------------------
 
-    @cached_property
-    def grids(self) -> tuple[TensorGrid, ...]:
-        """The Gauss grid of each element, in its conditional inputs."""
-        return tuple(TensorGrid(inputs, self.orders) for inputs in self.partition.inputs)
+    @property
+    def _per_element(self) -> int:
+        return math.prod(order + 1 for order in self.orders)
 
     @property
     def runs(self) -> int:
-        return self.partition.size * math.prod(order + 1 for order in self.orders)
+        """Runs of the first round: every starting element's grid."""
+        return self.start.size * self._per_element
+
+    @property
+    def budget(self) -> int:
+        """Most runs over all rounds: with at most ``max_elements`` elements at the end, at
+        most ``max_elements - 1`` elements were split on the way."""
+        if self.elements != "auto":
+            return self.runs
+        return (2 * self.max_elements - 1) * self._per_element
 
     def nodes(self) -> NodeSet:
-        """All elements' nodes, element by element; ``.nodes`` in the inputs' own germs."""
-        params = np.concatenate([grid.params for grid in self.grids])
+        """The first round: every starting element's nodes, element by element (a run starts
+        here, so this forgets the refinement of an earlier run); ``.nodes`` in the inputs' own
+        germs."""
+        self.exhausted = False
+        return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
+
+    def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
+        """Move to ``partition``, the nodes run so far in its elements ``kept`` (-1: left out),
+        and return the nodes of its elements ``new``, which join the run."""
+        self.partition = partition
+        self.grids = tuple(TensorGrid(inputs, self.orders) for inputs in partition.inputs)
+        grids = [self.grids[e] for e in new]
+        self.node_elements = np.concatenate([kept, np.repeat(new, [g.size for g in grids])])
+        params = np.concatenate([grid.params for grid in grids])
         germ = np.column_stack([d.to_germ(params[:, k]) for k, d in enumerate(self.distributions)])
         return NodeSet(self.distributions, germ, params)
 
-    @cached_property
-    def node_elements(self) -> NDArray[np.intp]:
-        """(N,) the element of every node (``/nodes/element``)."""
-        return np.repeat(np.arange(self.partition.size), [grid.size for grid in self.grids])
+    def more(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> NodeSet | None:
+        """The next round of ``elements: auto``: the nodes of the children of every element
+        split (see the module), or ``None`` when none is. Elements with failed nodes are not
+        split (their scores are NaN); :meth:`recover` fits them from their survivors."""
+        if self.elements != "auto":
+            return None
+        coefficients = {}
+        for name, y in values.items():
+            kept = np.where(ok.reshape(-1, *(1,) * (np.ndim(y) - 1)), y, np.nan)
+            coefficients[name] = np.stack(
+                [
+                    project_tensor(grid, kept[self.node_elements == e], self.multi_index)
+                    for e, grid in enumerate(self.grids)
+                ]
+            )
+        scores, shares = decay_scores(self.partition, coefficients, self.multi_index)
+        above = [int(e) for e in np.argsort(-np.nan_to_num(scores)) if scores[e] > THRESHOLD]
+        size, chosen = self.partition.size, {}
+        for e in above:
+            along = np.flatnonzero(shares[e] >= 0.5 * shares[e].max())
+            if size + 2**along.size - 1 <= self.max_elements:
+                chosen[e] = along.tolist()
+                size += 2**along.size - 1
+        self.exhausted = bool(above) and not chosen
+        if not chosen:
+            return None
+        # Children replace their parent in place; the others keep their nodes.
+        bounds, renumber, children = [], np.full(self.partition.size, -1), []
+        for e in range(self.partition.size):
+            if e in chosen:
+                split = self.partition.split(e, chosen[e]).bounds[e : e + 2 ** len(chosen[e])]
+                children += range(len(bounds), len(bounds) + len(split))
+                bounds += list(split)
+            else:
+                renumber[e] = len(bounds)
+                bounds.append(self.partition.bounds[e])
+        kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
+        return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
 
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
-        """(N,) P_e times the element's Gauss weights: a quadrature rule of the inputs' law."""
-        probability = self.partition.probability
-        return np.concatenate(
-            [p * grid.weights for p, grid in zip(probability, self.grids, strict=True)]
-        )
+        """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
+        quadrature rule of the inputs' law."""
+        weights = np.zeros(self.node_elements.size)
+        for e, (p, grid) in enumerate(zip(self.partition.probability, self.grids, strict=True)):
+            weights[self.node_elements == e] = p * grid.weights
+        return weights
 
     def record(self) -> Design:
         return Design(
@@ -160,11 +226,6 @@ class MultiElementCollocation:
 
     # -- recovery ---------------------------------------------------------------------------
 
-    @cached_property
-    def multi_index(self) -> NDArray[np.int64]:
-        """(S, n) the terms of every element."""
-        return self._collocation._index(self.grids[0])
-
     def recover(
         self,
         nodes: NodeSet,
@@ -172,8 +233,9 @@ class MultiElementCollocation:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        """Piecewise expansions of every output; a per-element least-squares fit where nodes of
-        the element failed (reported), and ``element-decay`` warnings (see the module)."""
+        """Piecewise expansions of every output from the nodes of the current elements; a
+        per-element least-squares fit where nodes of the element failed (reported), and
+        ``element-decay`` and ``element-budget`` warnings (see the module)."""
         index = self.multi_index
         position = {tuple(row): s for s, row in enumerate(index)}
         coefficients = {
@@ -208,9 +270,18 @@ class MultiElementCollocation:
             name: PiecewiseExpansion(self.partition, c, index, self.names)
             for name, c in coefficients.items()
         }
+        if self.exhausted:
+            warnings.append(
+                WarningRecord(
+                    "element-budget",
+                    f"elements: auto stopped at max_elements = {self.max_elements} with "
+                    "elements still above the decay threshold: a larger max_elements or a "
+                    "higher order may help, unless an output is chaotic in its inputs",
+                )
+            )
         warnings += self._decay_warnings(expansions)
         warnings += statistics_warnings(expansions, values, ok, times)
-        return Recovery(expansions, tuple(warnings))
+        return Recovery(expansions, tuple(warnings), node_elements=self.node_elements.copy())
 
     def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
         records = []
@@ -218,7 +289,7 @@ class MultiElementCollocation:
             scores, _ = decay_scores(
                 self.partition, {name: expansion.coefficients}, self.multi_index
             )
-            above = np.flatnonzero(scores > self.threshold)
+            above = np.flatnonzero(scores > THRESHOLD)
             if above.size:
                 worst = int(np.argmax(scores))
                 records.append(
@@ -226,7 +297,7 @@ class MultiElementCollocation:
                         "element-decay",
                         f"the chaos has not converged in {above.size} of {scores.size} "
                         f"element(s): P_e·η_e up to {scores[worst]:.3g} (element {worst}) "
-                        f"against the threshold {self.threshold:g}; more elements or a higher "
+                        f"against the threshold {THRESHOLD:g}; more elements or a higher "
                         "order may help, unless the output is chaotic in its inputs, which no "
                         "partition fixes",
                         name,
@@ -292,81 +363,23 @@ def decay_scores(
     return partition.probability * eta, shares
 
 
-@dataclass(frozen=True)
-class Refinement:
-    """What :func:`refine` found.
-
-    Attributes
-    ----------
-    design:
-        The design on the final partition; its :meth:`~MultiElementCollocation.nodes` are the
-        rows of ``values``.
-    values:
-        Output name -> (N, ...) the runs of the final elements' nodes.
-    runs:
-        Model runs spent, including those of elements later split.
-    exhausted:
-        Whether elements above the threshold were left unsplit for lack of budget.
-    """
-
-    design: MultiElementCollocation
-    values: dict[str, NDArray[np.float64]]
-    runs: int
-    exhausted: bool
-
-
-def refine(design: MultiElementCollocation, run: Runner) -> Refinement:
-    """Adaptive multi-element refinement (``elements: auto``).
-
-    Starting from ``design``'s partition, run every element without runs in one batch, score
-    the elements (:func:`decay_scores`) and split those above ``design.threshold``, the
-    highest scores first, along the inputs holding at least half of the largest tail share,
-    while the partition stays within ``design.max_elements``; repeat until no element is
-    split. Elements whose runs are not all finite are not split (their scores are NaN);
-    :meth:`MultiElementCollocation.recover` fits them from their survivors.
+def refine(
+    design: MultiElementCollocation, run: Runner
+) -> tuple[NodeSet, dict[str, NDArray[np.float64]]]:
+    """Run every round of ``design`` with ``run`` (outside a :class:`pcmb.Study`): every node
+    run and its values; ``design`` then holds the partition reached, ready to recover.
 
     Parameters
     ----------
     design:
-        The starting design (its settings give the orders, basis, threshold and budget).
+        The design to run.
     run:
-        Runs a batch: (B, n) physical inputs -> output name -> (B, ...) values; the only way
-        the refinement reaches the model.
+        Runs a batch: (B, n) physical inputs -> output name -> (B, ...) values.
     """
-    inputs = dict(zip(design.names, design.distributions, strict=True))
-    runs: list[dict[str, NDArray[np.float64]] | None] = [None] * design.partition.size
-    spent = 0
-    while True:
-        pending = [e for e, r in enumerate(runs) if r is None]
-        if pending:
-            grids = [design.grids[e] for e in pending]
-            batch = run(np.concatenate([grid.params for grid in grids]))
-            ends = np.cumsum([0, *(grid.size for grid in grids)])
-            for e, start, stop in zip(pending, ends[:-1], ends[1:], strict=True):
-                runs[e] = {name: np.asarray(y)[start:stop] for name, y in batch.items()}
-            spent += int(ends[-1])
-        coefficients = {
-            name: np.stack(
-                [
-                    project_tensor(g, r[name], design.multi_index)
-                    for g, r in zip(design.grids, runs, strict=True)
-                ]
-            )
-            for name in runs[0]
-        }
-        scores, shares = decay_scores(design.partition, coefficients, design.multi_index)
-        above = [int(e) for e in np.argsort(-np.nan_to_num(scores)) if scores[e] > design.threshold]
-        size, chosen = design.partition.size, {}
-        for e in above:
-            along = np.flatnonzero(shares[e] >= 0.5 * shares[e].max())
-            if size + 2**along.size - 1 <= design.max_elements:
-                chosen[e] = along
-                size += 2**along.size - 1
-        if not chosen:
-            values = {name: np.concatenate([r[name] for r in runs]) for name in runs[0]}
-            return Refinement(design, values, spent, exhausted=bool(above))
-        partition = design.partition
-        for e in sorted(chosen, reverse=True):
-            partition = partition.split(e, chosen[e].tolist())
-            runs[e : e + 1] = [None] * 2 ** chosen[e].size
-        design = MultiElementCollocation(inputs, design.settings, partition)
+    nodes = design.nodes()
+    values = {name: np.asarray(y) for name, y in run(nodes.params).items()}
+    while (batch := design.more(nodes, values, np.ones(nodes.size, dtype=bool))) is not None:
+        found = run(batch.params)
+        nodes = join_nodes(nodes, batch)
+        values = {name: np.concatenate([y, np.asarray(found[name])]) for name, y in values.items()}
+    return nodes, values

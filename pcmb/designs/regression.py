@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,9 +19,9 @@ from pcmb.chaos.sparse_regression import (
     next_batch,
 )
 from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
-from pcmb.result import Design, WarningRecord
+from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRecovery", "SparseRegression"]
+__all__ = ["SparseRegression"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
@@ -31,24 +30,13 @@ BASES = ("total", "hyperbolic")
 FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
 #: Worst corrected LOO error reported as a warning when no tolerance is set.
 LOO_WARNING = 1e-2
-#: Largest total samples, as a multiple of ``method.samples``, when a tolerance is set.
+#: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
 MAX_GROWTH = 16
 
 
-@dataclass(frozen=True)
-class SparseRecovery(Recovery):
-    """A :class:`Recovery` with the sparse fit of every output (selected terms, corrected LOO
-    error per time, condition number); the expansions hold the union of the selected terms,
-    with zero coefficients for the terms an output did not select."""
-
-    fits: dict[str, SparseFit] = field(default_factory=dict)
-
-    @property
-    def worst_loo(self) -> float:
-        """The largest corrected LOO error over outputs and times (0 without an output)."""
-        return max(
-            (float(np.nanmax(f.loo_error, initial=0.0)) for f in self.fits.values()), default=0.0
-        )
+def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
+    """The largest corrected LOO error over outputs and times (0 without an output)."""
+    return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
 
 
 class SparseRegression:
@@ -57,7 +45,12 @@ class SparseRegression:
 
     The candidate terms are the hyperbolic set (Σ α_k^q)^(1/q) <= order (``basis: total``:
     q = 1), capped per input by its order; every output gets the terms its LARS or OMP path
-    selects (:func:`pcmb.chaos.sparse_regression.fit_sparse`), shared by all its times.
+    selects (:func:`pcmb.chaos.sparse_regression.fit_sparse`), shared by all its times; the
+    expansions hold the union of the selected terms (zero where an output did not select one).
+
+    With a ``tolerance`` the design is adaptive (:class:`~pcmb.designs.base.AdaptiveDesign`):
+    after each round :meth:`more` adds samples until the worst corrected LOO error meets it or
+    the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
@@ -65,6 +58,7 @@ class SparseRegression:
         sampling = getattr(settings, "sampling", "sobol")
         q = getattr(settings, "q", 1.0)
         tolerance = getattr(settings, "tolerance", None)
+        max_samples = getattr(settings, "max_samples", None)
         if settings.samples is None:
             raise ValueError("method.samples: required key is missing (needed by kind regression)")
         if settings.orders is None:
@@ -79,32 +73,47 @@ class SparseRegression:
             raise ValueError(f"method.q: must be in (0, 1], got {q}")
         if tolerance is not None and not tolerance > 0:
             raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
+        if max_samples is not None and tolerance is None:
+            raise ValueError(
+                "method.max_samples: only used with method.tolerance (the budget of the rounds "
+                "that add samples until the LOO error meets it)"
+            )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
+        self.samples, self.seed = settings.samples, settings.seed
+        self.basis = settings.basis or "hyperbolic"
+        self.q = q if self.basis == "hyperbolic" else 1.0
+        self.selection, self.sampling, self.tolerance = selection, sampling, tolerance
         caps = np.asarray(self.orders)
-        index = hyperbolic_index_set(
-            len(caps), max(self.orders), q if settings.basis != "total" else 1.0
-        )
+        index = hyperbolic_index_set(len(caps), max(self.orders), self.q)
         self.candidates = PolynomialBasis(
             tuple(d.family for d in self.distributions), index[np.all(index <= caps, axis=1)]
         )
         least = minimum_samples(self.candidates.size, selection)
-        if settings.samples < least:
+        if self.samples < least:
             raise ValueError(
                 f"method.samples: selection {selection} over the {self.candidates.size} candidate "
-                f"terms needs at least {least} samples, got {settings.samples}"
+                f"terms needs at least {least} samples, got {self.samples}"
             )
-        self.samples, self.seed, self.basis = (
-            settings.samples,
-            settings.seed,
-            settings.basis or "hyperbolic",
-        )
-        self.selection, self.sampling, self.tolerance = selection, sampling, tolerance
-        self.max_samples = getattr(settings, "max_samples", None) or MAX_GROWTH * self.samples
+        self.max_samples = max_samples or MAX_GROWTH * self.samples
+        if tolerance is not None and self.max_samples <= self.samples:
+            raise ValueError(
+                f"method.max_samples: a budget of {self.max_samples} runs leaves none for a "
+                f"round after the first {self.samples} (method.samples): give more"
+            )
+        # (runs, worst corrected LOO) of the rounds so far, and the runs of the last recovery.
+        self._history: list[tuple[int, float]] = []
+        self._made = self.samples
 
     @property
     def runs(self) -> int:
+        """Runs of the first round."""
         return self.samples
+
+    @property
+    def budget(self) -> int:
+        """Most runs of all rounds together."""
+        return self.samples if self.tolerance is None else self.max_samples
 
     def nodes(self) -> NodeSet:
         return random_nodes(self.distributions, self.samples, SAMPLINGS[self.sampling], self.seed)
@@ -118,9 +127,12 @@ class SparseRegression:
             grid=self.sampling,
             basis=self.basis,
             orders=self.orders,
-            samples=self.samples,
+            samples=self._made,
             seed=self.seed,
             fit=FITS[self.selection],
+            q=self.q,
+            tolerance=self.tolerance,
+            max_samples=None if self.tolerance is None else self.max_samples,
         )
 
     def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
@@ -132,7 +144,7 @@ class SparseRegression:
             Nodes made so far (the batch continues them: the Sobol' sequence is extended; LHS
             and random batches are drawn afresh with a seed derived from ``seed`` and ``done``).
         history:
-            (samples, :attr:`SparseRecovery.worst_loo`) of every fit so far.
+            (samples, worst corrected LOO error over outputs and times) of every fit so far.
         """
         if self.tolerance is None:
             return None
@@ -146,18 +158,39 @@ class SparseRegression:
         seed = int(np.random.SeedSequence((self.seed, done)).generate_state(1)[0])
         return random_nodes(self.distributions, size, method, seed)
 
+    def more(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> NodeSet | None:
+        """The next round's nodes while the worst corrected LOO error of a fit on every node so
+        far exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
+        if self.tolerance is None:
+            return None
+        if nodes.size == self.samples:  # the first round of a (new) run
+            self._history = []
+        self._history.append((nodes.size, _worst_loo(self._fits(nodes, values, ok))))
+        return self.next_nodes(nodes.size, self._history)
+
+    def _fits(
+        self, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
+    ) -> dict[str, SparseFit]:
+        germ = nodes.nodes[ok]
+        return {
+            name: fit_sparse(self.candidates, germ, y[ok], self.selection)
+            for name, y in values.items()
+        }
+
     def recover(
         self,
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
-    ) -> SparseRecovery:
-        germ = nodes.nodes[ok]
-        fits = {
-            name: fit_sparse(self.candidates, germ, y[ok], self.selection)
-            for name, y in values.items()
-        }
+    ) -> Recovery:
+        fits = self._fits(nodes, values, ok)
+        self._made = nodes.size
         expansions = {}
         if fits:
             union, where = np.unique(
@@ -173,13 +206,29 @@ class SparseRegression:
                 expansions[name] = ChaosExpansion(
                     coefficients, union, self.distributions, self.names
                 )
+        runs = int(np.sum(ok))
         records = tuple(
             record
             for name, fit in fits.items()
-            if (record := self._loo_warning(name, fit, germ.shape[0], times)) is not None
+            if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        return SparseRecovery(
-            expansions, records + statistics_warnings(expansions, values, ok, times), fits
+        worst = _worst_loo(fits)
+        if self.tolerance is not None and worst > self.tolerance:
+            records += (
+                WarningRecord(
+                    "regression-budget",
+                    f"the budget of {self.max_samples} runs (method.max_samples) ended before "
+                    f"the tolerance was met: worst corrected leave-one-out error {worst:.3g} > "
+                    f"{self.tolerance:g} after {nodes.size} runs; raise max_samples, or lower "
+                    "the order",
+                ),
+            )
+        regression = {
+            name: RegressionFit(fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition)
+            for name, fit in fits.items()
+        }
+        return Recovery(
+            expansions, records + statistics_warnings(expansions, values, ok, times), regression
         )
 
     def _loo_warning(

@@ -99,6 +99,7 @@ class SparseCollocation:
             orders=self.orders,
             level=self.level,
             fit="projection",
+            rule=", ".join(dict.fromkeys(rule.name for rule in self.grid.rules)),
         )
 
     def recover(

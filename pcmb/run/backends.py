@@ -2,14 +2,16 @@
 (for debugging only) this process.
 
 :data:`BACKENDS` maps ``execution.backend`` to its pool class; the config schema and the
-command line take their choices from it. :func:`open_pool` starts one for a campaign, warm:
-its workers start while the caller goes on preparing the nodes.
+command line take their choices from it. :func:`open_pool` hands one to a campaign; loky pools
+are started early (:func:`warm_up`) and kept warm between campaigns.
 """
 
 from __future__ import annotations
 
+import atexit
 import os
 import re
+import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -104,7 +106,13 @@ class LokyPool:
         self._submitted = [self._executor.submit(_warm_up) for _ in range(self.slots)]
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
-        future = self._executor.submit(fn, *args)
+        from concurrent.futures import BrokenExecutor
+
+        try:
+            future = self._executor.submit(fn, *args)
+        except BrokenExecutor:  # a worker died after its last task was reported: start afresh
+            self.rebuild()
+            future = self._executor.submit(fn, *args)
         self._submitted = [f for f in self._submitted if not f.done()] + [future]
         return future
 
@@ -230,43 +238,63 @@ def default_workers() -> int:
     return max(1, cpu_count())
 
 
-def start_pool(
-    backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None
-) -> Pool:
-    """Start a pool of ``backend``; the caller closes it (see :func:`open_pool`).
-
-    Parameters
-    ----------
-    jobs:
-        Worker processes (default: :func:`default_workers`).
-    tasks:
-        Most tasks that will run at once, if known: no more workers than that are started.
-    """
+def _workers(backend: str, jobs: int | None, tasks: int | None) -> int:
     workers = jobs or (1 if backend == "inprocess" else default_workers())
-    if tasks is not None:
-        workers = max(1, min(workers, tasks))
-    return BACKENDS[backend](jobs, workers, address)
+    return workers if tasks is None else max(1, min(workers, tasks))
 
 
-def fits(pool: Pool, backend: str, jobs: int | None, address: str | None) -> bool:
-    """Whether ``pool`` is the pool :func:`start_pool` would start for these settings."""
-    return (
-        type(pool) is BACKENDS[backend]
-        and address is None
-        and pool.slots == (jobs or default_workers())
-    )
+#: Loky pools kept warm between the campaigns of this process, by number of workers.
+_KEPT: dict[int, LokyPool] = {}
+
+
+def _close_kept() -> None:
+    while _KEPT:
+        _KEPT.popitem()[1].close()
+
+
+atexit.register(_close_kept)
+
+
+def warm_up(jobs: int | None = None, tasks: int | None = None) -> None:
+    """Start now the loky workers :func:`open_pool` will hand out for these settings, so that
+    they start (and import what tasks need) while the caller prepares the work."""
+    workers = _workers("loky", jobs, tasks)
+    if workers not in _KEPT:
+        _KEPT[workers] = LokyPool(jobs, workers)
 
 
 @contextmanager
 def open_pool(
     backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None
 ) -> Iterator[Pool]:
-    """A pool from :func:`start_pool`, closed on exit; its workers killed on an error or an
-    interrupt, so that none is left running."""
-    pool = start_pool(backend, jobs, address, tasks)
+    """Workers of ``backend`` for one campaign.
+
+    Loky pools are kept warm for the next campaign of this process (and closed at its exit);
+    the others are started and closed here. On an error or an interrupt the workers are
+    killed (a kept pool is dropped), so that none is left running.
+
+    Parameters
+    ----------
+    jobs:
+        Worker processes (default: :func:`default_workers`).
+    tasks:
+        Most tasks that will run at once, if known: no more workers than that are used.
+    """
+    workers = _workers(backend, jobs, tasks)
+    # Workers die with the thread that started them (see pcmb.run.lifeline): only those of the
+    # main thread can be kept.
+    kept = backend == "loky" and threading.current_thread() is threading.main_thread()
+    if kept:
+        warm_up(jobs, tasks)
+        pool: Pool = _KEPT[workers]
+    else:
+        pool = BACKENDS[backend](jobs, workers, address)
     try:
         yield pool
     except BaseException:
+        if kept:
+            del _KEPT[workers]
         pool.close(kill=True)
         raise
-    pool.close()
+    if not kept:
+        pool.close()

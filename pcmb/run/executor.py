@@ -33,7 +33,13 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.errors import ConfigProblem, ModelDefinitionError, ModelError, PcmbError, UsageError
+from pcmb.errors import (
+    ConfigError,
+    ConfigProblem,
+    ModelDefinitionError,
+    PcmbError,
+    UsageError,
+)
 from pcmb.result import NodeFailure, Status
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import Journal
@@ -252,19 +258,38 @@ def _model_code(function: Callable[..., _T], *args: Any) -> _T:
 _MODEL_CACHE = threading.local()
 
 
-def _cached_model(token: str, factory: Callable[[], Model]) -> tuple[Model, float]:
+@dataclass(frozen=True)
+class _Factory:
+    """A model factory as sent to workers: pickled by value, with the sender's import path.
+
+    A worker unpickles it itself, after adding the sender's ``sys.path`` entries it lacks, so
+    that a kept worker finds modules the caller made importable after the worker started.
+    """
+
+    token: str
+    payload: bytes
+    path: tuple[str, ...]
+
+    def build(self) -> Model:
+        missing = [entry for entry in self.path if entry not in sys.path]
+        sys.path.extend(missing)
+        return cloudpickle.loads(self.payload)()
+
+
+def _cached_model(factory: _Factory) -> tuple[Model, float]:
     """The model built by ``factory`` in this thread, and the seconds spent building it now."""
+    token = factory.token
     held = getattr(_MODEL_CACHE, "held", None)
     if held is not None and held[0] == token:
         return held[1], 0.0
     _MODEL_CACHE.held = None  # release the previous model before building the next one
     start = time.perf_counter()
     try:
-        model = _model_code(factory)
+        model = _model_code(factory.build)
     except PcmbError:
         raise
     except Exception as exc:
-        raise ModelError(f"could not build the model: {_describe(exc)}") from exc
+        raise ModelDefinitionError(f"could not build the model: {_describe(exc)}") from exc
     _MODEL_CACHE.held = (token, model)
     return model, time.perf_counter() - start
 
@@ -275,6 +300,8 @@ class ModelFacts:
 
     Attributes
     ----------
+    name:
+        Its class name.
     outputs:
         The outputs it offers.
     parameters:
@@ -283,17 +310,32 @@ class ModelFacts:
         Its preferred nodes per call (model protocol), or ``None``.
     build_seconds:
         Time the build took (each worker builds the model once).
+    nominal_from_params:
+        Whether its ``parameters`` are exactly the nominal values it was given.
+    time_problems:
+        ``(key, message)`` of what its ``check_times`` found wrong with the time grid asked
+        about (see :func:`describe_model`).
     """
 
+    name: str
     outputs: tuple[str, ...]
     parameters: tuple[str, ...] | None
     chunk_size: int | None
     build_seconds: float
+    nominal_from_params: bool = False
+    time_problems: tuple[tuple[str, str], ...] = ()
 
 
-def _model_facts(token: str, factory: Callable[[], Model]) -> ModelFacts:
+def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelFacts:
     """Build (or reuse) the model in this process and describe it."""
-    model, seconds = _cached_model(token, factory)
+    model, seconds = _cached_model(factory)
+    time_problems: tuple[tuple[str, str], ...] = ()
+    check_times = getattr(model, "check_times", None)
+    if times is not None and callable(check_times):
+        try:
+            _model_code(check_times, times)
+        except ConfigError as error:
+            time_problems = tuple((p.path or "time", p.message) for p in error.problems)
     offered = getattr(model, "outputs", None)
     if offered is None or not callable(getattr(model, "simulate", None)):
         raise UsageError(
@@ -302,45 +344,56 @@ def _model_facts(token: str, factory: Callable[[], Model]) -> ModelFacts:
         )
     parameters = getattr(model, "parameters", None)
     return ModelFacts(
+        name=type(model).__name__,
         outputs=tuple(offered),
         parameters=None if parameters is None else tuple(parameters),
         chunk_size=getattr(model, "chunk_size", None),
         build_seconds=seconds,
+        nominal_from_params=bool(getattr(model, "nominal_from_params", False)),
+        time_problems=time_problems,
     )
 
 
-def _token(model_factory: Callable[[], Model]) -> str:
-    """The factory's identity: the model cached in a worker is reused for the same token."""
+def _factory(model_factory: Callable[[], Model]) -> _Factory:
+    """``model_factory`` ready to be sent to workers; the token is its identity (the model
+    cached in a worker is reused for the same token)."""
     try:
-        return hashlib.sha256(cloudpickle.dumps(model_factory)).hexdigest()
+        payload = cloudpickle.dumps(model_factory)
     except Exception as exc:  # pickling can fail with almost any exception type
         raise UsageError(
             [ConfigProblem("model_factory", f"cannot be sent to worker processes: {exc}")],
             source="run_nodes",
         ) from exc
+    return _Factory(hashlib.sha256(payload).hexdigest(), payload, tuple(sys.path))
 
 
-def describe_model(model_factory: Callable[[], Model], pool: Pool) -> ModelFacts:
-    """Build the model in one of ``pool``'s workers and say what it offers.
+def describe_model(
+    model_factory: Callable[[], Model], pool: Pool, times: ArrayLike | None = None
+) -> ModelFacts:
+    """Build the model in one of ``pool``'s workers and say what it offers (and, given
+    ``times``, what it finds wrong with that time grid).
 
     Raises
     ------
     UsageError
         The factory cannot be sent to a worker, or builds no model.
-    ModelError
+    ModelDefinitionError
         The model's code failed while building, or killed its worker (named by its signal or
         exit code); this process is unharmed.
     """
-    token = _token(model_factory)
-    future = pool.submit(_model_facts, token, model_factory)
-    error = future.exception()
-    if error is None:
-        return future.result()
-    death = pool.death(error)
-    if death is None:
-        raise error
-    pool.rebuild()
-    raise ModelError(f"could not build the model: {death}")
+    factory = _factory(model_factory)
+    grid = None if times is None else np.asarray(times, dtype=np.float64)
+    # Twice: a worker of a kept pool may have died before this task (killed from outside).
+    for _ in range(2):
+        future = pool.submit(_model_facts, factory, grid)
+        error = future.exception()
+        if error is None:
+            return future.result()
+        death = pool.death(error)
+        if death is None:
+            raise error
+        pool.rebuild()
+    raise ModelDefinitionError(f"could not build the model: {death}")
 
 
 def _run_batch(
@@ -400,8 +453,7 @@ def _collect(
 
 
 def _execute(
-    token: str,
-    factory: Callable[[], Model],
+    factory: _Factory,
     params: Mapping[str, NDArray[np.float64]],
     times: NDArray[np.float64],
     outputs: Sequence[str],
@@ -416,7 +468,7 @@ def _execute(
     batch would only return a NaN row, so each node runs once (``1 + retries`` times if it
     fails) and its failure keeps its message.
     """
-    model, _ = _cached_model(token, factory)
+    model, _ = _cached_model(factory)
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
     params = {name: _read_only(array) for name, array in params.items()}
@@ -495,15 +547,14 @@ class _Campaign:
 
     def __init__(
         self,
-        token: str,
-        factory: Callable[[], Model],
+        factory: _Factory,
         params: dict[str, NDArray[np.float64]],
         times: NDArray[np.float64],
         outputs: tuple[str, ...],
         retries: int,
         journal: Journal | None,
     ) -> None:
-        self.token, self.factory = token, factory
+        self.factory = factory
         self.params, self.times, self.outputs = params, times, outputs
         self.retries, self.journal = retries, journal
         n_nodes = len(next(iter(params.values())))
@@ -543,7 +594,6 @@ class _Campaign:
         else:
             params = {name: array[task.indices] for name, array in self.params.items()}
         return (
-            self.token,
             self.factory,
             params,
             self.times,
@@ -902,15 +952,15 @@ def run_nodes(
     UsageError
         Before anything runs, for invalid arguments, a model without a requested output, or a
         journal that does not match this run.
-    ModelError
-        If the model cannot be built.
+    ModelDefinitionError
+        If the model cannot be built (its code failed or killed the worker).
     """
     start = time.perf_counter()
     arrays, time_grid, names = _check_arguments(
         params, times, outputs, jobs, backend, address, chunk_size, retries, timeout
     )
     n_nodes = len(next(iter(arrays.values())))
-    token = _token(model_factory)
+    factory = _factory(model_factory)
     if journal is not None:
         _check_journal(journal, n_nodes, names, time_grid.size)
     if pool is None:
@@ -940,7 +990,7 @@ def run_nodes(
         )
     facts = facts or describe_model(model_factory, pool)
     _check_outputs(facts, names)
-    campaign = _Campaign(token, model_factory, arrays, time_grid, names, retries, journal)
+    campaign = _Campaign(factory, arrays, time_grid, names, retries, journal)
     if journal is not None:
         campaign.resume(journal)
     # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the

@@ -3,8 +3,10 @@
 A worker killed with its parent (``kill -9`` of pcmb, a crash) must not go on running a model,
 and an external simulator must not outlive the worker that started it. On Linux the kernel
 does this: ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` makes it send SIGKILL to the process when its
-parent exits, whatever the process is doing. Elsewhere a daemon thread polls the parent's pid
-(it cannot interrupt native code that holds the GIL, so there it is a best effort).
+parent exits, whatever the process is doing (strictly: when the parent's thread that started
+it ends, so workers meant to outlive a thread must be started by the main thread). Elsewhere
+a daemon thread polls the parent's pid (it cannot interrupt native code that holds the GIL, so
+there it is a best effort).
 """
 
 from __future__ import annotations

@@ -1,0 +1,548 @@
+"""When polynomial chaos fails: per-time error indicators and a verdict per output.
+
+Three kinds of evidence, each an array over time and each measured in units of the output's
+*largest* standard deviation over time (the scale): an error that is small against the
+output's typical spread is accepted even where the spread itself is small (near a fixed
+initial state, or where a damped output settles), which is where a per-time normalisation
+raises false alarms.
+
+- **Spectral decay** (:func:`spectral_decay`): the share of the largest variance carried
+  by the outer two layers of the index set (terms of degree >= 2 only) — the top two total
+  degrees of a total basis, the top two degrees of each input of a tensor basis. An
+  expansion that converges has little there; two layers rather than one, because a
+  response even in a symmetric input has exactly zero odd coefficients, so its top shell
+  alone can be empty while the expansion is far from converged.
+- **Held-out error** (:func:`holdout_error`): the surrogate against K extra model runs at
+  random inputs; the RMS error and an upper confidence bound on it that fits K.
+- **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
+  where the runs vary, and surrogate samples far outside the range of the run values.
+
+:func:`diagnose` does all of it for one output: its estimated error is the held-out RMS error
+at each time (the decay where there are no held-out runs), its verdict (:func:`verdict`) the
+first time that exceeds the tolerance, explained in a ``chaos-unreliable`` record with a
+remedy that fits the failure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.nodes import draw_germs
+from pcmb.result import WarningRecord
+
+__all__ = [
+    "CODES",
+    "CONFIDENCE",
+    "TOLERANCE",
+    "VALIDATION",
+    "HeldOut",
+    "Holdout",
+    "OutputDiagnostics",
+    "diagnose",
+    "diagnose_all",
+    "holdout_error",
+    "out_of_range",
+    "range_checks",
+    "spectral_decay",
+    "tail_terms",
+    "verdict",
+]
+
+#: Codes of the warning records the diagnostics make.
+CODES = frozenset({"chaos-unreliable", "variance-nonpositive", "surrogate-out-of-range"})
+#: Default number of held-out runs (``method.validation``).
+VALIDATION = 16
+#: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
+#: design's own first nodes.
+HELD_OUT_SEED = 7919
+#: Default accepted error, relative to the output's largest standard deviation.
+TOLERANCE = 0.05
+#: Confidence level of the held-out upper bound.
+CONFIDENCE = 0.9
+#: Surrogate draws of the range check, and its seed.
+RANGE_DRAWS, RANGE_SEED = 4096, 0
+#: A surrogate draw is "far outside" beyond this fraction of the run values' range past
+#: their smallest or largest value ...
+RANGE_MARGIN = 0.25
+#: ... and the range check warns where more than this share of the draws is.
+RANGE_SHARE = 0.01
+#: Draws of an output that no run ever made negative are also far outside below 0 by more
+#: than this fraction of the range.
+RANGE_BELOW_ZERO = 0.01
+#: Run values whose std is below this fraction of their RMS do not vary (round-off).
+_ROUND_OFF = 1e-12
+#: A tail holding more than this share of its energy in one input is "concentrated".
+_CONCENTRATED = 0.75
+#: An error that ends above this multiple of its value where it first failed grows.
+_GROWTH = 2.0
+#: A tail holding between this share and all of the energy of the two layers before it
+#: decays algebraically, as the spectrum of a jump: the response is steep there.
+_FLAT = 0.5
+
+
+# -- spectral decay ----------------------------------------------------------------------------
+
+
+def tail_terms(multi_index: ArrayLike, depth: int = 2) -> NDArray[np.bool_]:
+    """(S,) the terms of degree >= 2 in the outer ``depth`` layers of an index set.
+
+    α is in the tail when α + depth·e_k leaves the set for some input k that the set varies
+    (largest degree >= 1): for a total set of order P that is |α| >= P - depth + 1, for a
+    tensor set α_k >= P_k - depth + 1 for some k. Terms of total degree 0 and 1 are never in
+    it, so a response linear in its inputs has an empty tail at every order (an order below
+    3 has fewer than two layers above the linear ones).
+    """
+    index = np.asarray(multi_index, dtype=np.int64)
+    present = {tuple(row) for row in index}
+    tail = np.zeros(index.shape[0], dtype=bool)
+    for k in np.flatnonzero(index.max(axis=0) >= 1):
+        shifted = index.copy()
+        shifted[:, k] += depth
+        tail |= np.array([tuple(row) not in present for row in shifted])
+    return tail & (index.sum(axis=1) >= 2)
+
+
+def spectral_decay(expansion: ChaosExpansion, scale: float) -> NDArray[np.float64]:
+    """(T,) share of the largest variance carried by the tail terms (:func:`tail_terms`).
+
+    Σ_{α in tail} c_α² / scale²: a converged expansion has little energy in its outer
+    layers. As a share of variance it is the square of the tail's norm over the scale, so
+    it reaches the tolerance where the tail's norm is √tolerance (22 % at 5 %) of the
+    largest standard deviation: the outer layers overstate the truncation error of smooth
+    responses by a factor 3–6 (the pendulum at order 7), so their norm alone would raise
+    false alarms, while a spectrum that does not decay (a jump, chaos) passes this mark.
+    Zero where the scale is zero.
+    """
+    tail = expansion.coefficients[tail_terms(expansion.multi_index)]
+    if not scale > 0 or not np.isfinite(scale):
+        return np.zeros(tail.shape[1:])
+    return np.sum((tail / scale) ** 2, axis=0)  # scaled before squaring: outputs near 1e200
+
+
+def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float) -> NDArray:
+    """√(Σ d² / count) / scale over the first axis, scaled before squaring (no overflow)."""
+    if not scale > 0 or not np.isfinite(scale):
+        return np.zeros(differences.shape[1:])
+    return np.sqrt(np.sum((differences / scale) ** 2, axis=0) / count)
+
+
+# -- held-out runs -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Holdout:
+    """The surrogate against K held-out model runs at random inputs.
+
+    Attributes
+    ----------
+    error:
+        (T,) RMS of surrogate minus model over the runs, over the scale.
+    upper:
+        (T,) upper confidence bound on the RMS error over the inputs' distribution, over
+        the scale: with probability ``confidence`` the true RMS error is below it when the
+        errors at the K inputs are roughly normal (χ² bound with K degrees of freedom).
+    count:
+        K, the finite runs used.
+    confidence:
+        The bound's confidence level.
+    """
+
+    error: NDArray[np.float64]
+    upper: NDArray[np.float64]
+    count: int
+    confidence: float
+
+
+def holdout_error(
+    predicted: ArrayLike, observed: ArrayLike, scale: float, confidence: float = CONFIDENCE
+) -> Holdout:
+    """RMS error of the surrogate at K held-out runs and its upper confidence bound.
+
+    With d_k the errors at K independent inputs drawn from their distribution, Σ d_k² / σ²
+    is χ²_K when the d_k are N(0, σ²), so σ <= √(Σ d_k² / χ²_K(1 - confidence)) with the
+    given confidence: 1.9 times the RMS estimate for K = 4, 1.4 for K = 10, 1.25 for K = 20
+    at 90 %. Errors with heavier tails than the normal (a jump met by few of the K inputs)
+    make it optimistic: the spectral decay covers those.
+
+    Parameters
+    ----------
+    predicted, observed:
+        (K, T) surrogate and model values at the same K inputs; rows with a non-finite
+        model value (failed runs) are left out.
+    scale:
+        The output's largest standard deviation over time.
+    confidence:
+        Level of the upper bound, in (0, 1).
+
+    Returns
+    -------
+    Holdout
+        Zeros if the scale is zero; NaN if no run is finite.
+    """
+    from scipy.special import gammaincinv
+
+    predicted, observed = np.atleast_2d(predicted), np.atleast_2d(observed)
+    if predicted.shape != observed.shape:
+        raise ValueError(f"predicted {predicted.shape} and observed {observed.shape} differ")
+    kept = np.isfinite(observed).all(axis=tuple(range(1, observed.ndim)))
+    differences = predicted[kept] - observed[kept]
+    count = int(kept.sum())
+    if count == 0:
+        nan = np.full(observed.shape[1:], np.nan)
+        return Holdout(nan, nan, 0, confidence)
+    quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
+    return Holdout(
+        _rms_over_scale(differences, scale, count),
+        _rms_over_scale(differences, scale, quantile),
+        count,
+        confidence,
+    )
+
+
+# -- range checks ------------------------------------------------------------------------------
+
+
+def out_of_range(
+    expansion: ChaosExpansion,
+    node_values: ArrayLike,
+    draws: int = RANGE_DRAWS,
+    seed: int = RANGE_SEED,
+    node_germ: ArrayLike | None = None,
+) -> NDArray[np.float64]:
+    """(T,) share of surrogate draws far outside the range of the run values.
+
+    With ``node_germ`` ((N, n) germ of the runs), only draws inside the box the runs span are
+    counted: beyond it (the tails of an unbounded input) a smooth response leaves the runs'
+    range by itself, which says nothing about the surrogate.
+
+    "Far" is beyond ``RANGE_MARGIN`` times the range (max - min of the runs) past the
+    smallest or largest run value; where the runs or the expansion do not vary beyond
+    round-off (:meth:`~pcmb.chaos.expansion.ChaosExpansion.varies`) the share is 0. An
+    output that is never negative in any run and at any time (a distance, an energy) is
+    also held to be non-negative: draws below 0 by more than ``RANGE_BELOW_ZERO`` times the
+    range count too.
+    """
+    values = np.asarray(node_values, dtype=float)
+    low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
+    margin = RANGE_MARGIN * (high - low)
+    floor = low - margin
+    if np.nanmin(values) >= 0:
+        floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
+    germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
+    if node_germ is not None:
+        box = np.asarray(node_germ, dtype=float)
+        germ = germ[np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)]
+    if germ.shape[0] == 0:
+        return np.zeros(values.shape[1])
+    samples = expansion.evaluate_germ(germ)
+    outside = (samples < floor) | (samples > high + margin)
+    return np.where(expansion.varies() & (high > low), outside.mean(axis=0), 0.0)
+
+
+def range_checks(
+    output: str,
+    expansion: ChaosExpansion,
+    node_values: ArrayLike,
+    times: ArrayLike,
+    out_of_range_share: NDArray[np.float64] | None = None,
+) -> list[WarningRecord]:
+    """Warnings where the expansion's values cannot be right, whatever its convergence.
+
+    - ``variance-nonpositive``: the variance from the coefficients is zero (or not finite)
+      where the runs vary — the basis misses what varies (e.g. a total basis that drops
+      the interaction the output consists of).
+    - ``surrogate-out-of-range``: more than ``RANGE_SHARE`` of the surrogate's draws lie
+      far outside the run values (:func:`out_of_range`): its PDF puts mass where no run
+      went (Gibbs or Runge overshoot of a steep response).
+
+    Parameters
+    ----------
+    output:
+        The output's name, for the records.
+    expansion:
+        Its (S, T) expansion.
+    node_values:
+        (N, T) the runs it was recovered from (non-finite rows are ignored).
+    times:
+        (T,) the grid.
+    out_of_range_share:
+        (T,) :func:`out_of_range` when already computed.
+    """
+    values = np.asarray(node_values, dtype=float)
+    values = values[np.isfinite(values).all(axis=1)]
+    times = np.asarray(times, dtype=float)
+    # Ranges, not squares: outputs near 1e200 must not overflow.
+    spread = np.ptp(values, axis=0) if values.shape[0] > 1 else np.zeros(times.shape)
+    size = np.max(np.abs(values), axis=0) if values.size else np.zeros(times.shape)
+    varies = spread > _ROUND_OFF * size
+    records = []
+    std = expansion.std()  # overflow-safe, where the variance of 1e200 would not be
+    empty = varies & ~(np.isfinite(std) & (std > 0))
+    if empty.any():
+        records.append(
+            WarningRecord(
+                "variance-nonpositive",
+                f"the variance from the chaos coefficients is zero or not finite at "
+                f"{_count(empty)} where the runs vary: the basis misses the variation",
+                output,
+                _span(times, empty),
+            )
+        )
+    share = out_of_range(expansion, values) if out_of_range_share is None else out_of_range_share
+    far = share > RANGE_SHARE
+    if far.any():
+        records.append(
+            WarningRecord(
+                "surrogate-out-of-range",
+                f"up to {_percent(share.max())} of the surrogate's values lie far outside the "
+                f"range of the runs (at {_count(far)}): its PDF has mass where no run went",
+                output,
+                _span(times, far),
+            )
+        )
+    return records
+
+
+def _count(where: NDArray[np.bool_]) -> str:
+    return f"{int(where.sum())} of {where.size} times"
+
+
+def _span(times: NDArray[np.float64], where: NDArray[np.bool_]) -> tuple[float, float]:
+    found = np.flatnonzero(where)
+    return float(times[found[0]]), float(times[found[-1]])
+
+
+def _percent(share: float) -> str:
+    return f"{100 * share:.2g} %"
+
+
+# -- the verdict -------------------------------------------------------------------------------
+
+
+def verdict(times: ArrayLike, estimate: ArrayLike, tolerance: float = TOLERANCE) -> float:
+    """The first time at which the estimated error exceeds the tolerance (NaN if never)."""
+    above = np.flatnonzero(np.asarray(estimate, dtype=float) > tolerance)
+    return float(np.asarray(times, dtype=float)[above[0]]) if above.size else float("nan")
+
+
+@dataclass(frozen=True)
+class OutputDiagnostics:
+    """How far one output's chaos expansion can be trusted, time by time.
+
+    Attributes
+    ----------
+    output:
+        The output's name.
+    scale:
+        Its largest standard deviation over time, the unit of every indicator.
+    decay:
+        (T,) :func:`spectral_decay`, a share of the largest variance.
+    holdout:
+        The held-out check (:class:`Holdout`), ``None`` without held-out runs.
+    out_of_range:
+        (T,) :func:`out_of_range`, a share of surrogate draws.
+    estimate:
+        (T,) the estimated error: the held-out RMS error, or the decay without held-out runs.
+    tolerance:
+        The accepted error, relative to the scale.
+    failing_from:
+        :func:`verdict` of the estimate: the first time it exceeds the tolerance, NaN if
+        never.
+    warnings:
+        ``chaos-unreliable`` (when ``failing_from`` is a time) and the range checks'
+        records (:func:`range_checks`).
+    """
+
+    output: str
+    scale: float
+    decay: NDArray[np.float64]
+    holdout: Holdout | None
+    out_of_range: NDArray[np.float64]
+    estimate: NDArray[np.float64]
+    tolerance: float
+    failing_from: float
+    warnings: tuple[WarningRecord, ...]
+
+    @property
+    def reliable(self) -> bool:
+        """Whether the estimated error stays within the tolerance at every time."""
+        return bool(np.isnan(self.failing_from))
+
+
+def diagnose(
+    output: str,
+    expansion: ChaosExpansion,
+    node_values: ArrayLike,
+    times: ArrayLike,
+    holdout: tuple[ArrayLike, ArrayLike] | None = None,
+    tolerance: float = TOLERANCE,
+    node_germ: ArrayLike | None = None,
+) -> OutputDiagnostics:
+    """Every check of one output's expansion, its verdict and its warnings.
+
+    Parameters
+    ----------
+    output:
+        The output's name.
+    expansion:
+        Its (S, T) expansion.
+    node_values:
+        (N, T) the runs it was recovered from.
+    times:
+        (T,) the grid.
+    holdout:
+        ``(predicted, observed)``, each (K, T): the surrogate and the model at K inputs
+        drawn at random from the inputs' distribution (not the nodes), or ``None``.
+    tolerance:
+        Accepted error relative to the output's largest standard deviation.
+    node_germ:
+        (N, n) germ of the runs, which bounds where the range check looks (see
+        :func:`out_of_range`).
+    """
+    times = np.asarray(times, dtype=float)
+    std = expansion.std()
+    finite = std[np.isfinite(std)]
+    scale = float(finite.max()) if finite.size else 0.0
+    decay = spectral_decay(expansion, scale)
+    checked = holdout_error(*holdout, scale) if holdout is not None else None
+    # The held-out error measures the surrogate's error itself; the decay only hints at it
+    # (it is large for a response that is exactly a polynomial of the expansion's order), so
+    # it decides only where there are no held-out runs.
+    estimate = decay if checked is None else checked.error
+    failing_from = verdict(times, estimate, tolerance)
+    share = out_of_range(expansion, node_values, node_germ=node_germ)
+    records = range_checks(output, expansion, node_values, times, share)
+    if not np.isnan(failing_from):
+        failing = times >= failing_from
+        message = (
+            f"polynomial chaos unreliable from t = {failing_from:.4g} "
+            f"({_evidence(decay, checked, failing)}); consider "
+            f"{_remedy(expansion, estimate, failing, share)}"
+        )
+        span = (failing_from, float(times[-1]))
+        records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
+    return OutputDiagnostics(
+        output, scale, decay, checked, share, estimate, tolerance, failing_from, tuple(records)
+    )
+
+
+def _evidence(
+    decay: NDArray[np.float64], holdout: Holdout | None, failing: NDArray[np.bool_]
+) -> str:
+    """The indicators' peaks over the failing times, e.g. "held-out error 12 % of std, ..."."""
+    found = [f"decay {_percent(np.nanmax(decay[failing]))}"]
+    if holdout is not None:
+        worst = int(np.flatnonzero(failing)[np.nanargmax(holdout.error[failing])])
+        found.insert(
+            0,
+            f"held-out error {_percent(holdout.error[worst])} of std, below "
+            f"{_percent(holdout.upper[worst])} with {_percent(holdout.confidence)} confidence "
+            f"from {holdout.count} runs",
+        )
+    return ", ".join(found)
+
+
+def _remedy(
+    expansion: ChaosExpansion,
+    estimate: NDArray[np.float64],
+    failing: NDArray[np.bool_],
+    out_of_range_share: NDArray[np.float64],
+) -> str:
+    """What may help, read from where the tail's energy sits over the failing times.
+
+    - energy spread over several inputs and an error that grows (more than doubles from
+      the first failing time to the end): chaotic or long-horizon dynamics, which no
+      order fixes — sampling;
+    - energy in one input whose spectrum decays slowly (the outer two layers hold between
+      half and all of the energy of the two before them, as the coefficients of a jump
+      do; or, below order 4, the surrogate overshoots the runs): steep or discontinuous
+      there — multi-element chaos;
+    - otherwise (a spectrum still rising: an oscillation not yet resolved; or decaying
+      geometrically but too slowly): a higher order, for the input that holds the tail.
+    """
+    index = expansion.multi_index
+    tail = tail_terms(index)
+    before = tail_terms(index, 4) & ~tail
+    energy = np.nansum(expansion.coefficients[:, failing] ** 2, axis=1)
+    by_input = (index[tail] > 0).T.astype(float) @ energy[tail]
+    total = by_input.sum()
+    top = int(np.argmax(by_input))
+    name = expansion.names[top]
+    if total <= 0:
+        return "raising the order (method.order)"
+    grows = estimate[-1] > _GROWTH * estimate[np.argmax(failing)]
+    if expansion.n > 1 and by_input[top] < _CONCENTRATED * total and grows:
+        return (
+            "sampling (method.kind: montecarlo, lhs or sobol): the error grows with time and "
+            "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
+            "order does not fix"
+        )
+    previous = energy[before].sum()
+    if previous > 0:
+        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+    if steep:
+        return (
+            f"multi-element chaos (method.elements): the response is steep or discontinuous "
+            f"in {name}"
+        )
+    return f"raising the order of {name} (method.order): its spectrum decays slowly"
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """The held-out runs: K model runs at inputs drawn from their distribution.
+
+    Attributes
+    ----------
+    seed:
+        Seed of the draws.
+    germ, params:
+        (K, n) germ and physical values.
+    values:
+        Output name -> (K, T) model values (NaN rows where a run failed).
+    ok:
+        (K,) which runs succeeded.
+    """
+
+    seed: int
+    germ: NDArray[np.float64]
+    params: NDArray[np.float64]
+    values: dict[str, NDArray[np.float64]]
+    ok: NDArray[np.bool_]
+
+
+def diagnose_all(
+    expansions: Mapping[str, object],
+    germ: NDArray[np.float64],
+    values: Mapping[str, NDArray[np.float64]],
+    ok: NDArray[np.bool_],
+    times: ArrayLike,
+    held_out: HeldOut | None,
+    tolerance: float = TOLERANCE,
+) -> dict[str, OutputDiagnostics]:
+    """:func:`diagnose` every output with a (single-element) chaos expansion.
+
+    ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
+    nodes that succeeded; the
+    held-out check uses the successful held-out runs. Piecewise (multi-element) expansions are
+    left to their own element indicators.
+    """
+    found = {}
+    for name, expansion in expansions.items():
+        if not isinstance(expansion, ChaosExpansion):
+            continue
+        holdout = None
+        if held_out is not None and held_out.ok.any():
+            predicted = expansion.evaluate_germ(held_out.germ[held_out.ok])
+            holdout = (predicted, held_out.values[name][held_out.ok])
+        found[name] = diagnose(
+            name, expansion, values[name][ok], times, holdout, tolerance, node_germ=germ[ok]
+        )
+    return found

@@ -1,0 +1,224 @@
+"""Tests of pcmb.analysis.diagnostics against responses whose true error is known.
+
+The true error is the RMS error of the surrogate over the inputs' distribution, relative to
+the output's largest std, computed by a Gauss rule far finer than the chaos order (exact to
+round-off for these smooth integrands). The held-out estimate from K = 16 runs is a χ²-type
+estimate: for normal errors the ratio estimate/true lies in [0.58, 1.43] with 99 %
+probability, so the verdict must fall between the times where the true error crosses half
+and twice the tolerance.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pcmb.analysis.diagnostics import (
+    TOLERANCE,
+    diagnose,
+    holdout_error,
+    out_of_range,
+    range_checks,
+    spectral_decay,
+    tail_terms,
+    verdict,
+)
+from pcmb.chaos.basis import tensor_index_set, total_index_set
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Uniform
+from pcmb.chaos.nodes import TensorGrid, draw_germs
+from pcmb.chaos.recovery import project_tensor
+from pcmb.errors import PcmbWarning
+from pcmb.references import double_well
+
+TIMES = np.linspace(0.0, 1.0, 101)
+HELD_OUT = 16
+
+
+def chaos(function, orders, index=None):
+    """The collocation expansion of function(ξ (N, n)) -> (N, T) on U[-1, 1] inputs, and
+    the values at the nodes."""
+    grid = TensorGrid((Uniform(-1.0, 1.0),) * len(orders), orders)
+    values = function(grid.nodes)
+    index = grid.multi_index if index is None else index
+    return ChaosExpansion(project_tensor(grid, values, index), index, grid.distributions), values
+
+
+def true_error(expansion, function, points=120):
+    """(T,) exact RMS error of the surrogate over the largest std (a fine Gauss rule)."""
+    grid = TensorGrid(expansion.distributions, (points - 1,) * expansion.n)
+    error = expansion.evaluate_germ(grid.nodes) - function(grid.nodes)
+    return np.sqrt(grid.weights @ error**2) / expansion.std().max()
+
+
+def held_out(expansion, function, seed=1):
+    germ = draw_germs(expansion.distributions, HELD_OUT, np.random.default_rng(seed))
+    return expansion.evaluate_germ(germ), function(germ)
+
+
+def crossing(times, error, level):
+    return verdict(times, error, level)
+
+
+def smooth(xi):
+    return (
+        np.outer(np.exp(0.5 * xi[:, 0]), np.sin(3 * TIMES))
+        + np.outer(xi[:, 1] ** 2 + 0.3 * xi[:, 0] * xi[:, 1], np.cos(3 * TIMES))
+        + 2.0
+    )
+
+
+def steepening(xi):
+    """tanh((1 + 80 t)(ξ - 0.3)): smooth at t = 0, nearly a jump at ξ = 0.3 by t = 1."""
+    return np.tanh(np.outer(xi[:, 0] - 0.3, 1.0 + 80.0 * TIMES))
+
+
+def even(xi):
+    """cos(14 t ξ): even in a symmetric input, so every odd coefficient is zero."""
+    return np.cos(np.outer(xi[:, 0], 14.0 * TIMES))
+
+
+def spreading(xi):
+    """cos(12 t (ξ1 + ξ2)): an error that grows with time and involves both inputs alike."""
+    return np.cos(np.outer(xi[:, 0] + xi[:, 1], 12.0 * TIMES))
+
+
+# -- the index-set tail ------------------------------------------------------------------------
+
+
+def test_the_tail_is_the_outer_two_layers_above_degree_one():
+    total = total_index_set(2, 4)
+    assert np.array_equal(tail_terms(total), total.sum(axis=1) >= 3)
+    tensor = tensor_index_set((4, 2))
+    expected = ((tensor[:, 0] >= 3) | (tensor[:, 1] >= 1)) & (tensor.sum(axis=1) >= 2)
+    assert np.array_equal(tail_terms(tensor), expected)
+    # Order 2: only the degree-2 layer; a linear response has an empty tail at any order.
+    assert np.array_equal(tail_terms(total_index_set(3, 2)), total_index_set(3, 2).sum(1) == 2)
+    linear, _ = chaos(lambda xi: np.outer(xi[:, 0] - 2 * xi[:, 1], TIMES), (3, 3))
+    assert spectral_decay(linear, 1.0).max() < 1e-25
+
+
+# -- both ways: silent where the chaos is right, flagged where it is not -----------------------
+
+
+def test_a_smooth_response_raises_nothing():
+    expansion, values = chaos(smooth, (6, 6))
+    # Its exact error is that of exp(ξ/2) at degree 7: 0.5⁷/7! ≈ 2e-6 of the std.
+    assert true_error(expansion, smooth).max() < 1e-4
+    found = diagnose("y", expansion, values, TIMES, held_out(expansion, smooth))
+    assert np.isnan(found.failing_from) and found.reliable and found.warnings == ()
+    assert found.decay.max() < 1e-6 and found.holdout.upper.max() < 1e-3
+
+
+def test_a_steepening_response_is_flagged_when_its_true_error_crosses_the_tolerance():
+    expansion, values = chaos(steepening, (7,))
+    truth = true_error(expansion, steepening)
+    assert truth.max() > 2 * TOLERANCE
+    found = diagnose("y", expansion, values, TIMES, held_out(expansion, steepening))
+    early = crossing(TIMES, truth, TOLERANCE / 2)
+    late = crossing(TIMES, truth, 2 * TOLERANCE)
+    assert early <= found.failing_from <= late
+    (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
+    assert record.output == "y" and record.time_range == (found.failing_from, 1.0)
+    assert record.message.startswith(f"polynomial chaos unreliable from t = {found.failing_from}")
+    assert "method.elements" in record.message and "x0" in record.message
+
+
+def test_an_even_response_defeats_the_top_shell_but_not_the_decay():
+    expansion, values = chaos(even, (7,))
+    top_shell = expansion.coefficients[tail_terms(expansion.multi_index, depth=1)]
+    assert np.abs(top_shell).max() < 1e-12  # degree 7 is odd: exactly zero by symmetry
+    truth = true_error(expansion, even)
+    assert truth.max() > 2 * TOLERANCE
+    # With the decay alone (no held-out runs) the failure is still found, and no later
+    # than the true error's crossing of twice the tolerance.
+    alone = diagnose("y", expansion, values, TIMES)
+    assert alone.holdout is None
+    assert alone.failing_from <= crossing(TIMES, truth, 2 * TOLERANCE)
+    assert alone.decay.max() > TOLERANCE
+    found = diagnose("y", expansion, values, TIMES, held_out(expansion, even))
+    assert crossing(TIMES, truth, TOLERANCE / 2) <= found.failing_from
+    assert found.failing_from <= crossing(TIMES, truth, 2 * TOLERANCE)
+
+
+def test_an_error_spread_over_the_inputs_and_growing_points_to_sampling():
+    expansion, values = chaos(spreading, (5, 5))
+    found = diagnose("y", expansion, values, TIMES, held_out(expansion, spreading))
+    assert found.failing_from <= crossing(TIMES, true_error(expansion, spreading), 2 * TOLERANCE)
+    assert "sampling" in found.warnings[0].message
+
+
+def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance():
+    from pcmb import Study
+
+    model = pytest.importorskip("model_loading").model_class("double_well", "DoubleWell")
+    times = np.linspace(0.0, 4.0, 201)
+    study = Study(model, {"x0": Uniform(-0.625, 0.375)}, times, order=7, jobs=1)
+    with pytest.warns(PcmbWarning, match=r"x: t in \[.*polynomial chaos unreliable from t ="):
+        result = study.run(progress=False)  # the study's own held-out runs find it too
+    checks = study.replace(method="montecarlo", samples=HELD_OUT, seed=7).run(progress=False)
+    expansion = result.expansions["x"]
+    predicted = expansion.evaluate_germ(checks.germ)
+    found = diagnose("x", expansion, result.values["x"], times, (predicted, checks.values["x"]))
+    fine = TensorGrid(expansion.distributions, (399,))
+    exact = double_well(times, fine.params[:, 0])
+    truth = np.sqrt(fine.weights @ (expansion.evaluate_germ(fine.nodes) - exact) ** 2)
+    truth /= expansion.std().max()
+    for verdict_time in (found.failing_from, result.diagnostics["x"].failing_from):
+        assert crossing(times, truth, TOLERANCE / 2) <= verdict_time
+        assert verdict_time <= crossing(times, truth, 2 * TOLERANCE)
+
+
+# -- the held-out bound ------------------------------------------------------------------------
+
+
+def test_the_held_out_bound_is_the_chi_square_bound_and_covers_at_its_level():
+    rng = np.random.default_rng(3)
+    observed = rng.normal(size=(10, 2000))
+    found = holdout_error(np.zeros_like(observed), observed, scale=2.0)
+    rms = np.sqrt(np.mean(observed**2, axis=0)) / 2.0
+    # χ²₁₀ has its 10 % quantile at 4.8652 (tables): the bound is √(10/4.8652) × the RMS.
+    assert found.upper == pytest.approx(rms * np.sqrt(10 / 4.8652), rel=1e-4)
+    assert found.error == pytest.approx(rms) and found.count == 10
+    # Each column is one experiment with true RMS error 1/2: the bound covers it in 90 %
+    # of them, within 3 binomial standard deviations (0.0067) of 2000 experiments.
+    assert np.mean(found.upper >= 0.5) == pytest.approx(0.9, abs=0.02)
+
+
+def test_failed_held_out_runs_are_left_out():
+    observed = np.array([[1.0, 2.0], [np.nan, 0.0], [3.0, 4.0]])
+    found = holdout_error(np.zeros((3, 2)), observed, scale=1.0)
+    assert found.count == 2
+    assert found.error == pytest.approx(np.sqrt([5.0, 10.0]))
+
+
+# -- range checks ------------------------------------------------------------------------------
+
+
+def test_a_basis_that_misses_the_variation_has_a_nonpositive_variance():
+    # ξ1 ξ2 is orthogonal to every term of total degree <= 1.
+    expansion, values = chaos(
+        lambda xi: np.outer(xi[:, 0] * xi[:, 1], 1.0 + TIMES), (1, 1), total_index_set(2, 1)
+    )
+    records = range_checks("y", expansion, values, TIMES)
+    assert [r.code for r in records] == ["variance-nonpositive"]
+    assert records[0].time_range == (0.0, 1.0)
+
+
+def test_a_surrogate_far_outside_the_runs_is_reported():
+    # A surrogate 10 ξ checked against runs ξ: most draws lie beyond the runs' range.
+    expansion = ChaosExpansion(
+        np.array([[0.0] * TIMES.size, [10.0 / np.sqrt(3)] * TIMES.size]),
+        [[0], [1]],
+        (Uniform(-1.0, 1.0),),
+    )
+    runs = np.outer(np.array([-1.0, 0.0, 1.0]), np.ones(TIMES.size))
+    share = out_of_range(expansion, runs)
+    assert share == pytest.approx(np.full(TIMES.size, 1 - 1.5 / 10), abs=0.03)
+    (record,) = range_checks("y", expansion, runs, TIMES)
+    assert record.code == "surrogate-out-of-range" and record.time_range == (0.0, 1.0)
+
+
+def test_the_verdict_is_the_first_time_above_the_tolerance():
+    assert verdict([0.0, 1.0, 2.0, 3.0], [0.0, 0.06, 0.01, 0.2], 0.05) == 1.0
+    assert np.isnan(verdict([0.0, 1.0], [0.05, 0.0], 0.05))

@@ -1,0 +1,296 @@
+"""Smolyak and sparse-regression studies end to end, from YAML (``pcmb run``) and from Python,
+against closed forms (Ishigami) and the tensor grid of order 9 of the same model."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+from model_loading import CONFIGS_DIR
+from test_resume import PYTHON_CONFIG, PYTHON_MODEL, output_values, pcmb_run, run_and_kill
+
+import pcmb
+from pcmb.config.schema import load_config
+from pcmb.errors import ConfigError, UsageError
+from pcmb.references import ishigami, ishigami_moments
+from pcmb.result import Design
+from pcmb.store import load
+from pcmb.study import Study
+
+ISHIGAMI = {name: pcmb.Uniform(-np.pi, np.pi) for name in ("x1", "x2", "x3")}
+TIMES = np.array([0.0, 1.0])
+#: A regression in rounds of the two-input model of test_resume (16 runs first, 256 at most).
+ROUNDS_METHOD = (
+    "{kind: regression, samples: 16, order: 6, basis: total, tolerance: 1e-4, max_samples: 256}"
+)
+
+
+@pcmb.batched(outputs=("y",))
+def ishigami_model(params, times):
+    """The Ishigami function, the same at every time."""
+    x = np.stack([params[name] for name in ISHIGAMI], axis=1)
+    return {"y": np.repeat(ishigami(x)[:, None], times.size, axis=1)}
+
+
+def ishigami_study(**method) -> Study:
+    return Study(ishigami_model, ISHIGAMI, TIMES, backend="inprocess", **method)
+
+
+@pytest.mark.filterwarnings(
+    "ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"
+)  # low levels
+def test_smolyak_study_of_ishigami_converges_to_the_closed_form():
+    exact = ishigami_moments()
+    errors = []
+    for level in (3, 4):
+        result = ishigami_study(grid="smolyak", level=level).run()
+        assert result.design.label == f"Smolyak level {level}, rule gauss-patterson"
+        assert result.n_nodes == {3: 111, 4: 351}[level]
+        # The mean is a sum of 1-D integrals of odd or separable terms, exact on the
+        # symmetric nested rule; the variance converges spectrally (analytic integrand).
+        np.testing.assert_allclose(result.mean("y"), exact.mean, atol=1e-12)
+        errors.append(abs(result.std("y")[0] ** 2 / exact.variance - 1))
+        total = result.sobol_total("y")[:, 0]
+        if level == 4:
+            np.testing.assert_allclose(total, exact.total, atol=1e-3)
+    assert errors[1] < 1e-3 < errors[0] / 10  # 111 -> 351 runs: at least 100x more accurate
+
+
+def test_lars_study_adds_rounds_until_the_loo_error_meets_the_tolerance():
+    tolerance = 1e-6
+    study = ishigami_study(
+        method="regression", samples=32, order=12, tolerance=tolerance, max_samples=2048
+    )
+    assert study.design.record().samples == 32  # the first round, before any run
+    result = study.run()
+    fit = result.regression["y"]
+    assert result.n_nodes > 32 and result.design.samples == result.n_nodes
+    assert np.nanmax(fit.loo) <= tolerance
+    assert not [w for w in result.warnings if w.code.startswith("regression-")]
+    # Sobol' points in rounds: the first N points of the one sequence.
+    whole = pcmb.chaos.nodes.random_nodes(tuple(ISHIGAMI.values()), result.n_nodes, "sobol", 0)
+    np.testing.assert_array_equal(result.germ, whole.nodes)
+    # The LOO error estimates ‖f - f̂‖²/Var f: so |σ̂ - σ| <= σ √ε and |μ̂ - μ| <= σ √ε.
+    exact = ishigami_moments()
+    sigma = np.sqrt(exact.variance)
+    bound = 3 * np.sqrt(tolerance)
+    np.testing.assert_allclose(result.std("y"), sigma, rtol=bound)
+    np.testing.assert_allclose(result.mean("y"), exact.mean, atol=bound * sigma)
+    np.testing.assert_allclose(result.sobol_total("y")[:, 0], exact.total, atol=2 * bound)
+
+
+def test_a_budget_that_ends_before_the_tolerance_is_reported():
+    study = ishigami_study(
+        method="regression", samples=32, order=6, tolerance=1e-12, max_samples=100
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", pcmb.PcmbWarning)
+        result = study.run()
+    assert result.n_nodes == 100 == result.design.samples
+    codes = {w.code for w in result.warnings}
+    assert {"regression-budget", "regression-loo"} <= codes
+    assert any("budget of 100 runs (method.max_samples) ended" in str(w.message) for w in caught)
+
+
+def test_design_records_of_older_files_load_without_the_new_fields():
+    old = (
+        '{"kind": "collocation", "grid": "tensor-gauss", "basis": "tensor", "orders": [5, 5], '
+        '"level": null, "elements": 1, "samples": null, "seed": null, "fit": "projection"}'
+    )
+    record = Design.from_description(old)
+    assert (record.rule, record.q, record.tolerance, record.max_samples) == (None,) * 4
+    assert record.label == "chaos order 5"
+
+
+@pytest.mark.parametrize(
+    ("method", "key", "message"),
+    [
+        ({"grid": "smolyak", "level": -1}, "level", "expected an integer >= 0"),
+        ({"method": "regression", "samples": 8, "tolerance": 0.0}, "tolerance", "must be > 0"),
+        (
+            {"method": "regression", "samples": 64, "tolerance": 1e-3, "max_samples": 64},
+            "max_samples",
+            "leaves none for a round after the first 64",
+        ),
+        ({"method": "regression", "samples": 64, "max_samples": 128}, "max_samples", "only"),
+        (
+            {"method": "regression", "samples": 64, "selection": "none", "basis": "total"},
+            "samples",
+            "needs at least 456 samples",
+        ),
+    ],
+)
+def test_unusable_python_settings_name_their_argument(method, key, message):
+    with pytest.raises(UsageError, match=rf"{key}: .*{message}"):
+        ishigami_study(order=12, **method)
+
+
+def _write_config(tmp_path, method: str):
+    text = PYTHON_CONFIG.replace("method: {kind: collocation, order: 3}", f"method: {method}")
+    (tmp_path / "model.py").write_text(PYTHON_MODEL)
+    (tmp_path / "study.yaml").write_text(text)
+    return tmp_path / "study.yaml"
+
+
+@pytest.mark.parametrize(
+    ("method", "key"),
+    [
+        ("{kind: collocation, grid: smolyak, level: -1}", "method.level"),
+        ("{kind: regression, samples: 64, order: 4, tolerance: 0}", "method.tolerance"),
+        (
+            "{kind: regression, samples: 64, order: 4, tolerance: 0.01, max_samples: 32}",
+            "method.max_samples",
+        ),
+        (
+            "{kind: regression, samples: 8, order: 4, selection: none, basis: total}",
+            "method.samples",
+        ),
+        ("{kind: collocation, grid: smolyak, level: 2, order: 3}", "method.order"),
+    ],
+)
+def test_unusable_config_settings_are_located_at_their_key_exit_2(tmp_path, method, key):
+    path = _write_config(tmp_path, method)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert [problem.path for problem in caught.value.problems] == [key]
+    found = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "validate", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert found.returncode == 2 and f"{key}:" in found.stderr, found.stderr
+
+
+def test_validate_prints_the_first_round_and_the_budget(tmp_path):
+    path = _write_config(tmp_path, ROUNDS_METHOD)
+    shown = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "validate", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    assert "LARS on total order 6, 16 samples (to LOO 0.0001, at most 256)" in shown.stdout
+    assert "16 model runs in the first round, at most 256 in all" in shown.stdout
+
+
+# --------------------------------------------------------------------------- the quarter car
+
+
+def _quarter_car(stem: str) -> Study:
+    return Study.from_config(load_config(CONFIGS_DIR / f"{stem}.yaml")).replace(analysis=None)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The tensor grid of order 9 (1000 runs) of configs/quarter_car.yaml."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        return _quarter_car("quarter_car").replace(order=9).run()
+
+
+def _run_config(stem: str, folder) -> pcmb.StudyResult:
+    """``pcmb run configs/<stem>.yaml`` into ``folder``, then ``pcmb inspect``; the result."""
+    output = folder / f"{stem}.h5"
+    command = [sys.executable, "-m", "pcmb.cli"]
+    config = CONFIGS_DIR / f"{stem}.yaml"
+    ran = subprocess.run(
+        [*command, "run", str(config), "-o", str(output), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert ran.returncode == 0, ran.stderr
+    shown = subprocess.run(
+        [*command, "inspect", str(output)], capture_output=True, text=True, timeout=60, check=True
+    )
+    result = load(output)
+    assert result.design.label in shown.stdout
+    for name, fit in result.regression.items():
+        assert f"fit      {name}: {fit.selected.shape[0]} terms selected" in shown.stdout
+    return result
+
+
+def _same_values(result: pcmb.StudyResult, again: pcmb.StudyResult) -> None:
+    """The YAML and the Python route make the same nodes, runs and statistics."""
+    np.testing.assert_array_equal(result.germ, again.germ)
+    for name in result.outputs:
+        np.testing.assert_array_equal(result.values[name], again.values[name])
+        np.testing.assert_array_equal(result.mean(name), again.mean(name))
+        np.testing.assert_array_equal(result.std(name), again.std(name))
+
+
+@pytest.mark.slow
+def test_smolyak_config_from_yaml_and_python_agrees_with_the_tensor_grid(tmp_path, reference):
+    result = _run_config("quarter_car_smolyak", tmp_path)
+    assert result.design.label == "Smolyak level 3, rule gauss-patterson"
+    assert result.n_nodes == 111 and result.weights.min() < 0  # a signed combination
+    _same_values(result, _quarter_car("quarter_car_smolyak").run())
+    # Level 3 is exact for polynomials of total degree 2·3+1 on Gauss–Patterson levels: about
+    # as accurate as the tensor grid of order 5 (216 runs), whose error is below 1 % of the
+    # largest std; the order-3 tensor grid's is 3 %.
+    for name in result.outputs:
+        scale = reference.std(name).max()
+        assert np.abs(result.mean(name) - reference.mean(name)).max() < 1e-2 * scale
+        assert np.abs(result.std(name) - reference.std(name)).max() < 1e-2 * scale
+
+
+@pytest.mark.slow
+def test_lars_config_from_yaml_and_python_agrees_with_the_tensor_grid(tmp_path, reference):
+    result = _run_config("quarter_car_lars", tmp_path)
+    method = load_config(CONFIGS_DIR / "quarter_car_lars.yaml").method
+    assert method.samples < result.n_nodes <= method.max_samples
+    assert result.design.samples == result.n_nodes
+    assert result.design.label.startswith("LARS on hyperbolic order 12, q=0.75, ")
+    _same_values(result, _quarter_car("quarter_car_lars").run())
+    for name, fit in result.regression.items():
+        assert np.nanmax(fit.loo) <= method.tolerance  # met before the budget ended
+        # Every time: |Δμ|, |Δσ| <= σ √ε (ε the LOO estimate of ‖f - f̂‖²/Var f), with a
+        # factor 3 for the estimate and 1e-3 σ_max for the reference's own error.
+        sigma = reference.std(name)
+        bound = 3 * sigma * np.sqrt(np.nan_to_num(fit.loo)) + 1e-3 * sigma.max()
+        assert np.all(np.abs(result.mean(name) - reference.mean(name)) <= bound)
+        assert np.all(np.abs(result.std(name) - reference.std(name)) <= bound)
+        kept = result.expansions[name].multi_index
+        assert {tuple(row) for row in fit.selected} <= {tuple(row) for row in kept}
+
+
+# --------------------------------------------------------------------------- resuming rounds
+
+
+@pytest.mark.slow
+def test_a_run_killed_between_and_inside_rounds_resumes_to_the_same_result(tmp_path):
+    """Rounds 0 and 1 journaled in out.h5.journal and out.h5.journal/round-1: killed after
+    round 0 and again inside round 1, the resumed run writes what an uninterrupted one does."""
+    path = _write_config(tmp_path, ROUNDS_METHOD)
+    # y = 1/(1 + a t + b²): analytic, not polynomial, so 16 runs miss the tolerance.
+    path.parent.joinpath("model.py").write_text(
+        PYTHON_MODEL.replace(
+            '{"y": params["a"] * times + params["b"] ** 2}',
+            '{"y": 1.0 / (1.0 + params["a"] * times + params["b"] ** 2)}',
+        )
+    )
+    run_and_kill(tmp_path, after=16)  # round 0 journaled, killed at round 1's first node
+    journal = tmp_path / "out.h5.journal"
+    assert len(list(journal.glob("record-*.npz"))) == 16
+    run_and_kill(tmp_path, "--resume", after=3)  # 3 nodes of round 1 journaled
+    assert len(list((journal / "round-1").glob("record-*.npz"))) == 3
+    resumed = pcmb_run(tmp_path, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert not journal.exists()
+    clean = pcmb_run(tmp_path, "-o", "clean.h5")
+    assert clean.returncode == 0, clean.stderr
+    first, second = load(tmp_path / "out.h5"), load(tmp_path / "clean.h5")
+    assert first.n_nodes == second.n_nodes > 32 and first.design == second.design
+    for name, values in output_values(tmp_path / "clean.h5").items():
+        assert output_values(tmp_path / "out.h5")[name].tobytes() == values.tobytes()
+        np.testing.assert_array_equal(
+            first.expansions[name].coefficients, second.expansions[name].coefficients
+        )
+        np.testing.assert_array_equal(first.regression[name].loo, second.regression[name].loo)
