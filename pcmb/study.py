@@ -566,9 +566,11 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
+        chunk_size: int | None = None,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
-        be removed once the result is written); raise by the failure policy."""
+        be removed once the result is written); raise by the failure policy. ``chunk_size``
+        overrides the study's."""
         journal = None
         fresh_journal = False
         if journal_dir is not None:
@@ -585,7 +587,7 @@ class Study:
                 jobs=self.jobs,
                 backend=self.backend,
                 address=self.address,
-                chunk_size=self.chunk_size,
+                chunk_size=chunk_size or self.chunk_size,
                 retries=self.retries if self.on_failure == "retry" else 0,
                 timeout=self.timeout,
                 journal=journal,
@@ -636,7 +638,9 @@ class Study:
         seed = self.seed + HELD_OUT_SEED
         batch = random_nodes(tuple(self.inputs.values()), self.validation, "montecarlo", seed)
         folder = None if journal_dir is None else journal_dir / "validation"
-        found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress)
+        # Two chunks, whatever the workers: a few runs do not pay one model call each.
+        halves = self.chunk_size or -(-self.validation // 2)
+        found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress, halves)
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         return HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
