@@ -385,15 +385,29 @@ def describe_model(
     grid = None if times is None else np.asarray(times, dtype=np.float64)
     # Twice: a worker of a kept pool may have died before this task (killed from outside).
     for _ in range(2):
-        future = pool.submit(_model_facts, factory, grid)
-        error = future.exception()
-        if error is None:
-            return future.result()
-        death = pool.death(error)
+        facts, death = _wait(pool, pool.submit(_model_facts, factory, grid))
         if death is None:
-            raise error
-        pool.rebuild()
+            return facts
     raise ModelDefinitionError(f"could not build the model: {death}")
+
+
+def _wait(
+    pool: Pool, future: Future[_T], seconds: float = math.inf, late: str = ""
+) -> tuple[_T | None, str | None]:
+    """``(result, None)`` of a task, or ``(None, why)`` when its worker died or it ran past
+    ``seconds`` (``late`` says so); the pool is rebuilt then. Other errors are raised."""
+    try:
+        error = future.exception(timeout=None if math.isinf(seconds) else seconds)
+    except FutureTimeout:
+        pool.rebuild()  # kills the stuck worker
+        return None, late
+    if error is None:
+        return future.result(), None
+    death = pool.death(error)
+    if death is None:
+        raise error
+    pool.rebuild()
+    return None, death
 
 
 def _run_batch(
@@ -663,6 +677,8 @@ class _Limits:
         return now + self.grace + self.timeout * task.indices.size
 
     def message(self, task: _Task) -> str:
+        if self.timeout is None:
+            return "no time limit"
         return (
             f"timed out after {self.timeout * task.indices.size:g} s "
             f"({self.timeout:g} s per node; its worker process was killed)"
@@ -672,19 +688,8 @@ class _Limits:
 def _run_alone(campaign: _Campaign, pool: Pool, task: _Task, limits: _Limits) -> _Outcome | str:
     """Run ``task`` as the only task in the pool: its outcome, or why it did not finish."""
     future = pool.submit(_execute, *campaign.arguments(task))
-    seconds = limits.deadline(task, 0.0)
-    try:
-        error = future.exception(timeout=None if math.isinf(seconds) else seconds)
-    except FutureTimeout:
-        pool.rebuild()  # kills the stuck worker
-        return limits.message(task)
-    if error is None:
-        return future.result()
-    death = pool.death(error)
-    if death is None:
-        raise error
-    pool.rebuild()
-    return death
+    outcome, why = _wait(pool, future, limits.deadline(task, 0.0), limits.message(task))
+    return why if outcome is None else outcome
 
 
 def _isolate(campaign: _Campaign, pool: Pool, task: _Task, limits: _Limits) -> None:
