@@ -1,6 +1,7 @@
 """``pcmb report``: every expected figure, of the right size, not blank; the index page."""
 
 import dataclasses
+import html
 import subprocess
 import sys
 import textwrap
@@ -8,6 +9,7 @@ import textwrap
 import numpy as np
 import pytest
 from executor_models import edges
+from model_loading import model_class
 
 import pcmb
 from pcmb.cli import main
@@ -15,7 +17,12 @@ from pcmb.cli import main
 pytest.importorskip("matplotlib")
 from matplotlib.image import imread
 
-from pcmb.analysis.report import figure_pixels, write_report
+from pcmb.analysis.report import (
+    UNRELIABLE_ALPHA,
+    UNRELIABLE_COLOR,
+    figure_pixels,
+    write_report,
+)
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.store import write_result
 
@@ -217,3 +224,47 @@ def test_the_command_line_module_stays_light():
     code = "import sys, pcmb.cli; print('matplotlib' in sys.modules, 'h5py' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+# -- the range the diagnostics call unreliable -------------------------------------------------
+
+
+def _shaded_share(path):
+    """Share of the pixels of the time plot in the colour of the unreliable range: the shade
+    blended over the white axes (within the 256-colour quantisation's rounding)."""
+    from matplotlib.colors import to_rgb
+
+    shade = 1.0 - UNRELIABLE_ALPHA * (1.0 - np.array(to_rgb(UNRELIABLE_COLOR)))
+    rgb = imread(path)[..., :3]
+    return np.mean(np.all(np.abs(rgb - shade) < 3 / 255, axis=-1))
+
+
+def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
+    # The double well at order 7 fails from t ≈ 2.2 (docs/diagnostics.md); a linear response
+    # y = a t is exact at order 1 and never flagged.
+    times = np.linspace(0.0, 4.0, 81)
+    well = model_class("double_well", "DoubleWell")
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375)}
+    with pytest.warns(pcmb.PcmbWarning, match=r"\[chaos-unreliable\]"):
+        flagged = pcmb.Study(well, inputs, times, order=7, jobs=1).run()
+    start = flagged.diagnostics["x"].failing_from
+    assert 2.0 < start < 2.4
+
+    @pcmb.pointwise(outputs=("x",))
+    def linear(params, times):
+        return {"x": params["a"] * times}
+
+    plain = pcmb.Study(linear, {"a": pcmb.Uniform(1.0, 3.0)}, times, order=1, params={"a": 2})
+    unflagged = plain.run()
+    assert unflagged.diagnostics["x"].reliable
+
+    write_report(flagged, tmp_path / "flagged")
+    write_report(unflagged, tmp_path / "unflagged")
+    page = (tmp_path / "flagged" / "index.html").read_text()
+    (message,) = [w.message for w in flagged.warnings if w.code == "chaos-unreliable"]
+    assert f"chaos unreliable from t = {start:.4g}. {html.escape(message)}" in page
+    assert "chaos unreliable" not in (tmp_path / "unflagged" / "index.html").read_text()
+    # The shade spans (4 - start) / 4 = 45 % of the axes' width, the axes about half of the
+    # figure: some 20 % of its pixels, fewer where the ±1σ band lies over the shade.
+    assert _shaded_share(tmp_path / "flagged" / "x_time.png") > 0.03
+    assert _shaded_share(tmp_path / "unflagged" / "x_time.png") < 1e-3

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.analysis.comparison import Comparison, compare, method_label
+from pcmb.analysis.comparison import LEVEL, Comparison, compare, method_label
 from pcmb.analysis.statistics import (
     Analysis,
     AnalysisSettings,
@@ -44,6 +44,8 @@ __all__ = [
     "DPI",
     "PANELS_PER_ROW",
     "ROW_HEIGHT",
+    "UNRELIABLE_ALPHA",
+    "UNRELIABLE_COLOR",
     "WIDTH",
     "figure_pixels",
     "write_comparison_figures",
@@ -58,6 +60,10 @@ PANELS_PER_ROW = 3
 _PSD_FLOOR = 1e-6
 #: Histogram bins of sampled comparisons.
 _BINS = 40
+#: The diagnostics' record that explains a shaded time range.
+_FLAG = "chaos-unreliable"
+#: Shading of the time range where the diagnostics call the chaos unreliable.
+UNRELIABLE_COLOR, UNRELIABLE_ALPHA = "tab:red", 0.12
 _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
 
 
@@ -208,6 +214,13 @@ def _legend(figure: Any, panels: Sequence[Any]) -> None:
         )
 
 
+def _unreliable(result: StudyResult, name: str) -> float | None:
+    """The time from which the diagnostics call an output's chaos unreliable (``None``:
+    reliable at every time, or not checked)."""
+    found = result.diagnostics.get(name)
+    return None if found is None or found.reliable else float(found.failing_from)
+
+
 def _time_figure(
     canvas: _Canvas,
     result: StudyResult,
@@ -241,6 +254,17 @@ def _time_figure(
         axes.plot(times, _gaps(o_mean), color=other.color, lw=1.2, label=f"mean: {other.label}")
         axes.plot(times, o_high, color=other.color, lw=1.0, ls="-.", label=f"± 1σ: {other.label}")
         axes.plot(times, o_low, color=other.color, lw=1.0, ls="-.")
+    unreliable = _unreliable(result, name)
+    if unreliable is not None:
+        axes.axvspan(
+            unreliable,
+            times[-1],
+            color=UNRELIABLE_COLOR,
+            alpha=UNRELIABLE_ALPHA,
+            lw=0,
+            label="chaos unreliable (see the index page)",
+        )
+        note += f"\n(shaded: chaos unreliable from t = {unreliable:.4g})"
     axes.set_xlabel(labels.time())
     axes.set_ylabel(labels.output(name))
     axes.set_title(f"{name}: mean with error bars{note}")
@@ -614,12 +638,22 @@ def _index_page(
     if comparisons:
         parts.append(
             "<p>rel: relative to the largest standard deviation of this result. departs at: "
-            "the first time the mean or std leaves 4 standard errors of the sampling noise; "
-            "verdict: whether they stay within it at every time.</p>"
+            "the first time the mean or std leaves the sampling noise (a family-wise test "
+            f"over all times at level {LEVEL:g}) or, between two chaos results, differs by "
+            "more than the chaos tolerance; against a Monte Carlo twin it depends on the "
+            "twin's size (see the resolution under each table). verdict: whether they stay "
+            "within it at every time.</p>"
         )
         parts += [f"<pre>{e(c.table())}</pre>" for c in comparisons]
     for name, paths in figures.items():
         parts.append(f"<h2>{e(name)}</h2>")
+        unreliable = _unreliable(result, name)
+        if unreliable is not None:
+            why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
+            parts.append(
+                f'<p class="warn">Shaded in the time plot: chaos unreliable from '
+                f"t = {unreliable:.4g}. {e(why)}</p>"
+            )
         for path in paths:
             relative = os.path.relpath(path, directory)
             parts.append(f'<p><img src="{e(relative)}" alt="{e(path.stem)}"></p>')
