@@ -274,6 +274,16 @@ def _inspect(path: str) -> str:
             f"fit      {name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
             f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}"
         )
+    fit = result.adaptive
+    if fit is not None:  # per round: runs and estimated error; per input: what it reached
+        rounds = ", ".join(f"{int(runs)}: {error:.2g}" for runs, error in fit.history)
+        reached = zip(result.input_names, fit.levels, fit.orders, fit.importance, strict=True)
+        lines += [
+            f"adaptive {fit.index_set.shape[0]} level indices, estimated error "
+            f"{fit.estimate:.3g}; runs: estimate per round {rounds}",
+            "inputs   "
+            + ", ".join(f"{n} level {lv} order {p} share {sh:.2g}" for n, lv, p, sh in reached),
+        ]
     if result.nominal_params:
         nominal = ", ".join(f"{k}={v:.6g}" for k, v in result.nominal_params.items())
         lines.append(f"nominal  {nominal} ({'stored' if result.nominal else 'failed'})")

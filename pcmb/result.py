@@ -21,7 +21,15 @@ if TYPE_CHECKING:
     from pcmb.analysis.diagnostics import HeldOut, OutputDiagnostics
     from pcmb.analysis.statistics import Analysis
 
-__all__ = ["Design", "NodeFailure", "RegressionFit", "Status", "StudyResult", "WarningRecord"]
+__all__ = [
+    "AdaptiveFit",
+    "Design",
+    "NodeFailure",
+    "RegressionFit",
+    "Status",
+    "StudyResult",
+    "WarningRecord",
+]
 
 
 class Status(enum.IntEnum):
@@ -65,7 +73,8 @@ class Design:
     tolerance, max_samples:
         Sparse regression adding samples until its leave-one-out error meets ``tolerance``,
         within ``max_samples`` runs in all (``None``: one round); ``samples`` is then the
-        number of runs made.
+        number of runs made. An adaptive sparse grid refines to ``tolerance`` within
+        ``max_runs`` runs (``samples``: the runs made).
 
     Records written before a field existed load with its default.
     """
@@ -83,6 +92,7 @@ class Design:
     q: float | None = None
     tolerance: float | None = None
     max_samples: int | None = None
+    max_runs: int | None = None
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -100,7 +110,10 @@ class Design:
     def label(self) -> str:
         """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
         ``lhs``, ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule
-        gauss-patterson`` or ``LARS on hyperbolic order 5, q=0.75, 256 samples``."""
+        gauss-patterson``, ``LARS on hyperbolic order 5, q=0.75, 256 samples`` or ``adaptive
+        sparse grid to 0.0001, 97 runs``."""
+        if self.kind == "adaptive":
+            return f"adaptive sparse grid to {self.tolerance:g}, {self.samples} runs"
         if self.grid == "smolyak":
             return f"Smolyak level {self.level}, rule {self.rule}"
         if self.kind == "regression" and self.orders is not None:
@@ -144,6 +157,54 @@ class RegressionFit:
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
+
+
+@dataclass(frozen=True)
+class AdaptiveFit:
+    """What a dimension-adaptive sparse grid concluded (stored under ``/adaptive``).
+
+    Attributes
+    ----------
+    index_set:
+        (K, n) the final downward-closed set of level multi-indices, in the order added.
+    indicators:
+        (K,) each index's error indicator: the largest norm over outputs and times of the
+        coefficients its tensor difference adds, relative to the output's largest std (NaN
+        where not computed, as after failed nodes).
+    active:
+        (K,) the indices not refined yet, whose indicators sum to the estimated error.
+    history:
+        (R, 2) runs so far and estimated error after each round.
+    orders:
+        (n,) highest degree per input of the recovered terms.
+    """
+
+    index_set: NDArray[np.int64]
+    indicators: NDArray[np.float64]
+    active: NDArray[np.bool_]
+    history: NDArray[np.float64]
+    orders: NDArray[np.int64]
+
+    @property
+    def estimate(self) -> float:
+        """The estimated error: the sum of the active indices' indicators."""
+        return float(self.indicators[self.active].sum())
+
+    @property
+    def levels(self) -> NDArray[np.int64]:
+        """(n,) highest 1-D level per input."""
+        return self.index_set.max(axis=0)
+
+    @property
+    def importance(self) -> NDArray[np.float64]:
+        """(n,) each input's share of the indicators of the indices that refine it (the
+        indices with a level > 0 there; shares overlap through interactions, so they need not
+        sum to 1): which inputs matter."""
+        finite = np.nan_to_num(self.indicators)
+        refine = self.index_set > 0
+        total = finite[refine.any(axis=1)].sum()
+        shares = refine.T.astype(float) @ finite
+        return shares / total if total > 0 else np.zeros(self.index_set.shape[1])
 
 
 @dataclass(frozen=True)
@@ -251,6 +312,8 @@ class StudyResult:
     node_elements:
         (N,) the element of every node of a multi-element study, -1 for the nodes of
         elements split by ``elements: auto`` (not used by the recovery); ``None`` otherwise.
+    adaptive:
+        What an adaptive sparse grid concluded (:class:`AdaptiveFit`); ``None`` otherwise.
     diagnostics:
         Output name -> how far its chaos expansion can be trusted, time by time
         (:class:`pcmb.analysis.diagnostics.OutputDiagnostics`: ``failing_from``, ``decay``,
@@ -278,6 +341,7 @@ class StudyResult:
     analysis: Analysis | None = None
     regression: dict[str, RegressionFit] = field(default_factory=dict)
     node_elements: NDArray[np.intp] | None = None
+    adaptive: AdaptiveFit | None = None
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
 

@@ -26,7 +26,15 @@ from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import from_description
 from pcmb.errors import ResultFileError
-from pcmb.result import Design, NodeFailure, RegressionFit, Status, StudyResult, WarningRecord
+from pcmb.result import (
+    AdaptiveFit,
+    Design,
+    NodeFailure,
+    RegressionFit,
+    Status,
+    StudyResult,
+    WarningRecord,
+)
 from pcmb.run.files import replace_durably
 from pcmb.run.output import write_error
 
@@ -153,6 +161,8 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     if result.weights is not None:
         _attach(nodes.create_dataset("weights", data=result.weights), node)
     _write_elements(file, result, node, input_)
+    if result.adaptive is not None:
+        _write_adaptive(file, result.adaptive, input_)
 
     index = result.multi_index
     term = None
@@ -223,6 +233,25 @@ def _write_elements(
     _attach(group.create_dataset("probability", data=partition.probability), element)
     if result.node_elements is not None:
         _attach(file.create_dataset("nodes/element", data=result.node_elements), node)
+
+
+def _write_adaptive(file: h5py.File, fit: AdaptiveFit, input_: h5py.Dataset) -> None:
+    """An adaptive sparse grid's ``/adaptive/index_set`` (K, n), ``indicators`` and ``active``
+    (K,), ``history`` (R, 2: runs, estimated error) and ``orders`` (n,)."""
+    group = file.create_group("adaptive")
+    group.create_dataset("index_set", data=fit.index_set).dims[1].attach_scale(input_)
+    group.create_dataset("indicators", data=fit.indicators)
+    group.create_dataset("active", data=fit.active)
+    group.create_dataset("history", data=fit.history)
+    _attach(group.create_dataset("orders", data=fit.orders), input_)
+
+
+def _read_adaptive(file: h5py.File) -> AdaptiveFit | None:
+    if "adaptive" not in file:
+        return None
+    group = file["adaptive"]
+    keys = ("index_set", "indicators", "active", "history", "orders")
+    return AdaptiveFit(**{key: group[key][()] for key in keys})
 
 
 def _element_scale(file: h5py.File, expansion: ChaosExpansion) -> tuple[h5py.Dataset, ...]:
@@ -506,6 +535,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             analysis=_read_analysis(file, outputs),
             regression=regression,
             node_elements=file["nodes/element"][()] if "element" in file["nodes"] else None,
+            adaptive=_read_adaptive(file),
             diagnostics=diagnostics,
             held_out=held_out,
         )

@@ -98,7 +98,8 @@ class Study:
         A ``method.kind`` (:data:`pcmb.designs.METHOD_KINDS`): ``"collocation"`` (tensor
         Gauss nodes; ``grid="smolyak"`` with ``level`` and ``rule``: a Smolyak sparse grid),
         ``"regression"`` (sparse regression: ``samples``, ``sampling``, ``selection``,
-        ``basis``, ``q``, ``order``, ``seed``, optionally ``tolerance`` and ``max_samples``)
+        ``basis``, ``q``, ``order``, ``seed``, optionally ``tolerance`` and ``max_samples``),
+        ``"adaptive"`` (a dimension-adaptive sparse grid to ``tolerance`` within ``max_runs``)
         or a sampling method ``"montecarlo"``, ``"lhs"``, ``"sobol"`` (with ``samples`` and
         ``seed``; ``fit="regression"`` adds a least-squares chaos fit of total order
         ``order``). The keys are those of the config's ``method:`` (``docs/config.md``).
@@ -158,6 +159,7 @@ class Study:
         q: float = 1.0,
         tolerance: float | None = None,
         max_samples: int | None = None,
+        max_runs: int | None = None,
         outputs: Sequence[str] | None = None,
         params: Mapping[str, Any] | None = None,
         name: str = "study",
@@ -194,6 +196,7 @@ class Study:
             "q": q,
             "tolerance": tolerance,
             "max_samples": max_samples,
+            "max_runs": max_runs,
         }
         self.name = name
         self.jobs, self.backend, self.address = jobs, backend, address
@@ -277,6 +280,7 @@ class Study:
             q=method.q,
             tolerance=method.tolerance,
             max_samples=method.max_samples,
+            max_runs=method.max_runs,
             outputs=config.output_names,
             name=config.name,
             jobs=execution.jobs,
@@ -727,6 +731,7 @@ class Study:
             seconds=runs.seconds,
             regression=recovery.regression,
             node_elements=recovery.node_elements,
+            adaptive=recovery.adaptive,
         )
 
 

@@ -22,6 +22,7 @@ EXAMPLES = {
     "regression": MethodSettings(
         "regression", orders=(3, 3), samples=32, seed=3, q=0.75, selection="lars"
     ),
+    "adaptive": MethodSettings("adaptive", tolerance=1e-3, max_runs=200),
 }
 #: ``Design.fit`` of the designs that recover an expansion.
 EXPANSION_FITS = ("projection", "regression", "lars", "omp", "ols")

@@ -116,6 +116,12 @@ class NestedRule(ABC):
         at :meth:`nodes` to the coefficients of p_0..p_l (read-only)."""
         return _projector(self, level)
 
+    def difference(self, level: int) -> NDArray[np.float64]:
+        """(p_l + 1, m_l) the 1-D surplus operator P_l - P_{l-1} (P_{-1} = 0): the projection
+        of level l minus that of level l - 1, which reads the first m_{l-1} nodes and yields
+        the first p_{l-1} + 1 degrees (read-only)."""
+        return _difference(self, level)
+
     def _weights(self, level: int) -> NDArray[np.float64]:
         """Interpolatory weights of a level: they integrate p_0..p_{m-1} exactly, Vᵀ w = e_0."""
         nodes = self.nodes(level)
@@ -301,6 +307,16 @@ def _projector(rule: NestedRule, level: int) -> NDArray[np.float64]:
 
 
 @cache
+@cache
+def _difference(rule: NestedRule, level: int) -> NDArray[np.float64]:
+    difference = rule.projector(level).copy()
+    if level > 0:
+        coarse = rule.projector(level - 1)
+        difference[: coarse.shape[0], : coarse.shape[1]] -= coarse
+    difference.setflags(write=False)
+    return difference
+
+
 def _extensions(family: OrthonormalFamily, added: tuple[int, ...]) -> NDArray[np.float64]:
     """The point sequence 0-level node (the mean), then each extension's nodes in turn."""
     points = np.array([family.recurrence(1)[0][0]])

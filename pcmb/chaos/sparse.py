@@ -42,6 +42,7 @@ from pcmb.chaos.recovery import _along_axes, _rows
 __all__ = [
     "SparseGrid",
     "combination_coefficients",
+    "find_rows",
     "project_sparse",
     "smolyak_index_set",
 ]
@@ -200,8 +201,11 @@ class SparseGrid:
         return self.index_set[used], coefficients[used]
 
     @cached_property
-    def _layout(self) -> tuple[NDArray[np.float64], list[NDArray[np.intp]]]:
-        """(N, n) germ nodes and, per tensor rule, the rows of its nodes (C order)."""
+    def _layout(
+        self,
+    ) -> tuple[NDArray[np.float64], list[NDArray[np.intp]], NDArray[np.int64]]:
+        """(N, n) germ nodes, per tensor rule the rows of its nodes (C order), and (N, n) the
+        nodes' positions in the rules' sequences."""
         levels, _ = self._tensors
         sizes = np.array(
             [
@@ -213,12 +217,18 @@ class SparseGrid:
         table, rows = np.unique(ids, axis=0, return_inverse=True)
         sequences = [rule.nodes(int(levels[:, k].max())) for k, rule in enumerate(self.rules)]
         germ = np.column_stack([seq[table[:, k]] for k, seq in enumerate(sequences)])
-        return germ, np.split(rows.ravel(), np.cumsum(np.prod(sizes, axis=1))[:-1])
+        return germ, np.split(rows.ravel(), np.cumsum(np.prod(sizes, axis=1))[:-1]), table
 
     @property
     def nodes(self) -> NDArray[np.float64]:
         """(N, n) germ coordinates ξ of the distinct nodes."""
         return self._layout[0]
+
+    @property
+    def node_ids(self) -> NDArray[np.int64]:
+        """(N, n) each node's position in its inputs' nested sequences: exact names of the
+        nodes, shared by every grid on the same rules (for incremental grids)."""
+        return self._layout[2]
 
     @cached_property
     def params(self) -> NDArray[np.float64]:
@@ -297,6 +307,43 @@ class SparseGrid:
             out[terms] += c * _along_axes(active, flat[nodes])
         return out.reshape(-1, *values.shape[1:])
 
+    @cached_property
+    def _node_lookup(self) -> _Lookup:
+        return _Lookup(self.node_ids)
+
+    def surplus(self, level: ArrayLike, values: ArrayLike) -> NDArray[np.float64]:
+        """Coefficients the tensor difference Δ_i = ⊗_k (P_{i_k} - P_{i_k - 1}) of one level
+        multi-index i of the set adds (its hierarchical surplus), by sparse projection.
+
+        Parameters
+        ----------
+        level:
+            (n,) a level multi-index of :attr:`index_set`.
+        values:
+            (N, ...) values at :attr:`nodes`.
+
+        Returns
+        -------
+        ndarray
+            (Π_k (p(i_k) + 1), ...) coefficients on the box {α : α_k <= p(i_k)}, C order.
+
+        Raises
+        ------
+        ValueError
+            If ``level`` is not in the set.
+        """
+        level = np.asarray(level, dtype=np.int64).reshape(1, self.n)
+        if _Lookup(self.index_set).find(level)[0] < 0:
+            raise ValueError(f"level {tuple(level[0])} is not in the index set")
+        pairs = list(zip(self.rules, level[0].tolist(), strict=True))
+        sizes = [rule.size(at) for rule, at in pairs]
+        ids = np.indices(sizes).reshape(self.n, -1).T
+        values = _rows(values, self.size)
+        flat = values.reshape(self.size, -1)[self._node_lookup.find(ids)]
+        # Inputs at level 0: the 1×1 operator [1], skipped as in :meth:`project`.
+        active = [rule.difference(at) for rule, at in pairs if at > 0]
+        return _along_axes(active, flat).reshape(-1, *values.shape[1:])
+
 
 def project_sparse(
     grid: SparseGrid, values: ArrayLike, names: Sequence[str] | None = None
@@ -318,6 +365,13 @@ def project_sparse(
         On ``grid.multi_index``, with the values' trailing shape.
     """
     return ChaosExpansion(grid.project(values), grid.multi_index, grid.distributions, names)
+
+
+def find_rows(table: ArrayLike, rows: ArrayLike) -> NDArray[np.intp]:
+    """Positions of integer ``rows`` (M, n) in ``table`` (K, n) of distinct rows, -1 where
+    absent: exact lookups of level multi-indices or :attr:`SparseGrid.node_ids`."""
+    table = np.asarray(table, dtype=np.int64)
+    return _Lookup(table).find(np.asarray(rows, dtype=np.int64).reshape(-1, table.shape[1]))
 
 
 class _Lookup:

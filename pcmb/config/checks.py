@@ -42,7 +42,8 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         yield key, message
         return
     if method.tolerance is not None:  # adaptive: bounded by its budget, not its first round
-        key, runs = "method.max_samples", getattr(design, "budget", design.runs)
+        budget_key = "max_runs" if method.kind == "adaptive" else "max_samples"
+        key, runs = f"method.{budget_key}", getattr(design, "budget", design.runs)
     elif method.samples is not None:
         key, runs = "method.samples", design.runs
     else:

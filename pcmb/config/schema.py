@@ -278,10 +278,15 @@ class MethodSpec(Section):
         default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
     )
     tolerance: PositiveReal | None = Field(
-        default=None, description="kind regression: add samples until the LOO error meets it"
+        default=None,
+        description="regression: add samples until the LOO error meets it; adaptive: refine "
+        "until the estimated error meets it",
     )
     max_samples: PositiveInt | None = Field(
         default=None, description="kind regression with tolerance: most samples in all"
+    )
+    max_runs: PositiveInt | None = Field(
+        default=None, description="kind adaptive: most runs in all (default 1000)"
     )
     validation: NonNegativeInt = Field(
         default=VALIDATION,

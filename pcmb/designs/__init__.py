@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from pcmb.chaos.inputs import Distribution
+from pcmb.designs.adaptive import AdaptiveCollocation
 from pcmb.designs.base import (
     RECORDED_ONLY,
     MethodSettings,
@@ -48,6 +49,7 @@ DESIGNS: dict[str, type[NodeDesign]] = {
     "lhs": Sampling,
     "sobol": Sampling,
     "regression": SparseRegression,
+    "adaptive": AdaptiveCollocation,
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))

@@ -13,7 +13,7 @@ from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
-from pcmb.result import Design, RegressionFit, WarningRecord
+from pcmb.result import AdaptiveFit, Design, RegressionFit, WarningRecord
 
 __all__ = [
     "RECORDED_ONLY",
@@ -59,18 +59,21 @@ class MethodSettings:
     q: float = 1.0
     tolerance: float | None = None
     max_samples: int | None = None
+    max_runs: int | None = None
 
 
 @dataclass(frozen=True)
 class Recovery:
     """What a design recovered from the runs: expansions per output, warnings and, for sparse
-    regression, each output's fit (selected terms, leave-one-out error, condition number)."""
+    regression, each output's fit (selected terms, leave-one-out error, condition number); for
+    an adaptive sparse grid, what its refinement concluded."""
 
     expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
     warnings: tuple[WarningRecord, ...] = ()
     regression: dict[str, RegressionFit] = field(default_factory=dict)
     #: Multi-element collocation: (N,) the element of every node (-1: left out).
     node_elements: NDArray[np.intp] | None = None
+    adaptive: AdaptiveFit | None = None
 
 
 class NodeDesign(Protocol):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from functools import cached_property
 
 import numpy as np
@@ -22,7 +22,7 @@ from pcmb.designs.base import (
 )
 from pcmb.result import Design
 
-__all__ = ["SparseCollocation"]
+__all__ = ["SparseCollocation", "sparse_recovery"]
 
 #: Most level multi-indices a grid may combine: beyond, building even the index set is slow
 #: (and the grid has far too many nodes to run).
@@ -109,24 +109,38 @@ class SparseCollocation:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        if ok.all():
-            # All outputs in one pass over the tensor rules: (N, outputs, T).
-            stacked = self.grid.project(np.stack(list(values.values()), axis=1))
-            index = self.grid.multi_index
-            recovery = Recovery(
-                {
-                    name: ChaosExpansion(stacked[:, k], index, self.distributions, self.names)
-                    for k, name in enumerate(values)
-                }
-            )
-        else:
-            recovery = least_squares_recovery(
-                self.distributions,
-                self.names,
-                self.grid.nodes[ok],
-                {name: y[ok] for name, y in values.items()},
-                int(self.grid.multi_index.sum(axis=1).max()),
-                caps=self.orders,
-            )
-        warnings = recovery.warnings + statistics_warnings(recovery.expansions, values, ok, times)
-        return Recovery(recovery.expansions, warnings)
+        return sparse_recovery(self.grid, self.names, values, ok, times)
+
+
+def sparse_recovery(
+    grid: SparseGrid,
+    names: Sequence[str],
+    values: Mapping[str, NDArray[np.float64]],
+    ok: NDArray[np.bool_],
+    times: NDArray[np.float64] | None = None,
+) -> Recovery:
+    """Expansions of every output from (N, T) values at ``grid.nodes``: sparse projection, or
+    with failed nodes (``ok`` False) a least-squares refit of the survivors on terms up to the
+    grid's degrees; with :func:`~pcmb.designs.base.statistics_warnings`."""
+    names = tuple(names)
+    index = grid.multi_index
+    if ok.all():
+        # All outputs in one pass over the tensor rules: (N, outputs, T).
+        stacked = grid.project(np.stack(list(values.values()), axis=1))
+        recovery = Recovery(
+            {
+                name: ChaosExpansion(stacked[:, k], index, grid.distributions, names)
+                for k, name in enumerate(values)
+            }
+        )
+    else:
+        recovery = least_squares_recovery(
+            grid.distributions,
+            names,
+            grid.nodes[ok],
+            {name: y[ok] for name, y in values.items()},
+            int(index.sum(axis=1).max()),
+            caps=tuple(int(p) for p in index.max(axis=0)),
+        )
+    warnings = recovery.warnings + statistics_warnings(recovery.expansions, values, ok, times)
+    return Recovery(recovery.expansions, warnings)

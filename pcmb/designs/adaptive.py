@@ -1,0 +1,300 @@
+"""Dimension-adaptive generalized sparse grids (Gerstner & Griebel, Computing 71, 2003).
+
+The index set grows from the level-0 index by forward neighbours, where the runs show that
+it pays: each index i carries an error indicator g_i, the largest norm over outputs and
+times of the coefficients its tensor difference Δ_i adds (:meth:`SparseGrid.surplus`),
+relative to the output's largest std over time. The indices not refined yet are the active
+ones; the sum of their indicators estimates the error of the statistics. Each round refines
+the active indices with the largest indicators — the fewest that hold :data:`BULK` of the
+active indicators' sum (bulk marking, so a round has several indices' nodes to run in
+parallel) — by adding their admissible forward neighbours (those whose backward neighbours
+are all refined), until the estimate meets the tolerance or the next refinement would pass
+the budget of runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nested import RULES, nested_rule
+from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.sparse import SparseGrid, find_rows
+from pcmb.designs.base import MethodSettings, Recovery
+from pcmb.designs.smolyak import sparse_recovery
+from pcmb.result import AdaptiveFit, Design, WarningRecord
+
+__all__ = ["AdaptiveCollocation"]
+
+#: Share of the refinable indicators' sum a round refines (bulk marking).
+BULK = 0.5
+#: Indicator below which a surplus is zero to round-off (relative to the std).
+BLIND = 1e-12
+#: ``method.max_runs`` when not given.
+DEFAULT_MAX_RUNS = 1000
+
+
+class AdaptiveCollocation:
+    """``method: {kind: adaptive, tolerance, max_runs, rule}``: a dimension-adaptive sparse grid
+    on the nested ``rule`` (``auto``: Gauss–Patterson for uniform inputs, Genz–Keister for
+    normal ones, Leja otherwise; one rule per input for all levels, so an input stops at its
+    rule's last level), recovered by sparse pseudo-spectral projection.
+
+    The first round runs the level-0 index and its forward neighbours; :meth:`more` then
+    refines in rounds (see the module). ``tolerance`` bounds the estimated error, relative
+    to each output's largest std; ``max_runs`` (default :data:`DEFAULT_MAX_RUNS`) the runs.
+    """
+
+    def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
+        tolerance, max_runs, rule = settings.tolerance, settings.max_runs, settings.rule
+        if tolerance is None:
+            raise ValueError("method.tolerance: required key is missing (needed by kind adaptive)")
+        if not tolerance > 0:
+            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
+        if settings.orders is not None or settings.level is not None:
+            key = "order" if settings.orders is not None else "level"
+            raise ValueError(f"method.{key}: kind adaptive chooses its levels from the runs")
+        if settings.fit != "none":
+            raise ValueError("method.fit: expected none: kind adaptive recovers by projection")
+        if settings.max_samples is not None:
+            raise ValueError("method.max_samples: kind adaptive is bounded by method.max_runs")
+        if rule not in RULES:
+            raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
+        self.names, self.distributions = tuple(inputs), tuple(inputs.values())
+        rules = []
+        for name, dist in inputs.items():
+            try:
+                rules.append(nested_rule(dist.family, rule))
+            except ValueError as error:
+                raise ValueError(f"method.rule: input {name!r}: {error}") from None
+        self.rules = tuple(rules)
+        self.tolerance = float(tolerance)
+        n = len(self.distributions)
+        first = np.vstack([np.zeros((1, n), dtype=np.int64), np.eye(n, dtype=np.int64)])
+        self._first = SparseGrid(self.distributions, first, self.rules)
+        self.max_runs = DEFAULT_MAX_RUNS if max_runs is None else int(max_runs)
+        if self.max_runs < self._first.size:
+            raise ValueError(
+                f"method.max_runs: {self.max_runs} runs do not allow one step: the level-0 grid "
+                f"and its first refinement take {self._first.size} runs"
+            )
+        self._reset()
+
+    def _reset(self) -> None:
+        """The state of the first round: index 0 refined, its forward neighbours active."""
+        self._grid = self._first
+        self._index = [tuple(row) for row in self._first.index_set.tolist()]
+        self._refined = {self._index[0]}
+        self._ids = self._first.node_ids
+        self._norms: dict[tuple[int, ...], NDArray[np.float64]] = {}
+        self._indicators = np.full(len(self._index), np.nan)
+        self._history: list[tuple[int, float]] = []
+        self._stopped: str | None = None
+
+    @property
+    def runs(self) -> int:
+        """Runs of the first round."""
+        return self._first.size
+
+    @property
+    def budget(self) -> int:
+        """Most runs of all rounds together."""
+        return self.max_runs
+
+    def nodes(self) -> NodeSet:
+        return NodeSet(self.distributions, self._first.nodes, self._first.params)
+
+    def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
+        """Row of every grid node among ``nodes`` (in run order)."""
+        if nodes.size != self._grid.size:
+            raise ValueError(
+                f"{nodes.size} nodes given, the adaptive grid so far has {self._grid.size}"
+            )
+        return find_rows(self._ids, self._grid.node_ids)
+
+    def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
+        """(N,) the sparse quadrature weights, in run order: they sum to one, some negative."""
+        weights = np.empty(nodes.size)
+        weights[self._order(nodes)] = self._grid.weights
+        return weights
+
+    def record(self) -> Design:
+        return Design(
+            kind="adaptive",
+            grid="adaptive",
+            basis="sparse",
+            orders=tuple(int(p) for p in self._grid.multi_index.max(axis=0)),
+            fit="projection",
+            rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
+            samples=self._grid.size,
+            tolerance=self.tolerance,
+            max_runs=self.max_runs,
+        )
+
+    # -- the rounds --------------------------------------------------------------------------
+
+    def more(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> NodeSet | None:
+        """The nodes of the next refinement while the estimated error exceeds the tolerance and
+        the budget allows, else ``None`` (every node must have run: a failed one ends the
+        rounds)."""
+        if nodes.size == self._first.size:  # the first round of a (new) run
+            self._reset()
+        order = self._order(nodes)
+        if not ok.all():
+            self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
+            return None
+        self._measure(np.stack(list(values.values()), axis=1)[order])
+        self._history.append((self._grid.size, self._estimate()))
+        while True:
+            active = np.flatnonzero(self._active())
+            refinable = [k for k in active if self._forward(self._index[k], room=True)]
+            converged = self._estimate() <= self.tolerance
+            if converged:
+                refinable = self._blind()
+                if not refinable:
+                    return None
+            elif not refinable:
+                self._stopped = (
+                    "the nested rules have no further levels to refine with: use rule "
+                    "clenshaw-curtis or leja, or a larger tolerance"
+                )
+                return None
+            added = self._refine(refinable, bulk=not converged)
+            if added is None:
+                step = "probing blind axes" if converged else "the next refinement"
+                self._stopped = (
+                    f"{step} would pass the budget of {self.max_runs} runs (method.max_runs): "
+                    "raise it, or the tolerance"
+                )
+                return None
+            if added:
+                return self._grow(added)
+
+    def _measure(self, values: NDArray[np.float64]) -> None:
+        """Surplus norms of the indices new since the last round, and every indicator
+        relative to each output's largest std over time on the grid so far."""
+        for level in self._index:
+            if level not in self._norms:
+                surplus = self._grid.surplus(level, values)
+                self._norms[level] = np.sqrt(np.sum(surplus**2, axis=0)).max(axis=-1)
+        coefficients = self._grid.project(values)
+        std = ChaosExpansion(coefficients, self._grid.multi_index, self.distributions).std()
+        spread = std.max(axis=-1)
+        norms = np.array([self._norms[level] for level in self._index])
+        relative = np.divide(norms, spread, out=np.zeros_like(norms), where=spread > 0)
+        self._indicators = relative.max(axis=1)
+
+    def _blind(self) -> list[int]:
+        """Active indices on an axis whose surplus vanishes (below :data:`BLIND`) while they
+        block a forward neighbour of a refined index whose indicator exceeds the tolerance: a
+        function that vanishes on the axis through the centre but not off it (Ishigami's
+        0.1 x3⁴ sin x1 at x1 = 0) hides its interactions from every surplus until then."""
+        position = {level: k for k, level in enumerate(self._index)}
+        found = set()
+        for level in self._refined:
+            if self._indicators[position[level]] > self.tolerance:
+                for child in self._forward(level, room=True):
+                    for parent in _backward(child):
+                        k = position.get(parent, -1)
+                        if (
+                            k >= 0
+                            and parent not in self._refined
+                            and sum(at > 0 for at in parent) == 1
+                            and self._indicators[k] <= BLIND
+                        ):
+                            found.add(k)
+        return sorted(found)
+
+    def _active(self) -> NDArray[np.bool_]:
+        return np.array([level not in self._refined for level in self._index])
+
+    def _estimate(self) -> float:
+        return float(self._indicators[self._active()].sum())
+
+    def _forward(self, level: tuple[int, ...], room: bool = False) -> list[tuple[int, ...]]:
+        """Forward neighbours of ``level`` within the rules' levels and not in the set: all of
+        them (``room``), or those whose backward neighbours are all refined."""
+        present = set(self._index)
+        out = []
+        for k, rule in enumerate(self.rules):
+            up = (*level[:k], level[k] + 1, *level[k + 1 :])
+            if up in present or (rule.max_level is not None and up[k] > rule.max_level):
+                continue
+            if room or all(b in self._refined for b in _backward(up)):
+                out.append(up)
+        return out
+
+    def _refine(self, refinable: list[int], bulk: bool) -> list[tuple[int, ...]] | None:
+        """Refine the indices marked in bulk (else all), largest indicator first, while the
+        runs stay within the budget; the indices added (``None``: the first does not fit)."""
+        strength = self._indicators[refinable]
+        ranked = [refinable[k] for k in np.argsort(-strength, kind="stable")]
+        marked = len(ranked)
+        if bulk:
+            cumulative = np.cumsum(np.sort(strength)[::-1])
+            marked = int(np.searchsorted(cumulative, BULK * strength.sum())) + 1
+        added: list[tuple[int, ...]] = []
+        for count, k in enumerate(ranked[:marked]):
+            level = self._index[k]
+            self._refined.add(level)
+            children = [c for c in self._forward(level) if c not in added]
+            trial = np.array(self._index + added + children)
+            if SparseGrid(self.distributions, trial, self.rules).size > self.max_runs:
+                self._refined.discard(level)
+                return added if count else None
+            added += children
+        return added
+
+    def _grow(self, added: list[tuple[int, ...]]) -> NodeSet:
+        """Add indices to the set; the nodes they bring."""
+        self._index += added
+        self._indicators = np.append(self._indicators, np.full(len(added), np.nan))
+        self._grid = SparseGrid(self.distributions, np.array(self._index), self.rules)
+        new = find_rows(self._ids, self._grid.node_ids) < 0
+        self._ids = np.vstack([self._ids, self._grid.node_ids[new]])
+        return NodeSet(self.distributions, self._grid.nodes[new], self._grid.params[new])
+
+    # -- recovery ----------------------------------------------------------------------------
+
+    def recover(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        order = self._order(nodes)
+        on_grid = {name: y[order] for name, y in values.items()}
+        recovery = sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
+        fit = AdaptiveFit(
+            index_set=np.array(self._index, dtype=np.int64),
+            indicators=self._indicators.copy(),
+            active=self._active(),
+            history=np.array(self._history, dtype=float).reshape(-1, 2),
+            orders=self._grid.multi_index.max(axis=0),
+        )
+        warnings = recovery.warnings
+        if self._stopped is not None:
+            reached = f"{self._history[-1][1]:.3g}" if self._history else "unknown"
+            warnings += (
+                WarningRecord(
+                    "adaptive-budget",
+                    f"the refinement ended early, after {self._grid.size} runs (estimated error "
+                    f"{reached}, tolerance {self.tolerance:g}): {self._stopped}",
+                ),
+            )
+        return Recovery(recovery.expansions, warnings, adaptive=fit)
+
+
+def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """The backward neighbours of a level multi-index."""
+    return [(*level[:k], at - 1, *level[k + 1 :]) for k, at in enumerate(level) if at > 0]

@@ -1,0 +1,178 @@
+"""Dimension-adaptive sparse grids (method kind adaptive) against closed forms: an anisotropic
+exponential where few inputs matter, and Ishigami; the budget; a YAML study resumed."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from test_resume import PYTHON_CONFIG, PYTHON_MODEL, output_values, pcmb_run, run_and_kill
+
+import pcmb
+from pcmb.chaos.sparse import SparseGrid, project_sparse
+from pcmb.config.schema import load_config
+from pcmb.designs import MethodSettings, make_design
+from pcmb.errors import ConfigError
+from pcmb.references import ishigami, ishigami_moments
+from pcmb.store import load
+from pcmb.study import Study
+
+#: exp(Σ a_k x_k), x_k uniform on [0, 1]: input k matters as a_k; the last not at all.
+RATES = np.array([1.0, 0.5, 0.2, 0.05, 0.01, 0.0])
+EXPONENTIAL = {f"x{k}": pcmb.Uniform(0.0, 1.0) for k in range(RATES.size)}
+ISHIGAMI = {name: pcmb.Uniform(-np.pi, np.pi) for name in ("x1", "x2", "x3")}
+TIMES = np.array([0.0, 1.0])
+
+
+def _exponential(x):
+    return np.exp(x @ RATES)
+
+
+def _moments(rates):
+    """E[e^{a x}] per input, x uniform on [0, 1] (1 for a = 0)."""
+    safe = np.where(rates > 0, rates, 1.0)
+    return np.where(rates > 0, np.expm1(rates) / safe, 1.0)
+
+
+EXACT_MEAN = float(np.prod(_moments(RATES)))
+EXACT_VARIANCE = float(np.prod(_moments(2 * RATES)) - EXACT_MEAN**2)
+
+
+def _model(function, inputs):
+    @pcmb.batched(outputs=("y",))
+    def model(params, times):
+        x = np.stack([params[name] for name in inputs], axis=1)
+        return {"y": np.repeat(function(x)[:, None], times.size, axis=1)}
+
+    return model
+
+
+def _adaptive(function, inputs, **method) -> pcmb.StudyResult:
+    study = Study(_model(function, inputs), inputs, TIMES, backend="inprocess", **method)
+    return study.run()
+
+
+def _smolyak_runs(function, inputs, error: float, exact: float) -> int:
+    """Runs of the smallest isotropic Smolyak grid (rule auto) whose variance is as accurate."""
+    for level in range(1, 8):
+        grid = SparseGrid.smolyak(tuple(inputs.values()), level)
+        variance = project_sparse(grid, function(grid.params)).variance()
+        if abs(variance / exact - 1) <= error:
+            return grid.size
+    raise AssertionError("no Smolyak grid of level <= 7 is as accurate")
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-4])
+def test_anisotropic_function_refines_the_inputs_that_matter(tolerance):
+    result = _adaptive(_exponential, EXPONENTIAL, method="adaptive", tolerance=tolerance)
+    fit = result.adaptive
+    assert result.design.label == f"adaptive sparse grid to {tolerance:g}, {result.n_nodes} runs"
+    assert fit.estimate <= tolerance and fit.history[-1, 0] == result.n_nodes
+    assert not [w for w in result.warnings if w.code == "adaptive-budget"]
+    # Honest: the estimate bounds the error of the std; the variance's is far smaller.
+    error = abs(result.std("y")[0] ** 2 / EXACT_VARIANCE - 1)
+    assert error <= tolerance
+    assert abs(result.mean("y")[0] - EXACT_MEAN) <= tolerance * np.sqrt(EXACT_VARIANCE)
+    # The important inputs are refined more; the one that does not matter least.
+    assert fit.levels[0] > fit.levels[-1] and np.all(np.diff(fit.levels) <= 0)
+    assert np.argmax(fit.importance) == 0 and fit.importance[-1] < 1e-12
+    # Fewer runs than the isotropic grid of equal accuracy.
+    assert result.n_nodes < _smolyak_runs(_exponential, EXPONENTIAL, error, EXACT_VARIANCE)
+    # The weights in run order: the sparse quadrature of the mean.
+    np.testing.assert_allclose(result.weights @ result.values["y"][:, 0], result.mean("y")[0])
+
+
+def test_ishigami_finds_the_interaction_its_axes_hide():
+    """0.1 x3⁴ sin x1 vanishes on the x3 axis through the centre: only probing that axis
+    finds it. At tolerance 1e-3 the variance and Sobol' indices are the closed form's."""
+    exact = ishigami_moments()
+    result = _adaptive(ishigami, ISHIGAMI, method="adaptive", tolerance=1e-3)
+    error = abs(result.std("y")[0] ** 2 / exact.variance - 1)
+    assert error <= 1e-3 and result.adaptive.estimate <= 1e-3
+    np.testing.assert_allclose(result.mean("y"), exact.mean, atol=1e-12)
+    np.testing.assert_allclose(result.sobol_total("y")[:, 0], exact.total, atol=1e-3)
+    assert result.adaptive.levels[2] >= 2  # x3⁴ needs degree 4: Gauss–Patterson level 2
+    # No isotropic grid of rule auto reaches the adaptive grid's 1e-14: compare at 1e-3.
+    assert result.n_nodes < _smolyak_runs(ishigami, ISHIGAMI, max(error, 1e-3), exact.variance)
+
+
+@pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+def test_a_budget_that_ends_before_the_tolerance_is_reported():
+    with pytest.warns(pcmb.PcmbWarning, match="adaptive-budget"):
+        result = _adaptive(ishigami, ISHIGAMI, method="adaptive", tolerance=1e-8, max_runs=40)
+    assert result.n_nodes <= 40 and result.adaptive.estimate > 1e-8
+    (record,) = [w for w in result.warnings if w.code == "adaptive-budget"]
+    assert "budget of 40 runs (method.max_runs)" in record.message
+
+
+@pytest.mark.parametrize(
+    ("settings", "key"),
+    [
+        ({"tolerance": 0.0}, "method.tolerance"),
+        ({}, "method.tolerance"),
+        ({"tolerance": 1e-3, "max_runs": 6}, "method.max_runs"),  # one step is 7 runs
+        ({"tolerance": 1e-3, "level": 2}, "method.level"),
+    ],
+)
+def test_unusable_settings_name_their_key(settings, key):
+    with pytest.raises(ValueError, match=rf"^{key}:"):
+        make_design(ISHIGAMI, MethodSettings("adaptive", **settings))
+
+
+def _write_config(folder, method: str):
+    text = PYTHON_CONFIG.replace("method: {kind: collocation, order: 3}", f"method: {method}")
+    # y = 1/(1 + a t + b²): analytic, not polynomial, so the grid refines in rounds.
+    folder.joinpath("model.py").write_text(
+        PYTHON_MODEL.replace(
+            '{"y": params["a"] * times + params["b"] ** 2}',
+            '{"y": 1.0 / (1.0 + params["a"] * times + params["b"] ** 2)}',
+        )
+    )
+    (folder / "study.yaml").write_text(text)
+    return folder / "study.yaml"
+
+
+def test_config_errors_name_the_budget(tmp_path):
+    path = _write_config(tmp_path, "{kind: adaptive, tolerance: 1e-3, max_runs: 4}")
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert [p.path for p in caught.value.problems] == ["method.max_runs"]
+
+
+@pytest.mark.slow
+def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
+    """Round 0 (5 runs: the level-0 index and its neighbours) journaled, killed at round 1;
+    the resumed run writes what an uninterrupted one does, and inspect shows the refinement."""
+    _write_config(tmp_path, "{kind: adaptive, tolerance: 1e-4, max_runs: 400}")
+    run_and_kill(tmp_path, after=5)
+    journal = tmp_path / "out.h5.journal"
+    assert len(list(journal.glob("record-*.npz"))) == 5
+    resumed = pcmb_run(tmp_path, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert not journal.exists()
+    clean = pcmb_run(tmp_path, "-o", "clean.h5")
+    assert clean.returncode == 0, clean.stderr
+    first, second = load(tmp_path / "out.h5"), load(tmp_path / "clean.h5")
+    assert first.n_nodes == second.n_nodes > 5 and first.design == second.design
+    assert first.adaptive.history.shape[0] > 2
+    for field in ("index_set", "indicators", "active", "history", "orders"):
+        np.testing.assert_array_equal(
+            getattr(first.adaptive, field), getattr(second.adaptive, field)
+        )
+    for name, values in output_values(tmp_path / "clean.h5").items():
+        assert output_values(tmp_path / "out.h5")[name].tobytes() == values.tobytes()
+        np.testing.assert_array_equal(
+            first.expansions[name].coefficients, second.expansions[name].coefficients
+        )
+    shown = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "inspect", str(tmp_path / "out.h5")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    assert first.design.label in shown.stdout
+    assert f"adaptive {first.adaptive.index_set.shape[0]} level indices" in shown.stdout
+    assert "a level " in shown.stdout and "b level " in shown.stdout
