@@ -284,6 +284,13 @@ def _inspect(path: str) -> str:
             "inputs   "
             + ", ".join(f"{n} level {lv} order {p} share {sh:.2g}" for n, lv, p, sh in reached),
         ]
+    history = result.refinement
+    if history is not None:  # order: auto, per round: order and indicator
+        rounds = ", ".join(
+            f"{int(orders.max())}: {error:.2g}"
+            for orders, error in zip(history.orders, history.indicator, strict=True)
+        )
+        lines.append(f"refined  order: indicator per round {rounds}")
     if result.nominal_params:
         nominal = ", ".join(f"{k}={v:.6g}" for k, v in result.nominal_params.items())
         lines.append(f"nominal  {nominal} ({'stored' if result.nominal else 'failed'})")

@@ -25,6 +25,7 @@ __all__ = [
     "AdaptiveFit",
     "Design",
     "NodeFailure",
+    "Refinement",
     "RegressionFit",
     "Status",
     "StudyResult",
@@ -74,7 +75,8 @@ class Design:
         Sparse regression adding samples until its leave-one-out error meets ``tolerance``,
         within ``max_samples`` runs in all (``None``: one round); ``samples`` is then the
         number of runs made. An adaptive sparse grid refines to ``tolerance`` within
-        ``max_runs`` runs (``samples``: the runs made).
+        ``max_runs`` runs (``samples``: the runs made); so does tensor collocation with
+        ``order: auto`` (``orders``: the orders reached).
 
     Records written before a field existed load with its default.
     """
@@ -109,9 +111,9 @@ class Design:
     @property
     def label(self) -> str:
         """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
-        ``lhs``, ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule
-        gauss-patterson``, ``LARS on hyperbolic order 5, q=0.75, 256 samples`` or ``adaptive
-        sparse grid to 0.0001, 97 runs``."""
+        ``chaos order 4 (order auto to 0.05, 99 runs)``, ``lhs``, ``lhs + chaos fit, total order
+        3``, ``Smolyak level 3, rule gauss-patterson``, ``LARS on hyperbolic order 5, q=0.75,
+        256 samples`` or ``adaptive sparse grid to 0.0001, 97 runs``."""
         if self.kind == "adaptive":
             return f"adaptive sparse grid to {self.tolerance:g}, {self.samples} runs"
         if self.grid == "smolyak":
@@ -136,7 +138,11 @@ class Design:
             )
         else:
             order = f"total order {max(self.orders)}"
-        return f"chaos {order}" if self.fit == "projection" else f"{self.kind} + chaos fit, {order}"
+        if self.fit != "projection":
+            return f"{self.kind} + chaos fit, {order}"
+        if self.tolerance is not None:  # order: auto
+            return f"chaos {order} (order auto to {self.tolerance:g}, {self.samples} runs)"
+        return f"chaos {order}"
 
 
 @dataclass(frozen=True)
@@ -157,6 +163,27 @@ class RegressionFit:
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """The rounds of order refinement, ``order: auto`` (stored under ``/refinement``).
+
+    Attributes
+    ----------
+    orders:
+        (R, n) the orders of each round's grid.
+    runs:
+        (R,) runs made by the end of each round.
+    indicator:
+        (R,) the estimated error of each round's statistics: the largest difference, over
+        outputs and times, of its mean and std from the previous round's, relative to the
+        output's largest std (NaN in the first round).
+    """
+
+    orders: NDArray[np.int64]
+    runs: NDArray[np.int64]
+    indicator: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -314,6 +341,8 @@ class StudyResult:
         elements split by ``elements: auto`` (not used by the recovery); ``None`` otherwise.
     adaptive:
         What an adaptive sparse grid concluded (:class:`AdaptiveFit`); ``None`` otherwise.
+    refinement:
+        The rounds of ``order: auto`` (:class:`Refinement`); ``None`` otherwise.
     diagnostics:
         Output name -> how far its chaos expansion can be trusted, time by time
         (:class:`pcmb.analysis.diagnostics.OutputDiagnostics`: ``failing_from``, ``decay``,
@@ -342,6 +371,7 @@ class StudyResult:
     regression: dict[str, RegressionFit] = field(default_factory=dict)
     node_elements: NDArray[np.intp] | None = None
     adaptive: AdaptiveFit | None = None
+    refinement: Refinement | None = None
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
 

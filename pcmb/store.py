@@ -30,6 +30,7 @@ from pcmb.result import (
     AdaptiveFit,
     Design,
     NodeFailure,
+    Refinement,
     RegressionFit,
     Status,
     StudyResult,
@@ -163,6 +164,8 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     _write_elements(file, result, node, input_)
     if result.adaptive is not None:
         _write_adaptive(file, result.adaptive, input_)
+    if result.refinement is not None:
+        _write_refinement(file, result.refinement, input_)
 
     index = result.multi_index
     term = None
@@ -252,6 +255,22 @@ def _read_adaptive(file: h5py.File) -> AdaptiveFit | None:
     group = file["adaptive"]
     keys = ("index_set", "indicators", "active", "history", "orders")
     return AdaptiveFit(**{key: group[key][()] for key in keys})
+
+
+def _write_refinement(file: h5py.File, history: Refinement, input_: h5py.Dataset) -> None:
+    """The rounds of ``order: auto``: ``/refinement/orders`` (R, n), ``runs`` and
+    ``indicator`` (R,)."""
+    group = file.create_group("refinement")
+    group.create_dataset("orders", data=history.orders).dims[1].attach_scale(input_)
+    group.create_dataset("runs", data=history.runs)
+    group.create_dataset("indicator", data=history.indicator)
+
+
+def _read_refinement(file: h5py.File) -> Refinement | None:
+    if "refinement" not in file:
+        return None
+    group = file["refinement"]
+    return Refinement(**{key: group[key][()] for key in ("orders", "runs", "indicator")})
 
 
 def _element_scale(file: h5py.File, expansion: ChaosExpansion) -> tuple[h5py.Dataset, ...]:
@@ -536,6 +555,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             regression=regression,
             node_elements=file["nodes/element"][()] if "element" in file["nodes"] else None,
             adaptive=_read_adaptive(file),
+            refinement=_read_refinement(file),
             diagnostics=diagnostics,
             held_out=held_out,
         )

@@ -89,7 +89,9 @@ class Study:
     times:
         (T,) output grid.
     order:
-        Chaos order, one for all inputs or a mapping input -> order.
+        Chaos order, one for all inputs or a mapping input -> order; ``"auto"`` (tensor
+        collocation) raises it in rounds until ``diagnostics_tolerance`` is met, within
+        ``max_runs`` (:mod:`pcmb.designs.refine`).
     basis:
         ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P);
         for regression ``"total"`` or ``"hyperbolic"`` candidates (default: tensor for
@@ -143,7 +145,7 @@ class Study:
         inputs: Mapping[str, Distribution],
         times: ArrayLike,
         *,
-        order: int | Mapping[str, int] = 3,
+        order: int | Mapping[str, int] | Literal["auto"] = 3,
         basis: str | None = None,
         method: str = "collocation",
         samples: int | None = None,
@@ -244,6 +246,7 @@ class Study:
             seed=self.seed,
             fit=self.fit,
             **self.method_options,
+            diagnostics_tolerance=self.diagnostics_tolerance,
         )
         try:
             return make_design(self.inputs, settings)
@@ -262,9 +265,7 @@ class Study:
             config.model_factory(),
             dict(zip(config.input_names, config.distributions, strict=True)),
             config.times,
-            order=dict(zip(config.input_names, config.orders, strict=True))
-            if config.orders is not None
-            else 0,
+            order=_order(config),
             basis=method.basis,
             method=method.kind,
             samples=method.samples,
@@ -355,8 +356,12 @@ class Study:
         return tuple(self.inputs)
 
     @property
-    def orders(self) -> tuple[int, ...]:
-        """Chaos order per input, germ order."""
+    def orders(self) -> tuple[int, ...] | Literal["auto"]:
+        """Chaos order per input, germ order (``"auto"``: chosen in rounds)."""
+        if isinstance(self.order, str):
+            if self.order != "auto":
+                raise _usage("order", f"expected an int, a mapping or 'auto', got {self.order!r}")
+            return "auto"
         if isinstance(self.order, Mapping):
             missing = set(self.inputs) - set(self.order)
             if missing:
@@ -732,6 +737,7 @@ class Study:
             regression=recovery.regression,
             node_elements=recovery.node_elements,
             adaptive=recovery.adaptive,
+            refinement=recovery.refinement,
         )
 
 
@@ -752,6 +758,14 @@ def _run_settings(config: StudyConfig) -> str:
     # The held-out runs have their own journal folder, fingerprinted by their own nodes.
     data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
+
+
+def _order(config: StudyConfig) -> int | dict[str, int] | Literal["auto"]:
+    """The ``order`` argument of a config's study (0 for a method without one)."""
+    orders = config.orders
+    if orders is None:
+        return 0
+    return orders if orders == "auto" else dict(zip(config.input_names, orders, strict=True))
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

@@ -8,7 +8,13 @@ import sys
 
 import numpy as np
 import pytest
-from test_resume import PYTHON_CONFIG, PYTHON_MODEL, output_values, pcmb_run, run_and_kill
+from test_resume import (
+    PYTHON_CONFIG,
+    PYTHON_MODEL,
+    output_values,
+    resume_and_rerun,
+    run_and_kill,
+)
 
 import pcmb
 from pcmb.chaos.sparse import SparseGrid, project_sparse
@@ -16,7 +22,6 @@ from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design
 from pcmb.errors import ConfigError
 from pcmb.references import ishigami, ishigami_moments
-from pcmb.store import load
 from pcmb.study import Study
 
 #: exp(Σ a_k x_k), x_k uniform on [0, 1]: input k matters as a_k; the last not at all.
@@ -149,12 +154,7 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     run_and_kill(tmp_path, after=5)
     journal = tmp_path / "out.h5.journal"
     assert len(list(journal.glob("record-*.npz"))) == 5
-    resumed = pcmb_run(tmp_path, "--resume")
-    assert resumed.returncode == 0, resumed.stderr
-    assert not journal.exists()
-    clean = pcmb_run(tmp_path, "-o", "clean.h5")
-    assert clean.returncode == 0, clean.stderr
-    first, second = load(tmp_path / "out.h5"), load(tmp_path / "clean.h5")
+    first, second = resume_and_rerun(tmp_path)
     assert first.n_nodes == second.n_nodes > 5 and first.design == second.design
     assert first.adaptive.history.shape[0] > 2
     for field in ("index_set", "indicators", "active", "history", "orders"):

@@ -23,6 +23,9 @@ EXAMPLES = {
         "regression", orders=(3, 3), samples=32, seed=3, q=0.75, selection="lars"
     ),
     "adaptive": MethodSettings("adaptive", tolerance=1e-3, max_runs=200),
+    "collocation:refine": MethodSettings(
+        "collocation", orders="auto", diagnostics_tolerance=0.05, max_runs=100
+    ),
 }
 #: ``Design.fit`` of the designs that recover an expansion.
 EXPANSION_FITS = ("projection", "regression", "lars", "omp", "ols")

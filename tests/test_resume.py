@@ -21,6 +21,9 @@ import h5py
 import numpy as np
 import pytest
 
+from pcmb.result import StudyResult
+from pcmb.store import load
+
 PYTHON_MODEL = """
 import os
 import time
@@ -149,6 +152,17 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
         process.stderr.close()
     assert len(records(folder)) == wanted  # the model hangs at the next node
     assert not (folder / "out.h5").exists()
+
+
+def resume_and_rerun(folder: Path) -> tuple[StudyResult, StudyResult]:
+    """Finish an interrupted run with ``--resume`` (its journal then gone) and run the same
+    study afresh into ``clean.h5``: both results, resumed first."""
+    resumed = pcmb_run(folder, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert not (folder / "out.h5.journal").exists()
+    clean = pcmb_run(folder, "-o", "clean.h5")
+    assert clean.returncode == 0, clean.stderr
+    return load(folder / "out.h5"), load(folder / "clean.h5")
 
 
 def snapshot(directory: Path, *, lock: bool = True) -> dict[str, bytes]:

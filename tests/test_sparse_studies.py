@@ -10,7 +10,13 @@ import warnings
 import numpy as np
 import pytest
 from model_loading import CONFIGS_DIR
-from test_resume import PYTHON_CONFIG, PYTHON_MODEL, output_values, pcmb_run, run_and_kill
+from test_resume import (
+    PYTHON_CONFIG,
+    PYTHON_MODEL,
+    output_values,
+    resume_and_rerun,
+    run_and_kill,
+)
 
 import pcmb
 from pcmb.config.schema import load_config
@@ -283,12 +289,7 @@ def test_a_run_killed_between_and_inside_rounds_resumes_to_the_same_result(tmp_p
     assert len(list(journal.glob("record-*.npz"))) == 16
     run_and_kill(tmp_path, "--resume", after=3)  # 3 nodes of round 1 journaled
     assert len(list((journal / "round-1").glob("record-*.npz"))) == 3
-    resumed = pcmb_run(tmp_path, "--resume")
-    assert resumed.returncode == 0, resumed.stderr
-    assert not journal.exists()
-    clean = pcmb_run(tmp_path, "-o", "clean.h5")
-    assert clean.returncode == 0, clean.stderr
-    first, second = load(tmp_path / "out.h5"), load(tmp_path / "clean.h5")
+    first, second = resume_and_rerun(tmp_path)
     assert first.n_nodes == second.n_nodes > 32 and first.design == second.design
     for name, values in output_values(tmp_path / "clean.h5").items():
         assert output_values(tmp_path / "out.h5")[name].tobytes() == values.tobytes()

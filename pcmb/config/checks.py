@@ -31,9 +31,12 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         if unknown or missing:
             return
     # MethodSpec's keys are MethodSettings' fields, but for order (one per input there) and
-    # the held-out runs (the study's, not the design's).
+    # the held-out runs (the study's, not the design's); order auto refines to the
+    # diagnostics' tolerance.
     settings = MethodSettings(
-        orders=config.orders, **method.model_dump(exclude={"order", "validation"})
+        orders=config.orders,
+        diagnostics_tolerance=config.diagnostics.tolerance,
+        **method.model_dump(exclude={"order", "validation"}),
     )
     try:
         design = make_design(dict(zip(names, config.distributions, strict=True)), settings)
@@ -41,8 +44,8 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         key, _, message = str(error).partition(": ")
         yield key, message
         return
-    if method.tolerance is not None:  # adaptive: bounded by its budget, not its first round
-        budget_key = "max_runs" if method.kind == "adaptive" else "max_samples"
+    if method.tolerance is not None or method.order == "auto":  # rounds: bounded by the budget
+        budget_key = "max_samples" if method.kind == "regression" else "max_runs"
         key, runs = f"method.{budget_key}", getattr(design, "budget", design.runs)
     elif method.samples is not None:
         key, runs = "method.samples", design.runs

@@ -230,14 +230,17 @@ class TimeSpec(Section):
 
 
 def _order_tag(value: Any) -> str:
+    if isinstance(value, str):
+        return "order:auto"
     return "order:mapping" if isinstance(value, Mapping) else "order:int"
 
 
-# Tagged by the value's type, so an error names the form the user wrote (an int or a mapping)
-# instead of listing how the value fails both.
+# Tagged by the value's type, so an error names the form the user wrote (an int, a mapping or
+# auto) instead of listing how the value fails every form.
 OrderSpec = Annotated[
     Annotated[NonNegativeInt, Tag("order:int")]
-    | Annotated[dict[Name, NonNegativeInt], Tag("order:mapping")],
+    | Annotated[dict[Name, NonNegativeInt], Tag("order:mapping")]
+    | Annotated[Literal["auto"], Tag("order:auto")],
     Discriminator(_order_tag),
 ]
 
@@ -250,7 +253,10 @@ class MethodSpec(Section):
         default="none", description="regression: least-squares chaos fit on sampled nodes"
     )
     order: OrderSpec | None = Field(
-        default=None, validate_default=True, description="int, or a mapping input -> int"
+        default=None,
+        validate_default=True,
+        description="int, a mapping input -> int, or auto: tensor collocation raised order by "
+        "order until diagnostics.tolerance is met",
     )
     basis: Literal[tuple(dict.fromkeys((*BASES, *REGRESSION_BASES)))] | None = Field(
         default=None,
@@ -286,7 +292,8 @@ class MethodSpec(Section):
         default=None, description="kind regression with tolerance: most samples in all"
     )
     max_runs: PositiveInt | None = Field(
-        default=None, description="kind adaptive: most runs in all (default 1000)"
+        default=None,
+        description="kind adaptive, or order auto: most runs in all (default 1000)",
     )
     validation: NonNegativeInt = Field(
         default=VALIDATION,
@@ -451,11 +458,12 @@ class StudyConfig(Section):
         return [spec.distribution for spec in self.inputs.values()]
 
     @property
-    def orders(self) -> tuple[int, ...] | None:
-        """Chaos order per input in germ order (``None`` when the method has none)."""
+    def orders(self) -> tuple[int, ...] | Literal["auto"] | None:
+        """Chaos order per input in germ order (``None`` when the method has none, ``"auto"``
+        for order refinement)."""
         order = self.method.order
-        if order is None:
-            return None
+        if order is None or order == "auto":
+            return order
         if isinstance(order, int):
             return (order,) * len(self.inputs)
         return tuple(order[name] for name in self.inputs)

@@ -20,6 +20,7 @@ from pcmb.designs.base import (
 )
 from pcmb.designs.collocation import TensorCollocation
 from pcmb.designs.multi_element import MultiElementCollocation
+from pcmb.designs.refine import OrderRefinement
 from pcmb.designs.regression import SparseRegression
 from pcmb.designs.sampling import Sampling
 from pcmb.designs.smolyak import SparseCollocation
@@ -38,13 +39,14 @@ __all__ = [
 ]
 
 #: Design key -> design class: ``method.kind``, or ``collocation:<grid>`` for a collocation
-#: grid other than the tensor one, or ``collocation:elements`` for multi-element collocation
-#: (see :func:`design_key`). The config schema, ``pcmb validate`` and the docs read their
-#: lists from here.
+#: grid other than the tensor one, ``collocation:elements`` for multi-element collocation or
+#: ``collocation:refine`` for ``order: auto`` (see :func:`design_key`). The config schema,
+#: ``pcmb validate`` and the docs read their lists from here.
 DESIGNS: dict[str, type[NodeDesign]] = {
     "collocation": TensorCollocation,
     "collocation:smolyak": SparseCollocation,
     "collocation:elements": MultiElementCollocation,
+    "collocation:refine": OrderRefinement,
     "montecarlo": Sampling,
     "lhs": Sampling,
     "sobol": Sampling,
@@ -53,13 +55,15 @@ DESIGNS: dict[str, type[NodeDesign]] = {
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
+#: Collocation keys chosen by other keys than ``method.grid``.
+_NOT_GRIDS = ("collocation:elements", "collocation:refine")
 #: ``method.grid`` values of collocation.
 GRIDS = (
     "tensor",
     *(
         key.partition(":")[2]
         for key in DESIGNS
-        if key.startswith("collocation:") and key != "collocation:elements"
+        if key.startswith("collocation:") and key not in _NOT_GRIDS
     ),
 )
 
@@ -71,6 +75,8 @@ def design_key(settings: MethodSettings) -> str:
             return "collocation:elements"
         if settings.grid != "tensor":
             return f"collocation:{settings.grid}"
+        if settings.orders == "auto":
+            return "collocation:refine"
     return settings.kind
 
 
@@ -98,4 +104,10 @@ def make_design(inputs: Mapping[str, Distribution], settings: MethodSettings) ->
         raise ValueError(
             "method.elements: multi-element collocation uses tensor grids (grid: tensor)"
         )
-    return DESIGNS[design_key(settings)](inputs, settings)
+    key = design_key(settings)
+    if settings.orders == "auto" and key != "collocation:refine":
+        raise ValueError(
+            "method.order: auto refines single-element tensor collocation (kind collocation, "
+            "grid tensor, no elements)"
+        )
+    return DESIGNS[key](inputs, settings)

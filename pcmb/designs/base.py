@@ -13,7 +13,7 @@ from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
-from pcmb.result import AdaptiveFit, Design, RegressionFit, WarningRecord
+from pcmb.result import AdaptiveFit, Design, Refinement, RegressionFit, WarningRecord
 
 __all__ = [
     "RECORDED_ONLY",
@@ -38,13 +38,15 @@ _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 class MethodSettings:
     """The ``method:`` settings a design is built from (config keys of the same names).
 
-    ``orders`` is one order per input (germ order), ``None`` when the method has none.
-    :func:`pcmb.designs.design_key` picks the design from ``kind`` (and, for collocation,
-    ``grid`` and ``elements``); each design reads the fields it uses.
+    ``orders`` is one order per input (germ order), ``"auto"`` for order refinement, ``None``
+    when the method has none. :func:`pcmb.designs.design_key` picks the design from ``kind``
+    (and, for collocation, ``grid``, ``elements`` and ``orders``); each design reads the fields
+    it uses. ``diagnostics_tolerance`` is ``diagnostics.tolerance``, which ``order: auto``
+    refines to.
     """
 
     kind: str
-    orders: tuple[int, ...] | None = None
+    orders: tuple[int, ...] | str | None = None
     basis: str | None = None
     samples: int | None = None
     seed: int = 0
@@ -60,13 +62,14 @@ class MethodSettings:
     tolerance: float | None = None
     max_samples: int | None = None
     max_runs: int | None = None
+    diagnostics_tolerance: float | None = None
 
 
 @dataclass(frozen=True)
 class Recovery:
     """What a design recovered from the runs: expansions per output, warnings and, for sparse
     regression, each output's fit (selected terms, leave-one-out error, condition number); for
-    an adaptive sparse grid, what its refinement concluded."""
+    an adaptive sparse grid, what its refinement concluded; for ``order: auto``, its rounds."""
 
     expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
     warnings: tuple[WarningRecord, ...] = ()
@@ -74,6 +77,7 @@ class Recovery:
     #: Multi-element collocation: (N,) the element of every node (-1: left out).
     node_elements: NDArray[np.intp] | None = None
     adaptive: AdaptiveFit | None = None
+    refinement: Refinement | None = None
 
 
 class NodeDesign(Protocol):
@@ -124,9 +128,9 @@ class NodeDesign(Protocol):
 
 class AdaptiveDesign(NodeDesign, Protocol):
     """A design that runs in rounds: after each, it may ask for more nodes (sparse regression
-    to a tolerance, multi-element refinement). ``Study.run`` runs each round through the same
-    workers and journals it in its own folder of the journal, so a resumed run recomputes the
-    same rounds from the journaled values."""
+    to a tolerance, multi-element refinement, order refinement). ``Study.run`` runs each round
+    through the same workers and journals it in its own folder of the journal, so a resumed run
+    recomputes the same rounds from the journaled values."""
 
     def more(
         self,

@@ -1,0 +1,217 @@
+"""Order refinement (method.order: auto) against closed forms: smooth exponentials stop once
+the order indicator meets the tolerance, with the true error below it; the double well runs
+out of orders and says so; errors name their key; a run killed between rounds resumes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from model_loading import model_class
+from test_resume import (
+    PYTHON_CONFIG,
+    PYTHON_MODEL,
+    output_values,
+    resume_and_rerun,
+    run_and_kill,
+)
+
+import pcmb
+from pcmb.config.schema import load_config
+from pcmb.designs import MethodSettings, make_design
+from pcmb.designs.refine import MAX_ORDER
+from pcmb.errors import ConfigError, UsageError
+from pcmb.references import double_well_moments
+from pcmb.store import load
+from pcmb.study import Study
+
+TIMES = np.linspace(0.0, 1.0, 11)
+
+
+def _exponential(high: float, c: float):
+    """y = exp(a t + c b), a ~ U[0, high], b ~ N(0, 1), and its exact mean and std."""
+
+    @pcmb.batched(outputs=("y",))
+    def model(params, times):
+        return {"y": np.exp(params["a"][:, None] * times + c * params["b"][:, None])}
+
+    def moment(k: int):  # E[y^k]: E[e^{k a t}] E[e^{k c b}]
+        rate = k * high * TIMES
+        safe = np.where(rate > 0, rate, 1.0)
+        return np.where(rate > 0, np.expm1(rate) / safe, 1.0) * np.exp((k * c) ** 2 / 2)
+
+    mean = moment(1)
+    return model, mean, np.sqrt(moment(2) - mean**2)
+
+
+def _inputs(high: float) -> dict[str, pcmb.Distribution]:
+    return {"a": pcmb.Uniform(0.0, high), "b": pcmb.Normal(0.0, 1.0)}
+
+
+INPUTS = _inputs(1.0)
+
+
+def _error(result, mean, std) -> float:
+    """The true error of the statistics, as the indicator measures it."""
+    gap = np.maximum(np.abs(result.mean("y") - mean), np.abs(result.std("y") - std))
+    return float(gap.max() / std.max())
+
+
+@pytest.mark.parametrize(
+    ("high", "c", "tolerance", "order"),
+    [(1.0, 0.2, 0.05, 2), (6.0, 0.5, 0.05, 4), (6.0, 0.5, 0.01, 5)],
+)
+def test_smooth_responses_stop_once_the_indicator_meets_the_tolerance(
+    tmp_path, high, c, tolerance, order
+):
+    model, mean, std = _exponential(high, c)
+    study = Study(
+        model,
+        _inputs(high),
+        TIMES,
+        order="auto",
+        backend="inprocess",
+        diagnostics_tolerance=tolerance,
+    )
+    result = study.run(tmp_path / "out.h5")
+    history = result.refinement
+    assert result.design.orders == (order, order)
+    label = f"chaos order {order} (order auto to {tolerance:g}, {result.n_nodes} runs)"
+    assert result.design.label == label
+    np.testing.assert_array_equal(history.orders[:, 0], np.arange(1, order + 1))
+    assert history.indicator[-1] < tolerance and np.all(history.indicator[1:-1] >= tolerance)
+    assert not [w for w in result.warnings if w.code == "order-budget"]
+    assert _error(result, mean, std) < tolerance
+    # Every grid run once but the centre, shared by the even orders from 4 on.
+    runs = np.cumsum([(p + 1) ** 2 - (p >= 4 and p % 2 == 0) for p in range(1, order + 1)])
+    np.testing.assert_array_equal(history.runs, runs)
+    assert result.n_nodes == runs[-1] == result.design.samples
+    # The final expansion is the tensor collocation of the order reached.
+    plain = study.replace(order=order).run()
+    for statistic in ("mean", "std"):
+        np.testing.assert_allclose(
+            getattr(result, statistic)("y"), getattr(plain, statistic)("y"), rtol=1e-13
+        )
+    np.testing.assert_allclose(result.weights @ result.values["y"], result.mean("y"), rtol=1e-13)
+    stored = load(tmp_path / "out.h5")
+    assert stored.design == result.design
+    for field in ("orders", "runs", "indicator"):
+        np.testing.assert_array_equal(getattr(stored.refinement, field), getattr(history, field))
+
+
+@pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+def test_the_double_well_runs_out_of_orders_and_says_so():
+    """x' = x - x³ to t = 8: the runs split between the wells ever more sharply and the mean
+    and std are still 0.1 off at the highest order: the budget ends the rounds."""
+    times = np.linspace(0.0, 8.0, 81)
+    low, high = -0.625, 0.375
+    study = Study(
+        model_class("double_well", "DoubleWell"),
+        {"x0": pcmb.Uniform(low, high)},
+        times,
+        order="auto",
+        backend="inprocess",
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="order-budget"):
+        result = study.run()
+    assert result.design.orders == (MAX_ORDER,)
+    (record,) = [w for w in result.warnings if w.code == "order-budget"]
+    assert f"order {MAX_ORDER} is the highest" in record.message
+    assert result.refinement.indicator[-1] > study.diagnostics_tolerance
+    mean, std = double_well_moments(times, low, high)
+    gap = np.maximum(np.abs(result.mean("x") - mean), np.abs(result.std("x") - std))
+    assert gap.max() / std.max() > study.diagnostics_tolerance  # the indicator was right
+
+
+@pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+def test_max_runs_ends_the_rounds():
+    model, _, _ = _exponential(6.0, 0.5)
+    study = Study(
+        model, _inputs(6.0), TIMES, order="auto", max_runs=40, backend="inprocess", validation=0
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="order-budget"):
+        result = study.run()
+    assert result.n_nodes == 29 and result.design.orders == (3, 3)  # order 4 needs 24 more
+    (record,) = [w for w in result.warnings if w.code == "order-budget"]
+    assert "past the budget of 40 (method.max_runs)" in record.message
+
+
+@pytest.mark.parametrize(
+    ("settings", "key"),
+    [
+        ({"kind": "regression", "samples": 32}, "method.order"),
+        ({"kind": "collocation", "elements": {"a": [0.5]}}, "method.order"),
+        ({"kind": "collocation", "max_runs": 12}, "method.max_runs"),  # orders 1, 2: 13 runs
+        ({"kind": "collocation", "tolerance": 0.01}, "method.tolerance"),
+    ],
+)
+def test_unusable_settings_name_their_key(settings, key):
+    with pytest.raises(ValueError, match=rf"^{key}:"):
+        make_design(INPUTS, MethodSettings(orders="auto", diagnostics_tolerance=0.05, **settings))
+
+
+def test_a_study_with_an_unknown_order_names_it():
+    model, _, _ = _exponential(1.0, 0.2)
+    with pytest.raises(UsageError) as caught:
+        Study(model, INPUTS, TIMES, order="fine")
+    assert [p.path for p in caught.value.problems] == ["order"]
+
+
+def _write_config(folder, method: str):
+    (folder / "model.py").write_text(
+        PYTHON_MODEL.replace(
+            '{"y": params["a"] * times + params["b"] ** 2}',
+            '{"y": 1.0 / (1.0 + params["a"] * times + params["b"] ** 2)}',
+        )
+    )
+    text = PYTHON_CONFIG.replace("method: {kind: collocation, order: 3}", f"method: {method}")
+    (folder / "study.yaml").write_text(text)
+    return folder / "study.yaml"
+
+
+@pytest.mark.parametrize(
+    ("method", "key"),
+    [
+        ("{kind: collocation, order: fine}", "method.order"),
+        ("{kind: collocation, order: -1}", "method.order"),
+        ("{kind: regression, order: auto, samples: 16}", "method.order"),
+        ("{kind: collocation, order: auto, max_runs: 5}", "method.max_runs"),
+    ],
+)
+def test_config_errors_name_the_key(tmp_path, method, key):
+    path = _write_config(tmp_path, method)
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    assert [p.path for p in caught.value.problems] == [key]
+
+
+@pytest.mark.slow
+def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
+    """Round 0 (order 1: 4 runs) journaled, killed in round 1; the resumed run writes what an
+    uninterrupted one does, and inspect shows the rounds."""
+    _write_config(tmp_path, "{kind: collocation, order: auto, max_runs: 60}")
+    run_and_kill(tmp_path, after=4)
+    journal = tmp_path / "out.h5.journal"
+    assert len(list(journal.glob("record-*.npz"))) == 4
+    first, second = resume_and_rerun(tmp_path)
+    assert first.n_nodes == second.n_nodes > 13 and first.design == second.design
+    for field in ("orders", "runs", "indicator"):
+        np.testing.assert_array_equal(
+            getattr(first.refinement, field), getattr(second.refinement, field)
+        )
+    for name, values in output_values(tmp_path / "clean.h5").items():
+        assert output_values(tmp_path / "out.h5")[name].tobytes() == values.tobytes()
+        np.testing.assert_array_equal(
+            first.expansions[name].coefficients, second.expansions[name].coefficients
+        )
+    shown = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "inspect", str(tmp_path / "out.h5")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
+    assert first.design.label in shown.stdout
+    assert "refined  order: indicator per round 1: nan, 2: " in shown.stdout
