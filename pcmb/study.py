@@ -113,6 +113,9 @@ class Study:
         Free text stored in the result.
     jobs, backend, address, chunk_size, timeout:
         Execution settings (see :func:`pcmb.run.executor.run_nodes`).
+    nominal_run:
+        Whether to make the deterministic run at the nominal parameters (one more model
+        run, stored as ``nominal``; ``execution.nominal_run``).
     on_failure, retries:
         Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
         node), ``"retry"`` (re-run failed nodes ``retries`` times, then abort) or
@@ -170,6 +173,7 @@ class Study:
         address: str | None = None,
         chunk_size: int | None = None,
         timeout: float | None = None,
+        nominal_run: bool = True,
         on_failure: FailurePolicy = "abort",
         retries: int = 1,
         nominal: Mapping[str, float] | None = None,
@@ -203,6 +207,7 @@ class Study:
         self.name = name
         self.jobs, self.backend, self.address = jobs, backend, address
         self.chunk_size, self.timeout = chunk_size, timeout
+        self.nominal_run = nominal_run
         self.on_failure, self.retries = on_failure, retries
         self.params = dict(params or {})
         if is_function_model(model):
@@ -289,6 +294,7 @@ class Study:
             address=execution.address,
             chunk_size=execution.chunk_size,
             timeout=execution.timeout,
+            nominal_run=execution.nominal_run,
             on_failure=execution.on_failure,
             retries=execution.retries,
             nominal={
@@ -332,6 +338,7 @@ class Study:
             "address": self.address,
             "chunk_size": self.chunk_size,
             "timeout": self.timeout,
+            "nominal_run": self.nominal_run,
             "on_failure": self.on_failure,
             "retries": self.retries,
             "params": self.params,
@@ -525,7 +532,7 @@ class Study:
         runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
         nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
         held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
-        nominal = self._run_nominal(facts, outputs, pool)
+        nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
         result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
@@ -687,9 +694,12 @@ class Study:
             facts=facts,
         )
 
-    def _with_nominal(self, result: StudyResult, run: RunResult) -> StudyResult:
-        """The result with the nominal run added; its failure is a warning, not an error."""
+    def _with_nominal(self, result: StudyResult, run: RunResult | None) -> StudyResult:
+        """The result with the nominal run added (``None``: none was made); its failure is a
+        warning, not an error."""
         params = self.nominal_params()
+        if run is None:
+            return dataclasses.replace(result, nominal_params=params)
         if run.failures:
             warning = WarningRecord(
                 "nominal-failed",
@@ -742,7 +752,9 @@ class Study:
 
 
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
-_EXECUTION_ONLY = frozenset({"jobs", "backend", "address", "on_failure", "retries", "timeout"})
+_EXECUTION_ONLY = frozenset(
+    {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run"}
+)
 #: Top-level config keys that cannot change a node's values.
 _NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution"})
 

@@ -273,3 +273,39 @@ def test_a_function_returning_a_scalar_fails_once_with_one_message(tmp_path):
     message = str(caught.value)
     assert "\n" not in message and message.count("returned a float for output 'y'") == 1
     assert list(tmp_path.iterdir()) == []  # no result, no journal
+
+
+class LoggedLine:
+    """y = a t, appending each run's ``a`` to the file ``log``."""
+
+    outputs = ("y",)
+
+    def __init__(self, a: float = 2.0, log: str = "") -> None:
+        self.parameters = {"a": a}
+        self.log = log
+
+    def simulate(self, params, times):
+        a = np.asarray(params["a"], dtype=float)
+        with open(self.log, "a") as file:
+            file.write("".join(f"{float(x)!r}\n" for x in a))
+        return {"y": a[:, None] * times}
+
+
+def test_the_nominal_run_can_be_left_out(tmp_path):
+    runs = {}
+    for nominal_run in (True, False):
+        log = tmp_path / f"runs-{nominal_run}.log"
+        study = pcmb.Study(
+            LoggedLine,
+            {"a": pcmb.Uniform(1.0, 3.0)},
+            TIMES,
+            order=3,
+            params={"a": 2.0, "log": str(log)},
+            validation=0,
+            nominal_run=nominal_run,
+        )
+        result = study.run()
+        runs[nominal_run] = log.read_text().split()
+        assert (result.nominal != {}) == nominal_run
+    assert len(runs[True]) == 4 + 1 and runs[True][-1] == "2.0"  # the nodes, then a = 2
+    assert len(runs[False]) == 4 and "2.0" not in runs[False]

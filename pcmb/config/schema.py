@@ -320,6 +320,9 @@ class ExecutionSpec(Section):
         default=None,
         description="nodes per model call (default: the model's choice, else ~N/16, 1 to 256)",
     )
+    nominal_run: bool = Field(
+        default=True, description="make the deterministic run at the nominal parameters"
+    )
     timeout: PositiveReal | None = Field(
         default=None,
         description="seconds a node may take before its worker is killed (backend loky)",
