@@ -16,6 +16,7 @@ always start with the zero multi-index (the mean term).
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -181,6 +182,10 @@ class PolynomialBasis:
     def _tensor_orders(self) -> tuple[int, ...] | None:
         """The orders when the index set is the full tensor set in C order, else None."""
         orders = tuple(int(p) for p in self.multi_index.max(axis=0, initial=0))
-        if self.multi_index.shape[0] and np.array_equal(self.multi_index, tensor_index_set(orders)):
+        # The count first: a sparse basis of high orders in many inputs would otherwise build a
+        # tensor set of prod(p + 1) terms just to be told apart (12^8 terms for Smolyak L3, 8D).
+        if self.multi_index.shape[0] != math.prod(p + 1 for p in orders):
+            return None
+        if np.array_equal(self.multi_index, tensor_index_set(orders)):
             return orders
         return None
