@@ -39,7 +39,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.result import Status, StudyResult, WarningRecord
-from pcmb.run.backends import BACKENDS, Pool, open_pool
+from pcmb.run.backends import BACKENDS, Pool, checking_backend, open_pool
 from pcmb.run.executor import (
     ModelFacts,
     RunResult,
@@ -427,8 +427,8 @@ class Study:
         Parameters
         ----------
         pool:
-            Workers to build it in (default: one worker of the study's backend, started and
-            stopped here).
+            Workers to build it in (default: the kept workers that check a config, see
+            :func:`pcmb.run.backends.checking_backend`).
 
         Raises
         ------
@@ -439,7 +439,8 @@ class Study:
             The model's code failed or killed its worker while building.
         """
         if pool is None:
-            with open_pool(self.backend, self.jobs, self.address, tasks=1) as own:
+            # The workers that checked the config build it (or have it built already).
+            with open_pool(checking_backend(self.backend), self.jobs) as own:
                 return self.check_model(own)
         return self._outputs(describe_model(self.model_factory, pool))
 

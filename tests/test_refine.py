@@ -4,16 +4,14 @@ out of orders and says so; errors name their key; a run killed between rounds re
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from model_loading import model_class
 from test_resume import (
     PYTHON_CONFIG,
     PYTHON_MODEL,
-    output_values,
+    assert_same_runs,
+    inspected,
     resume_and_rerun,
     run_and_kill,
 )
@@ -201,17 +199,7 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
         np.testing.assert_array_equal(
             getattr(first.refinement, field), getattr(second.refinement, field)
         )
-    for name, values in output_values(tmp_path / "clean.h5").items():
-        assert output_values(tmp_path / "out.h5")[name].tobytes() == values.tobytes()
-        np.testing.assert_array_equal(
-            first.expansions[name].coefficients, second.expansions[name].coefficients
-        )
-    shown = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "inspect", str(tmp_path / "out.h5")],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=True,
-    )
-    assert first.design.label in shown.stdout
-    assert "refined  order: indicator per round 1: nan, 2: " in shown.stdout
+    assert_same_runs(tmp_path, first, second)
+    shown = inspected(tmp_path / "out.h5")
+    assert first.design.label in shown
+    assert "refined  order: indicator per round 1: nan, 2: " in shown

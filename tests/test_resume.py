@@ -165,6 +165,23 @@ def resume_and_rerun(folder: Path) -> tuple[StudyResult, StudyResult]:
     return load(folder / "out.h5"), load(folder / "clean.h5")
 
 
+def assert_same_runs(folder: Path, first: StudyResult, second: StudyResult) -> None:
+    """The resumed ``out.h5`` and the clean ``clean.h5`` hold the same node values and
+    coefficients, bit for bit."""
+    clean = output_values(folder / "clean.h5")
+    for name, values in output_values(folder / "out.h5").items():
+        assert values.tobytes() == clean[name].tobytes()
+        np.testing.assert_array_equal(
+            first.expansions[name].coefficients, second.expansions[name].coefficients
+        )
+
+
+def inspected(path: Path) -> str:
+    """What ``pcmb inspect PATH`` prints."""
+    command = [sys.executable, "-m", "pcmb.cli", "inspect", str(path)]
+    return subprocess.run(command, capture_output=True, text=True, timeout=60, check=True).stdout
+
+
 def snapshot(directory: Path, *, lock: bool = True) -> dict[str, bytes]:
     """Every file of a journal and its bytes (without the lock file, if ``lock`` is False:
     a run that takes over the lock of a killed one writes its own PID there)."""

@@ -66,11 +66,11 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
 def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
     check the inputs, the analysis and the time grid against what it says of itself."""
-    from pcmb.run.backends import open_pool
+    from pcmb.run.backends import checking_backend, open_pool
     from pcmb.run.executor import describe_model
 
     # A model is only ever built in a worker process, here too: its crash is not pcmb's.
-    backend = "inprocess" if config.execution.backend == "inprocess" else "loky"
+    backend = checking_backend(config.execution.backend)
     try:
         with open_pool(backend, config.execution.jobs) as pool:
             facts = describe_model(config.model_factory(), pool, config.times)

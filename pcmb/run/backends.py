@@ -263,6 +263,12 @@ def warm_up(jobs: int | None = None, tasks: int | None = None) -> None:
         _KEPT[workers] = LokyPool(jobs, workers)
 
 
+def checking_backend(backend: str) -> str:
+    """The backend that builds a model to check it: this process for ``inprocess``, else the
+    kept loky workers (the ones a loky run then uses; no dask cluster is started for a check)."""
+    return "inprocess" if backend == "inprocess" else "loky"
+
+
 @contextmanager
 def open_pool(
     backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None

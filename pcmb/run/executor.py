@@ -392,15 +392,15 @@ def describe_model(
 
 
 def _wait(
-    pool: Pool, future: Future[_T], seconds: float = math.inf, late: str = ""
+    pool: Pool, future: Future[_T], seconds: float = math.inf, late: Callable[[], str] = str
 ) -> tuple[_T | None, str | None]:
     """``(result, None)`` of a task, or ``(None, why)`` when its worker died or it ran past
-    ``seconds`` (``late`` says so); the pool is rebuilt then. Other errors are raised."""
+    ``seconds`` (``late()`` says so); the pool is rebuilt then. Other errors are raised."""
     try:
         error = future.exception(timeout=None if math.isinf(seconds) else seconds)
     except FutureTimeout:
         pool.rebuild()  # kills the stuck worker
-        return None, late
+        return None, late()
     if error is None:
         return future.result(), None
     death = pool.death(error)
@@ -677,8 +677,6 @@ class _Limits:
         return now + self.grace + self.timeout * task.indices.size
 
     def message(self, task: _Task) -> str:
-        if self.timeout is None:
-            return "no time limit"
         return (
             f"timed out after {self.timeout * task.indices.size:g} s "
             f"({self.timeout:g} s per node; its worker process was killed)"
@@ -688,7 +686,7 @@ class _Limits:
 def _run_alone(campaign: _Campaign, pool: Pool, task: _Task, limits: _Limits) -> _Outcome | str:
     """Run ``task`` as the only task in the pool: its outcome, or why it did not finish."""
     future = pool.submit(_execute, *campaign.arguments(task))
-    outcome, why = _wait(pool, future, limits.deadline(task, 0.0), limits.message(task))
+    outcome, why = _wait(pool, future, limits.deadline(task, 0.0), lambda: limits.message(task))
     return why if outcome is None else outcome
 
 
