@@ -12,6 +12,7 @@ from numpy.polynomial import Polynomial
 
 import pcmb
 from pcmb.chaos.elements import Partition
+from pcmb.chaos.nodes import join_nodes
 from pcmb.chaos.polynomials import Jacobi, Legendre
 from pcmb.chaos.truncated import Conditional, TruncatedFamily
 from pcmb.designs.base import MethodSettings
@@ -19,7 +20,6 @@ from pcmb.designs.multi_element import (
     THRESHOLD,
     MultiElementCollocation,
     decay_scores,
-    refine,
 )
 from pcmb.references import double_well, double_well_moments
 from pcmb.result import Design
@@ -319,3 +319,15 @@ def test_the_chaotic_lorenz_case_stays_flagged():
     flagged = {w.output for w in recovery.warnings if w.code == "element-decay"}
     assert flagged == {"x", "y", "z"}
     assert [w.code for w in recovery.warnings].count("element-budget") == 1
+
+
+def refine(design, run):
+    """Every round of ``design`` run by ``run`` ((B, n) physical inputs -> output -> values),
+    outside a Study (which does the same through its workers): all nodes and values."""
+    nodes = design.nodes()
+    values = {name: np.asarray(y) for name, y in run(nodes.params).items()}
+    while (batch := design.more(nodes, values, np.ones(nodes.size, dtype=bool))) is not None:
+        found = run(batch.params)
+        nodes = join_nodes(nodes, batch)
+        values = {name: np.concatenate([y, np.asarray(found[name])]) for name, y in values.items()}
+    return nodes, values

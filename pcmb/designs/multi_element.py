@@ -26,14 +26,14 @@ find: splitting only exhausts the budget, and the warnings stay.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import project_tensor
 from pcmb.designs.base import (
     MethodSettings,
@@ -44,7 +44,7 @@ from pcmb.designs.base import (
 from pcmb.designs.collocation import TensorCollocation
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["MultiElementCollocation", "decay_scores", "refine"]
+__all__ = ["MultiElementCollocation", "decay_scores"]
 
 #: Largest weighted decay indicator P_e η_e accepted.
 THRESHOLD = 1e-4
@@ -52,7 +52,6 @@ THRESHOLD = 1e-4
 _RELATIVE_NOISE = 1e-12
 
 #: A batch runner: (B, n) physical inputs -> output name -> (B, ...) values.
-Runner = Callable[[NDArray[np.float64]], Mapping[str, NDArray[np.float64]]]
 
 
 class MultiElementCollocation:
@@ -361,25 +360,3 @@ def decay_scores(
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         shares = np.where(better[:, None], energy, shares)
     return partition.probability * eta, shares
-
-
-def refine(
-    design: MultiElementCollocation, run: Runner
-) -> tuple[NodeSet, dict[str, NDArray[np.float64]]]:
-    """Run every round of ``design`` with ``run`` (outside a :class:`pcmb.Study`): every node
-    run and its values; ``design`` then holds the partition reached, ready to recover.
-
-    Parameters
-    ----------
-    design:
-        The design to run.
-    run:
-        Runs a batch: (B, n) physical inputs -> output name -> (B, ...) values.
-    """
-    nodes = design.nodes()
-    values = {name: np.asarray(y) for name, y in run(nodes.params).items()}
-    while (batch := design.more(nodes, values, np.ones(nodes.size, dtype=bool))) is not None:
-        found = run(batch.params)
-        nodes = join_nodes(nodes, batch)
-        values = {name: np.concatenate([y, np.asarray(found[name])]) for name, y in values.items()}
-    return nodes, values
