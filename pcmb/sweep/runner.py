@@ -306,6 +306,7 @@ def run_sweep(
         np.reshape(means, (-1, given.times.size)),
         np.reshape(stds, (-1, given.times.size)),
         label,
+        str(Path(source).resolve()),
         {output: noise_floor(given, output) for output in outputs},
     )
     csv_path, h5_path = write_sweep(table, folder)

@@ -99,6 +99,8 @@ class SweepTable:
         (rows, T) the per-time errors of each row.
     reference:
         What the errors are measured against (a file and its method).
+    reference_file:
+        The reference's result file.
     floors:
         Output -> (mean, std) noise floor of the reference, relative to its largest std.
     """
@@ -108,6 +110,7 @@ class SweepTable:
     mean_curves: NDArray[np.float64]
     std_curves: NDArray[np.float64]
     reference: str
+    reference_file: str = ""
     floors: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def extended(
@@ -149,6 +152,7 @@ def _h5_image(table: SweepTable) -> bytes:
     with h5py.File(buffer, "w") as file:
         file.attrs["kind"] = SWEEP_KIND
         file.attrs["reference"] = table.reference
+        file.attrs["reference_file"] = table.reference_file
         time = file.create_dataset("time", data=table.times)
         time.make_scale("time")
         group = file.create_group("table")
@@ -231,6 +235,7 @@ def read_sweep(path: str | os.PathLike[str]) -> SweepTable:
                 file["curves/mean_error"][()],
                 file["curves/std_error"][()],
                 str(file.attrs["reference"]),
+                str(file.attrs["reference_file"]),
                 floors,
             )
     except (OSError, KeyError) as error:
