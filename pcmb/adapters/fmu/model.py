@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.adapters.fmu.factory import Interface
 from pcmb.adapters.protocol import PointwiseModel, describe_exception
-from pcmb.errors import ConfigError, ConfigProblem, ModelError
+from pcmb.errors import ConfigError, ConfigProblem, ModelDefinitionError, ModelError
 
 __all__ = ["FmuModel"]
 
@@ -167,9 +167,15 @@ class FmuModel(PointwiseModel):
         self._getters = self._group([self._variables[name] for name in self.outputs], "get")
         self._log = _Log()
         self._unzipdir = self._extract(self._path)
-        self._extracted = None if self._path.is_dir() else self._unzipdir
-        self._instance: Any = None
-        self._instantiate()
+        if not self._path.is_dir():  # pcmb's own extraction: removed with the model
+            weakref.finalize(self, shutil.rmtree, self._unzipdir, ignore_errors=True)
+        #: FMU instances this model has made: 1, plus one after each fatal status.
+        self.instantiations = 0
+        try:
+            instance = self._new_instance()
+        except RuntimeError as exc:
+            raise ConfigError([_problem("model.fmu", str(exc))]) from exc
+        self._own(instance)
 
     # -- construction: what the config says ------------------------------------------------
 
@@ -418,14 +424,16 @@ class FmuModel(PointwiseModel):
                 [_problem("model.fmu", f"cannot extract {path}: {describe_exception(exc)}")]
             ) from exc
 
-    def _instantiate(self) -> None:
-        """A new instance of the FMU (the old one, if any, freed)."""
-        if self._instance is not None:
-            with contextlib.suppress(Exception):
-                self._instance.freeInstance()
-            self._instance = None
+    def _new_instance(self) -> Any:
+        """A new FMPy instance of the FMU.
+
+        Raises
+        ------
+        RuntimeError
+            FMPy's or the FMU's reason, with the FMU's log.
+        """
         try:
-            self._instance = instantiate_fmu(
+            return instantiate_fmu(
                 self._unzipdir,
                 self._md,
                 fmi_type=_INTERFACE_TYPES[self.interface],
@@ -433,18 +441,33 @@ class FmuModel(PointwiseModel):
             )
         except Exception as exc:
             log = self._log.take()
-            raise ConfigError(
-                [
-                    _problem(
-                        "model.fmu",
-                        f"cannot instantiate {self._path.name}: {describe_exception(exc)}"
-                        + (f"; the FMU logged: {log}" if log else ""),
-                    )
-                ]
+            raise RuntimeError(
+                f"cannot instantiate {self._path.name}: {describe_exception(exc)}"
+                + (f"; the FMU logged: {log}" if log else "")
             ) from exc
-        if hasattr(self, "_finalizer"):
-            self._finalizer.detach()
-        self._finalizer = weakref.finalize(self, _release, self._instance, self._extracted)
+
+    def _replace_instance(self) -> None:
+        """Swap in a new instance (after a fatal status, the old one may only be freed).
+
+        The new one is made first: freeing the last instance unloads the FMU's library.
+
+        Raises
+        ------
+        ModelDefinitionError
+            No new instance can be made: no node can run any more.
+        """
+        try:
+            instance = self._new_instance()
+        except RuntimeError as exc:
+            raise ModelDefinitionError(str(exc)) from exc
+        self._free()
+        self._own(instance)
+
+    def _own(self, instance: Any) -> None:
+        self._instance = instance
+        self.instantiations += 1
+        # freed when the model goes (or at exit), before its extracted folder is removed
+        self._free = weakref.finalize(self, _free, instance)
 
     # -- the protocol ------------------------------------------------------------------------
 
@@ -582,7 +605,7 @@ class FmuModel(PointwiseModel):
         """Bring the instance back to its state after instantiation for the next node."""
         fmu = self._instance
         if fatal:  # FMI: after a fatal status the instance may only be freed
-            self._instantiate()
+            self._replace_instance()
             return
         try:
             if not terminated:
@@ -591,13 +614,11 @@ class FmuModel(PointwiseModel):
             elif self.interface == "co-simulation":
                 fmu.terminate()  # FMPy's model-exchange loop has terminated already
             fmu.reset()
-        except Exception:  # after a fatal status only a new instance will do
-            self._instantiate()
+        except Exception:  # an instance that cannot be reset is replaced
+            self._replace_instance()
 
 
-def _release(instance: Any, extracted: str | None) -> None:
-    """Free the FMU instance and remove the folder pcmb extracted it to (at collection/exit)."""
+def _free(instance: Any) -> None:
+    """Free an FMU instance (FMPy also unloads the library when it is the last one)."""
     with contextlib.suppress(Exception):
         instance.freeInstance()
-    if extracted is not None:
-        shutil.rmtree(extracted, ignore_errors=True)

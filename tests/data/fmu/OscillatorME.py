@@ -1,0 +1,54 @@
+"""The free damped oscillator x'' + c x' + k x = 0 as a model-exchange FMU (FMI 3.0), with
+units, for tests/test_fmu_adapter.py: FMPy's CVode integrates it."""
+
+from pythonfmu3 import Float64, Fmi3Causality, Fmi3Initial, Fmi3SlaveBase, Fmi3Variability
+from pythonfmu3 import ModelExchange, Unit
+
+
+class OscillatorME(Fmi3SlaveBase, ModelExchange):
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.time = 0.0
+        self.x, self.v, self.der_x, self.der_v = 1.0, 0.0, 0.0, 0.0
+        self.k, self.c = 4.0, 0.4
+        self.register_units([Unit("m"), Unit("m/s"), Unit("m/s2"), Unit("1/s"), Unit("1/s2")])
+        continuous = Fmi3Variability.continuous
+        self.register_variable(
+            Float64("time", causality=Fmi3Causality.independent, variability=continuous)
+        )
+        states = (("x", "m", "m/s", 1), ("v", "m/s", "m/s2", 3))  # reference: x's, v's
+        for name, unit, derivative_unit, reference in states:
+            self.register_variable(
+                Float64(
+                    name,
+                    causality=Fmi3Causality.output,
+                    start=getattr(self, name),
+                    variability=continuous,
+                    initial=Fmi3Initial.exact,
+                    unit=unit,
+                )
+            )
+            self.register_variable(
+                Float64(
+                    f"der_{name}",
+                    causality=Fmi3Causality.local,
+                    variability=continuous,
+                    derivative=reference,
+                    unit=derivative_unit,
+                )
+            )
+        for name, unit in (("k", "1/s2"), ("c", "1/s")):
+            self.register_variable(
+                Float64(
+                    name,
+                    causality=Fmi3Causality.parameter,
+                    variability=Fmi3Variability.tunable,
+                    start=getattr(self, name),
+                    unit=unit,
+                )
+            )
+
+    def get_continuous_state_derivatives(self):
+        self.der_x = self.v
+        self.der_v = -self.k * self.x - self.c * self.v
+        return [self.der_x, self.der_v]
