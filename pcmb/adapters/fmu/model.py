@@ -169,8 +169,9 @@ class FmuModel(PointwiseModel):
         self._unzipdir = self._extract(self._path)
         if not self._path.is_dir():  # pcmb's own extraction: removed with the model
             weakref.finalize(self, shutil.rmtree, self._unzipdir, ignore_errors=True)
-        #: FMU instances this model has made: 1, plus one after each fatal status.
+        #: FMU instances this model has made: 1, plus one for each that could not go on.
         self.instantiations = 0
+        self._abandoned: list[Any] = []
         try:
             instance = self._new_instance()
         except RuntimeError as exc:
@@ -446,10 +447,13 @@ class FmuModel(PointwiseModel):
                 + (f"; the FMU logged: {log}" if log else "")
             ) from exc
 
-    def _replace_instance(self) -> None:
-        """Swap in a new instance (after a fatal status, the old one may only be freed).
+    def _replace_instance(self, *, fatal: bool) -> None:
+        """Swap in a new instance for one that cannot go on.
 
-        The new one is made first: freeing the last instance unloads the FMU's library.
+        After a fatal status FMI allows no further call into the instance, not even to free
+        it (freeing one that a Python exception made fatal crashes pythonfmu's FMUs), so it
+        is abandoned as it is; any other instance is freed once its successor exists (the
+        new one first, so that the FMU's library stays loaded).
 
         Raises
         ------
@@ -460,7 +464,11 @@ class FmuModel(PointwiseModel):
             instance = self._new_instance()
         except RuntimeError as exc:
             raise ModelDefinitionError(str(exc)) from exc
-        self._free()
+        if fatal:
+            self._free.detach()
+            self._abandoned.append(self._instance)  # its callbacks must outlive it
+        else:
+            self._free()
         self._own(instance)
 
     def _own(self, instance: Any) -> None:
@@ -604,8 +612,8 @@ class FmuModel(PointwiseModel):
     def _recover(self, *, terminated: bool = False, fatal: bool = False) -> None:
         """Bring the instance back to its state after instantiation for the next node."""
         fmu = self._instance
-        if fatal:  # FMI: after a fatal status the instance may only be freed
-            self._replace_instance()
+        if fatal:
+            self._replace_instance(fatal=True)
             return
         try:
             if not terminated:
@@ -615,7 +623,7 @@ class FmuModel(PointwiseModel):
                 fmu.terminate()  # FMPy's model-exchange loop has terminated already
             fmu.reset()
         except Exception:  # an instance that cannot be reset is replaced
-            self._replace_instance()
+            self._replace_instance(fatal=False)
 
 
 def _free(instance: Any) -> None:
