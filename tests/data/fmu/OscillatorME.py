@@ -1,8 +1,15 @@
 """The free damped oscillator x'' + c x' + k x = 0 as a model-exchange FMU (FMI 3.0), with
 units, for tests/test_fmu_adapter.py: FMPy's CVode integrates it."""
 
-from pythonfmu3 import Float64, Fmi3Causality, Fmi3Initial, Fmi3SlaveBase, Fmi3Variability
-from pythonfmu3 import ModelExchange, Unit
+from pythonfmu3 import (
+    Float64,
+    Fmi3Causality,
+    Fmi3Initial,
+    Fmi3SlaveBase,
+    Fmi3Variability,
+    ModelExchange,
+    Unit,
+)
 
 
 class OscillatorME(Fmi3SlaveBase, ModelExchange):
