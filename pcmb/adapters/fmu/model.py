@@ -16,7 +16,7 @@ import math
 import shutil
 import weakref
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -165,6 +165,8 @@ class FmuModel(PointwiseModel):
 
         self.parameters: Mapping[str, float] = MappingProxyType(self._nominal(params))
         self._getters = self._group([self._variables[name] for name in self.outputs], "get")
+        # output positions in the order the grouped reads return them
+        self._read_order = np.concatenate([positions for _, _, positions in self._getters])
         self._log = _Log()
         self._unzipdir = self._extract(self._path)
         if not self._path.is_dir():  # pcmb's own extraction: removed with the model
@@ -549,9 +551,16 @@ class FmuModel(PointwiseModel):
         for method, references, positions in self._group(variables, "set"):
             getattr(self._instance, method)(references, [values[p] for p in positions])
 
-    def _read_into(self, record: NDArray[np.float64], k: int) -> None:
-        for method, references, positions in self._getters:
-            record[positions, k] = getattr(self._instance, method)(references)
+    def _reader(self) -> Callable[[], list[Any]]:
+        """A call that returns every output's current value, grouped by FMI type (the
+        order of ``self._read_order``): one FMPy call per type, nothing else per step."""
+        calls = [
+            (getattr(self._instance, method), references) for method, references, _ in self._getters
+        ]
+        if len(calls) == 1:
+            getter, references = calls[0]
+            return lambda: getter(references)
+        return lambda: [value for getter, references in calls for value in getter(references)]
 
     def _cosimulate(
         self,
@@ -570,16 +579,18 @@ class FmuModel(PointwiseModel):
             self._set(start)
             fmu.enterInitializationMode()
         fmu.exitInitializationMode()
-        record = np.empty((len(self.outputs), times.size))
-        self._read_into(record, 0)
-        for k in range(1, times.size):
-            now = float(times[k - 1])
-            clock[0] = now
-            result = fmu.doStep(currentCommunicationPoint=now, communicationStepSize=times[k] - now)
+        read, grid = self._reader(), times.tolist()
+        step = fmu.doStep
+        rows = [read()]
+        for k in range(1, len(grid)):
+            now = clock[0] = grid[k - 1]
+            result = step(now, grid[k] - now)
             if self._fmi3 and result[1]:  # terminateSimulation
                 raise ModelError(f"the FMU ended the simulation at t = {result[3]:.6g}")
-            self._read_into(record, k)
-        clock[0] = t1
+            rows.append(read())
+        clock[0] = grid[-1]
+        record = np.empty((len(self.outputs), len(grid)))
+        record[self._read_order] = np.array(rows, dtype=float).T
         return record
 
     def _integrate(
