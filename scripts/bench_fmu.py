@@ -39,10 +39,13 @@ TIMES = np.linspace(0.0, 5.0, 101)
 def bare_loop(fmu: Path, k: np.ndarray, c: np.ndarray) -> tuple[float, np.ndarray]:
     """Seconds per node of the hand-written FMPy loop, and x, (N, T)."""
     md = read_model_description(str(fmu))
+    unzipdir = fmu.with_suffix("")  # beside the FMU, in the script's temporary folder
+    if not unzipdir.is_dir():
+        extract(str(fmu), unzipdir=unzipdir)
     refs = {v.name: v.valueReference for v in md.modelVariables}
     instance = FMU2Slave(
         guid=md.guid,
-        unzipDirectory=extract(str(fmu)),
+        unzipDirectory=str(unzipdir),
         modelIdentifier=md.coSimulation.modelIdentifier,
         instanceName="bare",
     )

@@ -3,10 +3,11 @@
 The FMUs (``models/fmu/DampedOscillator.py``, ``tests/data/fmu/*.py``) are the free damped
 oscillator x'' + c x' + k x = 0, whose exact solution is known:
 
-- DampedOscillator and Springs (co-simulation, FMI 2.0) advance their state by the exact
-  solution over each communication step, so their outputs are the closed form to rounding
-  wherever the steps land: a step that missed an output time would show at 1e-13;
-- OscillatorME (model exchange, FMI 3.0, with units) is integrated by FMPy's CVode, so it
+- DampedOscillator and Springs (co-simulation, FMI 2.0) and Oscillator3 as co-simulation
+  (FMI 3.0) advance their state by the exact solution over each communication step, so
+  their outputs are the closed form to rounding wherever the steps land: a step that missed
+  an output time would show at 1e-13;
+- Oscillator3 as model exchange (FMI 3.0, with units) is integrated by FMPy's CVode, so it
   matches the closed form to the integration tolerance.
 
 Statistics of chaos studies (uncertain k, c) are checked against a tensor Gauss–Legendre
@@ -107,6 +108,19 @@ def test_cosimulation_steps_onto_an_uneven_grid_from_its_start_time(fmu_dir):
         np.testing.assert_allclose(out["v"][i], v, rtol=0, atol=1e-13)
 
 
+def test_fmi3_cosimulation_is_the_default_interface_of_an_fmu_with_both(fmu_dir):
+    model = FmuModelFactory(fmu=fmu_dir / "Oscillator3.fmu")()
+    assert model.interface == "co-simulation"
+    times = np.sort(np.random.default_rng(2).random(30)) * 5.0  # uneven steps
+    k, c = np.array([3.6, 4.4]), np.array([0.25, 0.55])
+    out = model.simulate({"k": k, "c": c}, times)
+    for i in range(2):
+        x, v = free_response(times - times[0], k[i], c[i])
+        np.testing.assert_allclose(out["x"][i], x, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(out["v"][i], v, rtol=0, atol=1e-13)
+    assert model.instantiations == 1
+
+
 def test_parameters_are_the_settable_real_variables_with_their_start_values(fmu_dir):
     model = oscillator(fmu_dir, params={"x0": 0.5})()
     assert dict(model.parameters) == {"k": 4.0, "c": 0.4, "x0": 0.5, "v0": 0.0}
@@ -156,11 +170,13 @@ def test_a_failing_step_is_a_failed_node(fmu_dir, threshold, status, instantiati
 
 
 def test_model_exchange_is_integrated_to_its_tolerance(fmu_dir):
-    fmu = fmu_dir / "OscillatorME.fmu"
+    fmu = fmu_dir / "Oscillator3.fmu"
     k, c = np.array([3.6, 4.4]), np.array([0.25, 0.55])
     errors = {}
     for rtol in (1e-5, 1e-10):
-        model = FmuModelFactory(fmu=fmu, rtol=rtol, units={"x": "m", "k": "1/s2"})()
+        model = FmuModelFactory(
+            fmu=fmu, interface="model-exchange", rtol=rtol, units={"x": "m", "k": "1/s2"}
+        )()
         assert model.interface == "model-exchange"
         out = model.simulate({"k": k, "c": c}, TIMES)
         errors[rtol] = np.abs(out["x"] - damped_oscillator(TIMES, k, c)).max()
@@ -168,7 +184,7 @@ def test_model_exchange_is_integrated_to_its_tolerance(fmu_dir):
 
 
 def test_model_exchange_needs_an_evenly_spaced_grid(fmu_dir):
-    model = FmuModelFactory(fmu=fmu_dir / "OscillatorME.fmu")()
+    model = FmuModelFactory(fmu=fmu_dir / "Oscillator3.fmu", interface="model-exchange")()
     with pytest.raises(ConfigError, match="time: a model-exchange FMU needs an evenly spaced"):
         model.check_times(np.array([0.0, 0.1, 0.3]))
 
@@ -215,7 +231,7 @@ def test_the_fmu_file_is_fingerprinted(fmu_dir):
             "model.interface: the FMU has no model-exchange interface (it has: co-simulation)",
         ),
         (
-            "OscillatorME",
+            "Oscillator3",
             {"units": {"x": "m", "k": "N/m"}},
             None,
             "model.units.k: the FMU declares 'k' in '1/s2', not in 'N/m'",
@@ -285,7 +301,9 @@ def test_chaos_statistics_from_yaml_match_the_exact_solution(fmu_dir, tmp_path):
 
 def test_chaos_statistics_from_python_model_exchange(fmu_dir):
     study = pcmb.Study(
-        FmuModelFactory(fmu=fmu_dir / "OscillatorME.fmu", rtol=1e-10, outputs=("x",)),
+        FmuModelFactory(
+            fmu=fmu_dir / "Oscillator3.fmu", interface="model-exchange", rtol=1e-10, outputs=("x",)
+        ),
         {"k": pcmb.Uniform(*K_RANGE), "c": pcmb.Uniform(*C_RANGE)},
         TIMES,
         order=ORDER,

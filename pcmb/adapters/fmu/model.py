@@ -1,8 +1,9 @@
 """Functional Mock-up Units as models (``model.kind: fmu``); the only pcmb module importing fmpy.
 
 The FMU's ``modelDescription.xml`` is read and checked at construction (variable names,
-causalities, units), its archive extracted and one instance made: a worker builds the model
-once and runs every node of its chunks on that instance, resetting it between nodes.
+causalities, units), its archive extracted (once per machine, into a cache) and one
+instance made: a worker builds the model once and runs every node of its chunks on that
+instance, resetting it between nodes.
 Co-simulation FMUs are stepped from one output time to the next (``fmi*DoStep`` exactly onto
 the grid); model-exchange FMUs are integrated by FMPy's CVode. An FMI error, discard or fatal
 status, or a solver failure, is a failed run of that node. See ``docs/models.md``.
@@ -12,8 +13,11 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import hashlib
 import math
+import os
 import shutil
+import tempfile
 import weakref
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -169,8 +173,6 @@ class FmuModel(PointwiseModel):
         self._read_order = np.concatenate([positions for _, _, positions in self._getters])
         self._log = _Log()
         self._unzipdir = self._extract(self._path)
-        if not self._path.is_dir():  # pcmb's own extraction: removed with the model
-            weakref.finalize(self, shutil.rmtree, self._unzipdir, ignore_errors=True)
         #: FMU instances this model has made: 1, plus one for each that could not go on.
         self.instantiations = 0
         self._abandoned: list[Any] = []
@@ -417,11 +419,30 @@ class FmuModel(PointwiseModel):
         return [(m, refs, np.array(pos, dtype=np.intp)) for m, (refs, pos) in groups.items()]
 
     @staticmethod
+    @staticmethod
     def _extract(path: Path) -> str:
+        """The folder of the extracted FMU: ``path`` itself, or the FMU's folder in the cache.
+
+        Extracted once per machine into ``<temp>/pcmb-fmu/<SHA-256 of the archive>``, shared
+        by every worker and later runs: a worker killed mid-run leaves nothing behind, and
+        a changed archive gets a folder of its own. Made under a temporary name and renamed
+        into place, so a worker never sees a half-extracted FMU.
+        """
         if path.is_dir():
             return str(path)
         try:
-            return extract(str(path))
+            digest = hashlib.sha256(path.read_bytes()).hexdigest()
+            cache = Path(tempfile.gettempdir()) / "pcmb-fmu"
+            folder = cache / digest[:32]
+            if not (folder / "modelDescription.xml").is_file():
+                cache.mkdir(exist_ok=True)
+                staging = tempfile.mkdtemp(prefix=".extracting-", dir=cache)
+                extract(str(path), unzipdir=staging)
+                try:
+                    os.rename(staging, folder)
+                except OSError:  # another worker was first: use its folder
+                    shutil.rmtree(staging, ignore_errors=True)
+            return str(folder)
         except Exception as exc:
             raise ConfigError(
                 [_problem("model.fmu", f"cannot extract {path}: {describe_exception(exc)}")]
@@ -476,7 +497,7 @@ class FmuModel(PointwiseModel):
     def _own(self, instance: Any) -> None:
         self._instance = instance
         self.instantiations += 1
-        # freed when the model goes (or at exit), before its extracted folder is removed
+        # freed when the model goes (or at exit)
         self._free = weakref.finalize(self, _free, instance)
 
     # -- the protocol ------------------------------------------------------------------------

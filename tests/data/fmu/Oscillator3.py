@@ -1,7 +1,11 @@
-"""The free damped oscillator x'' + c x' + k x = 0 as a model-exchange FMU (FMI 3.0), with
-units, for tests/test_fmu_adapter.py: FMPy's CVode integrates it."""
+"""The free damped oscillator x'' + c x' + k x = 0 as an FMI 3.0 FMU with both interfaces
+and units, for tests/test_fmu_adapter.py: as model exchange FMPy's CVode integrates it; as
+co-simulation each step advances the state by the exact solution."""
+
+import math
 
 from pythonfmu3 import (
+    CoSimulation,
     Float64,
     Fmi3Causality,
     Fmi3Initial,
@@ -12,7 +16,7 @@ from pythonfmu3 import (
 )
 
 
-class OscillatorME(Fmi3SlaveBase, ModelExchange):
+class Oscillator3(Fmi3SlaveBase, ModelExchange, CoSimulation):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.time = 0.0
@@ -59,3 +63,15 @@ class OscillatorME(Fmi3SlaveBase, ModelExchange):
         self.der_x = self.v
         self.der_v = -self.k * self.x - self.c * self.v
         return [self.der_x, self.der_v]
+
+    def do_step(self, current_time, step_size):
+        a = self.c / 2
+        w = math.sqrt(self.k - a * a)
+        b = (self.v + a * self.x) / w
+        decay, cos, sin = math.exp(-a * step_size), math.cos(w * step_size), math.sin(w * step_size)
+        self.x, self.v = (
+            decay * (self.x * cos + b * sin),
+            decay * (self.v * cos - (a * b + w * self.x) * sin),
+        )
+        self.time = current_time + step_size
+        return True
