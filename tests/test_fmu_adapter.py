@@ -18,6 +18,7 @@ order 4 (the collocation truncation error; see tests/test_docs_models.py), from 
 
 from __future__ import annotations
 
+import ctypes
 import re
 from pathlib import Path
 
@@ -181,6 +182,43 @@ def test_model_exchange_is_integrated_to_its_tolerance(fmu_dir):
         out = model.simulate({"k": k, "c": c}, TIMES)
         errors[rtol] = np.abs(out["x"] - damped_oscillator(TIMES, k, c)).max()
     assert errors[1e-10] < 1e-7 < errors[1e-5]  # the tolerance is CVode's
+
+
+def test_a_failing_model_exchange_run_is_a_failed_node(fmu_dir):
+    model = FmuModelFactory(
+        fmu=fmu_dir / "Oscillator3.fmu",
+        interface="model-exchange",
+        params={"fail_after": 2.0},
+        rtol=1e-10,
+    )()
+    with pytest.raises(
+        ModelError, match=r"the FMU failed at t = 2(\.0\d*)?: RuntimeError: CVode error"
+    ):
+        model.simulate({"k": np.array([4.0])}, TIMES)
+    # the instance is reset after the failure: a node that never reaches t = 2 runs exactly
+    out = model.simulate({"k": np.array([4.0])}, TIMES[:40])
+    np.testing.assert_allclose(out["x"][0], damped_oscillator(TIMES[:40], 4.0, 0.4), atol=1e-7)
+
+
+def test_the_solver_guard_keeps_an_fmi_error_from_the_solver_callbacks(fmu_dir):
+    # An FMI error inside CVode's right-hand side cannot pass through FMPy's C callback:
+    # the guard keeps it, gives the solver NaN and calls the FMU no more.
+    from pcmb.adapters.fmu.model import _SolverGuard
+
+    model = FmuModelFactory(fmu=fmu_dir / "Oscillator3.fmu", interface="model-exchange")()
+    guard = _SolverGuard(model._instance)
+    guard.enterInitializationMode(startTime=0.0)
+    guard.exitInitializationMode()
+    guard.enterContinuousTimeMode()
+    buffer = (ctypes.c_double * 3)()
+    guard.getContinuousStateDerivatives(buffer, 2)
+    assert list(buffer) == [0.0, -4.0, 0.0] and guard.error is None
+    guard.getContinuousStateDerivatives(buffer, 3)  # a size the FMU refuses: an error
+    error = guard.error
+    assert error is not None and np.isnan(list(buffer)).all()
+    guard.setTime(0.5)
+    guard.getContinuousStateDerivatives(buffer, 2)  # not called: NaN again, same error
+    assert guard.error is error and np.isnan(list(buffer)[:2]).all()
 
 
 def test_model_exchange_needs_an_evenly_spaced_grid(fmu_dir):

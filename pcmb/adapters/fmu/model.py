@@ -23,7 +23,7 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from fmpy import extract, platform, supported_platforms
@@ -90,6 +90,49 @@ class _Log:
         text = "; ".join(self.lines)
         self.lines.clear()
         return text
+
+
+class _SolverGuard:
+    """The FMU instance as FMPy's CVode sees it.
+
+    FMPy calls the FMU's derivatives and event indicators from inside CVode's C callbacks,
+    where an exception cannot pass: an FMI error there would leave CVode with garbage and
+    crash the process. Here the first such error is kept instead, the callbacks get NaN
+    (which makes CVode stop with an error) and the FMU is not called again during the run;
+    :attr:`error` is then the node's reason.
+    """
+
+    #: Methods CVode's callbacks reach, and whether they fill an array (pointer, size).
+    _GUARDED: ClassVar[dict[str, bool]] = {
+        "getDerivatives": True,
+        "getContinuousStateDerivatives": True,
+        "getEventIndicators": True,
+        "getContinuousStates": True,
+        "setContinuousStates": False,
+        "setTime": False,
+    }
+
+    def __init__(self, instance: Any) -> None:
+        self._instance = instance
+        self.error: Exception | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        method = getattr(self._instance, name)
+        if name not in self._GUARDED:
+            return method
+        fills = self._GUARDED[name]
+
+        def guarded(*args: Any) -> Any:
+            if self.error is None:
+                try:
+                    return method(*args)
+                except Exception as exc:
+                    self.error = exc
+            if fills:  # (pointer to the solver's array, its size)
+                np.ctypeslib.as_array(args[0], (args[1],))[:] = np.nan
+            return None
+
+        return guarded
 
 
 class FmuModel(PointwiseModel):
@@ -511,13 +554,17 @@ class FmuModel(PointwiseModel):
             At ``time``.
         """
         grid = np.asarray(times, dtype=float)
-        if grid.ndim != 1 or grid.size < 2 or np.any(np.diff(grid) <= 0):
+        if grid.ndim != 1 or grid.size < 1 or np.any(np.diff(grid) <= 0):
             raise ConfigError([_problem("time", "the output grid must increase strictly")])
         if self.interface == "model-exchange":
             steps = np.diff(grid)
-            if np.ptp(steps) > 1e-9 * steps.mean():
+            if steps.size == 0 or np.ptp(steps) > 1e-9 * steps.mean():
                 raise ConfigError(
-                    [_problem("time", "a model-exchange FMU needs an evenly spaced output grid")]
+                    [
+                        _problem(
+                            "time", "a model-exchange FMU needs an evenly spaced grid of 2+ times"
+                        )
+                    ]
                 )
 
     def run_point(
@@ -555,7 +602,7 @@ class FmuModel(PointwiseModel):
             if self.interface == "co-simulation":
                 record = self._cosimulate(start, times, clock)
             else:
-                record = self._integrate(start, times)
+                record = self._integrate(start, times, clock)
         except Exception as exc:
             log = self._log.take()
             self._recover(fatal=getattr(exc, "status", None) == _STATUS.index("fatal"))
@@ -615,23 +662,39 @@ class FmuModel(PointwiseModel):
         return record
 
     def _integrate(
-        self, start: Mapping[str, float | int | bool], times: NDArray[np.float64]
+        self,
+        start: Mapping[str, float | int | bool],
+        times: NDArray[np.float64],
+        clock: list[float],
     ) -> NDArray[np.float64]:
         """Integrate by FMPy's CVode, sampled at the grid; (n_outputs, T)."""
-        result = simulate_fmu(
-            self._unzipdir,
-            validate=False,
-            start_time=float(times[0]),
-            stop_time=float(times[-1]),
-            solver="CVode",
-            relative_tolerance=self.rtol,
-            output_interval=(float(times[-1]) - float(times[0])) / (times.size - 1),
-            record_events=False,
-            start_values=dict(start),
-            output=list(self.outputs),
-            model_description=self._md,
-            fmu_instance=self._instance,
-        )
+
+        def reached(time: float, _recorder: object) -> bool:
+            clock[0] = time  # for the message of a failure
+            return True
+
+        guard = _SolverGuard(self._instance)
+        try:
+            result = simulate_fmu(
+                self._unzipdir,
+                validate=False,
+                start_time=float(times[0]),
+                stop_time=float(times[-1]),
+                solver="CVode",
+                relative_tolerance=self.rtol,
+                output_interval=(float(times[-1]) - float(times[0])) / (times.size - 1),
+                record_events=False,
+                fmi_type="ModelExchange",
+                start_values=dict(start),
+                output=list(self.outputs),
+                model_description=self._md,
+                fmu_instance=guard,
+                step_finished=reached,
+            )
+        except Exception:
+            if guard.error is not None:  # the FMU's error made the solver stop
+                raise guard.error from None
+            raise
         sampled = np.asarray(result["time"], dtype=float)
         if sampled.size != times.size:
             last = float(sampled[-1]) if sampled.size else float(times[0])

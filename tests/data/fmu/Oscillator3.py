@@ -1,6 +1,8 @@
 """The free damped oscillator x'' + c x' + k x = 0 as an FMI 3.0 FMU with both interfaces
 and units, for tests/test_fmu_adapter.py: as model exchange FMPy's CVode integrates it; as
-co-simulation each step advances the state by the exact solution."""
+co-simulation each step advances the state by the exact solution. Its derivatives are NaN
+once the time passes ``fail_after``, which CVode cannot integrate (a failing run; raising
+there would crash pythonfmu3's FMU)."""
 
 import math
 
@@ -21,7 +23,7 @@ class Oscillator3(Fmi3SlaveBase, ModelExchange, CoSimulation):
         super().__init__(**kwargs)
         self.time = 0.0
         self.x, self.v, self.der_x, self.der_v = 1.0, 0.0, 0.0, 0.0
-        self.k, self.c = 4.0, 0.4
+        self.k, self.c, self.fail_after = 4.0, 0.4, 1e300
         self.register_units([Unit("m"), Unit("m/s"), Unit("m/s2"), Unit("1/s"), Unit("1/s2")])
         continuous = Fmi3Variability.continuous
         self.register_variable(
@@ -58,8 +60,18 @@ class Oscillator3(Fmi3SlaveBase, ModelExchange, CoSimulation):
                     unit=unit,
                 )
             )
+        self.register_variable(
+            Float64(
+                "fail_after",
+                causality=Fmi3Causality.parameter,
+                variability=Fmi3Variability.tunable,
+                start=self.fail_after,
+            )
+        )
 
     def get_continuous_state_derivatives(self):
+        if self.time > self.fail_after:
+            return [math.nan, math.nan]
         self.der_x = self.v
         self.der_v = -self.k * self.x - self.c * self.v
         return [self.der_x, self.der_v]
