@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import ctypes
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,13 @@ import pcmb
 from pcmb.adapters.fmu.factory import FmuModelFactory
 from pcmb.cli import main
 from pcmb.config import validate_config
-from pcmb.errors import ConfigError, ModelError, ModelRunError, PcmbWarning
+from pcmb.errors import (
+    ConfigError,
+    MissingDependencyError,
+    ModelError,
+    ModelRunError,
+    PcmbWarning,
+)
 from pcmb.references import damped_oscillator
 from pcmb.result import Status
 from pcmb.run.fingerprint import model_files
@@ -313,6 +320,13 @@ def test_pcmb_validate_reports_a_bad_output_with_its_line(fmu_dir, tmp_path, cap
     err = capsys.readouterr().err
     line = text.splitlines().index(next(s for s in text.splitlines() if "[x, vv]" in s)) + 1
     assert f"bad.yaml:{line}: model.outputs[1]: 'vv' is not a variable of the FMU" in err
+
+
+def test_without_fmpy_the_message_names_the_extra(fmu_dir, monkeypatch):
+    monkeypatch.setitem(sys.modules, "fmpy", None)  # as if fmpy were not installed
+    monkeypatch.delitem(sys.modules, "pcmb.adapters.fmu.model", raising=False)
+    with pytest.raises(MissingDependencyError, match=r'pip install "pcmb\[fmu\]"'):
+        oscillator(fmu_dir)()
 
 
 def test_a_file_that_is_not_an_fmu(tmp_path):
