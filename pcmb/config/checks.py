@@ -103,9 +103,13 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     kept = config.output_names or facts.outputs
     if config.analysis is not None:
         yield from config.analysis.settings().problems(config.times, kept)
-    swept = config.sweep.outputs if config.sweep is not None else None
-    for index, name in enumerate(swept or ()):
-        if name not in kept:
-            outputs = ", ".join(kept)
-            yield f"sweep.outputs[{index}]", f"{name!r} is not an output (outputs: {outputs})"
+    named = {
+        "diagnostics.outputs": config.diagnostics.outputs,
+        "sweep.outputs": config.sweep.outputs if config.sweep is not None else None,
+    }
+    for key, names in named.items():
+        for index, name in enumerate(names or ()):
+            if name not in kept:
+                outputs = ", ".join(kept)
+                yield f"{key}[{index}]", f"{name!r} is not an output (outputs: {outputs})"
     yield from facts.time_problems

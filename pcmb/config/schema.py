@@ -365,6 +365,11 @@ class DiagnosticsSpec(Section):
         default=TOLERANCE,
         description="accepted error, relative to the output's largest standard deviation",
     )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None,
+        description="outputs the verdict covers (default: all; leave out a residual that is "
+        "zero to round-off)",
+    )
 
 
 class AnalysisSpec(Section):

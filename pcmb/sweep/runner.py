@@ -58,9 +58,8 @@ def _study(config: StudyConfig, setting: Setting) -> Study:
     from pcmb.study import Study
 
     execution = config.execution.model_copy(update={"nominal_run": False})
-    return Study.from_config(
-        config.model_copy(update={"method": setting.spec, "execution": execution})
-    )
+    changes = {"method": setting.spec, "execution": execution, "analysis": None}
+    return Study.from_config(config.model_copy(update=changes))
 
 
 def _identity(study: Study) -> tuple[str, dict[str, str]]:
