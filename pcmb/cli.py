@@ -62,8 +62,8 @@ def _parser() -> argparse.ArgumentParser:
     validate = commands.add_parser("validate", help="check a config without running anything")
     validate.add_argument("config")
 
-    inspect = commands.add_parser("inspect", help="summarise a result file")
-    inspect.add_argument("result", help="an HDF5 file written by pcmb run")
+    inspect = commands.add_parser("inspect", help="summarise a result file (or a sweep.h5)")
+    inspect.add_argument("result", help="an HDF5 file written by pcmb run or pcmb sweep")
 
     report = commands.add_parser("report", help="write figures and an index page of a result")
     report.add_argument("result", help="an HDF5 file written by pcmb run")
@@ -378,7 +378,10 @@ def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
         print(_summary(load_config(args.config)))
     elif args.command == "inspect":
-        print(_inspect(args.result))
+        from pcmb.sweep.table import is_sweep_file, read_sweep, summary
+
+        is_sweep = is_sweep_file(args.result)
+        print(summary(read_sweep(args.result)) if is_sweep else _inspect(args.result))
     elif args.command == "report":
         return _report(args)
     elif args.command == "compare":

@@ -312,3 +312,15 @@ def test_every_config_has_a_sweep_of_rising_cost_and_a_finer_reference(path, req
     assert runs == sorted(runs) and len(set(runs)) == len(runs)
     finer = pcmb.Study.from_config(config.model_copy(update={"method": plan.reference.spec}))
     assert finer.design.runs > runs[-1]
+
+
+def test_inspect_of_a_sweep_gives_the_cheapest_setting_reaching_each_accuracy(swept, capsys):
+    assert main(["inspect", str(swept / "sweep.h5")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("coll"))
+    chaos = [r for r in _rows(swept) if r["method"] == "collocation"]
+    cells = []
+    for target in (1e-2, 1e-4):
+        runs = min(int(r["runs"]) for r in chaos if float(r["err_std"]) <= target)
+        cells.append(f"{runs} runs")
+    assert [cell for cell in cells if cell in line] == cells
+    assert line.index(cells[0]) < line.rindex(cells[1])

@@ -28,10 +28,13 @@ from pcmb.run.output import write_error
 __all__ = [
     "COLUMNS",
     "SWEEP_KIND",
+    "TARGETS",
     "SweepRow",
     "SweepTable",
+    "cheapest",
     "is_sweep_file",
     "read_sweep",
+    "summary",
     "write_sweep",
 ]
 
@@ -132,6 +135,50 @@ class SweepTable:
     def column(self, name: str) -> NDArray:
         """One column over the rows."""
         return np.array([getattr(row, name) for row in self.rows])
+
+
+#: Accuracies :func:`summary` reports the cost of.
+TARGETS = (1e-2, 1e-4)
+
+
+def cheapest(table: SweepTable, output: str, target: float) -> dict[str, SweepRow | None]:
+    """Per method, its cheapest setting (in runs) whose median std error over replicates
+    meets ``target`` (the row of its median seconds), ``None`` when none does."""
+    settings: dict[tuple[str, str], list[SweepRow]] = {}
+    for row in table.rows:
+        if row.output == output:
+            settings.setdefault((row.method, row.setting), []).append(row)
+    found: dict[str, SweepRow | None] = {}
+    for (method, _), rows in settings.items():
+        found.setdefault(method, None)
+        if np.median([r.err_std for r in rows]) > target:
+            continue
+        typical = sorted(rows, key=lambda r: r.seconds)[len(rows) // 2]
+        best = found[method]
+        if best is None or typical.runs < best.runs:
+            found[method] = typical
+    return found
+
+
+def summary(table: SweepTable) -> str:
+    """The text ``pcmb inspect`` prints of a sweep: per output and method, the runs and
+    seconds of the cheapest setting reaching each of :data:`TARGETS`."""
+    lines = [f"sweep    {len(table.rows)} rows against {table.reference}"]
+    for output in dict.fromkeys(row.output for row in table.rows):
+        floor = table.floors.get(output, (0.0, 0.0))[1]
+        lines.append(f"output   {output} (reference noise floor of the std: {floor:.2g})")
+        reached = {target: cheapest(table, output, target) for target in TARGETS}
+        header = "".join(f"{f'std error {t:g}':>26}" for t in TARGETS)
+        lines.append(f"  {'method':<28}{header}")
+        for method in reached[TARGETS[0]]:
+            cells = []
+            for target in TARGETS:
+                row = reached[target][method]
+                cells.append(
+                    "not reached" if row is None else f"{row.runs} runs, {row.seconds:.3g} s"
+                )
+            lines.append(f"  {method:<28}" + "".join(f"{cell:>26}" for cell in cells))
+    return "\n".join(lines)
 
 
 def _csv_text(table: SweepTable) -> str:
