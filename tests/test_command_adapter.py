@@ -1,0 +1,162 @@
+"""``kind: command`` from a config file: where its errors point and what its failures report.
+
+The simulator is tests/data/sim_decay.py, run by this interpreter as a real process: its
+parameter ``mode`` selects a misbehaviour (1: a message on stderr and exit code 3). Nodes of
+``mode ~ U[0, 1.4]`` at chaos order 3 are the Gauss points 0.097, 0.46, 0.94 and 1.30, so
+node 3 fails and nodes 0-2 succeed.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.adapters.command import CommandModel
+from pcmb.cli import main
+from pcmb.config import load_config
+from pcmb.errors import ConfigError, ModelError
+
+DATA = Path(__file__).parent / "data"
+SIMULATOR = DATA / "sim_decay.py"
+STDERR_LINE = "something went wrong in the solver"  # what sim_decay.py prints in mode 1
+
+
+def config_text(model: str, run_dir: Path, **execution: str) -> str:
+    """A study of sim_decay.py with ``model`` lines added to the model section."""
+    options = ", ".join(f"{k}: {v}" for k, v in {"jobs": 2, **execution}.items())
+    return f"""\
+name: failing
+model:
+  kind: command
+  command: [{sys.executable}, sim_decay.py, out.csv]
+  files: [{SIMULATOR}]
+  params: {{k: 2.0, y0: 1.0, mode: 0.0}}
+  outputs: [y]
+  output: {{file: out.csv}}
+  run_dir: {run_dir}
+{model}time: {{start: 0.0, stop: 2.0, points: 5}}
+inputs:
+  mode: {{dist: uniform, low: 0.0, high: 1.4}}
+method: {{kind: collocation, order: 3, validation: 0}}
+execution: {{{options}}}
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "study.yaml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# --------------------------------------------------------------------------- key paths
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "path", "line", "fragment"),
+    [
+        (f"[{sys.executable},", "[no-such-program,", "model.command[0]", 4, "not found on PATH"),
+        ("out.csv]", "3]", "model.command[2]", 4, "expected a string, found 3"),
+        ("command: [", "command: 5 #", "model.command", 4, "a list of strings or one string"),
+        (f"[{SIMULATOR}]", f"[{SIMULATOR}, {DATA}/deck.txt, x.py]", "model.files[2]", 5, "x.py"),
+        ("  outputs:", "  templates: [gone.txt]\n  outputs:", "model.templates[0]", 7, "gone.txt"),
+    ],
+    ids=["program", "argument-type", "command-type", "file", "template"],
+)
+def test_command_errors_name_the_exact_key_and_line(tmp_path, old, new, path, line, fragment):
+    text = config_text("", tmp_path / "nodes")
+    assert old in text
+    with pytest.raises(ConfigError) as caught:
+        load_config(write(tmp_path, text.replace(old, new, 1)))
+    (problem,) = caught.value.problems
+    assert (problem.path, problem.line) == (path, line)
+    assert fragment in problem.message
+
+
+def test_a_command_string_is_split_before_its_words_are_checked(tmp_path):
+    text = config_text("", tmp_path / "nodes").replace(
+        f"[{sys.executable}, sim_decay.py, out.csv]", f"{sys.executable} sim_decay.py {{{{kk}}}}"
+    )
+    with pytest.raises(ConfigError) as caught:
+        load_config(write(tmp_path, text))
+    (problem,) = caught.value.problems
+    assert (problem.path, problem.line) == ("model.command[2]", 4)
+    assert "'{{kk}}' names no parameter (known: k, y0, mode, times.start" in problem.message
+
+
+# --------------------------------------------------------------------------- failures
+
+
+def kept_directories(run_dir: Path) -> list[Path]:
+    return sorted(run_dir.iterdir()) if run_dir.exists() else []
+
+
+def test_a_failed_node_reports_its_stderr_and_kept_directory(tmp_path, capsys):
+    run_dir = tmp_path / "nodes"
+    config = write(tmp_path, config_text("", run_dir, on_failure="abort"))
+    out = tmp_path / "out.h5"
+    assert main(["run", str(config), "-o", str(out), "--quiet"]) == 3
+    err = capsys.readouterr().err
+    (kept,) = kept_directories(run_dir)  # keep: failed is the default: the others are gone
+    assert json.loads((kept / "params.json").read_text())["params"]["mode"] > 1.0
+    assert STDERR_LINE in (kept / "stderr.txt").read_text()
+    expected = (
+        f"node 3 (mode=1.3028): ModelError: exited with code 3; last lines of stderr.txt: "
+        f"'{STDERR_LINE}' [work directory kept: {kept}]"
+    )
+    assert f"  {expected}\n" in err
+    assert not out.exists()
+
+
+def test_regress_names_the_kept_directory_in_its_warning_record(tmp_path, capsys):
+    run_dir = tmp_path / "nodes"
+    config = write(tmp_path, config_text("", run_dir, on_failure="regress"))
+    out = tmp_path / "out.h5"
+    assert main(["run", str(config), "-o", str(out), "--quiet"]) == 0
+    (kept,) = kept_directories(run_dir)
+    result = pcmb.load(out)
+    (failure,) = result.failures
+    assert failure.index == 3
+    assert failure.message.endswith(f"'{STDERR_LINE}' [work directory kept: {kept}]")
+    (record,) = [w for w in result.warnings if w.code == "nodes-failed"]
+    assert str(failure) in record.message
+    capsys.readouterr()
+    assert main(["inspect", str(out)]) == 0
+    shown = capsys.readouterr().out
+    assert f"\nfailed   {failure}" in shown
+    assert f"\nwarning  {record}" in shown
+
+
+@pytest.mark.parametrize(("keep", "kept"), [("none", 0), ("all", 5)])
+def test_keep_none_and_all(tmp_path, capsys, keep, kept):
+    run_dir = tmp_path / "nodes"
+    config = write(tmp_path, config_text(f"  keep: {keep}\n", run_dir, on_failure="regress"))
+    assert main(["run", str(config), "-o", str(tmp_path / "out.h5"), "--quiet"]) == 0
+    assert len(kept_directories(run_dir)) == kept  # all: 4 nodes and the nominal run
+    (failure,) = pcmb.load(tmp_path / "out.h5").failures
+    assert STDERR_LINE in failure.message
+    assert ("work directory kept" in failure.message) == (keep == "all")
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def test_a_whitespace_table_with_a_missing_column_lists_the_columns_found(tmp_path):
+    model = CommandModel(
+        [sys.executable, "sim_decay.py", "out.txt"],
+        params={"k": 2.0, "y0": 1.0},
+        outputs=["y", "z"],
+        output_file="out.txt",
+        output_format="table",
+        files=[str(SIMULATOR)],
+        run_dir=tmp_path,
+    )
+    times = np.linspace(0.0, 2.0, 5)
+    with pytest.raises(
+        ModelError, match=r"output\(s\) 'z' missing from out.txt \(found: time, y, dy\)"
+    ):
+        model.simulate({"k": np.array([1.5])}, times)
