@@ -9,6 +9,7 @@ node 3 fails and nodes 0-2 succeed.
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -17,10 +18,12 @@ import pytest
 
 import pcmb
 from pcmb.adapters.command import CommandModel
+from pcmb.adapters.command.spec import CommandModelSpec, CommandOutputSpec
 from pcmb.cli import main
 from pcmb.config import load_config
 from pcmb.errors import ConfigError, ModelError
 
+ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"
 SIMULATOR = DATA / "sim_decay.py"
 STDERR_LINE = "something went wrong in the solver"  # what sim_decay.py prints in mode 1
@@ -160,3 +163,41 @@ def test_a_whitespace_table_with_a_missing_column_lists_the_columns_found(tmp_pa
         ModelError, match=r"output\(s\) 'z' missing from out.txt \(found: time, y, dy\)"
     ):
         model.simulate({"k": np.array([1.5])}, times)
+
+
+# --------------------------------------------------------------------------- the docs
+
+
+def expected_defaults() -> dict[str, str]:
+    """Key -> its default as the docs' tables write it (a default of None is described)."""
+    fields = {
+        **{k: f for k, f in CommandModelSpec.model_fields.items() if k not in ("kind", "output")},
+        **{f"output.{k}": f for k, f in CommandOutputSpec.model_fields.items()},
+    }
+    shown = {}
+    for key, field in fields.items():
+        if field.is_required():
+            shown[key] = "required"
+        elif field.default_factory is not None:
+            shown[key] = f"`{field.default_factory()!r}`"
+        else:
+            shown[key] = None if field.default is None else f"`{field.default}`"
+    return shown
+
+
+@pytest.mark.parametrize(
+    ("page", "heading"),
+    [("README.md", "### Wrapping a program"), ("docs/models.md", "## `kind: command`")],
+)
+def test_the_readme_and_models_page_list_every_key_with_its_default(page, heading):
+    text = (ROOT / page).read_text(encoding="utf-8")
+    section = text[text.index(heading) :]
+    section = section[: section.index("\n#", 1)]
+    rows = dict(re.findall(r"^\| `([\w.]+)` \| ([^|]+?) \|", section, re.MULTILINE))
+    expected = expected_defaults()
+    assert rows.keys() == expected.keys()
+    for key, default in expected.items():
+        if default is None:
+            assert rows[key] != "required" and not rows[key].startswith("`"), key
+        else:
+            assert rows[key] == default, key
