@@ -1,4 +1,6 @@
-"""``kind: command`` from a config file: where its errors point and what its failures report.
+"""``kind: command`` from a config file: what its failures report, and its documentation.
+
+(Where its config errors point is checked with the other config errors, tests/test_config.py.)
 
 The simulator is tests/data/sim_decay.py, run by this interpreter as a real process: its
 parameter ``mode`` selects a misbehaviour (1: a message on stderr and exit code 3). Nodes of
@@ -20,8 +22,7 @@ import pcmb
 from pcmb.adapters.command import CommandModel
 from pcmb.adapters.command.spec import CommandModelSpec, CommandOutputSpec
 from pcmb.cli import main
-from pcmb.config import load_config
-from pcmb.errors import ConfigError, ModelError
+from pcmb.errors import ModelError
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"
@@ -54,41 +55,6 @@ def write(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "study.yaml"
     path.write_text(text, encoding="utf-8")
     return path
-
-
-# --------------------------------------------------------------------------- key paths
-
-
-@pytest.mark.parametrize(
-    ("old", "new", "path", "line", "fragment"),
-    [
-        (f"[{sys.executable},", "[no-such-program,", "model.command[0]", 4, "not found on PATH"),
-        ("out.csv]", "3]", "model.command[2]", 4, "expected a string, found 3"),
-        ("command: [", "command: 5 #", "model.command", 4, "a list of strings or one string"),
-        (f"[{SIMULATOR}]", f"[{SIMULATOR}, {DATA}/deck.txt, x.py]", "model.files[2]", 5, "x.py"),
-        ("  outputs:", "  templates: [gone.txt]\n  outputs:", "model.templates[0]", 7, "gone.txt"),
-    ],
-    ids=["program", "argument-type", "command-type", "file", "template"],
-)
-def test_command_errors_name_the_exact_key_and_line(tmp_path, old, new, path, line, fragment):
-    text = config_text("", tmp_path / "nodes")
-    assert old in text
-    with pytest.raises(ConfigError) as caught:
-        load_config(write(tmp_path, text.replace(old, new, 1)))
-    (problem,) = caught.value.problems
-    assert (problem.path, problem.line) == (path, line)
-    assert fragment in problem.message
-
-
-def test_a_command_string_is_split_before_its_words_are_checked(tmp_path):
-    text = config_text("", tmp_path / "nodes").replace(
-        f"[{sys.executable}, sim_decay.py, out.csv]", f"{sys.executable} sim_decay.py {{{{kk}}}}"
-    )
-    with pytest.raises(ConfigError) as caught:
-        load_config(write(tmp_path, text))
-    (problem,) = caught.value.problems
-    assert (problem.path, problem.line) == ("model.command[2]", 4)
-    assert "'{{kk}}' names no parameter (known: k, y0, mode, times.start" in problem.message
 
 
 # --------------------------------------------------------------------------- failures
