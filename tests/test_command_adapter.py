@@ -81,23 +81,31 @@ def test_a_failed_node_reports_its_stderr_and_kept_directory(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_regress_names_the_kept_directory_in_its_warning_record(tmp_path, capsys):
+def test_regress_names_every_kept_directory_in_a_warning_record(tmp_path, capsys):
     run_dir = tmp_path / "nodes"
-    config = write(tmp_path, config_text("", run_dir, on_failure="regress"))
+    text = config_text("", run_dir, on_failure="regress").replace("validation: 0", "validation: 16")
     out = tmp_path / "out.h5"
-    assert main(["run", str(config), "-o", str(out), "--quiet"]) == 0
-    (kept,) = kept_directories(run_dir)
+    assert main(["run", str(write(tmp_path, text)), "-o", str(out), "--quiet"]) == 0
     result = pcmb.load(out)
     (failure,) = result.failures
     assert failure.index == 3
-    assert failure.message.endswith(f"'{STDERR_LINE}' [work directory kept: {kept}]")
-    (record,) = [w for w in result.warnings if w.code == "nodes-failed"]
-    assert str(failure) in record.message
+    assert f"'{STDERR_LINE}' [work directory kept: {run_dir}" in failure.message
+    records = [w for w in result.warnings if w.code == "nodes-failed"]
+    assert len(records) == 2  # the collocation nodes, and the held-out runs
+    assert str(failure) in records[0].message
+    assert records[1].message.startswith("2 of 16 held-out run(s) failed and were left out")
+    kept = kept_directories(run_dir)
+    assert len(kept) == 3  # one node, two held-out runs
+    for workdir in kept:
+        named = [w for w in records if f"[work directory kept: {workdir}]" in w.message]
+        assert len(named) == 1, workdir
+        assert STDERR_LINE in (workdir / "stderr.txt").read_text()
     capsys.readouterr()
     assert main(["inspect", str(out)]) == 0
     shown = capsys.readouterr().out
     assert f"\nfailed   {failure}" in shown
-    assert f"\nwarning  {record}" in shown
+    for record in records:
+        assert f"\nwarning  {record}" in shown
 
 
 @pytest.mark.parametrize(("keep", "kept"), [("none", 0), ("all", 5)])
