@@ -134,6 +134,9 @@ class Study:
     diagnostics_tolerance:
         Accepted error of an expansion, relative to the output's largest standard deviation
         (``diagnostics.tolerance``): the diagnostics' verdict.
+    diagnosed:
+        Outputs the diagnostics judge (``diagnostics.outputs``; default: all), e.g. to leave
+        out a residual that is zero to round-off, whose spread is noise.
 
     Raises
     ------
@@ -180,6 +183,7 @@ class Study:
         analysis: AnalysisSettings | None = None,
         validation: int = VALIDATION,
         diagnostics_tolerance: float = TOLERANCE,
+        diagnosed: Sequence[str] | None = None,
     ):
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
@@ -222,6 +226,7 @@ class Study:
         self.nominal = dict(nominal or {})
         self.analysis = analysis
         self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
+        self.diagnosed = _tuple(diagnosed)
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
@@ -305,6 +310,7 @@ class Study:
             analysis=config.analysis_settings,
             validation=method.validation,
             diagnostics_tolerance=config.diagnostics.tolerance,
+            diagnosed=config.diagnostics.outputs,
         )
         study.fingerprint_extra = _run_settings(config)
         return study
@@ -346,6 +352,7 @@ class Study:
             "analysis": self.analysis,
             "validation": self.validation,
             "diagnostics_tolerance": self.diagnostics_tolerance,
+            "diagnosed": self.diagnosed,
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
@@ -680,8 +687,9 @@ class Study:
     ) -> StudyResult:
         """The result with its diagnostics (per output) and their warning records, after
         ``held_out_failed``."""
+        judged = self.diagnosed or tuple(result.expansions)
         found = diagnose_all(
-            result.expansions,
+            {name: e for name, e in result.expansions.items() if name in judged},
             result.germ,
             result.values,
             result.status == Status.OK,

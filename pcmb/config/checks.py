@@ -100,7 +100,16 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                     f"inputs.{name}",
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
+    kept = config.output_names or facts.outputs
     if config.analysis is not None:
-        kept = config.output_names or facts.outputs
         yield from config.analysis.settings().problems(config.times, kept)
+    named = {
+        "diagnostics.outputs": config.diagnostics.outputs,
+        "sweep.outputs": config.sweep.outputs if config.sweep is not None else None,
+    }
+    for key, names in named.items():
+        for index, name in enumerate(names or ()):
+            if name not in kept:
+                outputs = ", ".join(kept)
+                yield f"{key}[{index}]", f"{name!r} is not an output (outputs: {outputs})"
     yield from facts.time_problems

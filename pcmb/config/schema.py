@@ -61,6 +61,7 @@ from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.sweep.plan import sweep_problems
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import ModelFactory
@@ -73,6 +74,7 @@ __all__ = [
     "MethodSpec",
     "ModelSpec",
     "StudyConfig",
+    "SweepSpec",
     "TimeSpec",
     "config_json_schema",
     "load_config",
@@ -363,6 +365,11 @@ class DiagnosticsSpec(Section):
         default=TOLERANCE,
         description="accepted error, relative to the output's largest standard deviation",
     )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None,
+        description="outputs the verdict covers (default: all; leave out a residual that is "
+        "zero to round-off)",
+    )
 
 
 class AnalysisSpec(Section):
@@ -395,6 +402,25 @@ class AnalysisSpec(Section):
         return AnalysisSettings(**self.model_dump())
 
 
+class SweepSpec(Section):
+    """``pcmb sweep``: the methods run at rising cost and the reference they are measured
+    against (see ``docs/sweep.md``)."""
+
+    methods: Annotated[list[dict[Name, Any]], Field(min_length=1)] = Field(
+        description="method blocks, each with exactly one key given as a list of values"
+    )
+    reference: dict[Name, Any] | None = Field(
+        default=None,
+        description="method block of the reference run (default: give --reference REF.h5)",
+    )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None, description="outputs whose errors are measured (default: all)"
+    )
+    replicates: PositiveInt = Field(
+        default=1, description="seeds per setting of a seeded method (sampling, regression)"
+    )
+
+
 class StudyConfig(Section):
     """A validated study configuration.
 
@@ -418,6 +444,9 @@ class StudyConfig(Section):
     )
     output: Annotated[str, AfterValidator(_h5_path)] | None = Field(
         default=None, description="result file, relative to the current directory"
+    )
+    sweep: SweepSpec | None = Field(
+        default=None, description="pcmb sweep: methods at rising cost against a reference"
     )
 
     _source_text: str | None = PrivateAttr(default=None)
@@ -521,6 +550,7 @@ def _validate(
     if config is not None and not problems:
         config._base_dir = base_dir
         problems = located(cross_check(config), lines)
+        problems += located(sweep_problems(config), lines)
         problems += located(model_check(config), lines)
     if problems:
         raise ConfigError(sorted(problems, key=lambda p: (p.line or 0, p.path)), source)
