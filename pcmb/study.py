@@ -539,9 +539,10 @@ class Study:
                 )
         runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
         nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
-        held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
+        held_out, held_out_failed = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
-        result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
+        result = self._with_nominal(self._recover(nodes, runs), nominal)
+        result = self._diagnosed(result, held_out, held_out_failed)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -654,11 +655,12 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
-    ) -> HeldOut | None:
+    ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """The held-out runs that check a chaos expansion (none for plain sampling), journaled
-        in the journal's ``validation`` folder, under the failure policy."""
+        in the journal's ``validation`` folder, under the failure policy; and a
+        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not self.validation or self.design.record().basis is None:
-            return None
+            return None, ()
         seed = self.seed + HELD_OUT_SEED
         batch = random_nodes(tuple(self.inputs.values()), self.validation, "montecarlo", seed)
         folder = None if journal_dir is None else journal_dir / "validation"
@@ -667,10 +669,24 @@ class Study:
         found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress, halves)
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
-        return HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        if not found.failures:
+            return held_out, ()
+        failed = WarningRecord(
+            "nodes-failed",
+            f"{len(found.failures)} of {batch.size} held-out run(s) failed and were left out of "
+            f"the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
+        )
+        return held_out, (failed,)
 
-    def _diagnosed(self, result: StudyResult, held_out: HeldOut | None) -> StudyResult:
-        """The result with its diagnostics (per output) and their warning records."""
+    def _diagnosed(
+        self,
+        result: StudyResult,
+        held_out: HeldOut | None,
+        held_out_failed: tuple[WarningRecord, ...],
+    ) -> StudyResult:
+        """The result with its diagnostics (per output) and their warning records, after
+        ``held_out_failed``."""
         judged = self.diagnosed or tuple(result.expansions)
         found = diagnose_all(
             {name: e for name, e in result.expansions.items() if name in judged},
@@ -686,7 +702,7 @@ class Study:
             result,
             diagnostics=found,
             held_out=held_out,
-            warnings=(*result.warnings, *records),
+            warnings=(*result.warnings, *held_out_failed, *records),
         )
 
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:

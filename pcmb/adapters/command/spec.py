@@ -25,6 +25,8 @@ def _split_command(value: Any) -> Any:
             return split_command(value)
         except ValueError as exc:
             raise ValueError(f"cannot split the command: {exc}") from None
+    if not isinstance(value, list):
+        raise ValueError(f"expected a list of strings or one string, found {value!r}")
     return value
 
 
@@ -40,7 +42,9 @@ class CommandOutputSpec(Section):
 
     file: str = Field(description="file the command writes in its work directory")
     format: OutputFormat | None = Field(
-        default=None, description="default: from the file extension"
+        default=None,
+        description="table: whitespace-separated columns; default: from the extension "
+        "(.csv, .json, .npy, .npz)",
     )
     time_column: str = Field(default="time", description="checked against the grid if present")
 
