@@ -7,6 +7,7 @@ import csv
 import itertools
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -299,6 +300,8 @@ def test_a_sweep_killed_midway_resumes_where_it_stopped(tmp_path):
 @pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
 def test_every_config_has_a_sweep_of_rising_cost_and_a_finer_reference(path, request):
     text = path.read_text(encoding="utf-8")
+    if "ngspice" in text and shutil.which("ngspice") is None:
+        pytest.skip("ngspice is not on PATH (apt-get install ngspice, or conda-forge's ngspice)")
     if "../models/fmu/build" in text:  # the FMU is built at test time
         text = text.replace("../models/fmu/build", str(request.getfixturevalue("fmu_dir")))
     config = load_config(path, text=text)
