@@ -262,7 +262,8 @@ class MethodSpec(Section):
     )
     basis: Literal[tuple(dict.fromkeys((*BASES, *REGRESSION_BASES)))] | None = Field(
         default=None,
-        description="chaos terms (default: tensor for collocation, hyperbolic for regression)",
+        description="chaos terms (default: tensor for collocation, hyperbolic for regression; "
+        "kind adaptive: tensor raises a tensor grid one input at a time)",
     )
     samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
     seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
