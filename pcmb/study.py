@@ -11,14 +11,15 @@ import json
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import cloudpickle
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
+from pcmb.analysis.derived import DerivedOutput, derive, derived_problems
 from pcmb.analysis.diagnostics import (
     HELD_OUT_SEED,
     TOLERANCE,
@@ -27,9 +28,11 @@ from pcmb.analysis.diagnostics import (
     diagnose_all,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
+from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
+from pcmb.designs.base import Recovery
 from pcmb.errors import (
     ConfigProblem,
     IllPosedError,
@@ -41,6 +44,7 @@ from pcmb.errors import (
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS, Pool, checking_backend, open_pool
 from pcmb.run.executor import (
+    Layout,
     ModelFacts,
     RunResult,
     chunk_bounds,
@@ -51,6 +55,8 @@ from pcmb.run.executor import (
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
+
+_Runs = TypeVar("_Runs", RunResult, HeldOut, None)
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -134,6 +140,10 @@ class Study:
     diagnostics_tolerance:
         Accepted error of an expansion, relative to the output's largest standard deviation
         (``diagnostics.tolerance``): the diagnostics' verdict.
+    derived:
+        Figures of merit computed from the time outputs after the runs, each a scalar
+        output (``derived:`` of the config; :func:`pcmb.analysis.derived.parse_derived`
+        turns its mapping into these).
 
     Raises
     ------
@@ -180,6 +190,7 @@ class Study:
         analysis: AnalysisSettings | None = None,
         validation: int = VALIDATION,
         diagnostics_tolerance: float = TOLERANCE,
+        derived: Mapping[str, DerivedOutput] | None = None,
     ):
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
@@ -222,6 +233,7 @@ class Study:
         self.nominal = dict(nominal or {})
         self.analysis = analysis
         self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
+        self.derived = dict(derived or {})
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
@@ -305,6 +317,7 @@ class Study:
             analysis=config.analysis_settings,
             validation=method.validation,
             diagnostics_tolerance=config.diagnostics.tolerance,
+            derived=config.derived_outputs,
         )
         study.fingerprint_extra = _run_settings(config)
         return study
@@ -346,6 +359,7 @@ class Study:
             "analysis": self.analysis,
             "validation": self.validation,
             "diagnostics_tolerance": self.diagnostics_tolerance,
+            "derived": self.derived,
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
@@ -461,7 +475,12 @@ class Study:
                     f"input(s) {strangers} name no parameter of the model; "
                     f"it has {sorted(parameters)}",
                 )
-        return declared if self.outputs is None else self.outputs
+        kept = declared if self.outputs is None else self.outputs
+        on_time = tuple(name for name in kept if name not in facts.axes)
+        problems = derived_problems(self.derived, kept, on_time, self.times)
+        if problems:
+            raise UsageError([ConfigProblem(key, message) for key, message in problems])
+        return kept
 
     def run(
         self,
@@ -534,7 +553,13 @@ class Study:
         nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
         held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
-        result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
+        runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
+        axes = {
+            **{name: axis for name, axis in facts.axes.items() if name in outputs},
+            **dict.fromkeys(self.derived),
+        }
+        recovered = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        result = self._diagnosed(self._with_nominal(recovered, nominal), held_out)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -547,6 +572,42 @@ class Study:
             if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
                 warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
+
+    def _recover_by_axis(
+        self,
+        nodes: TensorGrid | NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        axes: Mapping[str, OutputAxis | None],
+    ) -> Recovery:
+        """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
+        order; the study-wide records (adaptive, refinement, elements) are the first's."""
+        parts = []
+        for axis, on_time, group in _by_axis(values, axes):
+            grid = self.times if on_time else None if axis is None else axis.values
+            parts.append(self.design.recover(nodes, group, ok, times=grid))
+        first = parts[0]
+        if len(parts) == 1:
+            return first
+        return dataclasses.replace(
+            first,
+            expansions={
+                name: part.expansions[name]
+                for name in values
+                for part in parts
+                if name in part.expansions
+            },
+            warnings=tuple(record for part in parts for record in part.warnings),
+            regression={k: v for part in parts for k, v in part.regression.items()},
+        )
+
+    def _with_derived(self, runs: _Runs) -> _Runs:
+        """Runs (or held-out runs, or ``None``) with the derived figures of their time
+        outputs added as (N, 1) outputs."""
+        if runs is None or not self.derived:
+            return runs
+        found = derive(self.derived, self.times, runs.values)
+        return dataclasses.replace(runs, values={**runs.values, **found})
 
     def _run_rounds(
         self,
@@ -564,7 +625,9 @@ class Study:
         more = getattr(self.design, "more", None)
         round_number = 0
         while more is not None:
-            batch = more(nodes, runs.values, runs.status == Status.OK)
+            # Rounds are steered by the outputs of one axis (time first): see _by_axis.
+            steering = _by_axis(runs.values, facts.axes)[0][2]
+            batch = more(nodes, steering, runs.status == Status.OK)
             if batch is None:
                 break
             round_number += 1
@@ -592,8 +655,9 @@ class Study:
         fresh_journal = False
         if journal_dir is not None:
             fresh_journal = not Journal.exists(journal_dir)
+            widths = Layout.of(outputs, self.times, facts.axes).widths
             journal = Journal(
-                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, self.times.size
+                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, widths
             )
         try:
             runs = run_nodes(
@@ -672,6 +736,7 @@ class Study:
             result.times,
             held_out,
             self.diagnostics_tolerance,
+            axes=result.axes,
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(
@@ -714,7 +779,14 @@ class Study:
 
     # -- recovery -----------------------------------------------------------------------------
 
-    def _recover(self, nodes: TensorGrid | NodeSet, runs: RunResult) -> StudyResult:
+    def _recover(
+        self,
+        nodes: TensorGrid | NodeSet,
+        runs: RunResult,
+        axes: Mapping[str, OutputAxis | None],
+    ) -> StudyResult:
+        """Expansions of every output: the design recovers the outputs of each axis together
+        (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
         warnings: list[WarningRecord] = []
         if runs.failures:
@@ -726,7 +798,7 @@ class Study:
                 )
             )
         try:
-            recovery = self.design.recover(nodes, runs.values, ok, times=self.times)
+            recovery = self._recover_by_axis(nodes, runs.values, ok, axes)
         except IllPosedError as error:
             message = f"on_failure regress could not refit: {error}:"
             raise ModelRunError(runs.failures, message) from error
@@ -752,12 +824,24 @@ class Study:
         )
 
 
+def _by_axis(
+    values: Mapping[str, Any], axes: Mapping[str, OutputAxis | None]
+) -> list[tuple[OutputAxis | None, bool, dict[str, Any]]]:
+    """The outputs grouped by axis: ``(axis, on_time, {name: values})``, time first."""
+    groups: dict[str | None, tuple[OutputAxis | None, bool, dict[str, Any]]] = {}
+    for name, array in values.items():
+        axis = axes.get(name)
+        key = "" if name not in axes else None if axis is None else axis.name
+        groups.setdefault(key, (axis, name not in axes, {}))[2][name] = array
+    return sorted(groups.values(), key=lambda group: not group[1])
+
+
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
 _EXECUTION_ONLY = frozenset(
     {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run"}
 )
 #: Top-level config keys that cannot change a node's values.
-_NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution"})
+_NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution", "derived"})
 
 
 def _run_settings(config: StudyConfig) -> str:

@@ -572,9 +572,9 @@ def _quantile_bands(
     once per basis (and elements) and the values in time blocks that bound memory."""
     bands = {}
     phis: dict[bytes, list[tuple[NDArray[np.intp], NDArray[np.float64]]]] = {}
-    n_times = result.times.size
     block = max(1, _BLOCK_VALUES // xi.shape[0])
     for name in result.outputs:
+        n_times = result.values[name].shape[1]
         expansion = result.expansions.get(name)
         if expansion is None:
             runs = result.values[name][result.ok]
@@ -628,6 +628,17 @@ def _column_quantiles(values: NDArray[np.float64], levels: Sequence[float]) -> N
     return bands
 
 
+def _pdf_points(result: StudyResult, name: str, settings: AnalysisSettings) -> NDArray[np.intp]:
+    """Where an output's PDFs are tabulated: a time output at ``settings.pdf_times`` (the
+    final time by default); an output on its own axis at the point of its largest std; a
+    scalar at its one point."""
+    if result.on_time(name):
+        times = result.times
+        return nearest_indices(times, settings.pdf_times or (times[-1],))
+    std = np.nan_to_num(np.atleast_1d(result.std(name)), nan=-1.0)
+    return np.array([int(np.argmax(std))])
+
+
 def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> Analysis:
     """Quantile bands, PDFs and spectra of every output of a result.
 
@@ -650,17 +661,19 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     settings = settings or AnalysisSettings()
     times = result.times
     settings.check(times, result.outputs)
+    on_time = [name for name in result.outputs if result.on_time(name)]
     xi = _germ_draws(result, settings)
-    indices = nearest_indices(times, settings.pdf_times or (times[-1],))
+    pdf_at = {name: _pdf_points(result, name, settings) for name in result.outputs}
     sources = {
         name: _PsdSource(result, name, settings)
-        for name in settings.spectrum_outputs(times, result.outputs)
+        for name in settings.spectrum_outputs(times, on_time)
+        if name in on_time
     }
     bins = {name: source.bins(settings.pdf_freqs) for name, source in sources.items()}
     # Every surrogate draw of every output in one pass over the basis matrix.
     surrogates = _Surrogates(xi)
     for name, expansion in result.expansions.items():
-        surrogates.add(("time", name), expansion, expansion.coefficients[..., indices])
+        surrogates.add(("time", name), expansion, expansion.coefficients[..., pdf_at[name]])
     for name, source in sources.items():
         if source.chaos is not None:
             source.request(surrogates, ("psd", name), bins[name])
@@ -668,6 +681,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     bands = _quantile_bands(result, xi[:QUANTILE_DRAWS], settings.quantiles)
     outputs = {}
     for name in result.outputs:
+        indices = pdf_at[name]
         at_times = drawn.get(("time", name))
         if at_times is None:
             at_times = result.values[name][result.ok][:, indices]
@@ -679,7 +693,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
             spectrum_ = source.spectrum(result, name, settings, pdf)
         outputs[name] = OutputAnalysis(
             quantiles=bands[name],
-            pdf=_density_table(times[indices], at_times, nonnegative=False),
+            pdf=_density_table(result.grid(name)[indices], at_times, nonnegative=False),
             spectrum=spectrum_,
         )
     return Analysis(settings, outputs)
