@@ -472,7 +472,8 @@ class _PsdSource:
 def output_draws(
     result: StudyResult, name: str, times: Sequence[float], settings: AnalysisSettings
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Draws of an output at the grid times nearest ``times``.
+    """Draws of an output at the grid times nearest ``times`` (the points of its own axis
+    for an output off the time grid; ``[0.]`` for a scalar).
 
     Surrogate values at ``settings.samples`` random inputs when the output has a chaos
     expansion, else the model runs themselves (see :func:`draws_are_runs`).
@@ -482,13 +483,14 @@ def output_draws(
     at, draws
         (P,) the grid times used and (M, P) the draws.
     """
-    indices = nearest_indices(result.times, times)
+    grid = result.grid(name)
+    indices = nearest_indices(grid, times)
     expansion = result.expansions.get(name)
     if expansion is None:
-        return result.times[indices], result.values[name][result.ok][:, indices]
+        return grid[indices], result.values[name][result.ok][:, indices]
     surrogates = _Surrogates(_germ_draws(result, settings))
     surrogates.add(name, expansion, expansion.coefficients[..., indices])
-    return result.times[indices], surrogates.evaluate()[name]
+    return grid[indices], surrogates.evaluate()[name]
 
 
 def draws_are_runs(result: StudyResult, name: str) -> bool:

@@ -180,15 +180,13 @@ class Layout:
         axes: Mapping[str, OutputAxis | None],
     ) -> Layout:
         """Outputs on time unless ``axes`` puts them on an axis (or makes them scalars)."""
-        return cls(
-            tuple(outputs),
-            tuple(
-                (times.size,) if name not in axes else () if axes[name] is None else
-                (axes[name].values.size,)
-                for name in outputs
-            ),
-            times,
-        )
+        shapes = []
+        for name in outputs:
+            axis = axes.get(name)
+            shapes.append(
+                (times.size,) if name not in axes else () if axis is None else axis.values.shape
+            )
+        return cls(tuple(outputs), tuple(shapes), times)
 
     @property
     def widths(self) -> tuple[int, ...]:

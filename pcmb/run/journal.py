@@ -408,9 +408,9 @@ class Journal:
         if set(values) != set(self.outputs):
             raise ValueError(f"values must hold exactly the outputs {list(self.outputs)}")
         arrays = [np.asarray(values[name], dtype=np.float64) for name in self.outputs]
-        if any(a.shape != (idx.size, w) for a, w in zip(arrays, self.widths, strict=True)):
-            shapes = dict(zip(self.outputs, ((idx.size, w) for w in self.widths), strict=True))
-            raise ValueError(f"the outputs must have shapes {shapes}")
+        for name, array, width in zip(self.outputs, arrays, self.widths, strict=True):
+            if array.shape != (idx.size, width):
+                raise ValueError(f"output {name!r} must have shape ({idx.size}, {width})")
         stacked = np.concatenate(arrays, axis=1)
         messages = messages or {}
         text = np.array([messages.get(int(i), "") for i in idx], dtype=np.str_)
