@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
-from pcmb.analysis.derived import DerivedOutput, derive, derived_problems
+from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
     HELD_OUT_SEED,
     TOLERANCE,
@@ -34,6 +34,7 @@ from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.designs.base import Recovery
 from pcmb.errors import (
+    ConfigError,
     ConfigProblem,
     IllPosedError,
     ModelDefinitionError,
@@ -70,6 +71,16 @@ FailurePolicy = Literal["abort", "retry", "regress"]
 
 def _usage(key: str, message: str) -> UsageError:
     return UsageError([ConfigProblem(key, message)], source="Study")
+
+
+def _derived(entries: Mapping[str, Any]) -> dict[str, DerivedOutput]:
+    """``derived`` entries as DerivedOutput s (a config-like mapping is parsed)."""
+    given = {k: v for k, v in entries.items() if not isinstance(v, DerivedOutput)}
+    try:
+        parsed = parse_derived(given)
+    except ConfigError as error:
+        raise UsageError(error.problems, source="Study") from None
+    return {name: parsed.get(name, entry) for name, entry in entries.items()}
 
 
 def _check_inputs(inputs: Mapping[str, Distribution]) -> dict[str, Distribution]:
@@ -142,8 +153,8 @@ class Study:
         (``diagnostics.tolerance``): the diagnostics' verdict.
     derived:
         Figures of merit computed from the time outputs after the runs, each a scalar
-        output (``derived:`` of the config; :func:`pcmb.analysis.derived.parse_derived`
-        turns its mapping into these).
+        output: name -> :class:`~pcmb.analysis.derived.DerivedOutput`, or a mapping as in
+        the config's ``derived:`` (``{"x1_peak": {"max_abs": "x1"}}``).
 
     Raises
     ------
@@ -190,7 +201,7 @@ class Study:
         analysis: AnalysisSettings | None = None,
         validation: int = VALIDATION,
         diagnostics_tolerance: float = TOLERANCE,
-        derived: Mapping[str, DerivedOutput] | None = None,
+        derived: Mapping[str, DerivedOutput | Mapping[str, Any]] | None = None,
     ):
         self.inputs = _check_inputs(inputs)
         self.times = np.asarray(times, dtype=float)
@@ -233,7 +244,7 @@ class Study:
         self.nominal = dict(nominal or {})
         self.analysis = analysis
         self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
-        self.derived = dict(derived or {})
+        self.derived = _derived(derived or {})
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
@@ -479,7 +490,9 @@ class Study:
         on_time = tuple(name for name in kept if name not in facts.axes)
         problems = derived_problems(self.derived, kept, on_time, self.times)
         if problems:
-            raise UsageError([ConfigProblem(key, message) for key, message in problems])
+            raise UsageError(
+                [ConfigProblem(key, message) for key, message in problems], source="Study"
+            )
         return kept
 
     def run(

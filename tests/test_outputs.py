@@ -18,7 +18,9 @@ from pcmb.analysis.comparison import compare
 from pcmb.analysis.derived import FIGURES, DerivedOutput, derive, parse_derived
 from pcmb.cli import main
 from pcmb.config import load_config
-from pcmb.errors import ConfigError, ModelError
+from pcmb.errors import ConfigError, ModelError, UsageError
+from pcmb.result import Status
+from pcmb.run.journal import Journal
 
 MODELS = Path(__file__).parent / "output_models.py"
 GAUSS = np.polynomial.legendre.leggauss(400)
@@ -386,3 +388,42 @@ def test_a_command_file_off_its_axis_is_a_failed_run(tmp_path):
     assert model.output_axes["gain"].name == "frequency"
     with pytest.raises(ModelError, match=r"'f' column of out\.csv does not match"):
         model.run_point({"zeta": 0.2}, np.array([0.0, 1.0]))
+
+
+# ----------------------------------------------------------------- Python API and journal
+
+
+def test_the_python_api_takes_derived_mappings_and_names_bad_keys():
+    inputs = {"k": pcmb.Uniform(1.0, 2.0)}
+    times = np.linspace(0.0, 1.0, 11)
+    study = pcmb.Study(
+        Decay(),
+        inputs,
+        times,
+        order=4,
+        backend="inprocess",
+        validation=0,
+        derived={"start": {"at": "x", "time": 0.0}},
+    )
+    result = study.run()
+    np.testing.assert_allclose(result.values["start"][:, 0], 1.0)  # exp(-k·0)
+    with pytest.raises(UsageError) as caught:
+        pcmb.Study(Decay(), inputs, times, derived={"p": {"max_abs": "energy"}}).check_model()
+    assert [p.path for p in caught.value.problems] == ["derived.p.max_abs"]
+    assert "'energy' is not a time output" in caught.value.problems[0].message
+    with pytest.raises(UsageError, match=r"derived\.p\.band"):
+        pcmb.Study(Decay(), inputs, times, derived={"p": {"rms": "x", "band": 1}})
+
+
+def test_the_journal_keeps_outputs_of_every_width(tmp_path):
+    journal = Journal(tmp_path / "j", "fp", 4, ("x", "gain", "peak"), (5, 40, 1))
+    values = {"x": np.ones((2, 5)), "gain": np.arange(80.0).reshape(2, 40), "peak": [[7.0], [8.0]]}
+    journal.record([1, 3], values, [Status.OK, Status.OK])
+    indices, found, status = Journal(
+        tmp_path / "j", "fp", 4, ("x", "gain", "peak"), (5, 40, 1)
+    ).completed()
+    assert indices.tolist() == [1, 3] and status.tolist() == [1, 1]
+    for name, array in values.items():
+        np.testing.assert_array_equal(found[name], array)
+    with pytest.raises(ValueError, match=r"output 'peak' must have shape \(2, 1\)"):
+        journal.record([0, 2], {**values, "peak": np.ones((2, 5))}, [1, 1])
