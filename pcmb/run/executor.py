@@ -631,10 +631,13 @@ class _Campaign:
         self,
         factory: _Factory,
         params: dict[str, NDArray[np.float64]],
-        layout: Layout,
+        times: NDArray[np.float64],
+        outputs: tuple[str, ...],
         retries: int,
         journal: Journal | None,
+        axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> None:
+        layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
         self.params, self.layout, self.outputs = params, layout, layout.outputs
         self.retries, self.journal = retries, journal
@@ -1060,10 +1063,9 @@ def run_nodes(
         )
     facts = facts or describe_model(model_factory, pool)
     _check_outputs(facts, names)
-    layout = Layout.of(names, time_grid, facts.axes)
     if journal is not None:
-        _check_journal(journal, n_nodes, layout)
-    campaign = _Campaign(factory, arrays, layout, retries, journal)
+        _check_journal(journal, n_nodes, Layout.of(names, time_grid, facts.axes))
+    campaign = _Campaign(factory, arrays, time_grid, names, retries, journal, facts.axes)
     if journal is not None:
         campaign.resume(journal)
     # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
