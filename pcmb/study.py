@@ -549,7 +549,8 @@ class Study:
         facts = describe_model(self.model_factory, pool)
         outputs = self._outputs(facts)
         if self.analysis is not None:
-            self.analysis.check(self.times, outputs)
+            on_time = [name for name in outputs if name not in facts.axes]
+            self.analysis.check(self.times, [*outputs, *self.derived], on_time)
         journal_dir = None
         if output is not None:
             # Before any node runs and before a journal exists: an output that cannot be

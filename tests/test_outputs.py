@@ -107,7 +107,12 @@ def test_bad_derived_entries_name_their_key(entry, key, message):
 # ------------------------------------------------------------------------- configs
 
 
-def _config(tmp_path: Path, derived: str, time: str = "{start: 0.0, stop: 1.0, points: 1001}"):
+def _config(
+    tmp_path: Path,
+    derived: str,
+    time: str = "{start: 0.0, stop: 1.0, points: 1001}",
+    analysis: str = "{samples: 4000, units: {x1_peak: m, wave: m}}",
+):
     text = textwrap.dedent(
         f"""\
         name: figures of merit
@@ -120,7 +125,7 @@ def _config(tmp_path: Path, derived: str, time: str = "{start: 0.0, stop: 1.0, p
           b: {{dist: uniform, low: 0.0, high: 1.0}}
           k: {{dist: uniform, low: 1.0, high: 2.0}}
         method: {{kind: collocation, order: {{a: 2, b: 1, k: 8}}}}
-        analysis: {{samples: 4000}}
+        analysis: {analysis}
         derived: {derived}
         """
     )
@@ -147,6 +152,14 @@ def test_config_errors_name_the_derived_keys(tmp_path):
     )
     assert found["derived.late.time"] == "5 is outside the grid [0, 1]"
     assert found["derived.wave"] == "'wave' is already an output of the model"
+
+
+def test_a_figure_of_merit_has_a_unit_but_no_spectrum(tmp_path):
+    path = _config(tmp_path, DERIVED, analysis="{psd: [wave, x1_peak], units: {x1_peak: m}}")
+    with pytest.raises(ConfigError) as caught:
+        load_config(path)
+    found = {p.path: p.message for p in caught.value.problems}
+    assert found == {"analysis.psd[1]": "'x1_peak' is not a time output"}
 
 
 @pytest.fixture(scope="module")

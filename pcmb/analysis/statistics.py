@@ -127,11 +127,17 @@ class AnalysisSettings:
             problems.append(("analysis.window", window))
         _raise(problems)
 
-    def problems(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[tuple[str, str]]:
+    def problems(
+        self,
+        times: NDArray[np.float64],
+        outputs: Sequence[str],
+        on_time: Sequence[str] | None = None,
+    ) -> list[tuple[str, str]]:
         """What does not fit a study's time grid and outputs, as (key path, message).
 
-        An unknown output, a PDF time outside the grid, a spectrum on a non-uniform grid,
-        a frequency above the grid's Nyquist frequency.
+        An unknown output, a spectrum of an output that is not on time (``on_time``: those
+        that are; default all), a PDF time outside the grid, a spectrum on a non-uniform
+        grid, a frequency above the grid's Nyquist frequency.
         """
         found = []
         for key, names in (("psd", self.psd or ()), ("units", self.units)):
@@ -139,6 +145,8 @@ class AnalysisSettings:
                 if name not in outputs:
                     where = f"analysis.{key}[{i}]" if key == "psd" else f"analysis.units.{name}"
                     found.append((where, f"{name!r} is not an output ({', '.join(outputs)})"))
+                elif key == "psd" and on_time is not None and name not in on_time:
+                    found.append((f"analysis.psd[{i}]", f"{name!r} is not a time output"))
         for i, t in enumerate(self.pdf_times or ()):
             if not times[0] <= t <= times[-1]:
                 found.append(
@@ -158,7 +166,12 @@ class AnalysisSettings:
                     )
         return found
 
-    def check(self, times: NDArray[np.float64], outputs: Sequence[str]) -> None:
+    def check(
+        self,
+        times: NDArray[np.float64],
+        outputs: Sequence[str],
+        on_time: Sequence[str] | None = None,
+    ) -> None:
         """Check the settings against a study's time grid and outputs, before it runs.
 
         Raises
@@ -166,7 +179,7 @@ class AnalysisSettings:
         ConfigError
             With every problem :meth:`problems` finds.
         """
-        _raise(self.problems(times, outputs))
+        _raise(self.problems(times, outputs, on_time))
 
     def spectrum_outputs(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[str]:
         """The outputs that get a spectrum."""
@@ -662,8 +675,8 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     """
     settings = settings or AnalysisSettings()
     times = result.times
-    settings.check(times, result.outputs)
     on_time = [name for name in result.outputs if result.on_time(name)]
+    settings.check(times, result.outputs, on_time)
     xi = _germ_draws(result, settings)
     pdf_at = {name: _pdf_points(result, name, settings) for name in result.outputs}
     sources = {

@@ -108,11 +108,12 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
     kept = tuple(config.output_names or facts.outputs)
+    on_time = tuple(name for name in kept if name not in facts.axes)
     if config.analysis is not None:
-        yield from config.analysis.settings().problems(config.times, kept)
+        every = (*kept, *config.derived)  # a figure of merit may have a unit
+        yield from config.analysis.settings().problems(config.times, every, on_time)
     yield from facts.time_problems
     if config.derived:
-        on_time = tuple(name for name in kept if name not in facts.axes)
         try:
             derived = config.derived_outputs
         except ConfigError:  # reported by cross_check
