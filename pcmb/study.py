@@ -597,8 +597,9 @@ class Study:
         """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
         order; the study-wide records (adaptive, refinement, elements) are the first's."""
         parts = []
-        for axis, on_time, group in _by_axis(values, axes):
-            grid = self.times if on_time else None if axis is None else axis.values
+        for _, on_time, group in _by_axis(values, axes):
+            # Warning records locate times only (time_range): off time they name indices.
+            grid = self.times if on_time else None
             parts.append(self.design.recover(nodes, group, ok, times=grid))
         first = parts[0]
         if len(parts) == 1:

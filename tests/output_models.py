@@ -63,22 +63,25 @@ class Signals:
       = a / √2 (the trapezoid rule is exact for it);
     - ``ramp`` = b t: its value at any time s is b s (linear interpolation is exact);
     - ``step`` = 1 - exp(-k t): settles into ±band·|y_T| of its final value y_T at
-      -ln(e^{-kT} + band (1 - e^{-kT})) / k.
+      -ln(e^{-kT} + band (1 - e^{-kT})) / k;
+    - ``line`` = t - c on t in [0, 1]: max |y| = max(c, 1 - c), a kink at c = 1/2 (the
+      known hard case of a maximum).
     """
 
-    outputs = ("wave", "ramp", "step")
-    parameters: ClassVar = {"a": 2.0, "b": 0.5, "k": 1.5}
+    outputs = ("wave", "ramp", "step", "line")
+    parameters: ClassVar = {"a": 2.0, "b": 0.5, "k": 1.5, "c": 0.5}
 
     def simulate(
         self, params: Mapping[str, NDArray[np.float64]], times: NDArray[np.float64]
     ) -> dict[str, NDArray[np.float64]]:
         size = len(next(iter(params.values())))
-        a, b, k = (
+        a, b, k, c = (
             np.broadcast_to(np.asarray(params.get(n, self.parameters[n]), dtype=float), size)
-            for n in ("a", "b", "k")
+            for n in ("a", "b", "k", "c")
         )
         return {
             "wave": np.outer(a, np.sin(2 * np.pi * times)),
             "ramp": np.outer(b, times),
             "step": 1.0 - np.exp(-np.outer(k, times)),
+            "line": times - c[:, None],
         }

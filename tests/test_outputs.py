@@ -148,7 +148,7 @@ def test_config_errors_name_the_derived_keys(tmp_path):
         load_config(path)
     found = {p.path: p.message for p in caught.value.problems}
     assert found["derived.x1_peak.max_abs"] == (
-        "'x9' is not an output; outputs are wave, ramp, step"
+        "'x9' is not an output; outputs are wave, ramp, step, line"
     )
     assert found["derived.late.time"] == "5 is outside the grid [0, 1]"
     assert found["derived.wave"] == "'wave' is already an output of the model"
@@ -440,3 +440,27 @@ def test_the_journal_keeps_outputs_of_every_width(tmp_path):
         np.testing.assert_array_equal(found[name], array)
     with pytest.raises(ValueError, match=r"output 'peak' must have shape \(2, 1\)"):
         journal.record([0, 2], {**values, "peak": np.ones((2, 5))}, [1, 1])
+
+
+def test_the_diagnostics_flag_the_chaos_of_a_kinked_maximum():
+    from output_models import Signals
+
+    study = pcmb.Study(
+        Signals(),
+        {"c": pcmb.Uniform(0.0, 1.0)},
+        np.linspace(0.0, 1.0, 101),
+        order=4,
+        backend="inprocess",
+        outputs=["line"],
+        derived={"peak": {"max_abs": "line"}},
+    )
+    with pytest.warns(pcmb.PcmbWarning, match=r"^peak: polynomial chaos unreliable \("):
+        result = study.run()
+    # max(c, 1 - c) ~ U[1/2, 1]: mean 3/4, std 1/(4 √3); order 4 misses the kink.
+    found = result.diagnostics["peak"]
+    assert not found.reliable and found.failing_from == 0.0
+    assert found.estimate[0] > found.tolerance
+    assert result.diagnostics["line"].reliable  # the time series itself is linear in c
+    # Rightly: the mean itself is off by more than the tolerance (0.05 of the std).
+    exact_std = 0.25 / np.sqrt(3.0)
+    assert abs(result.mean("peak")[0] - 0.75) > found.tolerance * exact_std

@@ -25,6 +25,7 @@ remedy that fits the failure.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -433,6 +434,8 @@ def diagnose(
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
+    if axis != "t":  # a record's time_range is in time: off time, the message says where
+        records = [dataclasses.replace(record, time_range=None) for record in records]
     return OutputDiagnostics(
         output, scale, decay, checked, share, estimate, tolerance, failing_from, tuple(records)
     )
