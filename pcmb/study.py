@@ -441,9 +441,18 @@ class Study:
 
     # -- running ------------------------------------------------------------------------------
 
-    def size_estimate(self, n_nodes: int, outputs: Sequence[str]) -> SizeEstimate:
-        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`)."""
-        return estimate_size(n_nodes, self.times.size, len(outputs), len(self.inputs))
+    def size_estimate(
+        self,
+        n_nodes: int,
+        outputs: Sequence[str],
+        axes: Mapping[str, OutputAxis | None] | None = None,
+    ) -> SizeEstimate:
+        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`),
+        every output (the derived ones too) counted as wide as the widest (``axes``: the
+        model's ``output_axes``)."""
+        widths = Layout.of(outputs, self.times, axes or {}).widths
+        count = len(outputs) + len(self.derived)
+        return estimate_size(n_nodes, max(widths, default=1), count, len(self.inputs))
 
     def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
         """Build the model in a worker, check it against the study, and return the outputs
@@ -555,7 +564,8 @@ class Study:
         if output is not None:
             # Before any node runs and before a journal exists: an output that cannot be
             # written (a folder, a read-only or full file system) is found now.
-            check_output(output, self.size_estimate(nodes.size, outputs), create=True)
+            estimate = self.size_estimate(nodes.size, outputs, facts.axes)
+            check_output(output, estimate, create=True)
             journal_dir = Path(f"{output}.journal")
             Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
             if Journal.exists(journal_dir) and not resume:
