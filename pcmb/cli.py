@@ -87,6 +87,26 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("others", nargs="+", metavar="OTHER", help="results to compare")
     compare.add_argument("-o", "--output", help="folder for overlay figures (default: none)")
 
+    sweep = commands.add_parser(
+        "sweep", help="run one case by several methods at rising cost against a reference"
+    )
+    sweep.add_argument("config", help="YAML study configuration (its sweep: section, if any)")
+    sweep.add_argument(
+        "-o",
+        "--output",
+        help="folder for sweep.csv, sweep.h5, sweep.png and the results "
+        "(default: the config's output without .h5, followed by _sweep)",
+    )
+    sweep.add_argument(
+        "--reference", metavar="REF.h5", help="result to measure against (not sweep.reference)"
+    )
+    sweep.add_argument(
+        "--jobs", type=int, help="worker processes (default: config, else all cores)"
+    )
+    sweep.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
+    sweep.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+
     commands.add_parser("schema", help="print the config JSON Schema (for editors)")
     return parser
 
@@ -192,6 +212,40 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return EXIT_OK
 
 
+def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    from pcmb.run.backends import warm_up
+
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.backend in (None, "loky"):
+        warm_up(args.jobs)
+
+    from pcmb.config.schema import load_config
+    from pcmb.sweep.runner import run_sweep
+
+    config = load_config(args.config)
+    folder = args.output
+    if folder is None:
+        if config.output is None:
+            raise UsageError(f"{args.config}: no output folder: give -o DIR or set 'output:'")
+        folder = config.output.removesuffix(".h5") + "_sweep"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PcmbWarning)  # stored in each setting's file
+        outcome = run_sweep(
+            config,
+            folder,
+            reference=args.reference,
+            resume=args.resume,
+            progress=False if args.quiet else None,
+            jobs=args.jobs,
+            backend=args.backend,
+            command_line=shlex.join(["pcmb", *argv]),
+        )
+    settings = len({(row.method, row.setting, row.replicate) for row in outcome.table.rows})
+    _log(f"pcmb: wrote {', '.join(str(p) for p in outcome.files[:3])} ({settings} settings)")
+    return EXIT_OK
+
+
 def _load(path: str):
     from pcmb.store import load
 
@@ -200,7 +254,16 @@ def _load(path: str):
 
 def _report(args: argparse.Namespace) -> int:
     from pcmb.analysis.report import write_report
+    from pcmb.sweep.table import is_sweep_file
 
+    if is_sweep_file(args.result):
+        from pcmb.sweep.report import write_sweep_report
+        from pcmb.sweep.table import read_sweep
+
+        folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
+        written = write_sweep_report(read_sweep(args.result), folder, source=args.result)
+        _log(f"pcmb: wrote {len(written) - 1} figures and {written[-1]}")
+        return EXIT_OK
     result = _load(args.result)
     others = [_load(path) for path in args.compare]
     folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
@@ -341,6 +404,8 @@ def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
         return _report(args)
     elif args.command == "compare":
         return _compare(args)
+    elif args.command == "sweep":
+        return _sweep(args, argv)
     elif args.command == "schema":
         from pcmb.config.schema import config_json_schema
 

@@ -4,6 +4,7 @@ compare, against closed forms and fine quadratures."""
 
 from __future__ import annotations
 
+import csv
 import stat
 import sys
 import textwrap
@@ -21,6 +22,7 @@ from pcmb.config import load_config
 from pcmb.errors import ConfigError, ModelError, UsageError
 from pcmb.result import Status
 from pcmb.run.journal import Journal
+from pcmb.sweep.table import read_sweep
 
 MODELS = Path(__file__).parent / "output_models.py"
 GAUSS = np.polynomial.legendre.leggauss(400)
@@ -464,3 +466,38 @@ def test_the_diagnostics_flag_the_chaos_of_a_kinked_maximum():
     # Rightly: the mean itself is off by more than the tolerance (0.05 of the std).
     exact_std = 0.25 / np.sqrt(3.0)
     assert abs(result.mean("peak")[0] - 0.75) > found.tolerance * exact_std
+
+
+def test_a_sweep_measures_scalar_and_derived_outputs(tmp_path):
+    config = tmp_path / "decay.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: decay sweep
+            model: {{kind: python, entry: "{MODELS}:Decay"}}
+            time: {{start: 0.0, stop: 1.0, points: 11}}
+            inputs:
+              k: {{dist: uniform, low: 1.0, high: 2.0}}
+            method: {{kind: collocation, order: 4}}
+            execution: {{jobs: 1}}
+            derived: {{x_end: {{at: x, time: 1.0}}}}
+            sweep:
+              methods: [{{kind: collocation, order: [1, 2, 4, 6]}}]
+              reference: {{kind: collocation, order: 14}}
+            """
+        )
+    )
+    folder = tmp_path / "out"
+    assert main(["sweep", str(config), "-o", str(folder), "--quiet"]) == 0
+    with open(folder / "sweep.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for output in ("x", "energy", "x_end"):
+        errors = [float(r["err_mean"]) for r in rows if r["output"] == output]
+        assert len(errors) == 4
+        # energy = 1/(2k) and exp(-k): spectral convergence in the order, to round-off.
+        assert errors[2] < 1e-4 and errors[3] < 1e-6, (output, errors)
+        assert errors[0] > errors[1] > errors[2] > errors[3], (output, errors)
+    table = read_sweep(folder / "sweep.h5")
+    on_time = table.column("output") == "x"
+    assert np.isfinite(table.mean_curves[on_time]).all()
+    assert np.isnan(table.mean_curves[~on_time]).all()

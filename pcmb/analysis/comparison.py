@@ -40,7 +40,15 @@ from pcmb.chaos.expansion import sample_mean, unsafe_to_square
 from pcmb.errors import UsageError
 from pcmb.result import StudyResult
 
-__all__ = ["DRAWS", "LEVEL", "Comparison", "OutputDifference", "compare", "method_label"]
+__all__ = [
+    "DRAWS",
+    "LEVEL",
+    "Comparison",
+    "OutputDifference",
+    "compare",
+    "method_label",
+    "sampling_noise",
+]
 
 #: Family-wise level of the noise verdict: the chance that two samples of the same law are
 #: called "beyond noise" (at any time).
@@ -80,7 +88,9 @@ def _standardised(runs: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.where(rms > 0, unit / rms, 0.0)
 
 
-def _noise(result: StudyResult, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def sampling_noise(
+    result: StudyResult, name: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(T,) standard errors of a result's mean and std: zero for a collocation grid."""
     runs = _sampled(result, name)
     if runs is None:
@@ -372,7 +382,7 @@ def compare(
         with np.errstate(over="ignore", invalid="ignore"):
             mean_gap = np.abs(other.mean(name) - reference.mean(name))
             std_gap = np.abs(other.std(name) - reference.std(name))
-            noise = [_noise(r, name) for r in pair]
+            noise = [sampling_noise(r, name) for r in pair]
             mean_noise = np.hypot(noise[0][0], noise[1][0])
             std_noise = np.hypot(noise[0][1], noise[1][1])
         if not finite.all():  # leave those times out of every figure below

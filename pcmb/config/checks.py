@@ -109,9 +109,14 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                 )
     kept = tuple(config.output_names or facts.outputs)
     on_time = tuple(name for name in kept if name not in facts.axes)
+    every = (*kept, *config.derived)  # a figure of merit is an output too
     if config.analysis is not None:
-        every = (*kept, *config.derived)  # a figure of merit may have a unit
         yield from config.analysis.settings().problems(config.times, every, on_time)
+    swept = config.sweep.outputs if config.sweep is not None else None
+    for index, name in enumerate(swept or ()):
+        if name not in every:
+            outputs = ", ".join(every)
+            yield f"sweep.outputs[{index}]", f"{name!r} is not an output (outputs: {outputs})"
     yield from facts.time_problems
     if config.derived:
         try:

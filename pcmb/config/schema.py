@@ -63,6 +63,7 @@ from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.sweep.plan import sweep_problems
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import ModelFactory
@@ -75,6 +76,7 @@ __all__ = [
     "MethodSpec",
     "ModelSpec",
     "StudyConfig",
+    "SweepSpec",
     "TimeSpec",
     "config_json_schema",
     "load_config",
@@ -397,6 +399,25 @@ class AnalysisSpec(Section):
         return AnalysisSettings(**self.model_dump())
 
 
+class SweepSpec(Section):
+    """``pcmb sweep``: the methods run at rising cost and the reference they are measured
+    against (see ``docs/sweep.md``)."""
+
+    methods: Annotated[list[dict[Name, Any]], Field(min_length=1)] = Field(
+        description="method blocks, each with exactly one key given as a list of values"
+    )
+    reference: dict[Name, Any] | None = Field(
+        default=None,
+        description="method block of the reference run (default: give --reference REF.h5)",
+    )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None, description="outputs whose errors are measured (default: all)"
+    )
+    replicates: PositiveInt = Field(
+        default=1, description="seeds per setting of a seeded method (sampling, regression)"
+    )
+
+
 #: One ``derived:`` entry: one figure kind (:data:`pcmb.analysis.derived.FIGURES`) naming a
 #: time output, with that figure's options; built from the registry.
 DerivedSpec = create_model(
@@ -442,6 +463,9 @@ class StudyConfig(Section):
     derived: dict[Name, DerivedSpec] = Field(
         default_factory=dict,
         description="figures of merit of time outputs, each stored as a scalar output",
+    )
+    sweep: SweepSpec | None = Field(
+        default=None, description="pcmb sweep: methods at rising cost against a reference"
     )
 
     _source_text: str | None = PrivateAttr(default=None)
@@ -552,6 +576,7 @@ def _validate(
     if config is not None and not problems:
         config._base_dir = base_dir
         problems = located(cross_check(config), lines)
+        problems += located(sweep_problems(config), lines)
         problems += located(model_check(config), lines)
     if problems:
         raise ConfigError(sorted(problems, key=lambda p: (p.line or 0, p.path)), source)
