@@ -126,6 +126,11 @@ def _summary(config) -> str:
         f"name     {config.name}",
         f"model    {config.model.kind} ({ADAPTERS[config.model.kind].summary})",
         f"outputs  {', '.join(outputs)}",
+        *(
+            f"derived  {name}: {entry.kind} of {entry.source}"
+            + "".join(f", {key} {value:g}" for key, value in entry.options.items())
+            for name, entry in study.derived.items()
+        ),
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]

@@ -501,3 +501,10 @@ def test_a_sweep_measures_scalar_and_derived_outputs(tmp_path):
     on_time = table.column("output") == "x"
     assert np.isfinite(table.mean_curves[on_time]).all()
     assert np.isnan(table.mean_curves[~on_time]).all()
+
+
+def test_validate_lists_the_derived_figures(tmp_path, capsys):
+    assert main(["validate", str(_config(tmp_path, DERIVED))]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "derived  x2_at: at of ramp, time 0.3333" in lines
+    assert "derived  x3_settle: settling_time of step, band 0.02" in lines
