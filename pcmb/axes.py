@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FREQUENCY_UNITS", "TIME", "OutputAxis", "axis_problems", "width"]
+__all__ = ["FREQUENCY_UNITS", "TIME", "OutputAxis", "axis_problems"]
 
 #: The name of the study's own axis.
 TIME = "time"
@@ -81,18 +81,6 @@ class OutputAxis:
             and self.unit == other.unit
             and np.array_equal(self.values, other.values)
         )
-
-    def describe(self) -> dict[str, object]:
-        return {"name": self.name, "unit": self.unit, "values": self.values.tolist()}
-
-
-def width(name: str, axes: Mapping[str, OutputAxis | None], n_times: int) -> int:
-    """Columns output ``name`` takes in pcmb's ``(N, W)`` arrays: T on time (not in
-    ``axes``), K on its own axis, 1 for a scalar."""
-    if name not in axes:
-        return n_times
-    axis = axes[name]
-    return 1 if axis is None else axis.values.size
 
 
 def axis_problems(axes: Mapping[str, OutputAxis | None], outputs: tuple[str, ...]) -> list[str]:

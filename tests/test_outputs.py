@@ -9,6 +9,7 @@ import stat
 import sys
 import textwrap
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from pcmb.analysis.comparison import compare
 from pcmb.analysis.derived import FIGURES, DerivedOutput, derive, parse_derived
 from pcmb.cli import main
 from pcmb.config import load_config
-from pcmb.errors import ConfigError, ModelError, UsageError
+from pcmb.errors import ConfigError, ModelDefinitionError, ModelError, UsageError
 from pcmb.result import Status
 from pcmb.run.journal import Journal
 from pcmb.sweep.table import read_sweep
@@ -508,3 +509,20 @@ def test_validate_lists_the_derived_figures(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     assert "derived  x2_at: at of ramp, time 0.3333" in lines
     assert "derived  x3_settle: settling_time of step, band 0.02" in lines
+
+
+def test_output_axes_are_checked():
+    from pcmb.axes import OutputAxis
+
+    with pytest.raises(ValueError, match="must be an identifier other than"):
+        OutputAxis("time", [1.0, 2.0])
+    with pytest.raises(ValueError, match="increase strictly"):
+        OutputAxis("frequency", [1.0, 1.0])
+    assert OutputAxis("omega", [1.0, 2.0], "rad/s").is_frequency
+
+    class Stray(Decay):
+        output_axes: ClassVar = {"energy": None, "power": None}
+
+    study = pcmb.Study(Stray(), {"k": pcmb.Uniform(1.0, 2.0)}, [0.0, 1.0], backend="inprocess")
+    with pytest.raises(ModelDefinitionError, match="output_axes names 'power'"):
+        study.run()
