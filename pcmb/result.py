@@ -405,7 +405,9 @@ class StudyResult:
     def grid(self, name: str) -> NDArray[np.float64]:
         """(W,) the points of output ``name``: ``times``, its axis's values, or ``[0.]`` for a
         scalar."""
-        axis = self.axis(name)
+        if self.on_time(name):
+            return self.times
+        axis = self.axes[name]
         return np.zeros(1) if axis is None else axis.values
 
     @property
