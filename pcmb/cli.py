@@ -23,6 +23,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.errors import (
@@ -34,6 +35,9 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.run.backends import BACKENDS
+
+if TYPE_CHECKING:
+    from pcmb.axes import OutputAxis
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -122,6 +126,11 @@ def _summary(config) -> str:
         f"name     {config.name}",
         f"model    {config.model.kind} ({ADAPTERS[config.model.kind].summary})",
         f"outputs  {', '.join(outputs)}",
+        *(
+            f"derived  {name}: {entry.kind} of {entry.source}"
+            + "".join(f", {key} {value:g}" for key, value in entry.options.items())
+            for name, entry in study.derived.items()
+        ),
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]
@@ -288,6 +297,17 @@ def _compare(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _placement(axis: OutputAxis | None, on_time: bool) -> str:
+    """Where an output of ``pcmb inspect`` lives, unless on time: ``  on frequency [Hz], 40
+    points`` or ``  scalar``."""
+    if on_time:
+        return ""
+    if axis is None:
+        return "  scalar"
+    unit = f" [{axis.unit}]" if axis.unit else ""
+    return f"  on {axis.name}{unit}, {axis.values.size} points"
+
+
 def _inspect(path: str) -> str:
     import dataclasses
 
@@ -315,6 +335,7 @@ def _inspect(path: str) -> str:
         mean, std = result.mean(name), result.std(name)
         lines.append(
             f"{name:<12}{mean.min():>12.4g}{mean.max():>12.4g}{std.min():>12.4g}{std.max():>12.4g}"
+            + _placement(result.axis(name), result.on_time(name))
         )
     for name, found in result.diagnostics.items():
         held = (
@@ -323,11 +344,16 @@ def _inspect(path: str) -> str:
             if found.holdout is not None
             else "no held-out runs"
         )
-        verdict = (
-            "reliable at every time"
-            if found.reliable
-            else f"UNRELIABLE from t = {found.failing_from:.4g}"
-        )
+        axis = result.axis(name)
+        if axis is None:  # a scalar: pass or fail
+            verdict = "reliable" if found.reliable else "UNRELIABLE"
+        else:
+            point = "time" if result.on_time(name) else f"{axis.name} point"
+            verdict = (
+                f"reliable at every {point}"
+                if found.reliable
+                else f"UNRELIABLE from {axis.name} = {found.failing_from:.4g}"
+            )
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"

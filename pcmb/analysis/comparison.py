@@ -94,7 +94,7 @@ def sampling_noise(
     """(T,) standard errors of a result's mean and std: zero for a collocation grid."""
     runs = _sampled(result, name)
     if runs is None:
-        zero = np.zeros(result.times.size)
+        zero = np.zeros(result.values[name].shape[1])
         return zero, zero
     count = runs.shape[0]
     kurtosis = np.mean(_standardised(runs) ** 4, axis=0)
@@ -317,6 +317,20 @@ def _check_grids(reference: StudyResult, other: StudyResult) -> None:
         )
 
 
+def _check_axes(reference: StudyResult, other: StudyResult, name: str) -> None:
+    """Output ``name`` must lie on the same points in both (time, one axis, or a scalar)."""
+    a, b = reference.axis(name), other.axis(name)
+    if reference.on_time(name) and other.on_time(name):
+        return
+    if a is None and b is None:
+        return
+    if a is None or b is None or not a.same(b):
+        raise UsageError(
+            f"output {name!r} lies on different axes in the two results: compare studies "
+            "whose outputs have the same points"
+        )
+
+
 def common_outputs(results: Sequence[StudyResult]) -> list[str]:
     """Outputs present in every result, in the first one's order.
 
@@ -361,6 +375,7 @@ def compare(
     differences = {}
     pair = (reference, other)
     for name in common_outputs(pair):
+        _check_axes(reference, other, name)
         statistics = [r.mean(name) for r in pair]
         statistics += [r.std(name) for r in pair]
         finite = np.logical_and.reduce([np.isfinite(s) for s in statistics])
@@ -376,7 +391,7 @@ def compare(
         scale = _largest(reference.std(name)[finite])
         mean_z = _z_scores(mean_gap, mean_noise, scale)
         std_z = _z_scores(std_gap, std_noise, scale)
-        times = reference.times[finite]
+        times = reference.grid(name)[finite]
         if mean_z is not None and std_z is not None:  # sampling noise: the family-wise test
             runs = tuple(int(np.sum(r.ok)) for r in pair if _sampled(r, name) is not None)
             critical, tolerance = _critical(pair, name, finite), float("nan")

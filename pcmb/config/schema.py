@@ -26,11 +26,13 @@ from pydantic import (
     Tag,
     ValidationError,
     ValidationInfo,
+    create_model,
     field_validator,
     model_validator,
 )
 
 from pcmb.adapters.registry import ADAPTERS
+from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
 from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs
@@ -422,6 +424,24 @@ class SweepSpec(Section):
     )
 
 
+#: One ``derived:`` entry: one figure kind (:data:`pcmb.analysis.derived.FIGURES`) naming a
+#: time output, with that figure's options; built from the registry.
+DerivedSpec = create_model(
+    "DerivedSpec",
+    __base__=Section,
+    __doc__="A figure of merit: one figure key naming a time output, and its options.",
+    **{
+        kind: (Name | None, Field(default=None, description=f"{figure.summary}: the output"))
+        for kind, figure in FIGURES.items()
+    },
+    **{
+        option: (Real | None, Field(default=None, description=text))
+        for figure in FIGURES.values()
+        for option, text in figure.descriptions.items()
+    },
+)
+
+
 class StudyConfig(Section):
     """A validated study configuration.
 
@@ -445,6 +465,10 @@ class StudyConfig(Section):
     )
     output: Annotated[str, AfterValidator(_h5_path)] | None = Field(
         default=None, description="result file, relative to the current directory"
+    )
+    derived: dict[Name, DerivedSpec] = Field(
+        default_factory=dict,
+        description="figures of merit of time outputs, each stored as a scalar output",
     )
     sweep: SweepSpec | None = Field(
         default=None, description="pcmb sweep: methods at rising cost against a reference"
@@ -505,6 +529,13 @@ class StudyConfig(Section):
     def analysis_settings(self) -> AnalysisSettings | None:
         """The analysis to run after recovery (``None`` without an ``analysis:`` section)."""
         return None if self.analysis is None else self.analysis.settings()
+
+    @property
+    def derived_outputs(self) -> dict[str, DerivedOutput]:
+        """The ``derived:`` figures (raises ConfigError at their keys; checked on loading)."""
+        return parse_derived(
+            {name: spec.model_dump(exclude_none=True) for name, spec in self.derived.items()}
+        )
 
     @property
     def output_names(self) -> tuple[str, ...] | None:

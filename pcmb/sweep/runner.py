@@ -169,8 +169,11 @@ def _rows(
                 file=file,
             )
         )
-        means.append(found.mean_curve)
-        stds.append(found.std_curve)
+        # The table's curves are over time: an output off the time grid (a scalar, an axis
+        # of its own) has its errors in the row only.
+        blank = np.full(reference.times.size, np.nan)
+        means.append(found.mean_curve if result.on_time(output) else blank)
+        stds.append(found.std_curve if result.on_time(output) else blank)
     return rows, means, stds
 
 

@@ -99,7 +99,8 @@ class SweepTable:
     times:
         (T,) the time grid of the curves.
     mean_curves, std_curves:
-        (rows, T) the per-time errors of each row.
+        (rows, T) the per-time errors of each row (NaN for an output that is not on time,
+        whose errors over its own points are in its row).
     reference:
         What the errors are measured against (a file and its method).
     reference_file:

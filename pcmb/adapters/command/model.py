@@ -36,6 +36,7 @@ from pcmb.adapters.protocol import (
     check_point_result,
     describe_exception,
 )
+from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 from pcmb.run.lifeline import kernel_kills_orphans
 
@@ -184,6 +185,10 @@ class CommandModel(PointwiseModel):
     time_column:
         Name of an optional time column/key in the output; when present it must match the
         requested grid.
+    axis, axis_column:
+        The outputs' own axis (:class:`~pcmb.axes.OutputAxis`, e.g. the frequencies of an
+        AC sweep) instead of time, and the column/key of the output file that holds its
+        points at every node (required, and checked against ``axis.values``).
 
     Raises
     ------
@@ -213,6 +218,8 @@ class CommandModel(PointwiseModel):
         run_dir: Path | None = None,
         keep: KeepPolicy = "failed",
         time_column: str = "time",
+        axis: OutputAxis | None = None,
+        axis_column: str = "frequency",
     ):
         base_dir = Path.cwd() if base_dir is None else Path(base_dir).resolve()
         try:
@@ -243,6 +250,10 @@ class CommandModel(PointwiseModel):
         self.run_dir = None if run_dir is None else Path(run_dir)
         self.keep = keep
         self.time_column = time_column
+        self.axis, self.axis_column = axis, axis_column
+        if axis is not None:
+            # The model protocol's output_axes: every output of the file is on the axis.
+            self.output_axes = dict.fromkeys(self.outputs, axis)
         self.templates = tuple(
             self._read_template(base_dir, name, f"model.templates[{i}]")
             for i, name in enumerate(templates)
@@ -417,20 +428,26 @@ class CommandModel(PointwiseModel):
         except (ValueError, OSError, EOFError, zipfile.BadZipFile, csv.Error) as exc:
             what = f"{self.output_file} as {self.output_format}"
             raise ModelError(f"cannot parse {what}: {describe_exception(exc)}") from exc
-        if self.time_column in columns:
-            self._check_time_column(columns[self.time_column], times)
+        key, label, points = self.time_column, "t", "time(s)"
+        if self.axis is not None:
+            key, times = self.axis_column, self.axis.values
+            label, points = key, "point(s)"
+            if key not in columns:
+                raise ModelError(f"{self.output_file} has no {key!r} column (the axis)")
+        if key in columns:
+            self._check_time_column(columns[key], times, key)
         result = check_point_result(columns, self.outputs, times.size, self.output_file)
         for name, values in result.items():
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
                 raise ModelError(
                     f"output {name!r} in {self.output_file} is not finite at "
-                    f"{bad.size} time(s), first at t={times[bad[0]]:g}"
+                    f"{bad.size} {points}, first at {label}={times[bad[0]]:g}"
                 )
         return result
 
-    def _check_time_column(self, column: Any, times: NDArray[np.float64]) -> None:
-        file_times = _float_array(column, f"{self.time_column!r} in {self.output_file}")
+    def _check_time_column(self, column: Any, times: NDArray[np.float64], key: str) -> None:
+        file_times = _float_array(column, f"{key!r} in {self.output_file}")
         # A simulator may print times with few digits; a row must still be unmistakably its
         # grid time, i.e. within a small fraction of the grid step.
         step = np.min(np.diff(times)) if times.size > 1 else max(1.0, abs(float(times[0])))
@@ -438,7 +455,7 @@ class CommandModel(PointwiseModel):
             file_times, times, rtol=0, atol=1e-3 * step
         ):
             raise ModelError(
-                f"the {self.time_column!r} column of {self.output_file} does not match the "
+                f"the {key!r} column of {self.output_file} does not match the "
                 f"requested grid ({times.size} points from {times[0]:g} to {times[-1]:g})"
             )
 
@@ -545,6 +562,8 @@ class CommandModelFactory(ModelFactory):
     run_dir: Path | None = None
     keep: KeepPolicy = "failed"
     time_column: str = "time"
+    axis: OutputAxis | None = None
+    axis_column: str = "frequency"
 
     def __call__(self) -> CommandModel:
         """Build the model (raises ConfigError as :class:`CommandModel` does)."""
