@@ -23,7 +23,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "BOREHOLE_BOUNDS",
     "IshigamiMoments",
+    "borehole",
     "cosine_covariance",
     "cosine_covariance_kl",
     "damped_oscillator",
@@ -444,6 +446,38 @@ def jacobi_moment(m: int, alpha: float, beta: float) -> float:
     for r in range(m):
         raw.append(raw[-1] * (a + r) / (a + b + r))
     return float(sum(math.comb(m, j) * (-1) ** (m - j) * 2**j * raw[j] for j in range(m + 1)))
+
+
+# --------------------------------------------------------------------------- Borehole
+
+#: The Borehole function's inputs, uniform on these ranges: rw, r, Tu, Hu, Tl, Hl, L, Kw.
+BOREHOLE_BOUNDS = (
+    (0.05, 0.15),
+    (100.0, 50_000.0),
+    (63_070.0, 115_600.0),
+    (990.0, 1110.0),
+    (63.1, 116.0),
+    (700.0, 820.0),
+    (1120.0, 1680.0),
+    (9855.0, 12_045.0),
+)
+
+
+def borehole(x: ArrayLike) -> Array:
+    """Water flow through a borehole, m³/year (Harper & Gupta, 1983).
+
+    Parameters
+    ----------
+    x : array_like, shape (N, 8)
+        rw, r, Tu, Hu, Tl, Hl, L, Kw (the ranges of :data:`BOREHOLE_BOUNDS`).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    rw, r, tu, hu, tl, hl, length, kw = np.asarray(x, dtype=float).T
+    log = np.log(r / rw)
+    return 2 * np.pi * tu * (hu - hl) / (log * (1 + 2 * length * tu / (log * rw**2 * kw) + tu / tl))
 
 
 # --------------------------------------------------------------------------- Ishigami

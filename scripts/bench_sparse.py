@@ -37,7 +37,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import pcmb
-from pcmb.references import ishigami, ishigami_moments
+from pcmb import references
+from pcmb.references import BOREHOLE_BOUNDS, ishigami, ishigami_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (1e-2, 1e-4, 1e-6)
@@ -79,26 +80,14 @@ class Problem:
 
 # ----------------------------------------------------------------------------- functions
 
-BOREHOLE = [
-    (0.05, 0.15),
-    (100.0, 50_000.0),
-    (63_070.0, 115_600.0),
-    (990.0, 1110.0),
-    (63.1, 116.0),
-    (700.0, 820.0),
-    (1120.0, 1680.0),
-    (9855.0, 12_045.0),
-]
+BOREHOLE = list(BOREHOLE_BOUNDS)
 EXP_WEIGHTS = 2.0 ** -np.arange(8)
 G_WEIGHTS = np.array([0.0, 1.0, 4.5, 9.0, 99.0, 99.0, 99.0, 99.0])
 
 
 def borehole(x: np.ndarray) -> np.ndarray:
     """Water flow through a borehole (Harper & Gupta 1983), (N, 8) -> (N, 1)."""
-    rw, r, tu, hu, tl, hl, length, kw = x.T
-    log = np.log(r / rw)
-    flow = 2 * np.pi * tu * (hu - hl) / (log * (1 + 2 * length * tu / (log * rw**2 * kw) + tu / tl))
-    return flow[:, None]
+    return references.borehole(x)[:, None]
 
 
 def gauss_std(func: Callable, bounds, points: list[int], block: int = 3) -> np.ndarray:

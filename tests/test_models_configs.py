@@ -44,3 +44,39 @@ def test_default_job_keeps_the_requested_outputs():
     config = load_config(CONFIGS_DIR / "quarter_car.yaml")
     assert config.model.outputs == ["x1", "x2"]
     assert config.times.size == 301
+
+
+def test_the_ishigami_config_gives_its_closed_form_statistics(tmp_path):
+    import h5py
+    import numpy as np
+
+    import pcmb
+    from pcmb.cli import main
+    from pcmb.references import ishigami_moments
+
+    out = tmp_path / "ishigami.h5"
+    assert main(["run", str(CONFIGS_DIR / "ishigami.yaml"), "-o", str(out), "--quiet"]) == 0
+    result, exact = pcmb.load(out), ishigami_moments()
+    with h5py.File(out) as file:
+        assert file["outputs/y/values"].shape == (result.n_nodes,)  # one number per run
+    # The adaptive grid's tolerance is 1e-4 of the std; the estimate is honest within 10x.
+    scale = np.sqrt(exact.variance)
+    assert abs(result.mean("y").item() - exact.mean) <= 1e-3 * scale
+    assert abs(result.std("y").item() - scale) <= 1e-3 * scale
+    np.testing.assert_allclose(np.ravel(result.sobol_total("y")), exact.total, atol=1e-3)
+
+
+def test_the_borehole_model_is_the_reference_function():
+    import numpy as np
+    from model_loading import model_class
+
+    from pcmb.references import BOREHOLE_BOUNDS, borehole
+
+    model = model_class("test_functions", "Borehole")()
+    low, high = np.array(BOREHOLE_BOUNDS).T
+    x = low + (high - low) * np.random.default_rng(3).random((5, 8))
+    names = ("rw", "r", "Tu", "Hu", "Tl", "Hl", "L", "Kw")
+    found = model.simulate({n: x[:, k] for k, n in enumerate(names)}, np.array([0.0, 1.0]))
+    np.testing.assert_array_equal(found["y"], borehole(x))
+    # Harper & Gupta's nominal flow at the middle of the ranges is about 73 m³/year.
+    assert 60 < model.simulate({}, np.array([0.0]))["y"][0] < 90
