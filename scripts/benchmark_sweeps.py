@@ -4,12 +4,13 @@ Usage::
 
     python scripts/benchmark_sweeps.py [CASE ...] [--folder results/benchmarks] [--no-peers]
 
-For each case (default: all of :data:`CASES`) it runs ``pcmb sweep configs/<case>.yaml``
+For each case given (default: all of :data:`CASES`) it runs ``pcmb sweep configs/<case>.yaml``
 into ``<folder>/<case>`` (``--resume`` continues an interrupted run), adds the peers with
 ``scripts/peers_sweep.py`` when chaospy and OpenTURNS are importable (the ``peers`` extra),
 copies the chart to ``docs/figures/sweep_<case>.png`` and rewrites the part of
-``docs/benchmarks.md`` between the ``sweeps`` markers: per case, the runs and seconds of the
-cheapest setting of every method reaching std error 1e-2 and 1e-4, with the machine and date.
+``docs/benchmarks.md`` between the ``sweeps`` markers: per case swept so far, the runs and
+seconds of the cheapest setting of every method reaching std error 1e-2 and 1e-4, with the
+machine and date.
 """
 
 from __future__ import annotations
@@ -61,7 +62,6 @@ def main() -> None:
     )
     if not peers and not args.no_peers:
         print("peers skipped: chaospy and OpenTURNS come with pip install -e '.[peers]'")
-    blocks = []
     for case in args.cases:
         config = ROOT / "configs" / f"{case}.yaml"
         folder = args.folder / case
@@ -71,9 +71,14 @@ def main() -> None:
             _run(
                 [sys.executable, str(ROOT / "scripts" / "peers_sweep.py"), str(config), str(folder)]
             )
+        shutil.copyfile(folder / "sweep.png", ROOT / "docs" / "figures" / f"sweep_{case}.png")
+    blocks = []
+    for case in CASES:  # every case swept so far, in order
+        found = args.folder / case / "sweep.h5"
+        if not found.is_file():
+            continue
         figure = ROOT / "docs" / "figures" / f"sweep_{case}.png"
-        shutil.copyfile(folder / "sweep.png", figure)
-        text = summary(read_sweep(folder / "sweep.h5"))
+        text = summary(read_sweep(found))
         blocks.append(
             f"### {case}: {CASES[case]}\n\n![{case}](figures/{figure.name})\n\n```\n{text}\n```\n"
         )
