@@ -175,3 +175,27 @@ def test_the_readme_and_models_page_list_every_key_with_its_default(page, headin
             assert rows[key] != "required" and not rows[key].startswith("`"), key
         else:
             assert rows[key] == default, key
+
+
+def test_the_ac_sweep_example_is_tensor_collocation_on_a_frequency_axis(tmp_path, capsys):
+    """configs/command_frequency_response.yaml against an independent tensor Gauss-Legendre
+    quadrature of the closed-form response at the same order: the same nodes and weights,
+    so only the CSV's printed digits (repr: round-trip exact) and summation order differ."""
+    out = tmp_path / "ac.h5"
+    config = ROOT / "configs" / "command_frequency_response.yaml"
+    assert main(["run", str(config), "-o", str(out), "--quiet"]) == 0
+    result = pcmb.load(out)
+    frequencies = np.geomspace(0.05, 2.0, 60)
+    np.testing.assert_allclose(result.axes["gain"].values, frequencies, rtol=1e-12)
+    x, w = np.polynomial.legendre.leggauss(9)
+    k, c = np.meshgrid(4.0 + 0.5 * x, 0.4 + 0.2 * x, indexing="ij")
+    weight = np.outer(w, w).ravel() / 4
+    omega = 2 * np.pi * frequencies
+    gain = 1 / np.abs(k.ravel()[:, None] - omega**2 + 1j * c.ravel()[:, None] * omega)
+    mean = weight @ gain
+    std = np.sqrt(weight @ (gain - mean) ** 2)
+    scale = std.max()
+    np.testing.assert_allclose(np.ravel(result.mean("gain")), mean, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(np.ravel(result.std("gain")), std, rtol=0, atol=1e-12 * scale)
+    assert main(["inspect", str(out)]) == 0
+    assert "on frequency [Hz], 60 points" in capsys.readouterr().out
