@@ -110,7 +110,10 @@ def _summary(config) -> str:
         lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
     design = study.design.record()
     seed = f", seed {design.seed}" if design.seed is not None else ""
-    lines.append(f"method   {design.kind}: {design.label}, {design.grid} nodes{seed}")
+    nodes = "no nodes (solved from the model's equations)" if design.grid == "none" else (
+        f"{design.grid} nodes"
+    )
+    lines.append(f"method   {design.kind}: {design.label}, {nodes}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
     held_out = study.validation if design.basis is not None else 0

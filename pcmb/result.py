@@ -138,6 +138,8 @@ class Design:
             )
         else:
             order = f"total order {max(self.orders)}"
+        if self.kind == "galerkin":
+            return f"Galerkin, {order}"
         if self.fit != "projection":
             return f"{self.kind} + chaos fit, {order}"
         if self.tolerance is not None:  # order: auto
@@ -349,6 +351,9 @@ class StudyResult:
         ``holdout``...); empty without an expansion.
     held_out:
         The held-out runs that checked the expansions (``None``: none were made).
+    moments:
+        Output name -> (2, T) mean and std of a method that computes them without runs or an
+        expansion (statistical linearization); empty otherwise.
     """
 
     name: str
@@ -374,6 +379,7 @@ class StudyResult:
     refinement: Refinement | None = None
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
+    moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     @property
     def method(self) -> str:
@@ -425,6 +431,8 @@ class StudyResult:
         overflow where the exact one is a float, :func:`pcmb.chaos.expansion.sample_mean`)."""
         if name in self.expansions:
             return self.expansions[name].mean()
+        if name in self.moments:
+            return self.moments[name][0]
         return sample_mean(self.values[name][self.ok])
 
     def std(self, name: str) -> NDArray[np.float64]:
@@ -433,6 +441,8 @@ class StudyResult:
         (:func:`pcmb.chaos.expansion.sample_std`)."""
         if name in self.expansions:
             return self.expansions[name].std()
+        if name in self.moments:
+            return self.moments[name][1]
         return sample_std(self.values[name][self.ok], ddof=1)
 
     def sobol_first(self, name: str) -> NDArray[np.float64]:

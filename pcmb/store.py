@@ -518,12 +518,15 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
         expansions: dict[str, ChaosExpansion] = {}
         nominal: dict[str, np.ndarray] = {}
         regression: dict[str, RegressionFit] = {}
+        moments: dict[str, np.ndarray] = {}
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
         for name in outputs:
             group = file["outputs"][name]
             values[name] = group["values"][()]
             if "coefficients" in group and index is not None:
                 expansions[name] = _read_expansion(group, index, partition, dists, names)
+            elif values[name].shape[0] == 0:  # no runs, no expansion: moments alone
+                moments[name] = np.stack([group["mean"][()], group["std"][()]])
             if "nominal" in group:
                 nominal[name] = group["nominal"][()]
             if (fit := _read_regression(group)) is not None:
@@ -558,4 +561,5 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             refinement=_read_refinement(file),
             diagnostics=diagnostics,
             held_out=held_out,
+            moments=moments,
         )

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import time
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -34,6 +35,7 @@ from pcmb.errors import (
     ConfigProblem,
     IllPosedError,
     ModelDefinitionError,
+    ModelError,
     ModelRunError,
     PcmbWarning,
     UsageError,
@@ -46,6 +48,7 @@ from pcmb.run.executor import (
     chunk_bounds,
     describe_model,
     join_runs,
+    run_in_worker,
     run_nodes,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
@@ -240,7 +243,7 @@ class Study:
         """Whether the method takes ``order`` (a Smolyak grid takes a level instead)."""
         if self.method == "collocation":
             return self.method_options["grid"] == "tensor"
-        return self.method == "regression" or self.fit != "none"
+        return self.method in ("regression", "galerkin") or self.fit != "none"
 
     def _design(self) -> NodeDesign:
         settings = MethodSettings(
@@ -509,7 +512,7 @@ class Study:
         """
         nodes = self.node_set()
         if pool is None:
-            tasks = len(chunk_bounds(nodes.size, self.chunk_size))
+            tasks = len(chunk_bounds(nodes.size, self.chunk_size)) if nodes.size else 1
             with open_pool(self.backend, self.jobs, self.address, tasks=tasks) as own:
                 return self.run(
                     output, resume=resume, progress=progress, provenance=provenance, pool=own
@@ -530,11 +533,18 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
                 )
-        runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
-        nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
+        if hasattr(self.design, "solve"):
+            # An intrusive method: one solve in a worker, nothing to journal but the held-out
+            # runs, which are few and run again on a resume.
+            journal, journal_dir = None, None
+            found = self._solve(nodes, outputs, pool)
+        else:
+            runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+            nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
+            found = self._recover(nodes, runs)
         held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
-        result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
+        result = self._diagnosed(self._with_nominal(found, nominal), held_out)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -547,6 +557,36 @@ class Study:
             if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
                 warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
+
+    def _solve(self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool) -> StudyResult:
+        """The result of an intrusive design (:class:`~pcmb.designs.base.IntrusiveDesign`),
+        checked and solved in a worker with the model built there."""
+        design = self.design
+        kind = design.record().kind
+        problems = run_in_worker(self.model_factory, pool, design.check, outputs)
+        if problems:
+            raise UsageError([ConfigProblem(key, message) for key, message in problems], "Study")
+        start = time.perf_counter()
+        try:
+            recovery = run_in_worker(self.model_factory, pool, design.solve, self.times, outputs)
+        except ModelError as error:
+            raise ModelRunError((), f"the {kind} solve failed: {error}") from error
+        return StudyResult(
+            name=self.name,
+            design=design.record(),
+            times=self.times,
+            input_names=self.input_names,
+            distributions=tuple(self.inputs.values()),
+            germ=nodes.nodes,
+            params=nodes.params,
+            weights=None,
+            status=np.zeros(0, dtype=np.int8),
+            values={name: np.zeros((0, self.times.size)) for name in outputs},
+            expansions=recovery.expansions,
+            warnings=recovery.warnings,
+            seconds=time.perf_counter() - start,
+            moments=recovery.moments,
+        )
 
     def _run_rounds(
         self,
@@ -663,12 +703,19 @@ class Study:
         return HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
 
     def _diagnosed(self, result: StudyResult, held_out: HeldOut | None) -> StudyResult:
-        """The result with its diagnostics (per output) and their warning records."""
+        """The result with its diagnostics (per output) and their warning records. A method
+        without runs (Galerkin) has its range checked against the held-out runs, and no
+        diagnostics without them."""
+        germ, values, ok = result.germ, result.values, result.status == Status.OK
+        if result.n_nodes == 0:
+            if held_out is None or not held_out.ok.any():
+                return dataclasses.replace(result, held_out=held_out)
+            germ, values, ok = held_out.germ, held_out.values, held_out.ok
         found = diagnose_all(
             result.expansions,
-            result.germ,
-            result.values,
-            result.status == Status.OK,
+            germ,
+            values,
+            ok,
             result.times,
             held_out,
             self.diagnostics_tolerance,

@@ -13,12 +13,15 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.designs.adaptive import AdaptiveCollocation
 from pcmb.designs.base import (
     RECORDED_ONLY,
+    IntrusiveDesign,
     MethodSettings,
     NodeDesign,
     Recovery,
     statistics_warnings,
 )
 from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.galerkin import Galerkin
+from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import MultiElementCollocation
 from pcmb.designs.refine import OrderRefinement
 from pcmb.designs.regression import SparseRegression
@@ -28,6 +31,7 @@ from pcmb.designs.smolyak import SparseCollocation
 __all__ = [
     "DESIGNS",
     "GRIDS",
+    "IntrusiveDesign",
     "METHOD_KINDS",
     "RECORDED_ONLY",
     "MethodSettings",
@@ -42,7 +46,7 @@ __all__ = [
 #: grid other than the tensor one, ``collocation:elements`` for multi-element collocation or
 #: ``collocation:refine`` for ``order: auto`` (see :func:`design_key`). The config schema,
 #: ``pcmb validate`` and the docs read their lists from here.
-DESIGNS: dict[str, type[NodeDesign]] = {
+DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     "collocation": TensorCollocation,
     "collocation:smolyak": SparseCollocation,
     "collocation:elements": MultiElementCollocation,
@@ -52,6 +56,10 @@ DESIGNS: dict[str, type[NodeDesign]] = {
     "sobol": Sampling,
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
+    # Intrusive methods (pcmb.designs.base.IntrusiveDesign): no nodes; solved from the
+    # model's polynomial form in a worker.
+    "galerkin": Galerkin,
+    "linearization": Linearization,
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
