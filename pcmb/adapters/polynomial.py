@@ -243,8 +243,10 @@ class CompiledPolynomials:
 
     def evaluate(self, variables: NDArray[np.float64]) -> NDArray[np.float64]:
         """(R, ...) values at points, from the (V, ...) variables there."""
-        powers = {(v, e): variables[v] ** e if e > 1 else variables[v] for v, e in self._powers}
-        out = np.zeros((self.size, *variables.shape[1:]))
+        powers = {}
+        for v, e in self._powers:  # by products: a complex ** goes through exp and log
+            powers[v, e] = variables[v] if e == 1 else powers.get((v, e - 1), variables[v] ** (e - 1)) * variables[v]
+        out = np.zeros((self.size, *variables.shape[1:]), dtype=variables.dtype)
         for row, factors, coefficient in zip(
             self.rows, self._factors, self.coefficients, strict=True
         ):

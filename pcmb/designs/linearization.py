@@ -91,12 +91,24 @@ class GaussianMoments:
         t: float,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Variables (V, Q) at the rule's points of N(m, Σ), the (D, Q) deviations z - m and the
-        weights; Σ's square root from its eigenvalues (clipped at 0: Σ may be singular)."""
+        weights.
+
+        The rule is exact for the polynomials it integrates, so what it returns is a polynomial
+        in m and R Rᵀ for any factor R with R Rᵀ = Σ: the moments are smooth in Σ, also where
+        an integration stage makes Σ slightly indefinite (near t0, where the states are
+        certain). R = S U √Λ from the eigenvalues Λ of S⁻¹ Σ S⁻¹ (S: √|diag Σ|, so that
+        variances of very different sizes keep their relative accuracy), with complex roots
+        of negative eigenvalues; the imaginary parts cancel, and callers keep the real part."""
         eta, weights = rule
-        values, vectors = np.linalg.eigh(covariance)
-        deviations = (vectors * np.sqrt(np.clip(values, 0.0, None))) @ eta
+        scale = np.sqrt(np.abs(np.diag(covariance)))
+        scale[scale == 0.0] = 1.0  # a certain state (at t0): its row of Σ is 0
+        values, vectors = np.linalg.eigh(covariance / np.outer(scale, scale))
+        root = scale[:, None] * vectors * np.sqrt(values.astype(complex))
+        deviations = root.real @ eta + 1j * (root.imag @ eta)  # numpy's mixed matmul is slow
         mean = np.concatenate([mean_x, self.input_mean])
-        variables = np.empty((mean.size + len(self.form.space.forcing_names), eta.shape[1]))
+        variables = np.empty(
+            (mean.size + len(self.form.space.forcing_names), eta.shape[1]), dtype=complex
+        )
         variables[: mean.size] = mean[:, None] + deviations
         variables[mean.size :] = self.form.forcing_at(t)[:, None]
         return variables, deviations, weights
@@ -125,7 +137,7 @@ class GaussianMoments:
         centred = (x0 - mean[:, None]) * weights
         xx = centred @ (x0 - mean[:, None]).T
         xt = centred @ deviations[self.d :].T
-        return np.concatenate([mean, xx.ravel(), xt.ravel()])
+        return np.concatenate([mean, xx.ravel(), xt.ravel()]).real
 
     def derivative(self, t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         """d/dt of the packed moments ``y``."""
@@ -133,18 +145,22 @@ class GaussianMoments:
         covariance = self._covariance(xx, xt)
         variables, deviations, weights = self._points(mean_x, covariance, self._rule, t)
         f = self.rhs.evaluate(variables)  # (d, Q)
-        gain = (f * weights) @ deviations.T  # (d, D) = E[f (z - m)ᵀ] = E[∂f/∂z] Σ
+        gain = ((f * weights) @ deviations.T).real  # (d, D) = E[f (z - m)ᵀ] = E[∂f/∂z] Σ
         d = self.d
         return np.concatenate(
-            [f @ weights, (gain[:, :d] + gain[:, :d].T).ravel(), gain[:, d:].ravel()]
+            [(f @ weights).real, (gain[:, :d] + gain[:, :d].T).ravel(), gain[:, d:].ravel()]
         )
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(R, 2, T) mean and std of every output at ``times``."""
         y0 = self.initial_state()
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))
+        # Covariances in squared units: absolute tolerance atol_i atol_j / rtol, so that stds
+        # above atol / rtol are held to rtol and smaller ones to an error far below atol.
+        rtol = self.form.rtol
+        spread = np.sqrt(np.diag(self.input_covariance))
         tolerance = np.concatenate(
-            [atol, np.outer(atol, atol).ravel(), np.repeat(atol, self.n)]
+            [atol, np.outer(atol, atol).ravel() / rtol, np.outer(atol, spread).ravel()]
         )
         states = solve_stacked(
             lambda t, y: self.derivative(t, y[:, 0])[:, None],
@@ -163,8 +179,9 @@ class GaussianMoments:
             )
             values = self.outputs.evaluate(variables)
             mean = values @ weights
-            out[:, 0, k] = mean
-            out[:, 1, k] = np.sqrt(((values - mean[:, None]) ** 2) @ weights)
+            out[:, 0, k] = mean.real
+            variance = (((values - mean[:, None]) ** 2) @ weights).real
+            out[:, 1, k] = np.sqrt(np.clip(variance, 0.0, None))
         return out
 
 
