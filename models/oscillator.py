@@ -31,7 +31,6 @@ from terrain_process import (
 )
 
 from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-
 from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]

@@ -30,7 +30,6 @@ from terrain_process import (
 )
 
 from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-
 from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
@@ -241,9 +240,7 @@ class QuarterCar(StackedODEModel):
             space,
             rhs=(v1, v2, force / p["Ms"], (p["kT"] * (z - x2) - force) / p["Mu"]),
             initial=(z + p["x1_0"], z + p["x2_0"], p["v1_0"], p["v2_0"]),
-            outputs={
-                "x1": x1, "x2": x2, "v1": v1, "v2": v2, "a1": force / p["Ms"], "z": z
-            },
+            outputs={"x1": x1, "x2": x2, "v1": v1, "v2": v2, "a1": force / p["Ms"], "z": z},
             forcing=functions,
             t0=self.initial_time,
             rtol=self.rtol,

@@ -64,7 +64,9 @@ def mode_functions(p: Mapping[str, float]) -> Callable[[float], NDArray[np.float
 
     def modes(t: float) -> NDArray[np.float64]:
         phases = rates * t
-        return np.array([np.cos(phases[0]), np.sin(phases[0]), np.cos(phases[1]), np.sin(phases[1])])
+        return np.array(
+            [np.cos(phases[0]), np.sin(phases[0]), np.cos(phases[1]), np.sin(phases[1])]
+        )
 
     return modes
 

@@ -219,11 +219,14 @@ class CompiledPolynomials:
         coefficients: NDArray[np.float64],
         size: int,
     ) -> None:
-        self.rows, self.exponents, self.coefficients, self.size = rows, exponents, coefficients, size
+        self.rows, self.exponents, self.coefficients, self.size = (
+            rows,
+            exponents,
+            coefficients,
+            size,
+        )
         # Per term, its (variable, power) factors; the powers every term needs are made once.
-        self._factors = [
-            tuple((int(v), int(e[v])) for v in np.flatnonzero(e)) for e in exponents
-        ]
+        self._factors = [tuple((int(v), int(e[v])) for v in np.flatnonzero(e)) for e in exponents]
         self._powers = sorted({factor for factors in self._factors for factor in factors})
 
     @classmethod
@@ -245,7 +248,11 @@ class CompiledPolynomials:
         """(R, ...) values at points, from the (V, ...) variables there."""
         powers = {}
         for v, e in self._powers:  # by products: a complex ** goes through exp and log
-            powers[v, e] = variables[v] if e == 1 else powers.get((v, e - 1), variables[v] ** (e - 1)) * variables[v]
+            powers[v, e] = (
+                variables[v]
+                if e == 1
+                else powers.get((v, e - 1), variables[v] ** (e - 1)) * variables[v]
+            )
         out = np.zeros((self.size, *variables.shape[1:]), dtype=variables.dtype)
         for row, factors, coefficient in zip(
             self.rows, self._factors, self.coefficients, strict=True

@@ -31,9 +31,9 @@ from pcmb.designs.smolyak import SparseCollocation
 __all__ = [
     "DESIGNS",
     "GRIDS",
-    "IntrusiveDesign",
     "METHOD_KINDS",
     "RECORDED_ONLY",
+    "IntrusiveDesign",
     "MethodSettings",
     "NodeDesign",
     "Recovery",

@@ -168,9 +168,7 @@ class IntrusiveDesign(Protocol):
         (``None``: all the model's); empty when it can be solved."""
         ...
 
-    def solve(
-        self, model: object, times: NDArray[np.float64], outputs: Sequence[str]
-    ) -> Recovery:
+    def solve(self, model: object, times: NDArray[np.float64], outputs: Sequence[str]) -> Recovery:
         """Expansions (or moments) of the outputs on the (T,) grid.
 
         Raises

@@ -73,7 +73,9 @@ class GalerkinSystem:
         for part in (self.rhs, self.initial, self.outputs):
             degree = np.maximum(degree, _germ_degrees(part, self.d, orders))
         # q Gauss points integrate degree 2q - 1: the term's degree plus φ_a's.
-        self.points = TensorGrid(tuple(distributions), tuple(int(p) for p in (degree + orders) // 2))
+        self.points = TensorGrid(
+            tuple(distributions), tuple(int(p) for p in (degree + orders) // 2)
+        )
         basis = PolynomialBasis(tuple(d.family for d in distributions), self.index)
         self._values = basis.evaluate(self.points.nodes)  # (Q, S): φ_b(μ_q)
         self._project = self._values * self.points.weights[:, None]  # (Q, S): w_q φ_a(μ_q)
@@ -174,9 +176,7 @@ class Galerkin:
     def check(self, model: object, outputs: Sequence[str] | None) -> list[tuple[str, str]]:
         return form_problems(model, self.names, outputs, "galerkin")
 
-    def solve(
-        self, model: object, times: NDArray[np.float64], outputs: Sequence[str]
-    ) -> Recovery:
+    def solve(self, model: object, times: NDArray[np.float64], outputs: Sequence[str]) -> Recovery:
         form = polynomial_form(model, self.names, outputs, "galerkin")
         system = GalerkinSystem(form, self.distributions, self.index(), outputs)
         times = np.asarray(times, dtype=float)

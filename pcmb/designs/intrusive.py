@@ -38,17 +38,26 @@ def _form(
         form = declare(tuple(inputs))
     except ValueError as error:
         return None, [
-            ("method.kind", f"{kind}: {label} has no polynomial form in inputs {list(inputs)}: {error}")
+            (
+                "method.kind",
+                f"{kind}: {label} has no polynomial form in inputs {list(inputs)}: {error}",
+            )
         ]
     if not isinstance(form, PolynomialForm):
         return None, [
-            ("method.kind", f"{kind}: {label}.polynomial_form returned {type(form).__name__}, "
-             "not a PolynomialForm")
+            (
+                "method.kind",
+                f"{kind}: {label}.polynomial_form returned {type(form).__name__}, "
+                "not a PolynomialForm",
+            )
         ]
     if form.space.input_names != tuple(inputs):
         return None, [
-            ("method.kind", f"{kind}: {label}.polynomial_form has inputs "
-             f"{list(form.space.input_names)}, the study {list(inputs)}")
+            (
+                "method.kind",
+                f"{kind}: {label}.polynomial_form has inputs "
+                f"{list(form.space.input_names)}, the study {list(inputs)}",
+            )
         ]
     return form, []
 

@@ -211,9 +211,7 @@ class Linearization:
     def check(self, model: object, outputs: Sequence[str] | None) -> list[tuple[str, str]]:
         return form_problems(model, self.names, outputs, "linearization")
 
-    def solve(
-        self, model: object, times: NDArray[np.float64], outputs: Sequence[str]
-    ) -> Recovery:
+    def solve(self, model: object, times: NDArray[np.float64], outputs: Sequence[str]) -> Recovery:
         form = polynomial_form(model, self.names, outputs, "linearization")
         statistics = GaussianMoments(form, self.distributions, outputs).solve(
             np.asarray(times, dtype=float)
