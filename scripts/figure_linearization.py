@@ -86,7 +86,8 @@ def main(out: str) -> None:
             second = std**2 + mean**2
             shown = second if case == "cubic oscillator" else std
             color, line, width = styles[label]
-            name = f"{label}: {result.design.label}"
+            setting = result.design.label
+            name = setting if setting.lower().startswith(label.lower()) else f"{label}, {setting}"
             axis.plot(result.times, shown, color=color, ls=line, lw=width, label=name)
             error = np.abs(std - reference.std(output)).max() / scale
             end = reference.mean(output)[-1] ** 2 + reference.std(output)[-1] ** 2
@@ -108,6 +109,7 @@ def main(out: str) -> None:
         axis.set_title(case)
         axis.legend(fontsize=8)
     axes[0].set_xlim(100, 200)
+    axes[0].set_ylim(0.5, 0.9)
     figure.tight_layout()
     figure.savefig(out, dpi=110)
     print(
