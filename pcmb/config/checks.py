@@ -9,7 +9,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from pcmb.config.types import MAX_RUNS, MAX_VALUES
-from pcmb.designs import MethodSettings, make_design
+from pcmb.designs import DESIGNS, MethodSettings, make_design
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -72,11 +72,15 @@ def _inputs(config: StudyConfig) -> dict[str, Distribution]:
     return dict(zip(config.input_names, config.distributions, strict=True))
 
 
-def _design(config: StudyConfig) -> object:
-    """The config's design (``None`` when the cross checks reject its settings)."""
+def _intrusive(config: StudyConfig) -> object:
+    """The config's intrusive design (``IntrusiveDesign``: it checks the model in a worker);
+    ``None`` for a node design, or when the cross checks reject the settings (an order
+    mapping that misses an input cannot even be read)."""
+    if not hasattr(DESIGNS.get(config.method.kind), "check"):
+        return None
     try:
         return make_design(_inputs(config), _settings(config))
-    except ValueError:
+    except (ValueError, KeyError):
         return None
 
 
@@ -93,7 +97,7 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             factory = config.model_factory()
             facts = describe_model(factory, pool, config.times)
             # An intrusive method checks the model's polynomial form where the model lives.
-            check = getattr(_design(config), "check", None)
+            check = getattr(_intrusive(config), "check", None)
             if check is not None:
                 yield from run_in_worker(factory, pool, check, config.output_names)
     except ConfigError as exc:
