@@ -93,9 +93,8 @@ def polynomial_form(
     ConfigError
         What :func:`form_problems` finds.
     """
-    problems = form_problems(model, inputs, outputs, kind)
-    if problems:
+    form, problems = _form(model, inputs, kind)
+    problems = problems or form_problems(model, inputs, outputs, kind)
+    if form is None or problems:
         raise ConfigError([ConfigProblem(key, message) for key, message in problems])
-    form, _ = _form(model, inputs, kind)
-    assert form is not None
     return form
