@@ -109,3 +109,35 @@ def test_linearization_study_stores_mean_and_std_and_warns_about_non_gaussian_in
         QuarterCar(), ("A", "c"), (Normal(0.05, 0.05 / np.sqrt(12)), inputs["c"]), "x1", times
     )
     np.testing.assert_allclose(loaded.std("x1"), direct[1], rtol=1e-12, atol=1e-15)
+
+
+def test_intrusive_results_sit_in_compare_and_inspect(tmp_path, capsys):
+    # A linear quarter car with a Gaussian amplitude: collocation (order 2 is exact: x1 is
+    # linear in A), Galerkin and linearization give the same mean and std to the solvers'
+    # accuracy, and pcmb compare and pcmb inspect read the files without runs.
+    from pcmb.analysis.comparison import compare
+    from pcmb.cli import main
+
+    times = np.linspace(0.0, 0.5, 26)
+    study = pcmb.Study(
+        QuarterCar,
+        {"A": Normal(0.05, 0.01)},
+        times,
+        params={"spring": "linear"},
+        order=2,
+        outputs=["x1"],
+        jobs=1,
+        validation=0,
+    )
+    paths = {}
+    for kind in ("collocation", "galerkin", "linearization"):
+        changes = {"basis": None} if kind == "linearization" else {}
+        paths[kind] = tmp_path / f"{kind}.h5"
+        study.replace(method=kind, **changes).run(paths[kind], progress=False)
+    reference = pcmb.load(paths["collocation"])
+    for kind in ("galerkin", "linearization"):
+        difference = compare(reference, pcmb.load(paths[kind])).differences["x1"]
+        assert difference.mean_relative < 1e-6 and difference.std_relative < 1e-6
+        assert main(["inspect", str(paths[kind])]) == 0
+        assert kind in capsys.readouterr().out.lower()
+    assert main(["compare", str(paths["collocation"]), str(paths["linearization"])]) == 0
