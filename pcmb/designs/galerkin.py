@@ -21,7 +21,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
-from pcmb.adapters.stacked_ode import solve_stacked
 from pcmb.chaos.basis import PolynomialBasis, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
@@ -99,6 +98,8 @@ class GalerkinSystem:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(d, S, T) state coefficients at ``times`` (one stacked solve of d·S unknowns)."""
+        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+
         shape = (self.d, self.size)
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))
         states = solve_stacked(

@@ -21,7 +21,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
-from pcmb.adapters.stacked_ode import solve_stacked
 from pcmb.chaos.inputs import Distribution, Normal
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery
@@ -153,6 +152,8 @@ class GaussianMoments:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(R, 2, T) mean and std of every output at ``times``."""
+        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+
         y0 = self.initial_state()
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))
         # Covariances in squared units: absolute tolerance atol_i atol_j / rtol, so that stds
