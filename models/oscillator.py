@@ -15,13 +15,22 @@ two-line spectrum of Part II Eq. 22. Loaded by pcmb as
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from terrain_process import GERMS, L1_DEFAULT, L2_DEFAULT, random_profile
+from terrain_process import (
+    GERMS,
+    L1_DEFAULT,
+    L2_DEFAULT,
+    MODES,
+    mode_functions,
+    random_profile,
+    random_profile_form,
+)
 
+from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
 from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
@@ -76,6 +85,30 @@ class CubicOscillator(StackedODEModel):
 
     def __init__(self, *, rtol: float = 1e-8, atol: float = 1e-10, **params: float) -> None:
         super().__init__(_DEFAULTS, params, rtol=rtol, atol=atol)
+
+    def polynomial_form(self, inputs: Sequence[str]) -> PolynomialForm:
+        """m x'' + c x' + h x³ = f(t) as polynomials in (x, v, inputs, the forcing's four
+        modes), for pcmb's intrusive methods.
+
+        Raises
+        ------
+        ValueError
+            An uncertain m (divided by), speed, L1 or L2 (inside the modes).
+        """
+        space = PolynomialSpace(("x", "v"), inputs, MODES)
+        p = space.parameters(self.parameters, ("m", "speed", "L1", "L2"))
+        x, v = space.states
+        force = random_profile_form(p, space.forcing)
+        return PolynomialForm(
+            space,
+            rhs=(v, (force - p["c"] * v - p["h"] * x**3) / p["m"]),
+            initial=(p["x0"], p["v0"]),
+            outputs={"x": x, "v": v},
+            forcing=mode_functions(self.parameters),
+            rtol=self.rtol,
+            atol=self.atol,
+            method=self.method,
+        )
 
     def _initial_state(self, p: Params) -> NDArray[np.float64]:
         return np.stack([p["x0"], p["v0"]])

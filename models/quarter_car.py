@@ -18,8 +18,18 @@ from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from terrain_process import GERMS, L1_DEFAULT, L2_DEFAULT, PERIOD, random_profile
+from terrain_process import (
+    GERMS,
+    L1_DEFAULT,
+    L2_DEFAULT,
+    MODES,
+    PERIOD,
+    mode_functions,
+    random_profile,
+    random_profile_form,
+)
 
+from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
 from pcmb.adapters.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
@@ -179,6 +189,64 @@ class QuarterCar(StackedODEModel):
         }
         super().__init__(defaults, params, rtol=rtol, atol=atol)
         self.terrain, self.damper, self.spring = terrain, damper, spring
+
+    def polynomial_form(self, inputs: Sequence[str]) -> PolynomialForm:
+        """The dynamics as polynomials in (x1, x2, v1, v2, inputs, forcing), for pcmb's
+        intrusive methods: the linear damper on the sine or KL terrain, either spring.
+
+        The sine terrain's forcing is sin(2π f t); the KL terrain's are sin(2π s/D) and the
+        four modes of its random part (s = speed·t). The model divides by the masses and
+        the forcing holds f, speed, D, L1 and L2: those must stay certain.
+
+        Raises
+        ------
+        ValueError
+            The MR damper (tanh), the bump terrain (a jump in time), or an uncertain input
+            the dynamics are not polynomial in.
+        """
+        if self.damper != "linear":
+            raise ValueError(f"the {self.damper} damper's force law is not polynomial")
+        fixed = ["Ms", "Mu"]
+        if self.terrain == "sine":
+            forcing: tuple[str, ...] = ("sine",)
+            fixed.append("f")
+            rate = 2 * np.pi * self.parameters["f"]
+
+            def functions(t: float) -> NDArray[np.float64]:
+                return np.array([np.sin(rate * t)])
+
+        elif self.terrain == "kl":
+            forcing = ("ground", *MODES)
+            fixed += ["speed", "D", "L1", "L2"]
+            modes = mode_functions(self.parameters)
+            ground = 2 * np.pi * self.parameters["speed"] / self.parameters["D"]
+
+            def functions(t: float) -> NDArray[np.float64]:
+                return np.concatenate([[np.sin(ground * t)], modes(t)])
+
+        else:
+            raise ValueError(
+                "the bump terrain jumps in time, which the polynomial form cannot carry"
+            )
+        space = PolynomialSpace(("x1", "x2", "v1", "v2"), inputs, forcing)
+        p = space.parameters(self.parameters, fixed)
+        x1, x2, v1, v2 = space.states
+        if self.terrain == "sine":
+            z = p["A"] * space.forcing[0]
+        else:
+            z = p["A0"] * space.forcing[0] + random_profile_form(p, space.forcing[1:])
+        force = self._suspension(x1, x2, v1, v2, p)
+        return PolynomialForm(
+            space,
+            rhs=(v1, v2, force / p["Ms"], (p["kT"] * (z - x2) - force) / p["Mu"]),
+            initial=(z + p["x1_0"], z + p["x2_0"], p["v1_0"], p["v2_0"]),
+            outputs={"x1": x1, "x2": x2, "v1": v1, "v2": v2, "a1": force / p["Ms"], "z": z},
+            forcing=functions,
+            t0=self.initial_time,
+            rtol=self.rtol,
+            atol=self.atol,
+            method=self.method,
+        )
 
     def _initial_state(self, p: Params) -> NDArray[np.float64]:
         z0 = self._terrain(self.initial_time, p)

@@ -15,7 +15,8 @@ Karhunen–Loève expansion, not a truncation of it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,4 +51,29 @@ def random_profile(
     phase2 = s / p["L2"]
     return p["A1"] * (p["xi11"] * np.cos(phase1) + p["xi12"] * np.sin(phase1)) + p["A2"] * (
         p["xi21"] * np.cos(phase2) + p["xi22"] * np.sin(phase2)
+    )
+
+
+#: Forcing names of the random profile's polynomial form: its four time functions.
+MODES = ("cos1", "sin1", "cos2", "sin2")
+
+
+def mode_functions(p: Mapping[str, float]) -> Callable[[float], NDArray[np.float64]]:
+    """``t -> (4,)`` cos(s/L1), sin(s/L1), cos(s/L2), sin(s/L2) at s = speed·t (floats ``p``)."""
+    rates = np.array([p["speed"] / p["L1"], p["speed"] / p["L2"]])
+
+    def modes(t: float) -> NDArray[np.float64]:
+        phases = rates * t
+        return np.array(
+            [np.cos(phases[0]), np.sin(phases[0]), np.cos(phases[1]), np.sin(phases[1])]
+        )
+
+    return modes
+
+
+def random_profile_form(p: Mapping[str, Any], modes: Sequence[Any]) -> Any:
+    """The random profile as a polynomial (pcmb.adapters.polynomial) in the amplitudes and germs
+    ``p`` (numbers or polynomial variables) and the four ``modes`` variables (:data:`MODES`)."""
+    return p["A1"] * (p["xi11"] * modes[0] + p["xi12"] * modes[1]) + p["A2"] * (
+        p["xi21"] * modes[2] + p["xi22"] * modes[3]
     )

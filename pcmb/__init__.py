@@ -14,6 +14,7 @@ from typing import Any
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
     "pcmb.adapters.stacked_ode": ["StackedODEModel", "solve_projected", "solve_stacked"],
+    "pcmb.adapters.polynomial": ["Polynomial", "PolynomialForm", "PolynomialSpace"],
     "pcmb.analysis.statistics": ["AnalysisSettings", "analyse"],
     "pcmb.chaos.basis": [
         "PolynomialBasis",
@@ -108,7 +109,10 @@ __all__ = [
     "PcmbError",
     "PcmbWarning",
     "PointwiseModel",
+    "Polynomial",
     "PolynomialBasis",
+    "PolynomialForm",
+    "PolynomialSpace",
     "ResultFileError",
     "RunResult",
     "StackedODEModel",

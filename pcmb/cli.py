@@ -139,7 +139,9 @@ def _summary(config) -> str:
         lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
     design = study.design.record()
     seed = f", seed {design.seed}" if design.seed is not None else ""
-    lines.append(f"method   {design.kind}: {design.label}, {design.grid} nodes{seed}")
+    made = "no nodes: solved from the model's equations" if design.grid == "none" else "nodes"
+    grid = "" if design.grid == "none" else f"{design.grid} "
+    lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
     held_out = study.validation if design.basis is not None else 0

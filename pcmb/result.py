@@ -139,6 +139,8 @@ class Design:
             )
         else:
             order = f"total order {max(self.orders)}"
+        if self.kind == "galerkin":
+            return f"Galerkin, {order}"
         if self.fit != "projection":
             return f"{self.kind} + chaos fit, {order}"
         if self.tolerance is not None:  # order: auto
@@ -355,6 +357,9 @@ class StudyResult:
         Output name -> its own axis (:class:`~pcmb.axes.OutputAxis`), or ``None`` for a
         scalar (a derived figure of merit, a model's scalar output); the outputs not listed
         are on ``times``. Every statistic of an output is per point of its axis.
+    moments:
+        Output name -> (2, T) mean and std of a method that computes them without runs or an
+        expansion (statistical linearization); empty otherwise.
     """
 
     name: str
@@ -381,6 +386,7 @@ class StudyResult:
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
     axes: dict[str, OutputAxis | None] = field(default_factory=dict)
+    moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     @property
     def method(self) -> str:
@@ -451,6 +457,8 @@ class StudyResult:
         overflow where the exact one is a float, :func:`pcmb.chaos.expansion.sample_mean`)."""
         if name in self.expansions:
             return self.expansions[name].mean()
+        if name in self.moments:
+            return self.moments[name][0]
         return sample_mean(self.values[name][self.ok])
 
     def std(self, name: str) -> NDArray[np.float64]:
@@ -459,6 +467,8 @@ class StudyResult:
         (:func:`pcmb.chaos.expansion.sample_std`)."""
         if name in self.expansions:
             return self.expansions[name].std()
+        if name in self.moments:
+            return self.moments[name][1]
         return sample_std(self.values[name][self.ok], ddof=1)
 
     def sobol_first(self, name: str) -> NDArray[np.float64]:

@@ -584,6 +584,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
         expansions: dict[str, ChaosExpansion] = {}
         nominal: dict[str, np.ndarray] = {}
         regression: dict[str, RegressionFit] = {}
+        moments: dict[str, np.ndarray] = {}
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
         axes = _read_axes(file, outputs)
         scalars = {name for name, axis in axes.items() if axis is None}
@@ -593,6 +594,8 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             values[name] = _columns(group["values"][()], scalar)
             if "coefficients" in group and index is not None:
                 expansions[name] = _read_expansion(group, index, partition, dists, names, scalar)
+            elif values[name].shape[0] == 0:  # no runs, no expansion: moments alone
+                moments[name] = np.stack([group["mean"][()], group["std"][()]])
             if "nominal" in group:
                 nominal[name] = _columns(group["nominal"][()], scalar)
             if (fit := _read_regression(group, scalar)) is not None:
@@ -628,4 +631,5 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             diagnostics=diagnostics,
             held_out=held_out,
             axes=axes,
+            moments=moments,
         )

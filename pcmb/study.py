@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import time
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -38,6 +39,7 @@ from pcmb.errors import (
     ConfigProblem,
     IllPosedError,
     ModelDefinitionError,
+    ModelError,
     ModelRunError,
     PcmbWarning,
     UsageError,
@@ -51,6 +53,7 @@ from pcmb.run.executor import (
     chunk_bounds,
     describe_model,
     join_runs,
+    run_in_worker,
     run_nodes,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
@@ -268,7 +271,7 @@ class Study:
         """Whether the method takes ``order`` (a Smolyak grid takes a level instead)."""
         if self.method == "collocation":
             return self.method_options["grid"] == "tensor"
-        return self.method == "regression" or self.fit != "none"
+        return self.method in ("regression", "galerkin") or self.fit != "none"
 
     def _design(self) -> NodeDesign:
         settings = MethodSettings(
@@ -557,7 +560,7 @@ class Study:
         """
         nodes = self.node_set()
         if pool is None:
-            tasks = len(chunk_bounds(nodes.size, self.chunk_size))
+            tasks = len(chunk_bounds(nodes.size, self.chunk_size)) if nodes.size else 1
             with open_pool(self.backend, self.jobs, self.address, tasks=tasks) as own:
                 return self.run(
                     output, resume=resume, progress=progress, provenance=provenance, pool=own
@@ -580,17 +583,25 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
                 )
-        runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
-        nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
+        intrusive = hasattr(self.design, "solve")
+        if intrusive:
+            # An intrusive method: one solve in a worker, nothing to journal but the held-out
+            # runs, which are few and run again on a resume.
+            journal, journal_dir = None, None
+            found = self._solve(nodes, outputs, pool)
+        else:
+            runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+            nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
         held_out, held_out_failed = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
-        runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
-        axes = {
-            **{name: axis for name, axis in facts.axes.items() if name in outputs},
-            **dict.fromkeys(self.derived),
-        }
-        recovered = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
-        result = self._diagnosed(self._with_nominal(recovered, nominal), held_out, held_out_failed)
+        if not intrusive:
+            runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
+            axes = {
+                **{name: axis for name, axis in facts.axes.items() if name in outputs},
+                **dict.fromkeys(self.derived),
+            }
+            found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        result = self._diagnosed(self._with_nominal(found, nominal), held_out, held_out_failed)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -640,6 +651,41 @@ class Study:
             return runs
         found = derive(self.derived, self.times, runs.values)
         return dataclasses.replace(runs, values={**runs.values, **found})
+
+    def _solve(self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool) -> StudyResult:
+        """The result of an intrusive design (:class:`~pcmb.designs.base.IntrusiveDesign`),
+        checked and solved in a worker with the model built there."""
+        design = self.design
+        kind = design.record().kind
+        problems = run_in_worker(self.model_factory, pool, design.check, outputs)
+        if self.derived:
+            problems = [
+                *problems,
+                ("derived", f"figures of merit are computed from runs, and kind {kind} has none"),
+            ]
+        if problems:
+            raise UsageError([ConfigProblem(key, message) for key, message in problems], "Study")
+        start = time.perf_counter()
+        try:
+            recovery = run_in_worker(self.model_factory, pool, design.solve, self.times, outputs)
+        except ModelError as error:
+            raise ModelRunError((), f"the {kind} solve failed: {error}") from error
+        return StudyResult(
+            name=self.name,
+            design=design.record(),
+            times=self.times,
+            input_names=self.input_names,
+            distributions=tuple(self.inputs.values()),
+            germ=nodes.nodes,
+            params=nodes.params,
+            weights=None,
+            status=np.zeros(0, dtype=np.int8),
+            values={name: np.zeros((0, self.times.size)) for name in outputs},
+            expansions=recovery.expansions,
+            warnings=recovery.warnings,
+            seconds=time.perf_counter() - start,
+            moments=recovery.moments,
+        )
 
     def _run_rounds(
         self,
@@ -774,13 +820,20 @@ class Study:
         held_out_failed: tuple[WarningRecord, ...],
     ) -> StudyResult:
         """The result with its diagnostics (per output) and their warning records, after
-        ``held_out_failed``."""
+        ``held_out_failed``. A method without runs (Galerkin) has its range checked against
+        the held-out runs, and no diagnostics without them."""
+        germ, values, ok = result.germ, result.values, result.status == Status.OK
+        warnings = (*result.warnings, *held_out_failed)
+        if result.n_nodes == 0:
+            if held_out is None or not held_out.ok.any():
+                return dataclasses.replace(result, held_out=held_out, warnings=warnings)
+            germ, values, ok = held_out.germ, held_out.values, held_out.ok
         judged = self.diagnosed or tuple(result.expansions)
         found = diagnose_all(
             {name: e for name, e in result.expansions.items() if name in judged},
-            result.germ,
-            result.values,
-            result.status == Status.OK,
+            germ,
+            values,
+            ok,
             result.times,
             held_out,
             self.diagnostics_tolerance,
@@ -791,7 +844,7 @@ class Study:
             result,
             diagnostics=found,
             held_out=held_out,
-            warnings=(*result.warnings, *held_out_failed, *records),
+            warnings=(*warnings, *records),
         )
 
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:

@@ -21,7 +21,7 @@ from pcmb.chaos.elements import PiecewiseExpansion, piecewise_spectrum
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std, unsafe_to_square
 from pcmb.chaos.nodes import TensorGrid, draw_germs
 from pcmb.chaos.spectral import ChaosSpectrum, chaos_spectrum, periodogram, taper, uniform_step
-from pcmb.errors import ConfigError, ConfigProblem
+from pcmb.errors import ConfigError, ConfigProblem, UsageError
 
 if TYPE_CHECKING:
     from pcmb.result import StudyResult
@@ -298,9 +298,10 @@ class Analysis:
 
 
 def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
-    """The tensor Gauss grid a collocation result was computed on (``None`` otherwise)."""
+    """The tensor Gauss grid a collocation result was computed on, or the one of a Galerkin
+    expansion's orders (``None`` otherwise)."""
     design = result.design
-    if design.grid != "tensor-gauss" or design.orders is None:
+    if design.orders is None or (design.grid != "tensor-gauss" and design.kind != "galerkin"):
         return None
     return TensorGrid(result.distributions, design.orders)
 
@@ -677,6 +678,11 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     times = result.times
     on_time = [name for name in result.outputs if result.on_time(name)]
     settings.check(times, result.outputs, on_time)
+    if result.moments:
+        raise UsageError(
+            f"a {result.method} result holds the mean and std only (no runs, no expansion): "
+            "quantiles, PDFs and spectra cannot be drawn from it; compare it with pcmb compare"
+        )
     xi = _germ_draws(result, settings)
     pdf_at = {name: _pdf_points(result, name, settings) for name in result.outputs}
     sources = {

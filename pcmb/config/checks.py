@@ -10,10 +10,11 @@ from typing import TYPE_CHECKING
 
 from pcmb.analysis.derived import derived_problems
 from pcmb.config.types import MAX_RUNS, MAX_VALUES
-from pcmb.designs import MethodSettings, make_design
+from pcmb.designs import DESIGNS, MethodSettings, make_design
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
+    from pcmb.chaos.inputs import Distribution
     from pcmb.config.schema import StudyConfig
 
 __all__ = ["cross_check", "model_check"]
@@ -40,13 +41,9 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     # MethodSpec's keys are MethodSettings' fields, but for order (one per input there) and
     # the held-out runs (the study's, not the design's); order auto refines to the
     # diagnostics' tolerance.
-    settings = MethodSettings(
-        orders=config.orders,
-        diagnostics_tolerance=config.diagnostics.tolerance,
-        **method.model_dump(exclude={"order", "validation"}),
-    )
+    settings = _settings(config)
     try:
-        design = make_design(dict(zip(names, config.distributions, strict=True)), settings)
+        design = make_design(_inputs(config), settings)
     except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
         key, _, message = str(error).partition(": ")
         yield key, message
@@ -70,17 +67,46 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         )
 
 
+def _settings(config: StudyConfig) -> MethodSettings:
+    return MethodSettings(
+        orders=config.orders,
+        diagnostics_tolerance=config.diagnostics.tolerance,
+        **config.method.model_dump(exclude={"order", "validation"}),
+    )
+
+
+def _inputs(config: StudyConfig) -> dict[str, Distribution]:
+    return dict(zip(config.input_names, config.distributions, strict=True))
+
+
+def _intrusive(config: StudyConfig) -> object:
+    """The config's intrusive design (``IntrusiveDesign``: it checks the model in a worker);
+    ``None`` for a node design, or when the cross checks reject the settings (an order
+    mapping that misses an input cannot even be read)."""
+    if not hasattr(DESIGNS.get(config.method.kind), "check"):
+        return None
+    try:
+        return make_design(_inputs(config), _settings(config))
+    except (ValueError, KeyError):
+        return None
+
+
 def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
     check the inputs, the analysis and the time grid against what it says of itself."""
     from pcmb.run.backends import checking_backend, open_pool
-    from pcmb.run.executor import describe_model
+    from pcmb.run.executor import describe_model, run_in_worker
 
     # A model is only ever built in a worker process, here too: its crash is not pcmb's.
     backend = checking_backend(config.execution.backend)
     try:
         with open_pool(backend, config.execution.jobs) as pool:
-            facts = describe_model(config.model_factory(), pool, config.times)
+            factory = config.model_factory()
+            facts = describe_model(factory, pool, config.times)
+            # An intrusive method checks the model's polynomial form where the model lives.
+            check = getattr(_intrusive(config), "check", None)
+            if check is not None:
+                yield from run_in_worker(factory, pool, check, config.output_names)
     except ConfigError as exc:
         for problem in exc.problems:
             yield problem.path, problem.message

@@ -14,12 +14,15 @@ from pcmb.designs.adaptive import AdaptiveCollocation
 from pcmb.designs.anisotropic import AnisotropicTensor
 from pcmb.designs.base import (
     RECORDED_ONLY,
+    IntrusiveDesign,
     MethodSettings,
     NodeDesign,
     Recovery,
     statistics_warnings,
 )
 from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.galerkin import Galerkin
+from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import MultiElementCollocation
 from pcmb.designs.refine import OrderRefinement
 from pcmb.designs.regression import SparseRegression
@@ -31,6 +34,7 @@ __all__ = [
     "GRIDS",
     "METHOD_KINDS",
     "RECORDED_ONLY",
+    "IntrusiveDesign",
     "MethodSettings",
     "NodeDesign",
     "Recovery",
@@ -44,7 +48,7 @@ __all__ = [
 #: ``collocation:refine`` for ``order: auto``, ``adaptive:tensor`` for an adaptive tensor grid
 #: (``basis: tensor``) (see :func:`design_key`). The config schema,
 #: ``pcmb validate`` and the docs read their lists from here.
-DESIGNS: dict[str, type[NodeDesign]] = {
+DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     "collocation": TensorCollocation,
     "collocation:smolyak": SparseCollocation,
     "collocation:elements": MultiElementCollocation,
@@ -55,6 +59,10 @@ DESIGNS: dict[str, type[NodeDesign]] = {
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
     "adaptive:tensor": AnisotropicTensor,
+    # Intrusive methods (pcmb.designs.base.IntrusiveDesign): no nodes; solved from the
+    # model's polynomial form in a worker.
+    "galerkin": Galerkin,
+    "linearization": Linearization,
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))

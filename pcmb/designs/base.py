@@ -18,6 +18,7 @@ from pcmb.result import AdaptiveFit, Design, Refinement, RegressionFit, WarningR
 __all__ = [
     "RECORDED_ONLY",
     "AdaptiveDesign",
+    "IntrusiveDesign",
     "MethodSettings",
     "NodeDesign",
     "Recovery",
@@ -78,6 +79,9 @@ class Recovery:
     node_elements: NDArray[np.intp] | None = None
     adaptive: AdaptiveFit | None = None
     refinement: Refinement | None = None
+    #: Methods that compute statistics without an expansion (statistical linearization):
+    #: output name -> (2, T) mean and std.
+    moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
 
 class NodeDesign(Protocol):
@@ -139,6 +143,41 @@ class AdaptiveDesign(NodeDesign, Protocol):
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
         """The next round's nodes, given every node run so far, or ``None`` when done."""
+        ...
+
+
+class IntrusiveDesign(Protocol):
+    """A method that solves equations derived from the model instead of running it at nodes
+    (stochastic Galerkin, statistical linearization): it has no nodes (``runs`` is 0, ``nodes``
+    is empty) and no ``recover``. ``Study.run`` calls :meth:`solve` as one task in a worker
+    process, with the model built there, because the equations come from the model's own code
+    (its polynomial form, :mod:`pcmb.adapters.polynomial`); ``pcmb validate`` calls
+    :meth:`check` the same way."""
+
+    @property
+    def runs(self) -> int: ...
+
+    def nodes(self) -> NodeSet: ...
+
+    def weights(self, nodes: NodeSet) -> None: ...
+
+    def record(self) -> Design: ...
+
+    def check(self, model: object, outputs: Sequence[str] | None) -> list[tuple[str, str]]:
+        """``(key, message)`` of what keeps the method from this model and these outputs
+        (``None``: all the model's); empty when it can be solved."""
+        ...
+
+    def solve(self, model: object, times: NDArray[np.float64], outputs: Sequence[str]) -> Recovery:
+        """Expansions (or moments) of the outputs on the (T,) grid.
+
+        Raises
+        ------
+        ConfigError
+            What :meth:`check` finds.
+        ModelError
+            The integration failed.
+        """
         ...
 
 

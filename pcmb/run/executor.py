@@ -50,7 +50,15 @@ from pcmb.run.progress import Progress
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
 
-__all__ = ["ModelFacts", "RunResult", "chunk_bounds", "describe_model", "join_runs", "run_nodes"]
+__all__ = [
+    "ModelFacts",
+    "RunResult",
+    "chunk_bounds",
+    "describe_model",
+    "join_runs",
+    "run_in_worker",
+    "run_nodes",
+]
 
 TARGET_CHUNKS = 16
 MAX_CHUNK_SIZE = 256
@@ -466,6 +474,32 @@ def describe_model(
         if death is None:
             return facts
     raise ModelDefinitionError(f"could not build the model: {death}")
+
+
+def run_in_worker(
+    model_factory: Callable[[], Model], pool: Pool, task: Callable[..., _T], *args: Any
+) -> _T:
+    """``task(model, *args)`` in one of ``pool``'s workers, with the model built (or reused)
+    there: how methods that need the model's own code besides ``simulate`` (the intrusive
+    designs' polynomial form) run it. ``task`` and ``args`` must pickle; what ``task`` raises
+    is raised here.
+
+    Raises
+    ------
+    ModelDefinitionError
+        The model's code failed while building, or killed its worker.
+    """
+    factory = _factory(model_factory)
+    for _ in range(2):  # as in describe_model: a kept worker may have died before this task
+        result, death = _wait(pool, pool.submit(_with_model, factory, task, args))
+        if death is None:
+            return result  # type: ignore[return-value]
+    raise ModelDefinitionError(f"the model's worker died: {death}")
+
+
+def _with_model(factory: _Factory, task: Callable[..., _T], args: tuple[Any, ...]) -> _T:
+    model, _ = _cached_model(factory)
+    return _model_code(task, model, *args)
 
 
 def _wait(
