@@ -25,6 +25,7 @@ EXAMPLES = {
         "regression", orders=(3, 3), samples=32, seed=3, q=0.75, selection="lars"
     ),
     "adaptive": MethodSettings("adaptive", tolerance=1e-3, max_runs=200),
+    "adaptive:tensor": MethodSettings("adaptive", tolerance=1e-3, max_runs=200, basis="tensor"),
     "collocation:refine": MethodSettings(
         "collocation", orders="auto", diagnostics_tolerance=0.05, max_runs=100
     ),
