@@ -214,7 +214,6 @@ def test_a_reference_on_another_grid_is_refused(tmp_path, swept, capsys):
             "sweep.methods[0]",
             "found order, level",
         ),
-        ("sweep:\n  methods: [{kind: collocation, order: 3}]\n", "sweep.methods[0]", "found none"),
         (
             "sweep:\n  methods: [{kind: collocation, order: [1, -2]}]\n",
             "sweep.methods[0].order[1]",

@@ -410,7 +410,7 @@ class SweepSpec(Section):
     against (see ``docs/sweep.md``)."""
 
     methods: Annotated[list[dict[Name, Any]], Field(min_length=1)] = Field(
-        description="method blocks, each with exactly one key given as a list of values"
+        description="method blocks, each with at most one key given as a list of values"
     )
     reference: dict[Name, Any] | None = Field(
         default=None,

@@ -79,6 +79,8 @@ def _series(table: SweepTable, output: str, method: str, x: str) -> dict[str, np
 def _panel(axes: Any, table: SweepTable, output: str, x: str, methods: list[str]) -> None:
     for color, method in zip(_COLORS * (len(methods) // len(_COLORS) + 1), methods, strict=False):
         series = _series(table, output, method, x)
+        drawn = series["cost"] > 0  # an intrusive method makes no runs: seconds panel only
+        series = {key: value[drawn] for key, value in series.items()}
         if not series["cost"].size:
             continue
         cost = series["cost"]

@@ -1,9 +1,11 @@
 """What a sweep runs: the ``sweep:`` section expanded into one method setting per value.
 
-Each entry of ``sweep.methods`` is a ``method:`` block with exactly one key given as a list;
-every value of that list is one setting, an ordinary study. Without a ``sweep:`` section the
-config's own method is swept over a rising cost (:func:`default_sweep`). Seeded methods
-(sampling, regression) are run ``sweep.replicates`` times with seeds ``seed``, ``seed + 1``, …
+Each entry of ``sweep.methods`` is a ``method:`` block with at most one key given as a list;
+every value of that list is one setting, an ordinary study (a block without a list is one
+setting: a method without a cost to vary, such as statistical linearization). Without a
+``sweep:`` section the config's own method is swept over a rising cost
+(:func:`default_sweep`). Seeded methods (sampling, regression) are run ``sweep.replicates``
+times with seeds ``seed``, ``seed + 1``, …
 """
 
 from __future__ import annotations
@@ -111,6 +113,11 @@ def _labels(entries: list[tuple[Mapping[str, Any], MethodSpec, str]]) -> list[st
     return labels
 
 
+def _fixed(entry: Mapping[str, Any]) -> str:
+    """The setting text of a block without a list: its keys, ``kind=linearization``."""
+    return " ".join(f"{key}={_text(value)}" for key, value in entry.items() if key != "validation")
+
+
 def _text(value: Any) -> str:
     """A setting value as compact text: ``3``, ``1e-04``, ``a:2,b:3``, ``0.0;1.0``."""
     if isinstance(value, Mapping):
@@ -123,9 +130,13 @@ def _text(value: Any) -> str:
 
 
 def _expand(entry: Mapping[str, Any]) -> Iterator[tuple[str, int, dict[str, Any]]]:
-    """(swept key, index, method data) per value of the entry's list (nothing for a bad
-    entry: :func:`sweep_problems` says why)."""
+    """(swept key, index, method data) per value of the entry's list; for an entry without a
+    list (a method without a cost to vary, e.g. linearization) one setting with key ``""``;
+    nothing for an entry with several lists (:func:`sweep_problems` says why)."""
     keys = _swept_key(entry)
+    if not keys:
+        yield "", 0, {**SWEPT_DEFAULTS, **entry}
+        return
     if len(keys) != 1:
         return
     key = keys[0]
@@ -151,9 +162,10 @@ def _settings_of(
     for key, _, data in _expand(entry):
         spec = MethodSpec.model_validate(data)
         copies = replicates if _design(config, spec).record().seed is not None else 1
+        text = f"{key}={_text(data[key])}" if key else _fixed(entry)
         for replicate in range(copies):
             seeded = spec.model_copy(update={"seed": spec.seed + replicate})
-            yield Setting(index, label, f"{key}={_text(data[key])}", replicate, seeded)
+            yield Setting(index, label, text, replicate, seeded)
 
 
 def _rising(value: Any, key: str) -> list[Any]:
@@ -279,12 +291,11 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
     for index, entry in enumerate(section.methods):
         prefix = f"sweep.methods[{index}]"
         keys = _swept_key(entry)
-        if len(keys) != 1:
-            found = f"found {', '.join(keys)}" if keys else "found none"
+        if len(keys) > 1:
             yield (
                 prefix,
-                "a sweep entry varies exactly one key, given as a list of values "
-                f"(e.g. order: [1, 2, 3]); {found}",
+                "a sweep entry varies at most one key, given as a list of values "
+                f"(e.g. order: [1, 2, 3]); found {', '.join(keys)}",
             )
             continue
         for key, position, data in _expand(entry):
