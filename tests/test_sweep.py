@@ -328,3 +328,58 @@ def test_inspect_of_a_sweep_gives_the_cheapest_setting_reaching_each_accuracy(sw
         cells.append(f"{runs} runs")
     assert [cell for cell in cells if cell in line] == cells
     assert line.index(cells[0]) < line.rindex(cells[1])
+
+
+def _quarter_car(tmp_path: Path, sweep: str, extra_input: str = "") -> Path:
+    """configs/quarter_car.yaml on 0..0.5 s with another sweep: section."""
+    source = Path(__file__).parent.parent / "configs" / "quarter_car.yaml"
+    text = source.read_text(encoding="utf-8").replace(
+        "../models", str(source.parent.parent / "models")
+    )
+    text = text.replace(
+        "time: {start: 0.0, stop: 3.0, points: 301}", "time: {start: 0.0, stop: 0.5, points: 51}"
+    )
+    text = text[: text.index("\nsweep:")] + "\n" + textwrap.dedent(sweep)
+    text = text.replace("inputs:\n", f"inputs:\n{extra_input}")
+    text = text.replace("pdf_times: [3.0]", "pdf_times: [0.5]").replace(
+        "pdf_freqs: [1.33, 3.0]", "pdf_freqs: [3.0]"
+    )
+    config = tmp_path / "quarter_car.yaml"
+    config.write_text(text, encoding="utf-8")
+    return config
+
+
+INTRUSIVE = """\
+sweep:
+  methods:
+    - {kind: galerkin, order: [1, 2, 3]}
+    - {kind: linearization}
+  reference: {kind: collocation, order: 8}
+  outputs: [x1]
+"""
+
+
+def test_intrusive_methods_join_a_sweep_without_runs(tmp_path):
+    config = _quarter_car(tmp_path, INTRUSIVE)
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out"), "--quiet"]) == 0
+    rows = _rows(tmp_path / "out")
+    galerkin = [r for r in rows if r["method"] == "galerkin"]
+    assert [r["setting"] for r in galerkin] == ["order=1", "order=2", "order=3"]
+    assert all(r["runs"] == "0" and float(r["seconds"]) > 0 for r in rows)
+    errors = [float(r["err_std"]) for r in galerkin]
+    assert errors[2] < errors[0]  # Galerkin converges to the collocation reference
+    (linearization,) = [r for r in rows if r["method"] == "linearization"]
+    assert linearization["setting"] == "kind=linearization"
+    assert np.isfinite(float(linearization["err_std"]))
+
+
+def test_an_intrusive_setting_the_model_cannot_take_is_refused_before_anything_runs(
+    tmp_path, capsys
+):
+    mass = "  Ms: {dist: uniform, low: 200.0, high: 300.0}\n"
+    config = _quarter_car(tmp_path, INTRUSIVE, extra_input=mass)
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "sweep.methods[0].kind: galerkin" in err and "not polynomial in ['Ms']" in err
+    assert "sweep.methods[1].kind: linearization" in err
+    assert not (tmp_path / "out").exists()

@@ -91,6 +91,27 @@ def _intrusive(config: StudyConfig) -> object:
         return None
 
 
+def _swept_intrusive(config: StudyConfig) -> Iterator[tuple[str, object]]:
+    """(key path, check) of the first intrusive setting of each sweep entry (and of the
+    sweep's reference), when the sweep itself is valid."""
+    from pcmb.sweep.plan import plan_sweep, sweep_problems
+
+    if config.sweep is None or next(iter(sweep_problems(config)), None) is not None:
+        return
+    plan = plan_sweep(config)
+    seen = set()
+    for setting in (*plan.settings, *([plan.reference] if plan.reference else [])):
+        check = getattr(
+            _intrusive(config.model_copy(update={"method": setting.spec})), "check", None
+        )
+        if check is not None and setting.entry not in seen:
+            seen.add(setting.entry)
+            yield (
+                (f"sweep.methods[{setting.entry}]" if setting.entry >= 0 else "sweep.reference"),
+                check,
+            )
+
+
 def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
     check the inputs, the analysis and the time grid against what it says of itself."""
@@ -107,6 +128,9 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             check = getattr(_intrusive(config), "check", None)
             if check is not None:
                 yield from run_in_worker(factory, pool, check, config.output_names)
+            for where, swept in _swept_intrusive(config):
+                for path, message in run_in_worker(factory, pool, swept, config.output_names):
+                    yield where + path.removeprefix("method"), message
     except ConfigError as exc:
         for problem in exc.problems:
             yield problem.path, problem.message
