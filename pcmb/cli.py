@@ -108,6 +108,14 @@ def _summary(config) -> str:
     for name, dist in study.inputs.items():
         described = ", ".join(f"{k}={v}" for k, v in dist.describe().items() if k != "dist")
         lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
+    for name, found in study.processes.items():
+        lines.append(
+            f"process  {name}: {found.covariance.description['kind']} covariance, "
+            f"{found.terms} germs {name}[0]..{name}[{found.terms - 1}] keep "
+            f"{found.captured_energy:.4f} of the variance (truncation error "
+            f"{found.truncation_error:.3g}; eigenvalues to ~{found.eigenvalue_error:.1g}), "
+            f"field of {found.grid.size} points"
+        )
     design = study.design.record()
     seed = f", seed {design.seed}" if design.seed is not None else ""
     lines.append(f"method   {design.kind}: {design.label}, {design.grid} nodes{seed}")
