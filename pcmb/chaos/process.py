@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
+import scipy.linalg
 import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
@@ -68,8 +69,8 @@ class Covariance:
 
     Attributes
     ----------
-    kernel:
-        R(x1, x2) for 1-D arrays x1 (P,), x2 (Q,), returning (P, Q).
+    function:
+        R(τ) at lags τ >= 0, (L,) -> (L,).
     variance:
         R(0), the pointwise variance.
     slope:
@@ -82,7 +83,7 @@ class Covariance:
         corrected), used to estimate that error from a grid of half the points.
     """
 
-    kernel: Kernel
+    function: Callable[[NDArray[np.float64]], NDArray[np.float64]]
     variance: float
     slope: float
     description: dict[str, object]
@@ -95,18 +96,23 @@ def _positive(**values: float) -> None:
             raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
-def _lag_kernel(function: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> Kernel:
-    def kernel(x1: NDArray[np.float64], x2: NDArray[np.float64]) -> NDArray[np.float64]:
-        return function(np.abs(np.subtract.outer(np.asarray(x1), np.asarray(x2))))
+def _at_lags(kernel: Kernel, width: int) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    """R(τ) = kernel(τ, 0) of a stationary kernel, evaluated ``width`` lags at a time (a
+    tabulated spectrum costs lags x frequencies memory)."""
 
-    return kernel
+    def function(lag: NDArray[np.float64]) -> NDArray[np.float64]:
+        zero = np.zeros(1)
+        chunks = [kernel(lag[i : i + width], zero)[:, 0] for i in range(0, lag.size, width)]
+        return np.concatenate(chunks) if chunks else np.zeros(0)
+
+    return function
 
 
 def exponential(sigma: float, length: float) -> Covariance:
     """R(τ) = σ² exp(-|τ|/ℓ) (Ornstein–Uhlenbeck; rough: a kink at zero lag)."""
     _positive(sigma=sigma, length=length)
     return Covariance(
-        _lag_kernel(lambda lag: sigma**2 * np.exp(-lag / length)),
+        lambda lag: sigma**2 * np.exp(-lag / length),
         sigma**2,
         -(sigma**2) / length,
         {"kind": "exponential", "sigma": sigma, "length": length},
@@ -117,7 +123,7 @@ def squared_exponential(sigma: float, length: float) -> Covariance:
     """R(τ) = σ² exp(-τ²/(2ℓ²)) (smooth)."""
     _positive(sigma=sigma, length=length)
     return Covariance(
-        _lag_kernel(lambda lag: sigma**2 * np.exp(-0.5 * (lag / length) ** 2)),
+        lambda lag: sigma**2 * np.exp(-0.5 * (lag / length) ** 2),
         sigma**2,
         0.0,
         {"kind": "squared-exponential", "sigma": sigma, "length": length},
@@ -145,7 +151,7 @@ def matern(sigma: float, length: float, nu: float) -> Covariance:
     # R'(0+) = -σ²·scale at ν = 1/2; zero for ν > 1/2; unbounded (not corrected) below.
     slope = -(sigma**2) * scale if nu == 0.5 else 0.0
     return Covariance(
-        _lag_kernel(function),
+        function,
         sigma**2,
         slope,
         {"kind": "matern", "sigma": sigma, "length": length, "nu": nu},
@@ -162,7 +168,7 @@ def line_spectrum(omega: ArrayLike, variance: ArrayLike) -> Covariance:
     kernel = line_covariance(omega, variance)
     omega, variance = np.asarray(omega, dtype=float), np.asarray(variance, dtype=float)
     return Covariance(
-        kernel,
+        _at_lags(kernel, max(1, 10_000_000 // omega.size)),
         float(variance.sum()),
         0.0,
         {"kind": "lines", "omega": omega.tolist(), "variance": variance.tolist()},
@@ -174,7 +180,7 @@ def tabulated_psd(omega: ArrayLike, density: ArrayLike) -> Covariance:
     kernel = spectral_covariance(omega, density)
     omega, density = np.asarray(omega, dtype=float), np.asarray(density, dtype=float)
     return Covariance(
-        kernel,
+        _at_lags(kernel, max(1, 10_000_000 // omega.size)),
         float(kernel(np.zeros(1), np.zeros(1))[0, 0]),
         0.0,
         {"kind": "psd", "omega": omega.tolist(), "density": density.tolist()},
@@ -263,7 +269,9 @@ def _nystrom(
     h = x[1] - x[0]
     weights = _gregory_weights(points, h)
     root = np.sqrt(weights)
-    matrix = root[:, None] * covariance.kernel(x, x) * root[None, :]
+    # Stationary on a uniform grid: R(|x_i - x_j|) is a Toeplitz matrix of J lags.
+    lags = covariance.function(np.arange(points) * h)
+    matrix = root[:, None] * scipy.linalg.toeplitz(lags) * root[None, :]
     values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
     # Euler–Maclaurin: the kink of R at zero lag sits on a node of every row.
     values = values[::-1] + h**2 / 6 * covariance.slope
@@ -347,10 +355,11 @@ class RandomProcess:
             raise ValueError(f"terms: expected at least 1, found {terms}")
         if terms is None and energy is None:
             energy = DEFAULT_ENERGY
-        # The Nyström grid refines the process grid by an even factor, so that it contains
-        # the grid's points and a grid of half as many points exists for the error estimate.
+        # The Nyström grid refines the process grid by a whole factor, so that it contains
+        # the grid's points, into an even number of intervals, so that a grid of half as many
+        # points exists for the error estimate.
         factor = max(1, math.ceil((NYSTROM_POINTS - 1) / (points - 1)))
-        factor += factor % 2
+        factor += factor * (points - 1) % 2
         fine = factor * (points - 1) + 1
         values, vectors, _ = _nystrom(covariance, start, stop, fine)
         total = covariance.variance * (stop - start)

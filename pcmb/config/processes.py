@@ -13,7 +13,7 @@ import json
 import typing
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 
 from pcmb.chaos import process as kl
 from pcmb.config.types import NonNegativeReal, Points, PositiveInt, PositiveReal, Real, Section
@@ -52,10 +52,12 @@ class MaternSpec(_CovarianceSpec):
     nu: PositiveReal = Field(description="smoothness ν (1/2: exponential; large: smooth)")
 
 
-def _same_length(spec: _CovarianceSpec, first: str, second: str) -> None:
-    a, b = getattr(spec, first), getattr(spec, second)
-    if len(a) != len(b):
-        raise ValueError(f"{second}: expected {len(a)} values (one per {first}), found {len(b)}")
+def _one_each(values: list[float], info: ValidationInfo) -> list[float]:
+    """An after-validator of the list paired with ``omega``: one value per frequency."""
+    omega = info.data.get("omega")
+    if omega is not None and len(values) != len(omega):
+        raise ValueError(f"expected {len(omega)} values (one per omega), found {len(values)}")
+    return values
 
 
 class LinesSpec(_CovarianceSpec):
@@ -65,14 +67,9 @@ class LinesSpec(_CovarianceSpec):
     omega: Annotated[list[NonNegativeReal], Field(min_length=1)] = Field(
         description="angular frequencies ω_i of the lines (radians per unit of the grid)"
     )
-    variance: Annotated[list[NonNegativeReal], Field(min_length=1)] = Field(
-        description="variance σ_i² of each line"
+    variance: Annotated[list[NonNegativeReal], Field(min_length=1), AfterValidator(_one_each)] = (
+        Field(description="variance σ_i² of each line")
     )
-
-    @model_validator(mode="after")
-    def _paired(self) -> LinesSpec:
-        _same_length(self, "omega", "variance")
-        return self
 
 
 def _increasing(values: list[float]) -> list[float]:
@@ -88,14 +85,9 @@ class PsdSpec(_CovarianceSpec):
     omega: Annotated[list[NonNegativeReal], Field(min_length=2), AfterValidator(_increasing)] = (
         Field(description="increasing angular frequencies ω (radians per unit of the grid)")
     )
-    density: Annotated[list[NonNegativeReal], Field(min_length=2)] = Field(
-        description="one-sided PSD S(ω) at each frequency, so that the variance is ∫ S dω"
+    density: Annotated[list[NonNegativeReal], Field(min_length=2), AfterValidator(_one_each)] = (
+        Field(description="one-sided PSD S(ω) at each frequency, so that the variance is ∫ S dω")
     )
-
-    @model_validator(mode="after")
-    def _paired(self) -> PsdSpec:
-        _same_length(self, "omega", "density")
-        return self
 
 
 CovarianceSpec = Annotated[
