@@ -259,12 +259,33 @@ def _gregory_weights(points: int, h: float) -> NDArray[np.float64]:
     return weights
 
 
+def _parity_bases(points: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Orthonormal bases (J, ⌈J/2⌉) and (J, ⌊J/2⌋) of the vectors even and odd about the
+    middle of J points."""
+    half = points // 2
+    even = np.zeros((points, points - half))
+    odd = np.zeros((points, half))
+    pairs = np.arange(half)
+    even[pairs, pairs] = even[points - 1 - pairs, pairs] = np.sqrt(0.5)
+    odd[pairs, pairs], odd[points - 1 - pairs, pairs] = np.sqrt(0.5), -np.sqrt(0.5)
+    if points % 2:
+        even[half, half] = 1.0
+    return even, odd
+
+
 def _nystrom(
     covariance: Covariance, start: float, stop: float, points: int
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Eigenvalues (J,) in decreasing order, eigenfunction values (J, J) (orthonormal in
     L²(start, stop) under the rule), and the rule's weights (J,), on ``points`` uniform
-    points."""
+    points.
+
+    A stationary kernel on a uniform grid with symmetric weights is a centro-symmetric
+    matrix: its eigenvectors are even or odd about the middle, found from two problems of
+    half the size (4x less work). That also fixes the basis of a double eigenvalue (the
+    cos/sin pair of a spectral line on whole periods) and, with the sign rule (largest entry
+    positive), makes the modes the same on every machine.
+    """
     x = np.linspace(start, stop, points)
     h = x[1] - x[0]
     weights = _gregory_weights(points, h)
@@ -272,10 +293,19 @@ def _nystrom(
     # Stationary on a uniform grid: R(|x_i - x_j|) is a Toeplitz matrix of J lags.
     lags = covariance.function(np.arange(points) * h)
     matrix = root[:, None] * scipy.linalg.toeplitz(lags) * root[None, :]
-    values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    values, vectors = [], []
+    for basis in _parity_bases(points):
+        if basis.shape[1]:
+            found, inner = np.linalg.eigh(basis.T @ matrix @ basis)
+            values.append(found)
+            vectors.append(basis @ inner)
+    values, vectors = np.concatenate(values), np.hstack(vectors)
+    order = np.argsort(values, kind="stable")[::-1]
+    values, vectors = values[order], vectors[:, order]
+    peaks = np.argmax(np.abs(vectors), axis=0)
+    vectors *= np.sign(vectors[peaks, np.arange(points)])
     # Euler–Maclaurin: the kink of R at zero lag sits on a node of every row.
-    values = values[::-1] + h**2 / 6 * covariance.slope
-    return values, vectors[:, ::-1] / root[:, None], weights
+    return values + h**2 / 6 * covariance.slope, vectors / root[:, None], weights
 
 
 @dataclass(frozen=True)
