@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 from pydantic import AfterValidator, Field, ValidationInfo, field_validator
 
 from pcmb.chaos import process as kl
-from pcmb.config.types import NonNegativeReal, Points, PositiveInt, PositiveReal, Real, Section
+from pcmb.config.types import NonNegativeReal, PositiveInt, PositiveReal, Real, Section, count
 
 __all__ = ["CovarianceSpec", "GridSpec", "ProcessSpec"]
 
@@ -103,7 +103,7 @@ class GridSpec(Section):
 
     start: Real = Field(default=0.0, description="first point")
     stop: Real = Field(description="last point (> start)")
-    points: Annotated[Points, Field(le=kl.MAX_GRID_POINTS)] = Field(
+    points: count(ge=2, le=kl.MAX_GRID_POINTS) = Field(
         description="number of points m: the model receives (B, m) values"
     )
 
@@ -146,7 +146,12 @@ def _settings(
 
 class ProcessSpec(Section):
     """``{process: kl, covariance, grid, energy | terms}``: a zero-mean Gaussian random
-    process, expanded into the fewest standard normal germs that keep ``energy``."""
+    process, expanded into the fewest standard normal germs that keep ``energy``.
+
+    Its germs are inputs ``<name>[0]``, ``<name>[1]``, ... in its place in the germ order
+    (``method.order`` may give the process one order for all of them); the model receives
+    the field at the grid's points, (B, m), under ``<name>``. See ``docs/processes.md``.
+    """
 
     process: Literal["kl"] = Field(description="the expansion: Karhunen–Loève")
     covariance: CovarianceSpec = Field(description="the stationary covariance")

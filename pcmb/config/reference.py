@@ -395,10 +395,9 @@ def _nested(path: str, nested: _Nested, level: int, context: str) -> _Table:
 def _mixed(path: str, nested: _Nested, level: int, context: str, where: str) -> _Table:
     """The tables of a union whose forms are picked by different keys (``dist: uniform``,
     ..., ``process: kl``): one table per form, titled by its key and value."""
-    assert nested.selectors is not None
     picks = [
         (section, _selector_key(section, chosen), chosen)
-        for (section, _), chosen in zip(nested.forms, nested.selectors, strict=True)
+        for (section, _), chosen in zip(nested.forms, nested.selectors or [], strict=True)
     ]
     values = {
         key: [_first_value(s, key) for s, k, _ in picks if k == key] for _, key, _ in picks
