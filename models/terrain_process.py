@@ -58,9 +58,10 @@ class SampledProfile:
 
     The field-input form of the terrain: pcmb hands a random process input to the model as
     (B, m) values at ``numpy.linspace(start, stop, m)`` (SPEC §3), and the integrator needs
-    the height between the samples. The not-a-knot cubic spline's error is about
-    (ω h)⁴/384 of a component of angular frequency ω for a spacing h: 2e-7 for the shortest
-    mode of the terrain (L2 ≈ 2.3 m) sampled every 0.2 m.
+    the height between the samples. The not-a-knot cubic spline's error for a component of
+    angular frequency ω and a spacing h is about 5(ω h)⁴/384 inside and up to (ω h)⁴/24 in
+    the end intervals: 1.6e-6 of the shortest mode of the terrain (L2 ≈ 2.3 m) sampled every
+    0.2 m (tests/test_process_configs.py).
 
     Parameters
     ----------

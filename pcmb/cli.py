@@ -251,6 +251,12 @@ def _inspect(path: str) -> str:
     ]
     design = dataclasses.asdict(result.design)
     lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
+    for name, found in result.processes.items():
+        lines.append(
+            f"process  {name}: {found.covariance.description['kind']} covariance, "
+            f"{found.terms} germs keep {found.captured_energy:.4f} of the variance, field of "
+            f"{found.grid.size} points"
+        )
     if result.multi_index is not None:
         lines.append(f"chaos    {result.multi_index.shape[0]} terms")
     if result.partition is not None:

@@ -418,7 +418,7 @@ class Study:
     def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> Fingerprint:
         """What the resume journal belongs to: everything that changes the node values.
 
-        Its ``digest`` hashes the nodes' parameters, the time grid, the modes of every
+        Its ``digest`` hashes the nodes' parameters, the time grid, the settings of every
         random process (what its germs become), the input names (the
         order of the columns), the outputs, an explicit chunk size, ``fingerprint_extra``
         (for a study built from a config: the run-relevant part of the validated config,
@@ -431,9 +431,17 @@ class Study:
         policy) and the analysis are left out: changing them keeps the finished work.
         """
         digest = hashlib.sha256()
-        for array in (nodes.params, self.times, *(p.modes for p in self.processes.values())):
+        for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
-        settings = [list(outputs), self.chunk_size, list(self.input_names), self.fingerprint_extra]
+        # A process by its settings (they make its modes; their bits may vary with the BLAS).
+        processes = {name: found.describe() for name, found in self.processes.items()}
+        settings = [
+            list(outputs),
+            self.chunk_size,
+            list(self.input_names),
+            self.fingerprint_extra,
+            processes,
+        ]
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
         return Fingerprint(digest.hexdigest(), digest_files(model_files(self.model_factory)))
