@@ -396,9 +396,7 @@ def cosine_covariance_kl(
     return eigenvalues, functions * np.sqrt(2 / period)
 
 
-def exponential_kl_eigenvalues(
-    variance: float, length: float, width: float, count: int
-) -> Array:
+def exponential_kl_eigenvalues(variance: float, length: float, width: float, count: int) -> Array:
     """The largest ``count`` Karhunen–Loève eigenvalues of σ² exp(-|x1 − x2|/ℓ) on an
     interval of length ``width``.
 

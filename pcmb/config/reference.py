@@ -254,9 +254,7 @@ def _describe(
         text, nested = _describe(get_args(tp)[0])
         distinct = "distinct " if unique in after else ""
         if nested is not None:
-            nested = _Nested(
-                INDEX + nested.suffix, nested.forms, nested.selector, nested.selectors
-            )
+            nested = _Nested(INDEX + nested.suffix, nested.forms, nested.selector, nested.selectors)
         return f"{size}list of {distinct}{_plural(text)}", nested
     if origin is dict:
         key, _ = _describe(get_args(tp)[0])
@@ -399,12 +397,14 @@ def _mixed(path: str, nested: _Nested, level: int, context: str, where: str) -> 
         (section, _selector_key(section, chosen), chosen)
         for (section, _), chosen in zip(nested.forms, nested.selectors or [], strict=True)
     ]
-    values = {
-        key: [_first_value(s, key) for s, k, _ in picks if k == key] for _, key, _ in picks
-    }
-    doc = "One form per " + "; or ".join(
-        f"`{key}`: " + ", ".join(f"`{v}`" for v in listed) for key, listed in values.items()
-    ) + "."
+    values = {key: [_first_value(s, key) for s, k, _ in picks if k == key] for _, key, _ in picks}
+    doc = (
+        "One form per "
+        + "; or ".join(
+            f"`{key}`: " + ", ".join(f"`{v}`" for v in listed) for key, listed in values.items()
+        )
+        + "."
+    )
     group = _Table(path, f"`{path}`{where}", level, doc)
     for section, key, chosen in picks:
         label = f"`{key}: {_first_value(section, key)}`"
