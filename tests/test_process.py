@@ -3,6 +3,8 @@ section and its errors, and a study with a field input against exact statistics.
 
 from __future__ import annotations
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -244,3 +246,19 @@ def test_process_germs_are_ordinary_inputs_for_every_method(tmp_path, method):
         np.testing.assert_allclose(result.std("y") ** 2, var, rtol=4 * np.sqrt(2 / 64))
     else:  # linear in the germs: exact
         np.testing.assert_allclose(result.std("y") ** 2, var, rtol=1e-10)
+
+
+def test_validate_says_how_many_germs_and_the_energy_kept(tmp_path, capsys):
+    from pcmb.cli import main
+
+    (tmp_path / "field_model.py").write_text(MODEL)
+    config = tmp_path / "field.yaml"
+    config.write_text(json.dumps(CONFIG))  # JSON is YAML
+    assert main(["validate", str(config)]) == 0
+    kl = _config(tmp_path).study_inputs["road"]
+    shown = capsys.readouterr().out
+    assert (
+        f"process  road: exponential covariance, {kl.terms} germs road[0]..road[{kl.terms - 1}] "
+        f"keep {kl.captured_energy:.4f} of the variance"
+    ) in shown
+    assert "  road[0]    normal(mean=0.0, std=1.0)" in shown
