@@ -433,15 +433,9 @@ class Study:
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
-        # A process by its settings (they make its modes; their bits may vary with the BLAS).
-        processes = {name: found.describe() for name, found in self.processes.items()}
-        settings = [
-            list(outputs),
-            self.chunk_size,
-            list(self.input_names),
-            self.fingerprint_extra,
-            processes,
-        ]
+        settings = [list(outputs), self.chunk_size, list(self.input_names), self.fingerprint_extra]
+        if self.processes:  # by their settings: they make the modes, whose bits vary by BLAS
+            settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
         return Fingerprint(digest.hexdigest(), digest_files(model_files(self.model_factory)))
