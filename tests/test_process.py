@@ -18,7 +18,7 @@ from pcmb.references import cosine_covariance_kl, exponential_kl_eigenvalues
 
 @pytest.fixture(scope="module")
 def exponential_kl() -> process.RandomProcess:
-    """σ = 1, ℓ = 1 on [0, 10], 201 points: 41 germs keep 95 % (Nyström on 1001 points)."""
+    """σ = 1, ℓ = 1 on [0, 10], 201 points: 41 germs keep 95 % (Nyström on 2001 points)."""
     return process.RandomProcess.karhunen_loeve(
         process.exponential(1.0, 1.0), 0.0, 10.0, 201, energy=0.95
     )
@@ -28,10 +28,11 @@ def test_exponential_eigenvalues_match_the_transcendental_equations(exponential_
     kl = exponential_kl
     exact = exponential_kl_eigenvalues(1.0, 1.0, 10.0, kl.terms)
     error = np.abs(kl.eigenvalues - exact) / exact
-    # The kink-corrected Gregory rule errs by ~(ω_k h)⁴/240 with h = 0.01: 1e-9 for the
-    # first modes, ~2e-6 at the 41st (ω ≈ 13); the Richardson estimate is within 3x.
-    assert error[:5].max() < 1e-7
-    assert error.max() < 5e-6
+    # The kink-corrected Gregory rule on 2001 points (h = 0.005) errs by ~(ω_k h)⁴/240 up to
+    # a few times that: 5e-11 to 2e-9 for the first five modes, 2e-7 at the 41st (ω ≈ 13); the
+    # Richardson estimate is within 3x.
+    assert error[:5].max() < 1e-8
+    assert error.max() < 1e-6
     assert error.max() <= 3 * kl.eigenvalue_error
     assert kl.eigenvalue_error <= 3 * error.max()
 

@@ -21,6 +21,7 @@ entries at the grid points (the refined grid contains them), so no interpolation
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -56,7 +57,7 @@ __all__ = [
 ]
 
 #: The Nyström grid is the process grid refined to at least this many points.
-NYSTROM_POINTS = 1000
+NYSTROM_POINTS = 2000
 #: Most points of a process grid (the eigenproblem is dense: m² memory, m³ work).
 MAX_GRID_POINTS = 2001
 #: Share of the variance kept when neither ``energy`` nor ``terms`` is given.
@@ -273,12 +274,9 @@ def _parity_bases(points: int) -> tuple[NDArray[np.float64], NDArray[np.float64]
     return even, odd
 
 
-def _nystrom(
-    covariance: Covariance, start: float, stop: float, points: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Eigenvalues (J,) in decreasing order, eigenfunction values (J, J) (orthonormal in
-    L²(start, stop) under the rule), and the rule's weights (J,), on ``points`` uniform
-    points.
+@dataclass(frozen=True)
+class _Nystrom:
+    """The Nyström eigenproblem of a stationary covariance on ``points`` uniform points.
 
     A stationary kernel on a uniform grid with symmetric weights is a centro-symmetric
     matrix: its eigenvectors are even or odd about the middle, found from two problems of
@@ -286,26 +284,53 @@ def _nystrom(
     cos/sin pair of a spectral line on whole periods) and, with the sign rule (largest entry
     positive), makes the modes the same on every machine.
     """
-    x = np.linspace(start, stop, points)
-    h = x[1] - x[0]
-    weights = _gregory_weights(points, h)
-    root = np.sqrt(weights)
-    # Stationary on a uniform grid: R(|x_i - x_j|) is a Toeplitz matrix of J lags.
-    lags = covariance.function(np.arange(points) * h)
-    matrix = root[:, None] * scipy.linalg.toeplitz(lags) * root[None, :]
-    values, vectors = [], []
-    for basis in _parity_bases(points):
-        if basis.shape[1]:
-            found, inner = np.linalg.eigh(basis.T @ matrix @ basis)
-            values.append(found)
-            vectors.append(basis @ inner)
-    values, vectors = np.concatenate(values), np.hstack(vectors)
-    order = np.argsort(values, kind="stable")[::-1]
-    values, vectors = values[order], vectors[:, order]
-    peaks = np.argmax(np.abs(vectors), axis=0)
-    vectors *= np.sign(vectors[peaks, np.arange(points)])
-    # Euler–Maclaurin: the kink of R at zero lag sits on a node of every row.
-    return values + h**2 / 6 * covariance.slope, vectors / root[:, None], weights
+
+    covariance: Covariance
+    start: float
+    stop: float
+    points: int
+
+    @functools.cached_property
+    def _problems(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """(basis (J, n_b), symmetric matrix (n_b, n_b)) of the even and the odd half."""
+        h = (self.stop - self.start) / (self.points - 1)
+        root = np.sqrt(_gregory_weights(self.points, h))
+        # Stationary on a uniform grid: R(|x_i - x_j|) is a Toeplitz matrix of J lags.
+        lags = self.covariance.function(np.arange(self.points) * h)
+        matrix = root[:, None] * scipy.linalg.toeplitz(lags) * root[None, :]
+        return [
+            (basis, basis.T @ matrix @ basis)
+            for basis in _parity_bases(self.points)
+            if basis.shape[1]
+        ]
+
+    @functools.cached_property
+    def spectrum(self) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """Every eigenvalue (J,), decreasing, and the half (0 even, 1 odd) it belongs to."""
+        found = [scipy.linalg.eigvalsh(block) for _, block in self._problems]
+        values = np.concatenate(found)
+        half = np.repeat(np.arange(len(found)), [f.size for f in found])
+        order = np.argsort(values, kind="stable")[::-1]
+        h = (self.stop - self.start) / (self.points - 1)
+        # Euler–Maclaurin: the kink of R at zero lag sits on a node of every row.
+        return values[order] + h**2 / 6 * self.covariance.slope, half[order]
+
+    def modes(self, count: int) -> NDArray[np.float64]:
+        """The leading ``count`` eigenfunctions at the points, (J, count), orthonormal in
+        L²(start, stop) under the rule, in the order of :attr:`spectrum`."""
+        _, half = self.spectrum
+        h = (self.stop - self.start) / (self.points - 1)
+        root = np.sqrt(_gregory_weights(self.points, h))
+        out = np.empty((self.points, count))
+        for b, (basis, block) in enumerate(self._problems):
+            where = np.flatnonzero(half[:count] == b)
+            if where.size:
+                n = block.shape[0]
+                _, inner = scipy.linalg.eigh(block, subset_by_index=[n - where.size, n - 1])
+                out[:, where] = basis @ inner[:, ::-1]
+        peaks = np.argmax(np.abs(out), axis=0)
+        out *= np.sign(out[peaks, np.arange(count)])
+        return out / root[:, None]
 
 
 @dataclass(frozen=True)
@@ -391,7 +416,8 @@ class RandomProcess:
         factor = max(1, math.ceil((NYSTROM_POINTS - 1) / (points - 1)))
         factor += factor * (points - 1) % 2
         fine = factor * (points - 1) + 1
-        values, vectors, _ = _nystrom(covariance, start, stop, fine)
+        nystrom = _Nystrom(covariance, start, stop, fine)
+        values, _ = nystrom.spectrum
         total = covariance.variance * (stop - start)
         positive = int(np.sum(values > ZERO_RATIO * values[0]))
         if terms is None:
@@ -402,15 +428,15 @@ class RandomProcess:
                 f"terms: the covariance has {positive} non-zero eigenvalues on this grid, "
                 f"fewer than the {terms} asked for"
             )
-        coarse, _, _ = _nystrom(covariance, start, stop, fine // 2 + 1)
-        change = np.abs(coarse[:terms] - values[:terms]) / values[:terms]
+        coarse = _Nystrom(covariance, start, stop, fine // 2 + 1).spectrum[0][:terms]
+        change = np.abs(coarse - values[: coarse.size]) / values[: coarse.size]
         change /= 2**covariance.rate - 1
         kept = values[:terms]
         return cls(
             covariance=covariance,
             grid=np.linspace(start, stop, points),
             eigenvalues=kept.copy(),
-            modes=(vectors[::factor, :terms] * np.sqrt(kept)).T.copy(),
+            modes=(nystrom.modes(terms)[::factor] * np.sqrt(kept)).T.copy(),
             energy=energy,
             total_variance=total,
             eigenvalue_error=float(change.max()),
