@@ -367,6 +367,10 @@ class RandomProcess:
     eigenvalue_error: float
     nystrom_points: int
 
+    def __post_init__(self) -> None:
+        for array in (self.grid, self.eigenvalues, self.modes):
+            array.setflags(write=False)  # shared: a config's expansion is made once
+
     @classmethod
     def karhunen_loeve(
         cls,
