@@ -45,6 +45,8 @@ _EXPORTS = {
     "pcmb.adapters.python": ["FunctionModel", "as_model", "batched", "load_entry", "pointwise"],
     "pcmb.adapters.command": ["CommandModel"],
     "pcmb.adapters.mujoco.model": ["MujocoModel", "MujocoModelFactory"],
+    "pcmb.adapters.fmu.factory": ["FmuModelFactory"],
+    "pcmb.adapters.fmu.model": ["FmuModel"],
     "pcmb.chaos.polynomials": [
         "GaussRule",
         "Hermite",
@@ -79,6 +81,8 @@ __all__ = [
     "ConfigError",
     "Design",
     "Distribution",
+    "FmuModel",
+    "FmuModelFactory",
     "FunctionModel",
     "Gamma",
     "GaussRule",

@@ -23,6 +23,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.errors import (
@@ -34,6 +35,9 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.run.backends import BACKENDS
+
+if TYPE_CHECKING:
+    from pcmb.axes import OutputAxis
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -62,8 +66,8 @@ def _parser() -> argparse.ArgumentParser:
     validate = commands.add_parser("validate", help="check a config without running anything")
     validate.add_argument("config")
 
-    inspect = commands.add_parser("inspect", help="summarise a result file")
-    inspect.add_argument("result", help="an HDF5 file written by pcmb run")
+    inspect = commands.add_parser("inspect", help="summarise a result file (or a sweep.h5)")
+    inspect.add_argument("result", help="an HDF5 file written by pcmb run or pcmb sweep")
 
     report = commands.add_parser("report", help="write figures and an index page of a result")
     report.add_argument("result", help="an HDF5 file written by pcmb run")
@@ -82,6 +86,26 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("reference", help="the result the others are compared with")
     compare.add_argument("others", nargs="+", metavar="OTHER", help="results to compare")
     compare.add_argument("-o", "--output", help="folder for overlay figures (default: none)")
+
+    sweep = commands.add_parser(
+        "sweep", help="run one case by several methods at rising cost against a reference"
+    )
+    sweep.add_argument("config", help="YAML study configuration (its sweep: section, if any)")
+    sweep.add_argument(
+        "-o",
+        "--output",
+        help="folder for sweep.csv, sweep.h5, sweep.png and the results "
+        "(default: the config's output without .h5, followed by _sweep)",
+    )
+    sweep.add_argument(
+        "--reference", metavar="REF.h5", help="result to measure against (not sweep.reference)"
+    )
+    sweep.add_argument(
+        "--jobs", type=int, help="worker processes (default: config, else all cores)"
+    )
+    sweep.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
+    sweep.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
+    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
 
     commands.add_parser("schema", help="print the config JSON Schema (for editors)")
     return parser
@@ -102,6 +126,11 @@ def _summary(config) -> str:
         f"name     {config.name}",
         f"model    {config.model.kind} ({ADAPTERS[config.model.kind].summary})",
         f"outputs  {', '.join(outputs)}",
+        *(
+            f"derived  {name}: {entry.kind} of {entry.source}"
+            + "".join(f", {key} {value:g}" for key, value in entry.options.items())
+            for name, entry in study.derived.items()
+        ),
         f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
         "inputs   (germ order)",
     ]
@@ -196,6 +225,40 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return EXIT_OK
 
 
+def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    from pcmb.run.backends import warm_up
+
+    if args.jobs is not None and args.jobs < 1:
+        raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.backend in (None, "loky"):
+        warm_up(args.jobs)
+
+    from pcmb.config.schema import load_config
+    from pcmb.sweep.runner import run_sweep
+
+    config = load_config(args.config)
+    folder = args.output
+    if folder is None:
+        if config.output is None:
+            raise UsageError(f"{args.config}: no output folder: give -o DIR or set 'output:'")
+        folder = config.output.removesuffix(".h5") + "_sweep"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PcmbWarning)  # stored in each setting's file
+        outcome = run_sweep(
+            config,
+            folder,
+            reference=args.reference,
+            resume=args.resume,
+            progress=False if args.quiet else None,
+            jobs=args.jobs,
+            backend=args.backend,
+            command_line=shlex.join(["pcmb", *argv]),
+        )
+    settings = len({(row.method, row.setting, row.replicate) for row in outcome.table.rows})
+    _log(f"pcmb: wrote {', '.join(str(p) for p in outcome.files[:3])} ({settings} settings)")
+    return EXIT_OK
+
+
 def _load(path: str):
     from pcmb.store import load
 
@@ -204,7 +267,16 @@ def _load(path: str):
 
 def _report(args: argparse.Namespace) -> int:
     from pcmb.analysis.report import write_report
+    from pcmb.sweep.table import is_sweep_file
 
+    if is_sweep_file(args.result):
+        from pcmb.sweep.report import write_sweep_report
+        from pcmb.sweep.table import read_sweep
+
+        folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
+        written = write_sweep_report(read_sweep(args.result), folder, source=args.result)
+        _log(f"pcmb: wrote {len(written) - 1} figures and {written[-1]}")
+        return EXIT_OK
     result = _load(args.result)
     others = [_load(path) for path in args.compare]
     folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
@@ -231,6 +303,17 @@ def _compare(args: argparse.Namespace) -> int:
         written = write_comparison_figures(reference, others, args.output, labels=args.others)
         _log(f"pcmb: wrote {len(written)} figures to {args.output}")
     return EXIT_OK
+
+
+def _placement(axis: OutputAxis | None, on_time: bool) -> str:
+    """Where an output of ``pcmb inspect`` lives, unless on time: ``  on frequency [Hz], 40
+    points`` or ``  scalar``."""
+    if on_time:
+        return ""
+    if axis is None:
+        return "  scalar"
+    unit = f" [{axis.unit}]" if axis.unit else ""
+    return f"  on {axis.name}{unit}, {axis.values.size} points"
 
 
 def _inspect(path: str) -> str:
@@ -266,6 +349,7 @@ def _inspect(path: str) -> str:
         mean, std = result.mean(name), result.std(name)
         lines.append(
             f"{name:<12}{mean.min():>12.4g}{mean.max():>12.4g}{std.min():>12.4g}{std.max():>12.4g}"
+            + _placement(result.axis(name), result.on_time(name))
         )
     for name, found in result.diagnostics.items():
         held = (
@@ -274,11 +358,16 @@ def _inspect(path: str) -> str:
             if found.holdout is not None
             else "no held-out runs"
         )
-        verdict = (
-            "reliable at every time"
-            if found.reliable
-            else f"UNRELIABLE from t = {found.failing_from:.4g}"
-        )
+        axis = result.axis(name)
+        if axis is None:  # a scalar: pass or fail
+            verdict = "reliable" if found.reliable else "UNRELIABLE"
+        else:
+            point = "time" if result.on_time(name) else f"{axis.name} point"
+            verdict = (
+                f"reliable at every {point}"
+                if found.reliable
+                else f"UNRELIABLE from {axis.name} = {found.failing_from:.4g}"
+            )
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
@@ -329,11 +418,16 @@ def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
         print(_summary(load_config(args.config)))
     elif args.command == "inspect":
-        print(_inspect(args.result))
+        from pcmb.sweep.table import is_sweep_file, read_sweep, summary
+
+        is_sweep = is_sweep_file(args.result)
+        print(summary(read_sweep(args.result)) if is_sweep else _inspect(args.result))
     elif args.command == "report":
         return _report(args)
     elif args.command == "compare":
         return _compare(args)
+    elif args.command == "sweep":
+        return _sweep(args, argv)
     elif args.command == "schema":
         from pcmb.config.schema import config_json_schema
 

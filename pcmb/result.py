@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
@@ -317,7 +318,8 @@ class StudyResult:
     status:
         (N,) int8 :class:`Status` codes.
     values:
-        Output name -> (N, T) model values (NaN rows for failed nodes).
+        Output name -> (N, T) model values (NaN rows for failed nodes); (N, K) for an output
+        on its own axis, (N, 1) for a scalar (see ``axes``).
     expansions:
         Output name -> :class:`ChaosExpansion` (empty for sampling without a fit), or
         :class:`~pcmb.chaos.elements.PiecewiseExpansion` for multi-element collocation.
@@ -353,6 +355,10 @@ class StudyResult:
     processes:
         Random process inputs by name (:class:`pcmb.chaos.process.RandomProcess`); their
         germs ``name[k]`` are among the inputs.
+    axes:
+        Output name -> its own axis (:class:`~pcmb.axes.OutputAxis`), or ``None`` for a
+        scalar (a derived figure of merit, a model's scalar output); the outputs not listed
+        are on ``times``. Every statistic of an output is per point of its axis.
     """
 
     name: str
@@ -379,6 +385,7 @@ class StudyResult:
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
     processes: dict[str, RandomProcess] = field(default_factory=dict)
+    axes: dict[str, OutputAxis | None] = field(default_factory=dict)
 
     @property
     def method(self) -> str:
@@ -388,6 +395,25 @@ class StudyResult:
     @property
     def outputs(self) -> tuple[str, ...]:
         return tuple(self.values)
+
+    def on_time(self, name: str) -> bool:
+        """Whether output ``name`` is a time series on ``times``."""
+        return name not in self.axes
+
+    def axis(self, name: str) -> OutputAxis | None:
+        """The axis of output ``name``: its own, a time axis (``unit`` empty), or ``None``
+        for a scalar."""
+        if name in self.axes:
+            return self.axes[name]
+        return OutputAxis("t", self.times)
+
+    def grid(self, name: str) -> NDArray[np.float64]:
+        """(W,) the points of output ``name``: ``times``, its axis's values, or ``[0.]`` for a
+        scalar."""
+        if self.on_time(name):
+            return self.times
+        axis = self.axes[name]
+        return np.zeros(1) if axis is None else axis.values
 
     @property
     def n_nodes(self) -> int:

@@ -22,6 +22,7 @@ import numpy as np
 
 from pcmb.analysis.diagnostics import CODES, HeldOut, Holdout, OutputDiagnostics
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
+from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import from_description
@@ -43,6 +44,8 @@ from pcmb.run.output import write_error
 __all__ = ["SCHEMA_VERSION", "load", "write_result"]
 
 SCHEMA_VERSION = 1
+#: The scale of an output's points: /time, /<axis name>, or None for a scalar output.
+_Trail = h5py.Dataset | None
 _VERSIONED = ("numpy", "scipy", "h5py", "joblib", "pydantic", "pyyaml", "mujoco")
 
 
@@ -68,6 +71,55 @@ def _attach(dataset: h5py.Dataset, *scales: h5py.Dataset) -> h5py.Dataset:
     return dataset
 
 
+def _points(
+    group: h5py.Group, key: str, data: Any, scales: tuple[h5py.Dataset, ...], trail: _Trail
+) -> h5py.Dataset:
+    """A dataset whose last axis is an output's points, on scale ``trail``; a scalar output's
+    (``trail`` None) is stored without that axis."""
+    if trail is None:
+        return _attach(group.create_dataset(key, data=np.asarray(data)[..., 0]), *scales)
+    return _attach(group.create_dataset(key, data=data), *scales, trail)
+
+
+def _columns(data: np.ndarray, scalar: bool) -> np.ndarray:
+    """The last axis a scalar output's datasets were stored without, back (length 1)."""
+    return data[..., None] if scalar else data
+
+
+def _output_scales(file: h5py.File, result: StudyResult, time_: h5py.Dataset) -> dict[str, _Trail]:
+    """Output name -> the scale of its points: ``/time``, ``/<axis name>`` (attribute
+    ``units``), or ``None`` for a scalar."""
+    trails: dict[str, _Trail] = {}
+    for name in result.values:
+        if result.on_time(name):
+            trails[name] = time_
+            continue
+        axis = result.axes[name]
+        if axis is None:
+            trails[name] = None
+            continue
+        if axis.name not in file:
+            _scale(file, axis.name, axis.values).attrs["units"] = axis.unit
+        trails[name] = file[axis.name]
+    return trails
+
+
+def _read_axes(file: h5py.File, outputs: list[str]) -> dict[str, OutputAxis | None]:
+    """Output name -> its own axis or ``None`` (scalar), from each group's ``axis``
+    attribute; the outputs without one are on time."""
+    axes: dict[str, OutputAxis | None] = {}
+    for name in outputs:
+        group = file["outputs"][name]
+        if "axis" not in group.attrs:
+            continue
+        key = _text(group.attrs["axis"])
+        scale = file[key] if key else None
+        axes[name] = (
+            None if scale is None else OutputAxis(key, scale[()], _text(scale.attrs["units"]))
+        )
+    return axes
+
+
 def _write_density(group: h5py.Group, at_name: str, density: Density) -> None:
     at = _scale(group, at_name, density.at)
     point = _scale(group, "point", np.arange(density.value.shape[1]))
@@ -83,9 +135,9 @@ def _read_density(group: h5py.Group, at_name: str) -> Density:
 
 
 def _write_analysis(
-    file: h5py.File, output: h5py.Group, analysis: OutputAnalysis, time_: h5py.Dataset, unit: str
+    file: h5py.File, output: h5py.Group, analysis: OutputAnalysis, time_: _Trail, unit: str
 ) -> None:
-    _attach(output.create_dataset("quantiles", data=analysis.quantiles), file["quantile"], time_)
+    _points(output, "quantiles", analysis.quantiles, (file["quantile"],), time_)
     _write_density(output.create_group("pdf"), "pdf_time", analysis.pdf)
     spectrum = analysis.spectrum
     if spectrum is None:
@@ -101,7 +153,9 @@ def _write_analysis(
         _write_density(group.create_group("pdf"), "pdf_frequency", spectrum.pdf)
 
 
-def _read_analysis(file: h5py.File, names: list[str]) -> Analysis | None:
+def _read_analysis(
+    file: h5py.File, names: list[str], axes: Mapping[str, OutputAxis | None]
+) -> Analysis | None:
     if "analysis" not in file.attrs:
         return None
     outputs = {}
@@ -119,7 +173,7 @@ def _read_analysis(file: h5py.File, names: list[str]) -> Analysis | None:
                 pdf=_read_density(part["pdf"], "pdf_frequency") if "pdf" in part else None,
             )
         outputs[name] = OutputAnalysis(
-            quantiles=group["quantiles"][()],
+            quantiles=_columns(group["quantiles"][()], name in axes and axes[name] is None),
             pdf=_read_density(group["pdf"], "pdf_time"),
             spectrum=spectrum,
         )
@@ -149,7 +203,8 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     time_ = _scale(file, "time", result.times)
     node = _scale(file, "node", np.arange(n_nodes))
     input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
-    _write_diagnostics(file, result, time_, input_)
+    trails = _output_scales(file, result, time_)
+    _write_diagnostics(file, result, trails, input_)
 
     inputs = file.create_group("inputs")
     inputs.attrs["names"] = json.dumps(list(result.input_names))
@@ -184,43 +239,43 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     file.create_group("outputs").attrs["names"] = json.dumps(list(result.values))
     for name, values in result.values.items():
         group = file.create_group(f"outputs/{name}")
-        _attach(group.create_dataset("values", data=values), node, time_)
-        _attach(group.create_dataset("mean", data=result.mean(name)), time_)
-        _attach(group.create_dataset("std", data=result.std(name)), time_)
+        trail = trails[name]
+        if not result.on_time(name):
+            group.attrs["axis"] = "" if trail is None else result.axes[name].name
+        _points(group, "values", values, (node,), trail)
+        _points(group, "mean", result.mean(name), (), trail)
+        _points(group, "std", result.std(name), (), trail)
         expansion = result.expansions.get(name)
         if expansion is not None and term is not None:
-            coefficients = group.create_dataset("coefficients", data=expansion.coefficients)
-            _attach(coefficients, *_element_scale(file, expansion), term, time_)
-            _attach(
-                group.create_dataset("sobol_first", data=expansion.sobol_first()), input_, time_
-            )
-            _attach(
-                group.create_dataset("sobol_total", data=expansion.sobol_total()), input_, time_
-            )
+            scales = (*_element_scale(file, expansion), term)
+            _points(group, "coefficients", expansion.coefficients, scales, trail)
+            _points(group, "sobol_first", expansion.sobol_first(), (input_,), trail)
+            _points(group, "sobol_total", expansion.sobol_total(), (input_,), trail)
         if name in result.nominal:
-            _attach(group.create_dataset("nominal", data=result.nominal[name]), time_)
+            _points(group, "nominal", result.nominal[name], (), trail)
         if name in result.regression:
-            _write_regression(group, result.regression[name], time_, input_)
+            _write_regression(group, result.regression[name], trail, input_)
         if analysis is not None:
             unit = analysis.settings.units.get(name, "")
-            _write_analysis(file, group, analysis.outputs[name], time_, unit)
+            _write_analysis(file, group, analysis.outputs[name], trail, unit)
 
 
 def _write_regression(
-    group: h5py.Group, fit: RegressionFit, time_: h5py.Dataset, input_: h5py.Dataset
+    group: h5py.Group, fit: RegressionFit, time_: _Trail, input_: h5py.Dataset
 ) -> None:
     """A sparse regression fit of one output: ``loo`` (T,), ``selected`` (S_k, n), attribute
     ``condition``."""
-    _attach(group.create_dataset("loo", data=fit.loo), time_)
+    _points(group, "loo", fit.loo, (), time_)
     selected = group.create_dataset("selected", data=fit.selected)
     selected.dims[1].attach_scale(input_)
     group.attrs["condition"] = fit.condition
 
 
-def _read_regression(group: h5py.Group) -> RegressionFit | None:
+def _read_regression(group: h5py.Group, scalar: bool) -> RegressionFit | None:
     if "loo" not in group:
         return None
-    return RegressionFit(group["selected"][()], group["loo"][()], float(group.attrs["condition"]))
+    loo = _columns(group["loo"][()], scalar)
+    return RegressionFit(group["selected"][()], loo, float(group.attrs["condition"]))
 
 
 def _write_elements(
@@ -325,10 +380,15 @@ def _element_scale(file: h5py.File, expansion: ChaosExpansion) -> tuple[h5py.Dat
 
 
 def _read_expansion(
-    group: h5py.Group, index: np.ndarray, partition: Partition | None, dists: tuple, names: tuple
+    group: h5py.Group,
+    index: np.ndarray,
+    partition: Partition | None,
+    dists: tuple,
+    names: tuple,
+    scalar: bool,
 ) -> ChaosExpansion | PiecewiseExpansion:
     """An output's expansion: piecewise on ``partition`` (from ``/elements``) if given."""
-    coefficients = group["coefficients"][()]
+    coefficients = _columns(group["coefficients"][()], scalar)
     if partition is None:
         return ChaosExpansion(coefficients, index, dists, names)
     return PiecewiseExpansion(partition, coefficients, index, names)
@@ -349,17 +409,18 @@ _DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimat
 
 
 def _write_diagnostics(
-    file: h5py.File, result: StudyResult, time_: h5py.Dataset, input_: h5py.Dataset
+    file: h5py.File, result: StudyResult, trails: Mapping[str, _Trail], input_: h5py.Dataset
 ) -> None:
-    """/diagnostics/<output>: per-time indicators and the verdict; /validation: the held-out
-    runs (germ, params, status, and values per output)."""
+    """/diagnostics/<output>: per-time (per-point) indicators and the verdict; /validation:
+    the held-out runs (germ, params, status, and values per output)."""
     for name, found in result.diagnostics.items():
         group = file["diagnostics"].require_group(name)
+        time_ = trails[name]
         for key, field in _DIAGNOSTIC_ARRAYS.items():
-            _attach(group.create_dataset(key, data=getattr(found, field)), time_)
+            _points(group, key, getattr(found, field), (), time_)
         if found.holdout is not None:
-            _attach(group.create_dataset("holdout_error", data=found.holdout.error), time_)
-            _attach(group.create_dataset("holdout_upper", data=found.holdout.upper), time_)
+            _points(group, "holdout_error", found.holdout.error, (), time_)
+            _points(group, "holdout_upper", found.holdout.upper, (), time_)
             group.attrs["holdout_count"] = found.holdout.count
             group.attrs["confidence"] = found.holdout.confidence
         group.attrs["failing_from"] = found.failing_from
@@ -376,26 +437,29 @@ def _write_diagnostics(
     status = np.where(held_out.ok, Status.OK, Status.FAILED).astype(np.int8)
     _attach(group.create_dataset("status", data=status), run)
     for name, values in held_out.values.items():
-        _attach(group.create_dataset(f"{name}/values", data=values), run, time_)
+        _points(group, f"{name}/values", values, (run,), trails[name])
 
 
 def _read_diagnostics(
-    file: h5py.File, warnings: tuple[WarningRecord, ...]
+    file: h5py.File, warnings: tuple[WarningRecord, ...], scalars: set[str]
 ) -> tuple[dict[str, OutputDiagnostics], HeldOut | None]:
     found: dict[str, OutputDiagnostics] = {}
     for name, group in file.get("diagnostics", {}).items():
         if not isinstance(group, h5py.Group) or "decay" not in group:
             continue
         attrs = group.attrs
+        scalar = name in scalars
         holdout = None
         if "holdout_error" in group:
             holdout = Holdout(
-                group["holdout_error"][()],
-                group["holdout_upper"][()],
+                _columns(group["holdout_error"][()], scalar),
+                _columns(group["holdout_upper"][()], scalar),
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )
-        arrays = {field: group[key][()] for key, field in _DIAGNOSTIC_ARRAYS.items()}
+        arrays = {
+            field: _columns(group[key][()], scalar) for key, field in _DIAGNOSTIC_ARRAYS.items()
+        }
         found[name] = OutputDiagnostics(
             output=name,
             scale=float(attrs["scale"]),
@@ -413,7 +477,9 @@ def _read_diagnostics(
         germ=group["germ"][()],
         params=group["params"][()],
         values={
-            name: group[name]["values"][()] for name in group if isinstance(group[name], h5py.Group)
+            name: _columns(group[name]["values"][()], name in scalars)
+            for name in group
+            if isinstance(group[name], h5py.Group)
         },
         ok=group["status"][()] == Status.OK,
     )
@@ -565,21 +631,24 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
         nominal: dict[str, np.ndarray] = {}
         regression: dict[str, RegressionFit] = {}
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
+        axes = _read_axes(file, outputs)
+        scalars = {name for name, axis in axes.items() if axis is None}
         for name in outputs:
             group = file["outputs"][name]
-            values[name] = group["values"][()]
+            scalar = name in scalars
+            values[name] = _columns(group["values"][()], scalar)
             if "coefficients" in group and index is not None:
-                expansions[name] = _read_expansion(group, index, partition, dists, names)
+                expansions[name] = _read_expansion(group, index, partition, dists, names, scalar)
             if "nominal" in group:
-                nominal[name] = group["nominal"][()]
-            if (fit := _read_regression(group)) is not None:
+                nominal[name] = _columns(group["nominal"][()], scalar)
+            if (fit := _read_regression(group, scalar)) is not None:
                 regression[name] = fit
         failures = tuple(
             NodeFailure(f["index"], f["params"], f["message"])
             for f in json.loads(_text(attrs.get("failures", "[]")))
         )
         warnings = _read_warnings(file)
-        diagnostics, held_out = _read_diagnostics(file, warnings)
+        diagnostics, held_out = _read_diagnostics(file, warnings, scalars)
         return StudyResult(
             name=_text(attrs["name"]),
             design=_read_design(file, index),
@@ -597,7 +666,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             seconds=float(attrs.get("seconds", 0.0)),
             nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
             nominal=nominal,
-            analysis=_read_analysis(file, outputs),
+            analysis=_read_analysis(file, outputs, axes),
             regression=regression,
             node_elements=file["nodes/element"][()] if "element" in file["nodes"] else None,
             adaptive=_read_adaptive(file),
@@ -605,4 +674,5 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             diagnostics=diagnostics,
             held_out=held_out,
             processes=_read_processes(file),
+            axes=axes,
         )

@@ -11,14 +11,15 @@ import json
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import cloudpickle
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
+from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
     HELD_OUT_SEED,
     TOLERANCE,
@@ -27,11 +28,14 @@ from pcmb.analysis.diagnostics import (
     diagnose_all,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
+from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
+from pcmb.designs.base import Recovery
 from pcmb.errors import (
+    ConfigError,
     ConfigProblem,
     IllPosedError,
     ModelDefinitionError,
@@ -42,6 +46,7 @@ from pcmb.errors import (
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS, Pool, checking_backend, open_pool
 from pcmb.run.executor import (
+    Layout,
     ModelFacts,
     RunResult,
     chunk_bounds,
@@ -52,6 +57,8 @@ from pcmb.run.executor import (
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
+
+_Runs = TypeVar("_Runs", RunResult, HeldOut, None)
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -65,6 +72,16 @@ FailurePolicy = Literal["abort", "retry", "regress"]
 
 def _usage(key: str, message: str) -> UsageError:
     return UsageError([ConfigProblem(key, message)], source="Study")
+
+
+def _derived(entries: Mapping[str, Any]) -> dict[str, DerivedOutput]:
+    """``derived`` entries as DerivedOutput s (a config-like mapping is parsed)."""
+    given = {k: v for k, v in entries.items() if not isinstance(v, DerivedOutput)}
+    try:
+        parsed = parse_derived(given)
+    except ConfigError as error:
+        raise UsageError(error.problems, source="Study") from None
+    return {name: parsed.get(name, entry) for name, entry in entries.items()}
 
 
 def _check_inputs(
@@ -143,6 +160,13 @@ class Study:
     diagnostics_tolerance:
         Accepted error of an expansion, relative to the output's largest standard deviation
         (``diagnostics.tolerance``): the diagnostics' verdict.
+    diagnosed:
+        Outputs the diagnostics judge (``diagnostics.outputs``; default: all), e.g. to leave
+        out a residual that is zero to round-off, whose spread is noise.
+    derived:
+        Figures of merit computed from the time outputs after the runs, each a scalar
+        output: name -> :class:`~pcmb.analysis.derived.DerivedOutput`, or a mapping as in
+        the config's ``derived:`` (``{"x1_peak": {"max_abs": "x1"}}``).
 
     Raises
     ------
@@ -189,6 +213,8 @@ class Study:
         analysis: AnalysisSettings | None = None,
         validation: int = VALIDATION,
         diagnostics_tolerance: float = TOLERANCE,
+        diagnosed: Sequence[str] | None = None,
+        derived: Mapping[str, DerivedOutput | Mapping[str, Any]] | None = None,
     ):
         #: What the model receives, by name: distributions and random processes.
         self.model_inputs = _check_inputs(inputs)
@@ -244,6 +270,8 @@ class Study:
         self.nominal = dict(nominal or {})
         self.analysis = analysis
         self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
+        self.diagnosed = _tuple(diagnosed)
+        self.derived = _derived(derived or {})
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
@@ -327,6 +355,8 @@ class Study:
             analysis=config.analysis_settings,
             validation=method.validation,
             diagnostics_tolerance=config.diagnostics.tolerance,
+            diagnosed=config.diagnostics.outputs,
+            derived=config.derived_outputs,
         )
         study.fingerprint_extra = _run_settings(config)
         return study
@@ -368,6 +398,8 @@ class Study:
             "analysis": self.analysis,
             "validation": self.validation,
             "diagnostics_tolerance": self.diagnostics_tolerance,
+            "diagnosed": self.diagnosed,
+            "derived": self.derived,
         }
         unknown = sorted(set(changes) - set(arguments))
         if unknown:
@@ -442,9 +474,18 @@ class Study:
 
     # -- running ------------------------------------------------------------------------------
 
-    def size_estimate(self, n_nodes: int, outputs: Sequence[str]) -> SizeEstimate:
-        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`)."""
-        return estimate_size(n_nodes, self.times.size, len(outputs), len(self.inputs))
+    def size_estimate(
+        self,
+        n_nodes: int,
+        outputs: Sequence[str],
+        axes: Mapping[str, OutputAxis | None] | None = None,
+    ) -> SizeEstimate:
+        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`),
+        every output (the derived ones too) counted as wide as the widest (``axes``: the
+        model's ``output_axes``)."""
+        widths = Layout.of(outputs, self.times, axes or {}).widths
+        count = len(outputs) + len(self.derived)
+        return estimate_size(n_nodes, max(widths, default=1), count, len(self.inputs))
 
     def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
         """Build the model in a worker, check it against the study, and return the outputs
@@ -487,7 +528,14 @@ class Study:
                     f"input(s) {strangers} name no parameter of the model; "
                     f"it has {sorted(parameters)}",
                 )
-        return declared if self.outputs is None else self.outputs
+        kept = declared if self.outputs is None else self.outputs
+        on_time = tuple(name for name in kept if name not in facts.axes)
+        problems = derived_problems(self.derived, kept, on_time, self.times)
+        if problems:
+            raise UsageError(
+                [ConfigProblem(key, message) for key, message in problems], source="Study"
+            )
+        return kept
 
     def run(
         self,
@@ -543,12 +591,14 @@ class Study:
         facts = describe_model(self.model_factory, pool)
         outputs = self._outputs(facts)
         if self.analysis is not None:
-            self.analysis.check(self.times, outputs)
+            on_time = [name for name in outputs if name not in facts.axes]
+            self.analysis.check(self.times, [*outputs, *self.derived], on_time)
         journal_dir = None
         if output is not None:
             # Before any node runs and before a journal exists: an output that cannot be
             # written (a folder, a read-only or full file system) is found now.
-            check_output(output, self.size_estimate(nodes.size, outputs), create=True)
+            estimate = self.size_estimate(nodes.size, outputs, facts.axes)
+            check_output(output, estimate, create=True)
             journal_dir = Path(f"{output}.journal")
             Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
             if Journal.exists(journal_dir) and not resume:
@@ -558,9 +608,15 @@ class Study:
                 )
         runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
         nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
-        held_out = self._run_held_out(facts, outputs, pool, journal_dir, progress)
+        held_out, held_out_failed = self._run_held_out(facts, outputs, pool, journal_dir, progress)
         nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
-        result = self._diagnosed(self._with_nominal(self._recover(nodes, runs), nominal), held_out)
+        runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
+        axes = {
+            **{name: axis for name, axis in facts.axes.items() if name in outputs},
+            **dict.fromkeys(self.derived),
+        }
+        recovered = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        result = self._diagnosed(self._with_nominal(recovered, nominal), held_out, held_out_failed)
         if self.analysis is not None:
             result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
@@ -573,6 +629,43 @@ class Study:
             if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
                 warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
+
+    def _recover_by_axis(
+        self,
+        nodes: TensorGrid | NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        axes: Mapping[str, OutputAxis | None],
+    ) -> Recovery:
+        """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
+        order; the study-wide records (adaptive, refinement, elements) are the first's."""
+        parts = []
+        for _, on_time, group in _by_axis(values, axes):
+            # Warning records locate times only (time_range): off time they name indices.
+            grid = self.times if on_time else None
+            parts.append(self.design.recover(nodes, group, ok, times=grid))
+        first = parts[0]
+        if len(parts) == 1:
+            return first
+        return dataclasses.replace(
+            first,
+            expansions={
+                name: part.expansions[name]
+                for name in values
+                for part in parts
+                if name in part.expansions
+            },
+            warnings=tuple(record for part in parts for record in part.warnings),
+            regression={k: v for part in parts for k, v in part.regression.items()},
+        )
+
+    def _with_derived(self, runs: _Runs) -> _Runs:
+        """Runs (or held-out runs, or ``None``) with the derived figures of their time
+        outputs added as (N, 1) outputs."""
+        if runs is None or not self.derived:
+            return runs
+        found = derive(self.derived, self.times, runs.values)
+        return dataclasses.replace(runs, values={**runs.values, **found})
 
     def _run_rounds(
         self,
@@ -590,7 +683,9 @@ class Study:
         more = getattr(self.design, "more", None)
         round_number = 0
         while more is not None:
-            batch = more(nodes, runs.values, runs.status == Status.OK)
+            # Rounds are steered by the outputs of one axis (time first): see _by_axis.
+            steering = _by_axis(runs.values, facts.axes)[0][2]
+            batch = more(nodes, steering, runs.status == Status.OK)
             if batch is None:
                 break
             round_number += 1
@@ -618,8 +713,9 @@ class Study:
         fresh_journal = False
         if journal_dir is not None:
             fresh_journal = not Journal.exists(journal_dir)
+            widths = Layout.of(outputs, self.times, facts.axes).widths
             journal = Journal(
-                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, self.times.size
+                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, widths
             )
         try:
             runs = run_nodes(
@@ -673,11 +769,12 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
-    ) -> HeldOut | None:
+    ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """The held-out runs that check a chaos expansion (none for plain sampling), journaled
-        in the journal's ``validation`` folder, under the failure policy."""
+        in the journal's ``validation`` folder, under the failure policy; and a
+        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not self.validation or self.design.record().basis is None:
-            return None
+            return None, ()
         seed = self.seed + HELD_OUT_SEED
         batch = random_nodes(tuple(self.inputs.values()), self.validation, "montecarlo", seed)
         folder = None if journal_dir is None else journal_dir / "validation"
@@ -686,25 +783,41 @@ class Study:
         found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress, halves)
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
-        return HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        if not found.failures:
+            return held_out, ()
+        failed = WarningRecord(
+            "nodes-failed",
+            f"{len(found.failures)} of {batch.size} held-out run(s) failed and were left out of "
+            f"the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
+        )
+        return held_out, (failed,)
 
-    def _diagnosed(self, result: StudyResult, held_out: HeldOut | None) -> StudyResult:
-        """The result with its diagnostics (per output) and their warning records."""
+    def _diagnosed(
+        self,
+        result: StudyResult,
+        held_out: HeldOut | None,
+        held_out_failed: tuple[WarningRecord, ...],
+    ) -> StudyResult:
+        """The result with its diagnostics (per output) and their warning records, after
+        ``held_out_failed``."""
+        judged = self.diagnosed or tuple(result.expansions)
         found = diagnose_all(
-            result.expansions,
+            {name: e for name, e in result.expansions.items() if name in judged},
             result.germ,
             result.values,
             result.status == Status.OK,
             result.times,
             held_out,
             self.diagnostics_tolerance,
+            axes=result.axes,
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(
             result,
             diagnostics=found,
             held_out=held_out,
-            warnings=(*result.warnings, *records),
+            warnings=(*result.warnings, *held_out_failed, *records),
         )
 
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
@@ -740,7 +853,14 @@ class Study:
 
     # -- recovery -----------------------------------------------------------------------------
 
-    def _recover(self, nodes: TensorGrid | NodeSet, runs: RunResult) -> StudyResult:
+    def _recover(
+        self,
+        nodes: TensorGrid | NodeSet,
+        runs: RunResult,
+        axes: Mapping[str, OutputAxis | None],
+    ) -> StudyResult:
+        """Expansions of every output: the design recovers the outputs of each axis together
+        (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
         warnings: list[WarningRecord] = []
         if runs.failures:
@@ -752,7 +872,7 @@ class Study:
                 )
             )
         try:
-            recovery = self.design.recover(nodes, runs.values, ok, times=self.times)
+            recovery = self._recover_by_axis(nodes, runs.values, ok, axes)
         except IllPosedError as error:
             message = f"on_failure regress could not refit: {error}:"
             raise ModelRunError(runs.failures, message) from error
@@ -779,12 +899,24 @@ class Study:
         )
 
 
+def _by_axis(
+    values: Mapping[str, Any], axes: Mapping[str, OutputAxis | None]
+) -> list[tuple[OutputAxis | None, bool, dict[str, Any]]]:
+    """The outputs grouped by axis: ``(axis, on_time, {name: values})``, time first."""
+    groups: dict[str | None, tuple[OutputAxis | None, bool, dict[str, Any]]] = {}
+    for name, array in values.items():
+        axis = axes.get(name)
+        key = "" if name not in axes else None if axis is None else axis.name
+        groups.setdefault(key, (axis, name not in axes, {}))[2][name] = array
+    return sorted(groups.values(), key=lambda group: not group[1])
+
+
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
 _EXECUTION_ONLY = frozenset(
     {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run"}
 )
 #: Top-level config keys that cannot change a node's values.
-_NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution"})
+_NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution", "derived"})
 
 
 def _run_settings(config: StudyConfig) -> str:

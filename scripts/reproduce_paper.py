@@ -162,14 +162,14 @@ CASES = {
     "pendulum_ode": Case(
         "pendulum_ode.yaml",
         2000,
-        (3,),
+        (3, 7),
         extras=_pendulum,
         figures=("theta_time.png", "y_compare.png"),
     ),
     "pendulum_dae": Case(
         "pendulum_dae.yaml",
         2000,
-        (3,),
+        (3, 7),
         extras=_pendulum,
         figures=("x_compare.png",),
     ),

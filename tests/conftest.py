@@ -3,6 +3,7 @@
 Exact reference solutions live in :mod:`pcmb.references`; helpers that must be importable
 by path stay modules of their own (``executor_models``: model classes worker processes
 unpickle; ``model_loading``: the simulators of ``models/`` loaded at module level).
+``fmu_dir`` builds real FMUs with pythonfmu once per session.
 """
 
 from __future__ import annotations
@@ -12,6 +13,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: pythonfmu slaves built into FMUs by ``fmu_dir``: the example of configs/ and the tests'.
+FMU_SOURCES = (
+    *sorted((ROOT / "models" / "fmu").glob("*.py")),
+    *sorted((ROOT / "tests" / "data" / "fmu").glob("*.py")),
+)
 
 LINEAR_MODEL = '''
 import os
@@ -82,3 +90,21 @@ def linear_study(tmp_path: Path) -> Callable[..., Path]:
         return config
 
     return write
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder of FMUs built at test time from ``FMU_SOURCES`` (``<Name>.py`` ->
+    ``<Name>.fmu``): FMI 2.0 slaves by pythonfmu, FMI 3.0 ones (importing pythonfmu3) by
+    pythonfmu3. Skips when pythonfmu ships no binary for this platform."""
+    from fmpy import platform, supported_platforms
+    from pythonfmu import FmuBuilder
+    from pythonfmu3 import FmuBuilder as Fmi3Builder
+
+    dest = tmp_path_factory.mktemp("fmus")
+    for source in FMU_SOURCES:
+        fmi3 = "from pythonfmu3 import" in source.read_text(encoding="utf-8")
+        built = (Fmi3Builder if fmi3 else FmuBuilder).build_FMU(source, dest=dest)
+        if platform not in supported_platforms(str(built)):
+            pytest.skip(f"pythonfmu ships no FMU binary for this platform ({platform})")
+    return dest

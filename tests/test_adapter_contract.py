@@ -1,7 +1,8 @@
 """Every registered adapter kind honours the adapter contract (pcmb.adapters.registry).
 
 Each kind brings a small example, ``tests/data/adapters/<kind>.yaml``: its ``model:``
-section, two nodes of its inputs and a time grid (``${PYTHON}`` stands for this interpreter).
+section, two nodes of its inputs and a time grid (``${PYTHON}`` stands for this interpreter,
+``${FMU_DIR}`` for the folder of FMUs built at test time).
 """
 
 from __future__ import annotations
@@ -21,11 +22,14 @@ from pcmb.config.loader import parse_yaml
 from pcmb.config.types import ModelSection
 
 EXAMPLES = Path(__file__).parent / "data" / "adapters"
+SUBSTITUTIONS = {"${PYTHON}": sys.executable}
 
 
 def example(kind: str) -> dict:
     path = EXAMPLES / f"{kind}.yaml"
-    text = path.read_text(encoding="utf-8").replace("${PYTHON}", sys.executable)
+    text = path.read_text(encoding="utf-8")
+    for placeholder, value in SUBSTITUTIONS.items():
+        text = text.replace(placeholder, value)
     data, _, problems = parse_yaml(text, str(path))
     assert not problems
     return data
@@ -38,6 +42,8 @@ def test_every_registered_kind_has_an_example():
 
 @pytest.fixture(params=sorted(ADAPTERS))
 def kind(request):
+    if request.param == "fmu":
+        SUBSTITUTIONS["${FMU_DIR}"] = str(request.getfixturevalue("fmu_dir"))
     return request.param
 
 

@@ -164,3 +164,65 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     assert first.design.label in shown
     assert f"adaptive {first.adaptive.index_set.shape[0]} level indices" in shown
     assert "a level " in shown and "b level " in shown
+
+
+# -- the anisotropic tensor grid (basis tensor) --------------------------------------------
+
+#: Three inputs of the exponential: 3^3 = 27 runs at level 1 in each.
+THREE = {name: EXPONENTIAL[name] for name in ("x0", "x1", "x2")}
+
+
+def _exponential3(x):
+    return np.exp(x @ RATES[:3])
+
+
+@pytest.mark.parametrize("tolerance", [1e-2, 1e-4])
+def test_a_tensor_grid_raised_one_input_at_a_time_meets_the_tolerance(tolerance):
+    rates = RATES[:3]
+    result = _adaptive(
+        _exponential3,
+        THREE,
+        method="adaptive",
+        basis="tensor",
+        tolerance=tolerance,
+        max_runs=5000,
+    )
+    fit = result.adaptive
+    index = fit.index_set
+    levels = index.max(axis=0)
+    # A box: every level multi-index up to the levels reached, so a tensor grid.
+    assert index.shape[0] == np.prod(levels + 1)
+    assert np.all(levels >= 1) and list(levels) == sorted(levels, reverse=True)
+    assert fit.estimate <= tolerance
+    mean, variance = np.prod(_moments(rates)), np.prod(_moments(2 * rates))
+    variance -= mean**2
+    # Honest: the true errors of the mean and std are within 10x the tolerance.
+    assert abs(result.std("y")[0] - np.sqrt(variance)) <= 10 * tolerance * np.sqrt(variance)
+    assert abs(result.mean("y")[0] - mean) <= 10 * tolerance * np.sqrt(variance)
+    assert result.design.basis == "tensor"
+    # One input per round: each round adds one level of one input.
+    steps = np.diff(fit.history[:, 0])
+    assert steps.size == levels.sum() - 3 and np.all(steps > 0)
+
+
+def test_a_tensor_grid_stops_at_its_budget_and_says_so():
+    with pytest.warns(pcmb.PcmbWarning, match="would pass the budget of 60 runs"):
+        result = _adaptive(
+            _exponential3, THREE, method="adaptive", basis="tensor", tolerance=1e-12, max_runs=60
+        )
+    assert result.n_nodes <= 60
+    with pytest.raises(pcmb.UsageError, match="level 1 in every input takes 27 runs"):
+        Study(
+            _model(_exponential3, THREE),
+            THREE,
+            TIMES,
+            method="adaptive",
+            basis="tensor",
+            tolerance=1e-3,
+            max_runs=20,
+        )
+
+
+def test_kind_adaptive_refuses_another_basis():
+    with pytest.raises(ValueError, match=r"method\.basis: kind adaptive takes basis tensor"):
+        make_design(EXPONENTIAL, MethodSettings(kind="adaptive", tolerance=1e-3, basis="total"))

@@ -551,14 +551,21 @@ def test_command_config_builds_a_working_model(tmp_path):
             "nope.txt does not exist",
         ),
         ("mode: 0.0", "mod: 0.0", "model.templates[0]", "templates:", "line 3: placeholder"),
-        ("{file: out.csv}", "{file: out.dat}", "model.output.format", "output:", "found 'dat'"),
+        ("{file: out.csv}", "{file: out.dat}", "model.output.format", "output:", "'dat' is none"),
         ("timeout: 30", "timeout: 0", "model.timeout", "timeout:", "expected a value > 0"),
         (
             f"command: {sys.executable} sim",
             "command: pcmb-no-such-program sim",
-            "model.command",
+            "model.command[0]",
             "command:",
             "not found on PATH",
+        ),
+        (  # a command written as one string: its words are counted after splitting
+            "out.csv --deck",
+            "'{{ kk }}' --deck",
+            "model.command[2]",
+            "command:",
+            "placeholder '{{kk}}' names no parameter (known: k, y0, mode, times.start",
         ),
         (
             "  k: {dist",

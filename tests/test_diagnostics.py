@@ -10,9 +10,12 @@ and twice the tolerance.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+import pcmb
 from pcmb.analysis.diagnostics import (
     TOLERANCE,
     diagnose,
@@ -222,3 +225,22 @@ def test_a_surrogate_far_outside_the_runs_is_reported():
 def test_the_verdict_is_the_first_time_above_the_tolerance():
     assert verdict([0.0, 1.0, 2.0, 3.0], [0.0, 0.06, 0.01, 0.2], 0.05) == 1.0
     assert np.isnan(verdict([0.0, 1.0], [0.05, 0.0], 0.05))
+
+
+def test_diagnostics_outputs_leaves_a_round_off_residual_unjudged(tmp_path, capsys):
+    from pcmb.cli import main
+
+    config = tmp_path / "pendulum.yaml"
+    source = Path(__file__).parent.parent / "configs" / "pendulum_dae.yaml"
+    text = source.read_text(encoding="utf-8").replace(
+        "../models", str(source.parent.parent / "models")
+    )
+    config.write_text(text.replace("[x, y, theta]}", "[x, y, theta, q]}"), encoding="utf-8")
+    assert main(["validate", str(config)]) == 2
+    assert "diagnostics.outputs[3]: 'q' is not an output" in capsys.readouterr().err
+    config.write_text(text, encoding="utf-8")
+    out = tmp_path / "out.h5"
+    assert main(["run", str(config), "-o", str(out), "--quiet", "--strict"]) == 0
+    result = pcmb.load(out)
+    assert set(result.diagnostics) == {"x", "y", "theta"}  # the constraint is not judged
+    assert all(found.reliable for found in result.diagnostics.values())

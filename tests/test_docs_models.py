@@ -6,6 +6,8 @@ example script's ``main``), and its numbers are checked against closed forms:
 - the damped oscillator (docs/examples/python_oscillator.yaml in every python form,
   oscillator_api.py, configs/command_oscillator.yaml, docs/examples/command_deck.yaml):
   x(t) = e^{-ct/2} (cos ωt + c/(2ω) sin ωt), ω = sqrt(k - c²/4);
+- the series RLC circuit in ngspice (configs/ngspice_rlc.yaml, when ngspice is on PATH): the
+  same oscillator with k = 1/(LC), c = R/L;
 - the pendulum (configs/mujoco_pendulum.yaml, docs/examples/mujoco_pendulum_bind.yaml,
   mujoco_api.py): θ(t) = 2 asin(k sn(K(k) - sqrt(g/L) t, k)), k = sin(θ0/2).
 
@@ -76,6 +78,31 @@ def node_statistics(result, name, reference):
 
 def oscillator_x(k, c):
     return damped_oscillator(OSCILLATOR_TIMES, k, c)
+
+
+# The RLC example: R ~ U[8, 12] ohm, L ~ U[0.9, 1.1] mH, C ~ U[0.9, 1.1] uF, t in [0, 1 ms].
+RLC_RANGES = [(8.0, 12.0), (0.9e-3, 1.1e-3), (0.9e-6, 1.1e-6)]
+RLC_TIMES = np.linspace(0.0, 1e-3, 201)
+RLC_ORDER = 4
+# output -> (tolerance of node values and mean, tolerance of the std). ngspice's trapezoidal
+# steps (at most a hundredth of the output step) put every node within 7e-7 V of the exact vc
+# and 2.2e-8 A of il, and the mean inherits that bias (4.7e-7 V, 1.5e-8 A); the std is off by
+# 9e-8 V and 3e-9 A, and order 4 by 4e-8 V and 9e-10 A, while order 3 misses it by 1.3e-6 V
+# and 2.9e-8 A (test_rlc_tolerance_has_teeth).
+RLC_TOLERANCES = {"vc": (1.5e-6, 3e-7), "il": (5e-8, 1e-8)}
+INSTALL_NGSPICE = "apt-get install ngspice, brew install ngspice or conda-forge's ngspice"
+
+
+def rlc_vc(R, L, C):
+    """Capacitor voltage (N, T) of the discharging series RLC circuit, from 1 V."""
+    return damped_oscillator(RLC_TIMES, 1 / (L * C), R / L)
+
+
+def rlc_il(R, L, C):
+    """Loop current (N, T), -C vc' = e^{-ct/2} sin(ωt) / (L ω)."""
+    R, L, C = (np.asarray(v, dtype=float)[..., None] for v in (R, L, C))
+    c, omega = R / L, np.sqrt(1 / (L * C) - (R / L) ** 2 / 4)
+    return np.exp(-c * RLC_TIMES / 2) * np.sin(omega * RLC_TIMES) / (L * omega)
 
 
 @pytest.fixture
@@ -241,6 +268,34 @@ def test_command_failed_runs_keep_their_work_directory(tmp_path):
             "stderr.txt",
         }
         assert "KeyError: 'k'" in (workdir / "stderr.txt").read_text()
+
+
+def test_rlc_tolerance_has_teeth():
+    for name, exact in (("vc", rlc_vc), ("il", rlc_il)):
+        converged = gauss_statistics(exact, RLC_RANGES, 24)
+        at_order = gauss_statistics(exact, RLC_RANGES, RLC_ORDER + 1)
+        below = gauss_statistics(exact, RLC_RANGES, RLC_ORDER)
+        tolerance, std_tolerance = RLC_TOLERANCES[name]
+        assert np.abs(at_order[0] - converged[0]).max() < tolerance / 4
+        assert np.abs(at_order[1] - converged[1]).max() < std_tolerance / 4
+        assert np.abs(below[1] - converged[1]).max() > 2 * std_tolerance
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    shutil.which("ngspice") is None, reason=f"ngspice is not on PATH ({INSTALL_NGSPICE})"
+)
+def test_ngspice_rlc_config(tmp_path):
+    result = run_config(ROOT / "configs" / "ngspice_rlc.yaml", tmp_path / "out.h5")
+    assert result.input_names == ("R", "L", "C")
+    assert np.array_equal(result.times, RLC_TIMES)
+    assert result.params.shape == ((RLC_ORDER + 1) ** 3, 3)
+    for name, exact in (("vc", rlc_vc), ("il", rlc_il)):
+        tolerance, std_tolerance = RLC_TOLERANCES[name]
+        assert np.abs(result.values[name] - exact(*result.params.T)).max() <= tolerance
+        mean, std = gauss_statistics(exact, RLC_RANGES, 24)
+        assert np.abs(result.mean(name) - mean).max() <= tolerance
+        assert np.abs(result.std(name) - std).max() <= std_tolerance
 
 
 # --------------------------------------------------------------------------- kind: mujoco

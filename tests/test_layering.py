@@ -74,10 +74,10 @@ def test_the_chaos_core_imports_no_heavy_library_and_no_pipeline():
 @pytest.mark.parametrize(
     ("library", "owners"),
     [
-        ("h5py", ("pcmb.store",)),
+        ("h5py", ("pcmb.store", "pcmb.sweep.table")),  # a result file; a sweep file
         ("mujoco", ("pcmb.adapters.mujoco",)),
         ("yaml", ("pcmb.config.loader",)),
-        ("matplotlib", ("pcmb.analysis.report",)),
+        ("matplotlib", ("pcmb.analysis.report", "pcmb.sweep.chart")),  # a result's; a sweep's
     ],
 )
 def test_each_heavy_library_has_one_owner(library, owners):

@@ -417,10 +417,19 @@ def command(tmp_path: Path, output: str = "out.csv", deck: bool = False, **kwarg
     return CommandModel(args, **options)
 
 
-@pytest.mark.parametrize("output", ["out.csv", "out.json", "out.npy", "out.npz"])
-def test_command_reads_every_output_format_exactly(tmp_path, output):
+@pytest.mark.parametrize(
+    ("output", "fmt"),
+    [
+        ("out.csv", None),
+        ("out.txt", "table"),
+        ("out.json", None),
+        ("out.npy", None),
+        ("out.npz", None),
+    ],
+)
+def test_command_reads_every_output_format_exactly(tmp_path, output, fmt):
     k = np.array([1.5, 0.1 + 0.2])
-    out = command(tmp_path, output).simulate({"k": k}, TIMES)
+    out = command(tmp_path, output, output_format=fmt).simulate({"k": k}, TIMES)
     expected = decay(k)  # same formula, same inputs in the simulator: bit-identical
     for name in ("y", "dy"):
         np.testing.assert_array_equal(out[name], expected[name])
@@ -456,7 +465,7 @@ def test_command_work_directories_kept_only_for_failures(tmp_path):
 @pytest.mark.parametrize(
     ("mode", "output", "pattern"),
     [
-        (1, "out.csv", r"exited with code 3; last output:\nsomething went wrong in the solver"),
+        (1, "out.csv", r"exited with code 3; last lines of stderr.txt: 'something went wrong"),
         (3, "out.csv", r"cannot parse out.csv as csv: .*line 2: 'not-a-number' is not a number"),
         (4, "out.csv", r"the command succeeded but wrote no output file out.csv"),
         (5, "out.npy", r"output 'y' in out.npy has shape \(4,\), expected \(5,\)"),
@@ -496,7 +505,8 @@ def test_command_timeout_kills_the_whole_process_group(tmp_path):
         ({"templates": ["no_such.tmpl"]}, "model.templates[0]", "no_such.tmpl does not exist"),
         ({"files": ["sim_decay.py", "nope.py"]}, "model.files[1]", "nope.py does not exist"),
         ({"params": {"k": 2.0}}, "model.templates[0]", "deck.txt line 2: placeholder '{{y0}}'"),
-        ({"output_file": "out.txt"}, "model.output.format", "found 'txt'"),
+        ({"output_file": "out.txt"}, "model.output.format", "its extension 'txt' is none of"),
+        ({"output_format": "xml"}, "model.output.format", "found 'xml'"),
         ({"output_file": "sub/out.csv"}, "model.output.file", "plain file name"),
         (
             {"output_file": "deck.txt", "output_format": "csv"},
@@ -526,15 +536,16 @@ def test_command_program_lookup():
     with pytest.raises(ConfigError) as exc:
         build(["pcmb-no-such-program"])
     assert only_problem(exc) == (
-        "model.command",
+        "model.command[0]",
         "program 'pcmb-no-such-program' not found on PATH",
     )
     with pytest.raises(ConfigError) as exc:
         build("./toy_models.py")
+    assert only_problem(exc)[0] == "model.command[0]"
     assert "is not executable" in only_problem(exc)[1]
     with pytest.raises(ConfigError) as exc:
-        build("true {{ nope }}")
-    assert only_problem(exc)[0] == "model.command"
+        build("true x {{ nope }}")
+    assert only_problem(exc)[0] == "model.command[2]"
     assert "'{{nope}}' names no parameter" in only_problem(exc)[1]
     with pytest.raises(ConfigError) as exc:
         build("true 'unbalanced")

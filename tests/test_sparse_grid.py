@@ -12,6 +12,7 @@ from pcmb.chaos.inputs import Beta, Gamma, Normal, Uniform
 from pcmb.chaos.nested import (
     ClenshawCurtis,
     Leja,
+    LejaContinued,
     gauss_patterson,
     genz_keister,
     nested_rule,
@@ -41,6 +42,8 @@ RULE_CASES = [
     (ClenshawCurtis(), 7, uniform_moment),
     (gauss_patterson(), 4, uniform_moment),
     (genz_keister(), 4, normal_moment),
+    (LejaContinued(gauss_patterson()), 6, uniform_moment),
+    (LejaContinued(genz_keister()), 6, normal_moment),
     (Leja(Legendre()), 12, uniform_moment),
     (Leja(Hermite()), 12, normal_moment),
     (Leja(Jacobi(1.0, 2.5)), 12, lambda m: jacobi_moment(m, 1.0, 2.5)),
@@ -65,7 +68,7 @@ def test_nested_rules_are_nested_and_exact_to_their_degree(rule, top, moment):
         exact = rule.exactness(level)
         integrals = weights @ rule.family.evaluate(nodes, exact + 1)
         np.testing.assert_allclose(integrals[: exact + 1], np.eye(1, exact + 1)[0], atol=1e-12)
-        if not isinstance(rule, Leja):
+        if not isinstance(rule, Leja | LejaContinued):
             # The stated degree is sharp: the next one is not integrated.
             assert abs(integrals[exact + 1]) > 1e-9
         for m in range(min(exact, 12) + 1):
@@ -92,9 +95,13 @@ def test_patterson_and_genz_keister_nodes_match_the_published_tables():
 
 def test_auto_rules_and_their_limits():
     assert nested_rule(Legendre()).name == "gauss-patterson"
-    assert nested_rule(Legendre(), level=5).name == "clenshaw-curtis"
+    continued = nested_rule(Legendre(), level=5)
+    assert isinstance(continued, LejaContinued) and continued.base.name == "gauss-patterson"
+    # The continuation keeps the Gauss-Patterson levels, so no level loses exactness.
+    np.testing.assert_array_equal(continued.nodes(4), gauss_patterson().nodes(4))
+    assert continued.exactness(5) > gauss_patterson().exactness(4)
     assert nested_rule(Hermite()).name == "genz-keister"
-    assert nested_rule(Hermite(), level=5).name == "leja"
+    assert nested_rule(Hermite(), level=5).base.name == "genz-keister"
     assert nested_rule(Laguerre(1.0)).name == "leja"
     with pytest.raises(ValueError, match="for normal inputs"):
         nested_rule(Legendre(), "genz-keister")

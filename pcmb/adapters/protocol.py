@@ -46,7 +46,13 @@ class Model(Protocol):
     - ``check_times(times)`` raising :class:`~pcmb.errors.ConfigError` when the model cannot
       produce the grid; the config validator calls it before anything runs;
     - ``chunk_size: int``, the nodes per call the model prefers (a stacked integrator pays
-      per call); ``execution.chunk_size`` overrides it.
+      per call); ``execution.chunk_size`` overrides it;
+    - ``output_axes: Mapping[str, OutputAxis | None]``, the outputs that are not time
+      series: an :class:`~pcmb.axes.OutputAxis` (name, unit, (K,) values: a frequency
+      sweep) for an output returned as (B, K) on that axis, ``None`` for a scalar per run
+      returned as (B,). Outputs not listed are (B, T) on ``times``. Every statistic,
+      Sobol' index, PDF and diagnostic of an output is then per point of its axis, and the
+      result file stores it on its own dimension (``docs/models.md``).
     """
 
     outputs: tuple[str, ...]
@@ -67,7 +73,8 @@ class Model(Protocol):
         Returns
         -------
         Mapping[str, NDArray]
-            Every name in ``outputs`` -> (B, T).
+            Every name in ``outputs`` -> (B, T); (B, K) or (B,) for the outputs in
+            ``output_axes``.
         """
         ...
 
@@ -153,6 +160,13 @@ def check_batch(
     return arrays, times, sizes.pop() if sizes else 1
 
 
+def _point_shape(axes: Mapping[str, Any], name: str, n_times: int) -> tuple[int, ...]:
+    """One node's shape of output ``name``: (T,), (K,) on its own axis, () a scalar."""
+    if name not in axes:
+        return (n_times,)
+    return () if axes[name] is None else axes[name].values.shape
+
+
 class PointwiseModel(ABC):
     """A model that runs one node at a time; :meth:`simulate` loops over the batch.
 
@@ -220,7 +234,11 @@ class PointwiseModel(ABC):
             A node showed that the model cannot work at any node.
         """
         arrays, times, batch = check_batch(params, times, self.parameters)
-        out = {name: np.full((batch, times.size), np.nan) for name in self.outputs}
+        axes = getattr(self, "output_axes", None) or {}
+        out = {
+            name: np.full((batch, *_point_shape(axes, name, times.size)), np.nan)
+            for name in self.outputs
+        }
         for i in range(batch):
             values = {name: a[i] if a.ndim == 2 else float(a[i]) for name, a in arrays.items()}
             try:

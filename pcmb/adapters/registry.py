@@ -55,6 +55,10 @@ ADAPTERS: dict[str, AdapterEntry] = {
         "pcmb.adapters.command.spec:CommandModelSpec",
         "an external program run once per node in its own work directory",
     ),
+    "fmu": AdapterEntry(
+        "pcmb.adapters.fmu.spec:FmuModelSpec",
+        "a Functional Mock-up Unit (FMI 2.0/3.0) run through FMPy, instantiated once per worker",
+    ),
 }
 
 

@@ -40,7 +40,15 @@ from pcmb.chaos.expansion import sample_mean, unsafe_to_square
 from pcmb.errors import UsageError
 from pcmb.result import StudyResult
 
-__all__ = ["DRAWS", "LEVEL", "Comparison", "OutputDifference", "compare", "method_label"]
+__all__ = [
+    "DRAWS",
+    "LEVEL",
+    "Comparison",
+    "OutputDifference",
+    "compare",
+    "method_label",
+    "sampling_noise",
+]
 
 #: Family-wise level of the noise verdict: the chance that two samples of the same law are
 #: called "beyond noise" (at any time).
@@ -80,11 +88,13 @@ def _standardised(runs: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.where(rms > 0, unit / rms, 0.0)
 
 
-def _noise(result: StudyResult, name: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def sampling_noise(
+    result: StudyResult, name: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(T,) standard errors of a result's mean and std: zero for a collocation grid."""
     runs = _sampled(result, name)
     if runs is None:
-        zero = np.zeros(result.times.size)
+        zero = np.zeros(result.values[name].shape[1])
         return zero, zero
     count = runs.shape[0]
     kurtosis = np.mean(_standardised(runs) ** 4, axis=0)
@@ -307,6 +317,20 @@ def _check_grids(reference: StudyResult, other: StudyResult) -> None:
         )
 
 
+def _check_axes(reference: StudyResult, other: StudyResult, name: str) -> None:
+    """Output ``name`` must lie on the same points in both (time, one axis, or a scalar)."""
+    a, b = reference.axis(name), other.axis(name)
+    if reference.on_time(name) and other.on_time(name):
+        return
+    if a is None and b is None:
+        return
+    if a is None or b is None or not a.same(b):
+        raise UsageError(
+            f"output {name!r} lies on different axes in the two results: compare studies "
+            "whose outputs have the same points"
+        )
+
+
 def common_outputs(results: Sequence[StudyResult]) -> list[str]:
     """Outputs present in every result, in the first one's order.
 
@@ -351,13 +375,14 @@ def compare(
     differences = {}
     pair = (reference, other)
     for name in common_outputs(pair):
+        _check_axes(reference, other, name)
         statistics = [r.mean(name) for r in pair]
         statistics += [r.std(name) for r in pair]
         finite = np.logical_and.reduce([np.isfinite(s) for s in statistics])
         with np.errstate(over="ignore", invalid="ignore"):
             mean_gap = np.abs(other.mean(name) - reference.mean(name))
             std_gap = np.abs(other.std(name) - reference.std(name))
-            noise = [_noise(r, name) for r in pair]
+            noise = [sampling_noise(r, name) for r in pair]
             mean_noise = np.hypot(noise[0][0], noise[1][0])
             std_noise = np.hypot(noise[0][1], noise[1][1])
         if not finite.all():  # leave those times out of every figure below
@@ -366,7 +391,7 @@ def compare(
         scale = _largest(reference.std(name)[finite])
         mean_z = _z_scores(mean_gap, mean_noise, scale)
         std_z = _z_scores(std_gap, std_noise, scale)
-        times = reference.times[finite]
+        times = reference.grid(name)[finite]
         if mean_z is not None and std_z is not None:  # sampling noise: the family-wise test
             runs = tuple(int(np.sum(r.ok)) for r in pair if _sampled(r, name) is not None)
             critical, tolerance = _critical(pair, name, finite), float("nan")

@@ -25,12 +25,14 @@ remedy that fits the failure.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.axes import OutputAxis
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import draw_germs
 from pcmb.result import WarningRecord
@@ -382,6 +384,7 @@ def diagnose(
     holdout: tuple[ArrayLike, ArrayLike] | None = None,
     tolerance: float = TOLERANCE,
     node_germ: ArrayLike | None = None,
+    axis: str = "t",
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -403,6 +406,10 @@ def diagnose(
     node_germ:
         (N, n) germ of the runs, which bounds where the range check looks (see
         :func:`out_of_range`).
+    axis:
+        Name of the axis ``times`` are points of, for the message (``"t"``; ``""`` for a
+        scalar output, whose ``times`` is ``[0.]``: ``failing_from`` is then 0 when it fails,
+        NaN when it passes).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -419,13 +426,16 @@ def diagnose(
     records = range_checks(output, expansion, node_values, times, share)
     if not np.isnan(failing_from):
         failing = times >= failing_from
+        where = f" from {axis} = {failing_from:.4g}" if axis else ""
         message = (
-            f"polynomial chaos unreliable from t = {failing_from:.4g} "
+            f"polynomial chaos unreliable{where} "
             f"({_evidence(decay, checked, failing)}); consider "
             f"{_remedy(expansion, estimate, failing, share)}"
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
+    if axis != "t":  # a record's time_range is in time: off time, the message says where
+        records = [dataclasses.replace(record, time_range=None) for record in records]
     return OutputDiagnostics(
         output, scale, decay, checked, share, estimate, tolerance, failing_from, tuple(records)
     )
@@ -526,8 +536,11 @@ def diagnose_all(
     times: ArrayLike,
     held_out: HeldOut | None,
     tolerance: float = TOLERANCE,
+    axes: Mapping[str, OutputAxis | None] | None = None,
 ) -> dict[str, OutputDiagnostics]:
-    """:func:`diagnose` every output with a (single-element) chaos expansion.
+    """:func:`diagnose` every output with a (single-element) chaos expansion, each on its
+    own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points of
+    its axis or ``[0.]`` for a scalar.
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
     nodes that succeeded; the
@@ -542,7 +555,11 @@ def diagnose_all(
         if held_out is not None and held_out.ok.any():
             predicted = expansion.evaluate_germ(held_out.germ[held_out.ok])
             holdout = (predicted, held_out.values[name][held_out.ok])
+        grid, label = times, "t"
+        if axes is not None and name in axes:
+            axis = axes[name]
+            grid, label = (np.zeros(1), "") if axis is None else (axis.values, axis.name)
         found[name] = diagnose(
-            name, expansion, values[name][ok], times, holdout, tolerance, node_germ=germ[ok]
+            name, expansion, values[name][ok], grid, holdout, tolerance, germ[ok], label
         )
     return found

@@ -221,6 +221,19 @@ def _unreliable(result: StudyResult, name: str) -> float | None:
     return None if found is None or found.reliable else float(found.failing_from)
 
 
+def _points_axis(axes: Any, result: StudyResult, name: str, labels: _Labels) -> None:
+    """The x axis of an output's points: time, or its own axis (log where it is a frequency
+    and positive)."""
+    axis, grid = result.axis(name), result.grid(name)
+    if result.on_time(name):
+        axes.set_xlabel(labels.time())
+    else:
+        axes.set_xlabel(f"{axis.name} [{axis.unit}]" if axis.unit else axis.name)
+        if axis.is_frequency and grid[0] > 0:
+            axes.set_xscale("log")
+    axes.set_xlim(grid[0], grid[-1])
+
+
 def _time_figure(
     canvas: _Canvas,
     result: StudyResult,
@@ -228,9 +241,11 @@ def _time_figure(
     analysis: Analysis,
     others: Sequence[_Other],
     labels: _Labels,
-) -> Path:
+) -> Path | None:
+    if result.axis(name) is None:
+        return None  # a scalar: its PDF figure shows mean ± std
     figure, (axes,) = canvas.figure(1)
-    times, mean, std = result.times, result.mean(name), result.std(name)
+    times, mean, std = result.grid(name), result.mean(name), result.std(name)
     note = _not_finite(canvas, f"{name}: mean or std", mean, std)
     with np.errstate(over="ignore", invalid="ignore"):
         low, high = _gaps(mean - std), _gaps(mean + std)
@@ -264,13 +279,13 @@ def _time_figure(
             lw=0,
             label="chaos unreliable (see the index page)",
         )
-        note += f"\n(shaded: chaos unreliable from t = {unreliable:.4g})"
-    axes.set_xlabel(labels.time())
+        note += f"\n(shaded: chaos unreliable from {result.axis(name).name} = {unreliable:.4g})"
+    _points_axis(axes, result, name, labels)
     axes.set_ylabel(labels.output(name))
     axes.set_title(f"{name}: mean with error bars{note}")
-    axes.set_xlim(times[0], times[-1])
     _legend(figure, [axes])
-    return canvas.save(figure, f"{name}_time.png")
+    suffix = "time" if result.on_time(name) else result.axis(name).name
+    return canvas.save(figure, f"{name}_{suffix}.png")
 
 
 def _plot_density(axes: Any, density: Density, row: int, color: str, label: str) -> bool:
@@ -337,23 +352,28 @@ def _pdf_figure(
     pdf = analysis.outputs[name].pdf
     figure, panels = canvas.figure(pdf.at.size)
     source = "surrogate" if not draws_are_runs(result, name) else "runs"
+    axis, grid = result.axis(name), result.grid(name)
     for row, (axes, at) in enumerate(zip(panels, pdf.at, strict=True)):
+        where = "" if axis is None else f" at {axis.name} = {at:.4g}"
         if not _plot_density(axes, pdf, row, _COLORS[0], f"{method_label(result)}, {source}"):
-            _no_density(axes, canvas, f"{name}: PDF at t = {at:.4g}")
+            _no_density(axes, canvas, f"{name}: PDF{where}")
         for other in others:
             _, draws = output_draws(other.result, name, [at], analysis.settings)
             is_runs = draws_are_runs(other.result, name)
             h = pdf.bandwidth[row]
             _plot_other_draws(axes, draws[:, 0], is_runs, other, nonnegative=False, bandwidth=h)
-        if name in result.nominal:
-            k = int(np.argmin(np.abs(result.times - at)))
-            if np.isfinite(result.nominal[name][k]):
-                axes.axvline(
-                    result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal"
-                )
+        k = int(np.argmin(np.abs(grid - at)))
+        if name in result.nominal and np.isfinite(result.nominal[name][k]):
+            axes.axvline(result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal")
+        if axis is None:  # a scalar: its mean ± std on its PDF
+            mean, std = float(result.mean(name)[k]), float(result.std(name)[k])
+            axes.axvline(mean, color=_COLORS[0], lw=1.2, label=f"mean {mean:.4g}")
+            for edge in (mean - std, mean + std):
+                label = f"± 1σ ({std:.3g})" if edge < mean else None
+                axes.axvline(edge, color=_COLORS[0], lw=1.0, ls=":", label=label)
         axes.set_xlabel(labels.output(name))
         axes.set_ylabel("probability density")
-        axes.set_title(f"{name} at t = {at:.4g}{_bandwidth_note(pdf, row)}")
+        axes.set_title(f"{name}{where}{_bandwidth_note(pdf, row)}")
     _legend(figure, panels)
     return canvas.save(figure, f"{name}_pdf.png")
 
@@ -361,10 +381,20 @@ def _pdf_figure(
 def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labels) -> Path | None:
     if name not in result.expansions or len(result.input_names) < 2:
         return None  # with one input both indices are 1 wherever the output varies
-    figure, (first_axes, total_axes) = canvas.figure(2)
-    times = result.times
     first, total = result.sobol_first(name), result.sobol_total(name)
     colors = [_COLORS[i % len(_COLORS)] for i in range(len(result.input_names))]
+    if result.axis(name) is None:  # a scalar: bars per input
+        figure, (axes,) = canvas.figure(1)
+        at = np.arange(len(result.input_names))
+        axes.bar(at - 0.2, first[:, 0], 0.4, color=colors, alpha=0.75, label="first order")
+        axes.bar(at + 0.2, total[:, 0], 0.4, color=colors, hatch="//", label="total")
+        axes.set_xticks(at, result.input_names)
+        axes.set_ylabel("share of the variance")
+        axes.set_ylim(0.0, 1.05)
+        axes.set_title(f"{name}: Sobol' indices (plain: first order, hatched: total)")
+        return canvas.save(figure, f"{name}_sobol.png")
+    figure, (first_axes, total_axes) = canvas.figure(2)
+    times = result.grid(name)
     # Where the output does not vary the indices are NaN: nothing is stacked there.
     first_axes.stackplot(
         times, np.nan_to_num(first), labels=result.input_names, colors=colors, alpha=0.75
@@ -374,10 +404,9 @@ def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labe
     first_axes.set_title(f"{name}: first-order Sobol' indices (stacked)")
     total_axes.set_title(f"{name}: total Sobol' indices")
     for axes in (first_axes, total_axes):
-        axes.set_xlabel(labels.time())
+        _points_axis(axes, result, name, labels)
         axes.set_ylabel("share of the variance")
         axes.set_ylim(0.0, 1.05)
-        axes.set_xlim(times[0], times[-1])
     _legend(figure, [first_axes, total_axes])
     return canvas.save(figure, f"{name}_sobol.png")
 
@@ -515,10 +544,10 @@ def _compare_figure(
     comparisons: Sequence[Comparison],
     labels: _Labels,
 ) -> Path | None:
-    if not others:
-        return None
+    if not others or result.axis(name) is None:
+        return None  # a scalar's differences are in the index page's table
     figure, (mean_axes, std_axes) = canvas.figure(2)
-    times = result.times
+    times = result.grid(name)
     own = method_label(result)
     mean_axes.plot(times, _gaps(result.mean(name)), color=_COLORS[0], lw=1.8, label=own)
     std_axes.plot(times, _gaps(result.std(name)), color=_COLORS[0], lw=1.8, label=own)
@@ -540,8 +569,7 @@ def _compare_figure(
     mean_axes.set_ylabel(labels.output(name))
     std_axes.set_ylabel(labels.output(name))
     for axes in (mean_axes, std_axes):
-        axes.set_xlabel(labels.time())
-        axes.set_xlim(times[0], times[-1])
+        _points_axis(axes, result, name, labels)
     _legend(figure, [mean_axes, std_axes])
     return canvas.save(figure, f"{name}_compare.png")
 
@@ -650,10 +678,10 @@ def _index_page(
         unreliable = _unreliable(result, name)
         if unreliable is not None:
             why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
-            parts.append(
-                f'<p class="warn">Shaded in the time plot: chaos unreliable from '
-                f"t = {unreliable:.4g}. {e(why)}</p>"
-            )
+            axis = result.axis(name)
+            where = "" if axis is None else f" from {axis.name} = {unreliable:.4g}"
+            plot = "the time plot" if result.on_time(name) else "its figures"
+            parts.append(f'<p class="warn">Shaded in {plot}: chaos unreliable{where}. {e(why)}</p>')
         for path in paths:
             relative = os.path.relpath(path, directory)
             parts.append(f'<p><img src="{e(relative)}" alt="{e(path.stem)}"></p>')

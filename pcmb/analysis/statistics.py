@@ -127,11 +127,17 @@ class AnalysisSettings:
             problems.append(("analysis.window", window))
         _raise(problems)
 
-    def problems(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[tuple[str, str]]:
+    def problems(
+        self,
+        times: NDArray[np.float64],
+        outputs: Sequence[str],
+        on_time: Sequence[str] | None = None,
+    ) -> list[tuple[str, str]]:
         """What does not fit a study's time grid and outputs, as (key path, message).
 
-        An unknown output, a PDF time outside the grid, a spectrum on a non-uniform grid,
-        a frequency above the grid's Nyquist frequency.
+        An unknown output, a spectrum of an output that is not on time (``on_time``: those
+        that are; default all), a PDF time outside the grid, a spectrum on a non-uniform
+        grid, a frequency above the grid's Nyquist frequency.
         """
         found = []
         for key, names in (("psd", self.psd or ()), ("units", self.units)):
@@ -139,6 +145,8 @@ class AnalysisSettings:
                 if name not in outputs:
                     where = f"analysis.{key}[{i}]" if key == "psd" else f"analysis.units.{name}"
                     found.append((where, f"{name!r} is not an output ({', '.join(outputs)})"))
+                elif key == "psd" and on_time is not None and name not in on_time:
+                    found.append((f"analysis.psd[{i}]", f"{name!r} is not a time output"))
         for i, t in enumerate(self.pdf_times or ()):
             if not times[0] <= t <= times[-1]:
                 found.append(
@@ -158,7 +166,12 @@ class AnalysisSettings:
                     )
         return found
 
-    def check(self, times: NDArray[np.float64], outputs: Sequence[str]) -> None:
+    def check(
+        self,
+        times: NDArray[np.float64],
+        outputs: Sequence[str],
+        on_time: Sequence[str] | None = None,
+    ) -> None:
         """Check the settings against a study's time grid and outputs, before it runs.
 
         Raises
@@ -166,7 +179,7 @@ class AnalysisSettings:
         ConfigError
             With every problem :meth:`problems` finds.
         """
-        _raise(self.problems(times, outputs))
+        _raise(self.problems(times, outputs, on_time))
 
     def spectrum_outputs(self, times: NDArray[np.float64], outputs: Sequence[str]) -> list[str]:
         """The outputs that get a spectrum."""
@@ -472,7 +485,8 @@ class _PsdSource:
 def output_draws(
     result: StudyResult, name: str, times: Sequence[float], settings: AnalysisSettings
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Draws of an output at the grid times nearest ``times``.
+    """Draws of an output at the grid times nearest ``times`` (the points of its own axis
+    for an output off the time grid; ``[0.]`` for a scalar).
 
     Surrogate values at ``settings.samples`` random inputs when the output has a chaos
     expansion, else the model runs themselves (see :func:`draws_are_runs`).
@@ -482,13 +496,14 @@ def output_draws(
     at, draws
         (P,) the grid times used and (M, P) the draws.
     """
-    indices = nearest_indices(result.times, times)
+    grid = result.grid(name)
+    indices = nearest_indices(grid, times)
     expansion = result.expansions.get(name)
     if expansion is None:
-        return result.times[indices], result.values[name][result.ok][:, indices]
+        return grid[indices], result.values[name][result.ok][:, indices]
     surrogates = _Surrogates(_germ_draws(result, settings))
     surrogates.add(name, expansion, expansion.coefficients[..., indices])
-    return result.times[indices], surrogates.evaluate()[name]
+    return grid[indices], surrogates.evaluate()[name]
 
 
 def draws_are_runs(result: StudyResult, name: str) -> bool:
@@ -572,9 +587,9 @@ def _quantile_bands(
     once per basis (and elements) and the values in time blocks that bound memory."""
     bands = {}
     phis: dict[bytes, list[tuple[NDArray[np.intp], NDArray[np.float64]]]] = {}
-    n_times = result.times.size
     block = max(1, _BLOCK_VALUES // xi.shape[0])
     for name in result.outputs:
+        n_times = result.values[name].shape[1]
         expansion = result.expansions.get(name)
         if expansion is None:
             runs = result.values[name][result.ok]
@@ -628,6 +643,17 @@ def _column_quantiles(values: NDArray[np.float64], levels: Sequence[float]) -> N
     return bands
 
 
+def _pdf_points(result: StudyResult, name: str, settings: AnalysisSettings) -> NDArray[np.intp]:
+    """Where an output's PDFs are tabulated: a time output at ``settings.pdf_times`` (the
+    final time by default); an output on its own axis at the point of its largest std; a
+    scalar at its one point."""
+    if result.on_time(name):
+        times = result.times
+        return nearest_indices(times, settings.pdf_times or (times[-1],))
+    std = np.nan_to_num(np.atleast_1d(result.std(name)), nan=-1.0)
+    return np.array([int(np.argmax(std))])
+
+
 def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> Analysis:
     """Quantile bands, PDFs and spectra of every output of a result.
 
@@ -649,18 +675,20 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     """
     settings = settings or AnalysisSettings()
     times = result.times
-    settings.check(times, result.outputs)
+    on_time = [name for name in result.outputs if result.on_time(name)]
+    settings.check(times, result.outputs, on_time)
     xi = _germ_draws(result, settings)
-    indices = nearest_indices(times, settings.pdf_times or (times[-1],))
+    pdf_at = {name: _pdf_points(result, name, settings) for name in result.outputs}
     sources = {
         name: _PsdSource(result, name, settings)
-        for name in settings.spectrum_outputs(times, result.outputs)
+        for name in settings.spectrum_outputs(times, on_time)
+        if name in on_time
     }
     bins = {name: source.bins(settings.pdf_freqs) for name, source in sources.items()}
     # Every surrogate draw of every output in one pass over the basis matrix.
     surrogates = _Surrogates(xi)
     for name, expansion in result.expansions.items():
-        surrogates.add(("time", name), expansion, expansion.coefficients[..., indices])
+        surrogates.add(("time", name), expansion, expansion.coefficients[..., pdf_at[name]])
     for name, source in sources.items():
         if source.chaos is not None:
             source.request(surrogates, ("psd", name), bins[name])
@@ -668,6 +696,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
     bands = _quantile_bands(result, xi[:QUANTILE_DRAWS], settings.quantiles)
     outputs = {}
     for name in result.outputs:
+        indices = pdf_at[name]
         at_times = drawn.get(("time", name))
         if at_times is None:
             at_times = result.values[name][result.ok][:, indices]
@@ -679,7 +708,7 @@ def analyse(result: StudyResult, settings: AnalysisSettings | None = None) -> An
             spectrum_ = source.spectrum(result, name, settings, pdf)
         outputs[name] = OutputAnalysis(
             quantiles=bands[name],
-            pdf=_density_table(times[indices], at_times, nonnegative=False),
+            pdf=_density_table(result.grid(name)[indices], at_times, nonnegative=False),
             spectrum=spectrum_,
         )
     return Analysis(settings, outputs)

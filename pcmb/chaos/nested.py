@@ -13,6 +13,7 @@ negative for Leja rules.
 | ``gauss-patterson``   | Legendre | 1, 3, 7, ..., 2^(l+1) - 1     | 1, 5, 11, ..., 3·2^l - 1  |
 | ``genz-keister``      | Hermite  | 1, 3, 9, 19, 35               | 1, 5, 15, 29, 51          |
 | ``leja``              | any      | 2l + 1                        | 2l                        |
+| ``auto``, l > 4       | Leg./Her.| 2 m_(l-1) + 1                 | m_l - 1                   |
 
 Gauss–Patterson (Patterson, Math. Comp. 22, 1968) and Genz–Keister (Genz & Keister,
 J. Comput. Appl. Math. 71, 1996) rules are computed rather than tabulated: both are
@@ -27,6 +28,13 @@ trade degree for positivity and are not of this form, so this rule stops at leve
 Both are computed in double precision from the previous level's nodes; Gauss–Patterson
 stops at level 4 (31 points, degree 47), where the extension is still exact to ~1e-14 (at
 63 points its linear system loses digits: 5e-12).
+
+``auto`` continues Gauss–Patterson past level 4 and Genz–Keister past level 4 with weighted
+Leja points grown from their nodes (the Leja search starts from the rule's last level, so the
+sequence stays nested), doubling the points per level like Gauss–Patterson; the continued
+levels are interpolatory, exact to degree m_l - 1. Switching the whole sequence to another
+rule instead (Clenshaw–Curtis or Leja from the start) would make every level of that input
+less exact: a level-5 grid was then less accurate than the level-4 one.
 
 Weighted Leja sequences (Narayan & Jakeman, SIAM J. Sci. Comput. 36, 2014) serve any
 family: x_0 is the germ's mean, then x_n maximises √w(x) Π_{j<n} |x - x_j| over the support,
@@ -51,6 +59,7 @@ __all__ = [
     "ClenshawCurtis",
     "KronrodPatterson",
     "Leja",
+    "LejaContinued",
     "NestedRule",
     "gauss_patterson",
     "genz_keister",
@@ -66,6 +75,8 @@ PATTERSON_LEVELS = 4
 GENZ_KEISTER_ADDED = (2, 6, 10, 16)
 #: Length of every Leja sequence (its levels are its prefixes): level <= 20.
 LEJA_POINTS = 41
+#: Levels ``auto`` adds by Leja points after the last Gauss–Patterson / Genz–Keister level.
+CONTINUED_LEVELS = 2
 #: Candidate points of the Leja search before local refinement.
 _LEJA_CANDIDATES = 4001
 
@@ -226,6 +237,44 @@ def genz_keister() -> KronrodPatterson:
 
 
 @dataclass(frozen=True)
+class LejaContinued(NestedRule):
+    """A Kronrod–Patterson rule continued past its last level by weighted Leja points.
+
+    Levels up to ``base.max_level`` are the base rule's; each further level doubles the points
+    plus one (as Gauss–Patterson does), with the Leja points that extend the previous ones.
+    Those levels are interpolatory, exact to degree m_l - 1.
+    """
+
+    base: KronrodPatterson
+    name: str = "auto"
+
+    @property
+    def family(self) -> OrthonormalFamily:  # type: ignore[override]
+        return self.base.family
+
+    @property
+    def max_level(self) -> int:
+        return self.base.max_level + CONTINUED_LEVELS
+
+    def size(self, level: int) -> int:
+        if level <= self.base.max_level:
+            return self.base.size(level)
+        return 2 * self.size(level - 1) + 1
+
+    def exactness(self, level: int) -> int:
+        if level <= self.base.max_level:
+            return self.base.exactness(level)
+        return self.size(level) - 1
+
+    def _sequence(self, count: int) -> NDArray[np.float64]:
+        base = self.base.nodes(self.base.max_level)
+        if count <= base.size:
+            return base[:count]
+        total = self.size(self.max_level)
+        return _leja_sequence(self.family, tuple(base), total)[:count]
+
+
+@dataclass(frozen=True)
 class Leja(NestedRule):
     """Weighted Leja rules for any family: level l has the first 2l + 1 Leja points.
 
@@ -247,15 +296,15 @@ class Leja(NestedRule):
         return 2 * level
 
     def _sequence(self, count: int) -> NDArray[np.float64]:
-        return _leja_sequence(self.family)[:count]
+        return _leja_sequence(self.family, (), LEJA_POINTS)[:count]
 
 
 def nested_rule(family: OrthonormalFamily, rule: str = "auto", level: int = 0) -> NestedRule:
     """The nested rule named ``rule`` for a germ family, with at least ``level`` levels.
 
-    ``auto`` picks Gauss–Patterson for the uniform germ (Clenshaw–Curtis beyond its 8 levels),
-    Genz–Keister for the normal germ up to its level 4 (Leja beyond: the rules of one input
-    must be nested, so the whole sequence is Leja then), and Leja for every other family.
+    ``auto`` picks Gauss–Patterson for the uniform germ and Genz–Keister for the normal germ,
+    each continued by Leja points past its level 4 (:class:`LejaContinued`), and Leja for
+    every other family.
 
     Raises
     ------
@@ -263,14 +312,14 @@ def nested_rule(family: OrthonormalFamily, rule: str = "auto", level: int = 0) -
         An unknown rule, a rule that does not fit the family, or a level the rule lacks.
     """
     if rule == "auto":
-        if isinstance(family, Legendre):
-            rule = "gauss-patterson" if level <= PATTERSON_LEVELS else "clenshaw-curtis"
-        elif isinstance(family, Hermite):
-            rule = "genz-keister" if level <= len(GENZ_KEISTER_ADDED) else "leja"
-        else:
-            rule = "leja"
+        if isinstance(family, Legendre | Hermite):
+            base = gauss_patterson() if isinstance(family, Legendre) else genz_keister()
+            made: NestedRule = base if level <= base.max_level else LejaContinued(base)
+            made._check(level)
+            return made
+        rule = "leja"
     if rule == "clenshaw-curtis":
-        made: NestedRule = ClenshawCurtis(family)
+        made = ClenshawCurtis(family)
     elif rule == "gauss-patterson":
         _require_family(family, Legendre, rule)
         made = gauss_patterson()
@@ -378,19 +427,22 @@ def _polish(
 
 
 @cache
-def _leja_sequence(family: OrthonormalFamily) -> NDArray[np.float64]:
-    """The first :data:`LEJA_POINTS` weighted Leja points of a family (see the module notes)."""
+def _leja_sequence(
+    family: OrthonormalFamily, start: tuple[float, ...], count: int
+) -> NDArray[np.float64]:
+    """``count`` weighted Leja points of a family (see the module notes): ``start``, then the
+    points that extend it (from the germ's mean when ``start`` is empty)."""
     from scipy.optimize import minimize_scalar  # deferred: only Leja rules need it
 
     germ = family.germ
     low, high = family.support
-    reach = 2.0 * np.max(np.abs(family.gauss_rule(2 * LEJA_POINTS).nodes))
+    reach = 2.0 * np.max(np.abs(family.gauss_rule(2 * count).nodes))
     low, high = max(low, -reach), min(high, reach)
     candidates = np.unique(
         np.concatenate(
             [
                 np.linspace(low, high, _LEJA_CANDIDATES),
-                family.gauss_rule(4 * LEJA_POINTS).nodes,
+                family.gauss_rule(4 * count).nodes,
             ]
         )
     )
@@ -403,8 +455,8 @@ def _leja_sequence(family: OrthonormalFamily) -> NDArray[np.float64]:
             )
         return np.where(np.isnan(value), -np.inf, value)
 
-    points = [float(family.recurrence(1)[0][0])]
-    while len(points) < LEJA_POINTS:
+    points = list(start) or [float(family.recurrence(1)[0][0])]
+    while len(points) < count:
         scores = objective(candidates, points)
         best = int(np.argmax(scores))
         left = candidates[max(best - 1, 0)]

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
+from pcmb.analysis.derived import derived_problems
 from pcmb.config.types import MAX_RUNS, MAX_VALUES
 from pcmb.designs import MethodSettings, make_design
 from pcmb.errors import ConfigError
@@ -19,7 +20,13 @@ __all__ = ["cross_check", "model_check"]
 
 
 def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
-    """Order mapping against the inputs; the number of runs and of stored values."""
+    """Order mapping against the inputs; the number of runs and of stored values; the
+    ``derived:`` entries (one figure kind each, with its options)."""
+    try:
+        config.derived_outputs  # noqa: B018 - parsed for its problems
+    except ConfigError as error:
+        for problem in error.problems:
+            yield problem.path, problem.message
     method, names = config.method, config.input_names
     if isinstance(method.order, dict):
         unknown = [key for key in method.order if key not in config.inputs]
@@ -100,7 +107,24 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                     f"inputs.{name}",
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
+    kept = tuple(config.output_names or facts.outputs)
+    on_time = tuple(name for name in kept if name not in facts.axes)
+    every = (*kept, *config.derived)  # a figure of merit is an output too
     if config.analysis is not None:
-        kept = config.output_names or facts.outputs
-        yield from config.analysis.settings().problems(config.times, kept)
+        yield from config.analysis.settings().problems(config.times, every, on_time)
+    named = {
+        "diagnostics.outputs": config.diagnostics.outputs,
+        "sweep.outputs": config.sweep.outputs if config.sweep is not None else None,
+    }
+    for key, names in named.items():
+        for index, name in enumerate(names or ()):
+            if name not in every:
+                outputs = ", ".join(every)
+                yield f"{key}[{index}]", f"{name!r} is not an output (outputs: {outputs})"
     yield from facts.time_problems
+    if config.derived:
+        try:
+            derived = config.derived_outputs
+        except ConfigError:  # reported by cross_check
+            return
+        yield from derived_problems(derived, kept, on_time, config.times)

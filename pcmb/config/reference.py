@@ -95,6 +95,36 @@ the nodes are made and the chaos coefficients recovered (`method`), where the ru
   analysis). `pcmb schema` prints the JSON Schema of config files, for editors with YAML
   schema support.
 
+**Figures of merit** (`derived`) are questions asked of time outputs without model code:
+
+```yaml
+derived: {x1_peak: {max_abs: x1}, x1_rms: {rms: x1}, x2_at_2s: {at: x2, time: 2.0},
+          x1_settle: {settling_time: x1, band: 0.02}}
+```
+
+Each entry names one new output (not an output of the model) and holds one figure key
+naming a time output, with that figure's options. After the runs pcmb computes the figure
+of every run (and of every held-out run and the nominal run) from its stored time series on
+the grid, y_j = y(t_j), j = 0..T-1:
+
+- `max_abs`: max_j |y_j|;
+- `rms`: sqrt(∫ y² dt / (t_{T-1} - t_0)), the integral by the trapezoid rule on the grid;
+- `at` with `time: s`: y(s), linear between the two grid points around s (s within the grid);
+- `settling_time` with `band: b` (default 0.02): the settling time into the band
+  |y - y_f| <= b·|y_f| around the final value y_f = y_{T-1}, i.e. the time the run leaves
+  the band for the last time: with j the last grid point outside the band, the time
+  between t_j and t_{j+1} where the excess |y - y_f| - b·|y_f| crosses 0, linear between
+  the two; t_0 when the run never leaves the band. A run that ends before settling has
+  its settling time near the end of the grid: choose the grid long enough.
+
+A figure is then an output like any other, one number per run: mean, std, Sobol' indices,
+PDF and diagnostics, stored under `/outputs/<name>/` without the time dimension (`values`
+(N,), `mean`, `std`, `sobol_first` (n,), ...) and listed by `pcmb inspect`. The chaos of a
+maximum (or of a settling time, which jumps where an oscillation's last excursion leaves
+the band) may converge slowly: the diagnostics then say so. `pcmb validate` reports a
+figure that names no time output (`derived.x1_peak.max_abs: 'x9' is not an output;
+outputs are x1, x2`) or a time off the grid.
+
 In the tables below, a key path shows a mapping's keys as `<name>` and a list's entries as
 `[i]`. A key that is not required may be left out; its default applies ("not set": the key
 is absent, and the description says what that means).

@@ -26,11 +26,13 @@ from pydantic import (
     Tag,
     ValidationError,
     ValidationInfo,
+    create_model,
     field_validator,
     model_validator,
 )
 
 from pcmb.adapters.registry import ADAPTERS
+from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
 from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs, process
@@ -63,6 +65,7 @@ from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.sweep.plan import sweep_problems
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import ModelFactory
@@ -75,6 +78,7 @@ __all__ = [
     "MethodSpec",
     "ModelSpec",
     "StudyConfig",
+    "SweepSpec",
     "TimeSpec",
     "config_json_schema",
     "load_config",
@@ -268,7 +272,8 @@ class MethodSpec(Section):
     )
     basis: Literal[tuple(dict.fromkeys((*BASES, *REGRESSION_BASES)))] | None = Field(
         default=None,
-        description="chaos terms (default: tensor for collocation, hyperbolic for regression)",
+        description="chaos terms (default: tensor for collocation, hyperbolic for regression; "
+        "kind adaptive: tensor raises a tensor grid one input at a time)",
     )
     samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
     seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
@@ -371,6 +376,11 @@ class DiagnosticsSpec(Section):
         default=TOLERANCE,
         description="accepted error, relative to the output's largest standard deviation",
     )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None,
+        description="outputs the verdict covers (default: all; leave out a residual that is "
+        "zero to round-off)",
+    )
 
 
 class AnalysisSpec(Section):
@@ -403,6 +413,43 @@ class AnalysisSpec(Section):
         return AnalysisSettings(**self.model_dump())
 
 
+class SweepSpec(Section):
+    """``pcmb sweep``: the methods run at rising cost and the reference they are measured
+    against (see ``docs/sweep.md``)."""
+
+    methods: Annotated[list[dict[Name, Any]], Field(min_length=1)] = Field(
+        description="method blocks, each with exactly one key given as a list of values"
+    )
+    reference: dict[Name, Any] | None = Field(
+        default=None,
+        description="method block of the reference run (default: give --reference REF.h5)",
+    )
+    outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
+        default=None, description="outputs whose errors are measured (default: all)"
+    )
+    replicates: PositiveInt = Field(
+        default=1, description="seeds per setting of a seeded method (sampling, regression)"
+    )
+
+
+#: One ``derived:`` entry: one figure kind (:data:`pcmb.analysis.derived.FIGURES`) naming a
+#: time output, with that figure's options; built from the registry.
+DerivedSpec = create_model(
+    "DerivedSpec",
+    __base__=Section,
+    __doc__="A figure of merit: one figure key naming a time output, and its options.",
+    **{
+        kind: (Name | None, Field(default=None, description=f"{figure.summary}: the output"))
+        for kind, figure in FIGURES.items()
+    },
+    **{
+        option: (Real | None, Field(default=None, description=text))
+        for figure in FIGURES.values()
+        for option, text in figure.descriptions.items()
+    },
+)
+
+
 class StudyConfig(Section):
     """A validated study configuration.
 
@@ -426,6 +473,13 @@ class StudyConfig(Section):
     )
     output: Annotated[str, AfterValidator(_h5_path)] | None = Field(
         default=None, description="result file, relative to the current directory"
+    )
+    derived: dict[Name, DerivedSpec] = Field(
+        default_factory=dict,
+        description="figures of merit of time outputs, each stored as a scalar output",
+    )
+    sweep: SweepSpec | None = Field(
+        default=None, description="pcmb sweep: methods at rising cost against a reference"
     )
 
     _source_text: str | None = PrivateAttr(default=None)
@@ -495,6 +549,13 @@ class StudyConfig(Section):
         return None if self.analysis is None else self.analysis.settings()
 
     @property
+    def derived_outputs(self) -> dict[str, DerivedOutput]:
+        """The ``derived:`` figures (raises ConfigError at their keys; checked on loading)."""
+        return parse_derived(
+            {name: spec.model_dump(exclude_none=True) for name, spec in self.derived.items()}
+        )
+
+    @property
     def output_names(self) -> tuple[str, ...] | None:
         """Outputs to keep (``None``: every output of the model)."""
         return self.model.output_names
@@ -539,6 +600,7 @@ def _validate(
     if config is not None and not problems:
         config._base_dir = base_dir
         problems = located(cross_check(config), lines)
+        problems += located(sweep_problems(config), lines)
         problems += located(model_check(config), lines)
     if problems:
         raise ConfigError(sorted(problems, key=lambda p: (p.line or 0, p.path)), source)

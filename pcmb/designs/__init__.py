@@ -11,6 +11,7 @@ from collections.abc import Mapping
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.designs.adaptive import AdaptiveCollocation
+from pcmb.designs.anisotropic import AnisotropicTensor
 from pcmb.designs.base import (
     RECORDED_ONLY,
     MethodSettings,
@@ -40,7 +41,8 @@ __all__ = [
 
 #: Design key -> design class: ``method.kind``, or ``collocation:<grid>`` for a collocation
 #: grid other than the tensor one, ``collocation:elements`` for multi-element collocation or
-#: ``collocation:refine`` for ``order: auto`` (see :func:`design_key`). The config schema,
+#: ``collocation:refine`` for ``order: auto``, ``adaptive:tensor`` for an adaptive tensor grid
+#: (``basis: tensor``) (see :func:`design_key`). The config schema,
 #: ``pcmb validate`` and the docs read their lists from here.
 DESIGNS: dict[str, type[NodeDesign]] = {
     "collocation": TensorCollocation,
@@ -52,6 +54,7 @@ DESIGNS: dict[str, type[NodeDesign]] = {
     "sobol": Sampling,
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
+    "adaptive:tensor": AnisotropicTensor,
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
@@ -77,6 +80,8 @@ def design_key(settings: MethodSettings) -> str:
             return f"collocation:{settings.grid}"
         if settings.orders == "auto":
             return "collocation:refine"
+    if settings.kind == "adaptive" and settings.basis == "tensor":
+        return "adaptive:tensor"
     return settings.kind
 
 

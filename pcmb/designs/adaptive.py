@@ -62,6 +62,11 @@ class AdaptiveCollocation:
             raise ValueError("method.fit: expected none: kind adaptive recovers by projection")
         if settings.max_samples is not None:
             raise ValueError("method.max_samples: kind adaptive is bounded by method.max_runs")
+        if settings.basis is not None:
+            raise ValueError(
+                f"method.basis: kind adaptive takes basis tensor (a tensor grid raised one input "
+                f"at a time) or none (a sparse grid), got {settings.basis!r}"
+            )
         if rule not in RULES:
             raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())

@@ -274,5 +274,7 @@ def _where(
     else:
         words = f"{count} of the {last - first + 1} times in this range"
     if times is None:
+        if size == 1:  # a scalar output (a figure of merit)
+            return "its value", None
         return f"{words} (time indices {first}..{last})", None
     return words, (float(times[first]), float(times[last]))

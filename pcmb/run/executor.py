@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import math
 import signal
 import sys
@@ -33,6 +34,7 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.axes import OutputAxis, axis_problems
 from pcmb.errors import (
     ConfigError,
     ConfigProblem,
@@ -143,11 +145,77 @@ class _Task:
 
 @dataclass(frozen=True)
 class _Outcome:
-    """A finished task: (B, n_outputs, T) values, per-node messages ("" = ok), model seconds."""
+    """A finished task: (B, W) values (:class:`Layout`), per-node messages ("" = ok), model
+    seconds."""
 
     values: NDArray[np.float64]
     messages: tuple[str, ...]
     seconds: float
+
+
+@dataclass(frozen=True)
+class Layout:
+    """How a task's outputs sit side by side in one (B, W) array.
+
+    Attributes
+    ----------
+    outputs:
+        The output names, in order.
+    shapes:
+        Each output's shape per node: ``(T,)`` on time, ``(K,)`` on its own axis, ``()`` a
+        scalar (see :mod:`pcmb.axes`).
+    times:
+        (T,) the time grid (named in messages).
+    """
+
+    outputs: tuple[str, ...]
+    shapes: tuple[tuple[int, ...], ...]
+    times: NDArray[np.float64]
+
+    @classmethod
+    def of(
+        cls,
+        outputs: Sequence[str],
+        times: NDArray[np.float64],
+        axes: Mapping[str, OutputAxis | None],
+    ) -> Layout:
+        """Outputs on time unless ``axes`` puts them on an axis (or makes them scalars)."""
+        shapes = []
+        for name in outputs:
+            axis = axes.get(name)
+            shapes.append(
+                (times.size,) if name not in axes else () if axis is None else axis.values.shape
+            )
+        return cls(tuple(outputs), tuple(shapes), times)
+
+    @property
+    def widths(self) -> tuple[int, ...]:
+        """Columns of each output (1 for a scalar)."""
+        return tuple(shape[0] if shape else 1 for shape in self.shapes)
+
+    @property
+    def bounds(self) -> list[tuple[int, int]]:
+        """``[start, stop)`` columns of each output."""
+        return list(itertools.pairwise(np.cumsum([0, *self.widths]).tolist()))
+
+    def empty(self, n: int) -> NDArray[np.float64]:
+        """(n, W) NaN."""
+        return np.full((n, sum(self.widths)), np.nan)
+
+    def split(self, values: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
+        """Output name -> its (n, W_k) columns of (n, W) ``values``."""
+        return {
+            name: values[:, a:b] for name, (a, b) in zip(self.outputs, self.bounds, strict=True)
+        }
+
+    def where(self, k: int, j: int) -> str:
+        """Where column ``j`` of output ``k`` is, for a message: ``" at t=0.5"``."""
+        shape = self.shapes[k]
+        if not shape:
+            return ""
+        if shape == (self.times.size,):
+            return f" at t={self.times[j]:.6g}"
+        return f" at axis point {j}"
 
 
 # -- calls into the model's code -------------------------------------------------------------
@@ -315,6 +383,9 @@ class ModelFacts:
     time_problems:
         ``(key, message)`` of what its ``check_times`` found wrong with the time grid asked
         about (see :func:`describe_model`).
+    axes:
+        Its ``output_axes`` (model protocol): output name -> its own axis, or ``None`` for a
+        scalar; the outputs not listed are on time.
     """
 
     name: str
@@ -324,6 +395,7 @@ class ModelFacts:
     build_seconds: float
     nominal_from_params: bool = False
     time_problems: tuple[tuple[str, str], ...] = ()
+    axes: Mapping[str, OutputAxis | None] = dataclasses.field(default_factory=dict)
 
 
 def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelFacts:
@@ -343,6 +415,10 @@ def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelF
             source="run_nodes",
         )
     parameters = getattr(model, "parameters", None)
+    axes = dict(getattr(model, "output_axes", None) or {})
+    problems = axis_problems(axes, tuple(offered))
+    if problems:
+        raise ModelDefinitionError(f"the model's output_axes: {'; '.join(problems)}")
     return ModelFacts(
         name=type(model).__name__,
         outputs=tuple(offered),
@@ -351,6 +427,7 @@ def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelF
         build_seconds=seconds,
         nominal_from_params=bool(getattr(model, "nominal_from_params", False)),
         time_problems=time_problems,
+        axes=axes,
     )
 
 
@@ -411,20 +488,17 @@ def _wait(
 
 
 def _run_batch(
-    model: Model,
-    params: Mapping[str, NDArray[np.float64]],
-    times: NDArray[np.float64],
-    outputs: Sequence[str],
+    model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout
 ) -> tuple[NDArray[np.float64], list[str], bool]:
-    """One ``simulate`` call: (B, n_outputs, T) values, per-node messages ("" = ok), and
-    whether the call as a whole failed (it raised or returned a wrong result), so that which
-    node made it fail is unknown."""
+    """One ``simulate`` call: (B, W) values, per-node messages ("" = ok), and whether the
+    call as a whole failed (it raised or returned a wrong result), so that which node made
+    it fail is unknown."""
     n = len(next(iter(params.values())))
-    values = np.full((n, len(outputs), times.size), np.nan)
+    values = layout.empty(n)
     try:
-        result = _model_code(model.simulate, params, times)
+        result = _model_code(model.simulate, params, layout.times)
         # Reading the result runs the model's code too (a mapping's lookup, an __array__).
-        problem = _model_code(_collect, result, outputs, times, values)
+        problem = _model_code(_collect, result, layout, values)
     except ModelDefinitionError:
         raise  # the same at every node: stop with its one message
     except Exception as exc:  # the model's own failure, whatever its type, is data here
@@ -432,45 +506,40 @@ def _run_batch(
     if problem:
         return values, [problem] * n, True
     messages = []
-    for row in values:
-        bad = ~np.isfinite(row)  # (n_outputs, T)
-        if bad.any():
-            j = int(np.flatnonzero(bad.any(axis=0))[0])
-            k = int(np.flatnonzero(bad[:, j])[0])
-            messages.append(f"non-finite output {outputs[k]!r} at t={times[j]:.6g}")
+    columns = [np.isfinite(part) for part in layout.split(values).values()]
+    for i in range(n):
+        # The earliest point (time) of any output, as for outputs that share the time grid.
+        first = [(int(np.argmin(c[i])), k) for k, c in enumerate(columns) if not c[i].all()]
+        if first:
+            j, k = min(first)
+            messages.append(f"non-finite output {layout.outputs[k]!r}{layout.where(k, j)}")
         else:
             messages.append("")
     return values, messages, False
 
 
-def _collect(
-    result: object,
-    outputs: Sequence[str],
-    times: NDArray[np.float64],
-    values: NDArray[np.float64],
-) -> str:
-    """Copy a ``simulate`` result into (B, n_outputs, T) ``values``; what is wrong, or ""."""
+def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str:
+    """Copy a ``simulate`` result into (B, W) ``values``; what is wrong, or ""."""
     n = values.shape[0]
     if not isinstance(result, Mapping):
         return f"simulate returned {type(result).__name__}, expected a mapping"
-    for k, name in enumerate(outputs):
+    for name, shape, (a, b) in zip(layout.outputs, layout.shapes, layout.bounds, strict=True):
         if name not in result:
             return f"the model returned no output {name!r}"
         try:
             array = np.asarray(result[name], dtype=np.float64)
         except (TypeError, ValueError) as exc:
             return f"output {name!r} is not a float array ({exc})"
-        if array.shape != (n, times.size):
-            return f"output {name!r} has shape {array.shape}, expected {(n, times.size)}"
-        values[:, k] = array
+        if array.shape != (n, *shape):
+            return f"output {name!r} has shape {array.shape}, expected {(n, *shape)}"
+        values[:, a:b] = array.reshape(n, b - a)
     return ""
 
 
 def _execute(
     factory: _Factory,
     params: Mapping[str, NDArray[np.float64]],
-    times: NDArray[np.float64],
-    outputs: Sequence[str],
+    layout: Layout,
     batched: bool,
     retries: int,
 ) -> _Outcome:
@@ -486,12 +555,12 @@ def _execute(
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
     params = {name: _read_only(array) for name, array in params.items()}
-    times = _read_only(times)
+    layout = dataclasses.replace(layout, times=_read_only(layout.times))
     start = time.perf_counter()
     n = len(next(iter(params.values())))
-    values = np.full((n, len(outputs), times.size), np.nan)
+    values = layout.empty(n)
     messages = ["not run"] * n
-    narrow = _Narrowing(model, params, times, outputs, retries, values, messages)
+    narrow = _Narrowing(model, params, layout, retries, values, messages)
     if batched and n > 1 and not callable(getattr(model, "run_point", None)):
         narrow.batch(0, n)
     else:
@@ -506,8 +575,7 @@ class _Narrowing:
 
     model: Model
     params: Mapping[str, NDArray[np.float64]]
-    times: NDArray[np.float64]
-    outputs: Sequence[str]
+    layout: Layout
     retries: int
     values: NDArray[np.float64]
     messages: list[str]
@@ -516,7 +584,7 @@ class _Narrowing:
         """Run node ``i`` in a one-node batch, ``1 + retries`` times at most."""
         single = {name: array[i : i + 1] for name, array in self.params.items()}
         for _ in range(1 + self.retries):
-            row, (message,), _ = _run_batch(self.model, single, self.times, self.outputs)
+            row, (message,), _ = _run_batch(self.model, single, self.layout)
             if not message:
                 break
         self.values[i], self.messages[i] = row[0], message
@@ -536,7 +604,7 @@ class _Narrowing:
             self.alone(start)
             return
         part = {name: array[start:stop] for name, array in self.params.items()}
-        rows, found, failed = _run_batch(self.model, part, self.times, self.outputs)
+        rows, found, failed = _run_batch(self.model, part, self.layout)
         if failed:
             middle = (start + stop) // 2
             self.batch(start, middle)
@@ -567,12 +635,17 @@ class _Campaign:
         outputs: tuple[str, ...],
         retries: int,
         journal: Journal | None,
+        axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> None:
+        layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
-        self.params, self.times, self.outputs = params, times, outputs
+        self.params, self.layout, self.outputs = params, layout, layout.outputs
         self.retries, self.journal = retries, journal
         n_nodes = len(next(iter(params.values())))
-        self.values = {name: np.full((n_nodes, times.size), np.nan) for name in outputs}
+        self.values = {
+            name: np.ascontiguousarray(part)
+            for name, part in layout.split(layout.empty(n_nodes)).items()
+        }
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
         self.resumed = 0
@@ -610,8 +683,7 @@ class _Campaign:
         return (
             self.factory,
             params,
-            self.times,
-            self.outputs,
+            self.layout,
             task.batched,
             self.retries,
         )
@@ -620,8 +692,8 @@ class _Campaign:
         """Store a finished task, journal it at once and advance the progress line."""
         failed = np.array([bool(m) for m in messages])
         chunk = {
-            name: np.where(failed[:, None], np.nan, values[:, k])
-            for k, name in enumerate(self.outputs)
+            name: np.where(failed[:, None], np.nan, part)
+            for name, part in self.layout.split(values).items()
         }
         for name, column in chunk.items():
             self.values[name][task.indices] = column
@@ -640,7 +712,7 @@ class _Campaign:
 
     def accept_death(self, task: _Task, message: str) -> None:
         n = task.indices.size
-        self.accept(task, np.full((n, len(self.outputs), self.times.size), np.nan), [message] * n)
+        self.accept(task, self.layout.empty(n), [message] * n)
 
     def result(self, seconds: float) -> RunResult:
         failures = tuple(
@@ -870,12 +942,12 @@ def _check_outputs(facts: ModelFacts, outputs: Sequence[str]) -> None:
         )
 
 
-def _check_journal(journal: Journal, n_nodes: int, outputs: tuple[str, ...], n_times: int) -> None:
-    found = (journal.n_nodes, tuple(journal.outputs), journal.n_times)
-    if found != (n_nodes, outputs, n_times):
+def _check_journal(journal: Journal, n_nodes: int, layout: Layout) -> None:
+    found = (journal.n_nodes, tuple(journal.outputs), journal.widths)
+    if found != (n_nodes, layout.outputs, layout.widths):
         raise UsageError(
-            f"journal {journal.directory} holds (nodes, outputs, times) = {found}, this run "
-            f"has {(n_nodes, outputs, n_times)}; delete it or drop --resume"
+            f"journal {journal.directory} holds (nodes, outputs, columns) = {found}, this run "
+            f"has {(n_nodes, layout.outputs, layout.widths)}; delete it or drop --resume"
         )
 
 
@@ -964,8 +1036,6 @@ def run_nodes(
     )
     n_nodes = len(next(iter(arrays.values())))
     factory = _factory(model_factory)
-    if journal is not None:
-        _check_journal(journal, n_nodes, names, time_grid.size)
     if pool is None:
         with open_pool(backend, jobs, address, tasks=len(chunk_bounds(n_nodes, chunk_size))) as own:
             return run_nodes(
@@ -993,7 +1063,9 @@ def run_nodes(
         )
     facts = facts or describe_model(model_factory, pool)
     _check_outputs(facts, names)
-    campaign = _Campaign(factory, arrays, time_grid, names, retries, journal)
+    if journal is not None:
+        _check_journal(journal, n_nodes, Layout.of(names, time_grid, facts.axes))
+    campaign = _Campaign(factory, arrays, time_grid, names, retries, journal, facts.axes)
     if journal is not None:
         campaign.resume(journal)
     # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the

@@ -210,12 +210,14 @@ def model_files(factory: object) -> list[Path]:
     """The files a model factory built by pcmb's adapters is known to depend on.
 
     A :class:`~pcmb.adapters.python.model.PythonModelFactory` (python entry), a
-    :class:`~pcmb.adapters.command.model.CommandModelFactory` or a
-    :class:`~pcmb.adapters.mujoco.model.MujocoModelFactory`, whether built from a config or
-    by hand; any other factory (a Python object given to ``Study``) has none: it is
-    fingerprinted by pickling.
+    :class:`~pcmb.adapters.command.model.CommandModelFactory`, a
+    :class:`~pcmb.adapters.mujoco.model.MujocoModelFactory` or a
+    :class:`~pcmb.adapters.fmu.factory.FmuModelFactory` (its ``.fmu`` file), whether built
+    from a config or by hand; any other factory (a Python object given to ``Study``) has
+    none: it is fingerprinted by pickling.
     """
     from pcmb.adapters.command.model import CommandModelFactory
+    from pcmb.adapters.fmu.factory import FmuModelFactory
     from pcmb.adapters.python.model import PythonModelFactory
 
     if isinstance(factory, PythonModelFactory):
@@ -223,6 +225,8 @@ def model_files(factory: object) -> list[Path]:
     if isinstance(factory, CommandModelFactory):
         base = Path.cwd() if factory.base_dir is None else factory.base_dir
         return command_files(factory.command, factory.templates, factory.files, base)
+    if isinstance(factory, FmuModelFactory):
+        return [Path(factory.fmu)] if Path(factory.fmu).is_file() else []
     # Only loaded (it imports mujoco) when a MuJoCo factory exists.
     mujoco_model = sys.modules.get("pcmb.adapters.mujoco.model")
     if mujoco_model is not None and isinstance(factory, mujoco_model.MujocoModelFactory):

@@ -33,7 +33,7 @@ from pcmb.run.output import write_error
 
 __all__ = ["Journal"]
 
-_FORMAT = 2
+_FORMAT = 3
 _META = "journal.json"
 _LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
@@ -185,7 +185,9 @@ class Journal:
     outputs:
         Names of the recorded outputs, in order.
     n_times:
-        T, the length of the output time grid.
+        T, the length of the output time grid: the columns of every output; or each
+        output's columns (T on time, K on its own axis, 1 for a scalar, see
+        :mod:`pcmb.axes`).
 
     Raises
     ------
@@ -207,11 +209,19 @@ class Journal:
         fingerprint: str | Fingerprint,
         n_nodes: int,
         outputs: Sequence[str],
-        n_times: int,
+        n_times: int | Sequence[int],
     ) -> None:
         outputs = tuple(outputs)
-        if int(n_nodes) < 1 or int(n_times) < 1:
-            raise ValueError(f"n_nodes and n_times must be positive, got {n_nodes} and {n_times}")
+        widths = (
+            tuple(int(w) for w in n_times)
+            if isinstance(n_times, Sequence)
+            else (int(n_times),) * len(outputs)
+        )
+        if int(n_nodes) < 1 or min(widths, default=1) < 1 or len(widths) != len(outputs):
+            raise ValueError(
+                f"n_nodes and n_times must be positive (one per output), got {n_nodes} and "
+                f"{n_times}"
+            )
         if not outputs or len(set(outputs)) != len(outputs):
             raise ValueError(f"outputs must be non-empty and distinct, got {list(outputs)}")
         if not isinstance(fingerprint, Fingerprint):
@@ -221,7 +231,7 @@ class Journal:
         self.files = dict(sorted(fingerprint.files.items()))
         self.n_nodes = int(n_nodes)
         self.outputs = outputs
-        self.n_times = int(n_times)
+        self.widths = widths
         self._next_record = 0
         self._lock: _Lock | None = None
         try:
@@ -254,7 +264,7 @@ class Journal:
             "fingerprint": self.fingerprint,
             "n_nodes": self.n_nodes,
             "outputs": list(self.outputs),
-            "n_times": self.n_times,
+            "widths": list(self.widths),
             "files": self.files,
         }
 
@@ -397,9 +407,11 @@ class Journal:
             raise ValueError("status must be Status.OK (1) or Status.FAILED (2) for every node")
         if set(values) != set(self.outputs):
             raise ValueError(f"values must hold exactly the outputs {list(self.outputs)}")
-        stacked = np.stack([np.asarray(values[name], dtype=np.float64) for name in self.outputs], 1)
-        if stacked.shape != (idx.size, len(self.outputs), self.n_times):
-            raise ValueError(f"each output must have shape ({idx.size}, {self.n_times})")
+        arrays = [np.asarray(values[name], dtype=np.float64) for name in self.outputs]
+        for name, array, width in zip(self.outputs, arrays, self.widths, strict=True):
+            if array.shape != (idx.size, width):
+                raise ValueError(f"output {name!r} must have shape ({idx.size}, {width})")
+        stacked = np.concatenate(arrays, axis=1)
         messages = messages or {}
         text = np.array([messages.get(int(i), "") for i in idx], dtype=np.str_)
         path = self.directory / f"record-{self._next_record:06d}.npz"
@@ -414,9 +426,10 @@ class Journal:
     # -- reading -------------------------------------------------------------------------------
 
     def _latest(self) -> dict[int, tuple[int, NDArray[np.float64], str]]:
-        """Node index -> (status, (n_outputs, T) values, message), later records winning."""
+        """Node index -> (status, (W,) values of every output side by side, message), later
+        records winning."""
         latest: dict[int, tuple[int, NDArray[np.float64], str]] = {}
-        shape = (len(self.outputs), self.n_times)
+        shape = (sum(self.widths),)
         for path in self._record_paths():
             try:
                 # Opened here, not by np.load, so that a damaged file is closed on error too.
@@ -455,11 +468,14 @@ class Journal:
         """
         latest = self._latest()
         indices = np.array(sorted(latest), dtype=np.int64)
-        stacked = np.empty((indices.size, len(self.outputs), self.n_times))
+        stacked = np.empty((indices.size, sum(self.widths)))
         status = np.empty(indices.size, dtype=np.int8)
         for row, i in enumerate(indices):
             status[row], stacked[row], _ = latest[int(i)]
-        values = {name: stacked[:, k, :] for k, name in enumerate(self.outputs)}
+        ends = np.cumsum([0, *self.widths]).tolist()
+        values = {
+            name: stacked[:, a:b] for name, a, b in zip(self.outputs, ends, ends[1:], strict=False)
+        }
         return indices, values, status
 
     def messages(self) -> dict[int, str]:

@@ -13,10 +13,11 @@ _PROGRESS_INTERVAL = 0.1
 
 
 class Progress:
-    """One status line on a stream, rewritten in place: nodes done / total, rate, ETA."""
+    """One status line on a stream, rewritten in place: nodes (or another ``unit``) done /
+    total, rate, ETA."""
 
-    def __init__(self, total: int, done: int, stream: TextIO | None) -> None:
-        self._total, self._done, self._stream = total, done, stream
+    def __init__(self, total: int, done: int, stream: TextIO | None, unit: str = "nodes") -> None:
+        self._total, self._done, self._stream, self._unit = total, done, stream, unit
         self._ran = 0
         self._start = self._last = time.perf_counter()
         self._width = 0
@@ -40,8 +41,8 @@ class Progress:
         else:
             eta_text = "?"
         line = (
-            f"pcmb: {self._done}/{self._total} nodes ({100 * self._done / self._total:.0f}%), "
-            f"{rate:.3g} nodes/s, ETA {eta_text}"
+            f"pcmb: {self._done}/{self._total} {self._unit} "
+            f"({100 * self._done / self._total:.0f}%), {rate:.3g} {self._unit}/s, ETA {eta_text}"
         )
         self._stream.write("\r" + line.ljust(self._width))
         self._stream.flush()

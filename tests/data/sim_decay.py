@@ -4,7 +4,8 @@ Usage: python sim_decay.py OUTPUT [--deck FILE]
 
 Reads the parameters from params.json (or, with --deck, from "name = value" lines of a
 rendered template), computes y = y0 exp(-k t), dy = -k y and writes OUTPUT in the format
-of its extension (.csv with a time column, .json, .npy, .npz). The parameter ``mode``
+of its extension (.csv with a time column, .txt: a whitespace table like ngspice's
+``wrdata``, .json, .npy, .npz). The parameter ``mode``
 selects a misbehaviour: 1 exit 3, 2 hang (with a grandchild), 3 garbage, 4 no output,
 5 one row short, 6 SIGSEGV, 7 NaN, 8 wrong time column.
 """
@@ -71,6 +72,11 @@ if output.endswith(".csv"):
         handle.write("time, y, dy\n")
         for row in zip(times, y, dy, strict=True):
             handle.write(",".join(repr(float(v)) for v in row) + "\n")
+elif output.endswith(".txt"):
+    with open(output, "w") as handle:
+        handle.write(" time     y    dy\n")
+        for row in zip(times, y, dy, strict=True):
+            handle.write(" " + "\t ".join(repr(float(v)) for v in row) + "  \n")
 elif output.endswith(".json"):
     with open(output, "w") as handle:
         json.dump({"time": times.tolist(), "y": y.tolist(), "dy": dy.tolist()}, handle)

@@ -36,16 +36,19 @@ from pcmb.adapters.protocol import (
     check_point_result,
     describe_exception,
 )
+from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 from pcmb.run.lifeline import kernel_kills_orphans
 
 __all__ = ["FORMATS", "KEEP_POLICIES", "CommandModel", "CommandModelFactory", "split_command"]
 
-OutputFormat = Literal["csv", "json", "npy", "npz"]
+OutputFormat = Literal["csv", "table", "json", "npy", "npz"]
 KeepPolicy = Literal["failed", "all", "none"]
 
 #: Output file formats, and which work directories survive (``keep``); the config's lists.
 FORMATS: tuple[str, ...] = typing.get_args(OutputFormat)
+# Formats inferred from an output file's extension (a whitespace table has no usual one).
+_EXTENSIONS = ("csv", "json", "npy", "npz")
 KEEP_POLICIES: tuple[str, ...] = typing.get_args(KeepPolicy)
 
 _PLACEHOLDER = re.compile(r"\{\{\s*([^{}]*?)\s*\}\}")
@@ -54,8 +57,9 @@ _GRID_NAMES = ("times.start", "times.stop", "times.points")
 _PARAMS_FILE = "params.json"
 _STDOUT_FILE = "stdout.txt"
 _STDERR_FILE = "stderr.txt"
-_TAIL_LINES = 15
-_TAIL_CHARS = 2000
+# The end of a failed run's stderr (else stdout) shown in its message: the lines that say why.
+_TAIL_LINES = 5
+_TAIL_LINE_CHARS = 200
 
 
 def _problem(path: str, message: str) -> ConfigError:
@@ -101,13 +105,19 @@ def _jsonable(value: Any) -> Any:
     return float(array) if array.ndim == 0 else array.tolist()
 
 
-def _tail(path: Path) -> str:
-    try:
-        text = path.read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return ""
-    lines = text.rstrip().splitlines()[-_TAIL_LINES:]
-    return "\n".join(lines)[-_TAIL_CHARS:]
+def _output_tail(workdir: Path) -> str:
+    """The last non-blank lines of the run's stderr (else stdout), quoted on one line: a
+    failure is reported on one line per node."""
+    for name in (_STDERR_FILE, _STDOUT_FILE):
+        try:
+            text = (workdir / name).read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            continue
+        lines = [line.strip() for line in text.splitlines() if line.strip()]
+        if lines:
+            shown = ", ".join(repr(line[-_TAIL_LINE_CHARS:]) for line in lines[-_TAIL_LINES:])
+            return f"last lines of {name}: {shown}"
+    return f"{_STDERR_FILE} and {_STDOUT_FILE} are empty"
 
 
 def _wait_unreaped(pid: int, timeout: float | None) -> bool:
@@ -154,9 +164,10 @@ class CommandModel(PointwiseModel):
     output_file:
         File the command writes in its work directory.
     output_format:
-        ``csv`` (header row of names, one row per time), ``json`` (``{name: [...]}``),
-        ``npy`` ((T,) for one output or (T, k) with columns in ``outputs`` order) or
-        ``npz`` (arrays by name); ``None`` infers it from the file extension.
+        ``csv`` (header row of names, one row per time), ``table`` (the same, separated by
+        whitespace, as ngspice's ``wrdata`` writes), ``json`` (``{name: [...]}``), ``npy``
+        ((T,) for one output or (T, k) with columns in ``outputs`` order) or ``npz`` (arrays
+        by name); ``None`` infers it from the file extension (all but ``table``).
     templates:
         Template files (relative to ``base_dir``), rendered into the work directory under
         their own file name.
@@ -174,6 +185,10 @@ class CommandModel(PointwiseModel):
     time_column:
         Name of an optional time column/key in the output; when present it must match the
         requested grid.
+    axis, axis_column:
+        The outputs' own axis (:class:`~pcmb.axes.OutputAxis`, e.g. the frequencies of an
+        AC sweep) instead of time, and the column/key of the output file that holds its
+        points at every node (required, and checked against ``axis.values``).
 
     Raises
     ------
@@ -203,6 +218,8 @@ class CommandModel(PointwiseModel):
         run_dir: Path | None = None,
         keep: KeepPolicy = "failed",
         time_column: str = "time",
+        axis: OutputAxis | None = None,
+        axis_column: str = "frequency",
     ):
         base_dir = Path.cwd() if base_dir is None else Path(base_dir).resolve()
         try:
@@ -233,6 +250,10 @@ class CommandModel(PointwiseModel):
         self.run_dir = None if run_dir is None else Path(run_dir)
         self.keep = keep
         self.time_column = time_column
+        self.axis, self.axis_column = axis, axis_column
+        if axis is not None:
+            # The model protocol's output_axes: every output of the file is on the axis.
+            self.output_axes = dict.fromkeys(self.outputs, axis)
         self.templates = tuple(
             self._read_template(base_dir, name, f"model.templates[{i}]")
             for i, name in enumerate(templates)
@@ -251,12 +272,12 @@ class CommandModel(PointwiseModel):
             path = (base_dir / program).resolve()
             if not path.is_file() or not os.access(path, os.X_OK):
                 raise _problem(
-                    "model.command", f"program {path} does not exist or is not executable"
+                    "model.command[0]", f"program {path} does not exist or is not executable"
                 )
             return str(path)
         found = shutil.which(program)
         if found is None:
-            raise _problem("model.command", f"program {program!r} not found on PATH")
+            raise _problem("model.command[0]", f"program {program!r} not found on PATH")
         return found
 
     @staticmethod
@@ -265,14 +286,21 @@ class CommandModel(PointwiseModel):
             raise _problem(
                 "model.output.file", f"expected a plain file name, found {output_file!r}"
             )
-        fmt = output_format or Path(output_file).suffix.lstrip(".").lower()
-        if fmt not in FORMATS:
+        if output_format is not None:
+            if output_format not in FORMATS:
+                raise _problem(
+                    "model.output.format",
+                    f"expected one of {', '.join(FORMATS)}, found {output_format!r}",
+                )
+            return output_format
+        suffix = Path(output_file).suffix.lstrip(".").lower()
+        if suffix not in _EXTENSIONS:
             raise _problem(
                 "model.output.format",
-                f"expected one of {', '.join(FORMATS)} (or an output file with such an "
-                f"extension), found {fmt!r}",
+                f"give the format of {output_file} ({', '.join(FORMATS)}): its extension "
+                f"{suffix!r} is none of {', '.join(_EXTENSIONS)}",
             )
-        return fmt
+        return suffix
 
     @staticmethod
     def _resolve_file(base_dir: Path, name: str, key: str) -> Path:
@@ -301,11 +329,11 @@ class CommandModel(PointwiseModel):
                         f"{template.name} line {line}: placeholder {match.group(0)!r} names "
                         f"no parameter ({hint})",
                     )
-        for arg in self.argv[1:]:
+        for i, arg in enumerate(self.argv[1:], start=1):
             for match in _PLACEHOLDER.finditer(arg):
                 if match.group(1) not in known:
                     raise _problem(
-                        "model.command",
+                        f"model.command[{i}]",
                         f"placeholder {match.group(0)!r} names no parameter ({hint})",
                     )
 
@@ -381,15 +409,13 @@ class CommandModel(PointwiseModel):
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(process.pid, signal.SIGKILL)
                 code = process.wait()
-        tail = _tail(workdir / _STDERR_FILE) or _tail(workdir / _STDOUT_FILE)
-        detail = f"; last output:\n{tail}" if tail else " (no output)"
         if not finished:
-            raise ModelError(f"timed out after {self.timeout:g} s (process group killed){detail}")
+            raise ModelError(f"timed out after {self.timeout:g} s (process group killed)")
         if code < 0:
             name = signal.Signals(-code).name if -code in signal.valid_signals() else "?"
-            raise ModelError(f"killed by signal {-code} ({name}){detail}")
+            raise ModelError(f"killed by signal {-code} ({name})")
         if code > 0:
-            raise ModelError(f"exited with code {code}{detail}")
+            raise ModelError(f"exited with code {code}")
 
     def _read_outputs(
         self, workdir: Path, times: NDArray[np.float64]
@@ -402,20 +428,26 @@ class CommandModel(PointwiseModel):
         except (ValueError, OSError, EOFError, zipfile.BadZipFile, csv.Error) as exc:
             what = f"{self.output_file} as {self.output_format}"
             raise ModelError(f"cannot parse {what}: {describe_exception(exc)}") from exc
-        if self.time_column in columns:
-            self._check_time_column(columns[self.time_column], times)
+        key, label, points = self.time_column, "t", "time(s)"
+        if self.axis is not None:
+            key, times = self.axis_column, self.axis.values
+            label, points = key, "point(s)"
+            if key not in columns:
+                raise ModelError(f"{self.output_file} has no {key!r} column (the axis)")
+        if key in columns:
+            self._check_time_column(columns[key], times, key)
         result = check_point_result(columns, self.outputs, times.size, self.output_file)
         for name, values in result.items():
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
                 raise ModelError(
                     f"output {name!r} in {self.output_file} is not finite at "
-                    f"{bad.size} time(s), first at t={times[bad[0]]:g}"
+                    f"{bad.size} {points}, first at {label}={times[bad[0]]:g}"
                 )
         return result
 
-    def _check_time_column(self, column: Any, times: NDArray[np.float64]) -> None:
-        file_times = _float_array(column, f"{self.time_column!r} in {self.output_file}")
+    def _check_time_column(self, column: Any, times: NDArray[np.float64], key: str) -> None:
+        file_times = _float_array(column, f"{key!r} in {self.output_file}")
         # A simulator may print times with few digits; a row must still be unmistakably its
         # grid time, i.e. within a small fraction of the grid step.
         step = np.min(np.diff(times)) if times.size > 1 else max(1.0, abs(float(times[0])))
@@ -423,7 +455,7 @@ class CommandModel(PointwiseModel):
             file_times, times, rtol=0, atol=1e-3 * step
         ):
             raise ModelError(
-                f"the {self.time_column!r} column of {self.output_file} does not match the "
+                f"the {key!r} column of {self.output_file} does not match the "
                 f"requested grid ({times.size} points from {times[0]:g} to {times[-1]:g})"
             )
 
@@ -448,9 +480,10 @@ class CommandModel(PointwiseModel):
             succeeded = True
             return result
         except ModelError as exc:
+            message = f"{exc}; {_output_tail(workdir)}"
             if self.keep != "none":
-                raise ModelError(f"{exc} [work directory kept: {workdir}]") from exc
-            raise
+                message += f" [work directory kept: {workdir}]"
+            raise ModelError(message) from exc
         finally:
             if self.keep == "none" or (self.keep == "failed" and succeeded):
                 shutil.rmtree(workdir, ignore_errors=True)
@@ -458,7 +491,16 @@ class CommandModel(PointwiseModel):
 
 def _read_csv(path: Path, outputs: Sequence[str]) -> dict[str, NDArray[np.float64]]:
     text = path.read_text(encoding="utf-8", errors="replace")
-    rows = [row for row in csv.reader(io.StringIO(text)) if row]
+    return _columns([row for row in csv.reader(io.StringIO(text)) if row])
+
+
+def _read_table(path: Path, outputs: Sequence[str]) -> dict[str, NDArray[np.float64]]:
+    text = path.read_text(encoding="utf-8", errors="replace")
+    return _columns([line.split() for line in text.splitlines() if line.strip()])
+
+
+def _columns(rows: list[list[str]]) -> dict[str, NDArray[np.float64]]:
+    """Columns by name of a table whose first row names them."""
     if not rows:
         raise ValueError("the file is empty")
     header = [cell.strip() for cell in rows[0]]
@@ -497,6 +539,7 @@ def _read_npz(path: Path, outputs: Sequence[str]) -> dict[str, NDArray[np.float6
 
 _READERS: dict[str, Callable[[Path, Sequence[str]], Mapping[str, Any]]] = {
     "csv": _read_csv,
+    "table": _read_table,
     "json": _read_json,
     "npy": _read_npy,
     "npz": _read_npz,
@@ -519,6 +562,8 @@ class CommandModelFactory(ModelFactory):
     run_dir: Path | None = None
     keep: KeepPolicy = "failed"
     time_column: str = "time"
+    axis: OutputAxis | None = None
+    axis_column: str = "frequency"
 
     def __call__(self) -> CommandModel:
         """Build the model (raises ConfigError as :class:`CommandModel` does)."""

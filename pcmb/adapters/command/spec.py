@@ -5,7 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BeforeValidator, Field
+import numpy as np
+from pydantic import BeforeValidator, Field, model_validator
 
 from pcmb.adapters.command.model import (
     CommandModelFactory,
@@ -13,7 +14,8 @@ from pcmb.adapters.command.model import (
     OutputFormat,
     split_command,
 )
-from pcmb.config.types import ModelSection, Name, NameList, PositiveReal, Real, Section
+from pcmb.axes import OutputAxis
+from pcmb.config.types import ModelSection, Name, NameList, Points, PositiveReal, Real, Section
 
 __all__ = ["CommandModelSpec", "CommandOutputSpec"]
 
@@ -25,6 +27,8 @@ def _split_command(value: Any) -> Any:
             return split_command(value)
         except ValueError as exc:
             raise ValueError(f"cannot split the command: {exc}") from None
+    if not isinstance(value, list):
+        raise ValueError(f"expected a list of strings or one string, found {value!r}")
     return value
 
 
@@ -35,14 +39,46 @@ Command = Annotated[
 ]
 
 
+class CommandAxisSpec(Section):
+    """The outputs' own axis (an AC sweep's frequencies), read from a column of the file."""
+
+    name: Name = Field(default="frequency", description="the axis's name (its dimension)")
+    column: str = Field(description="column (key) of the output file holding its points")
+    unit: str = Field(default="", description="unit text; Hz, kHz, rad/s... draw log axes")
+    start: Real = Field(description="first point")
+    stop: Real = Field(description="last point (> start)")
+    points: Points = Field(description="number of points")
+    spacing: Literal["linear", "log"] = Field(
+        default="linear", description="linear or log (geometric, start > 0) spacing"
+    )
+
+    @model_validator(mode="after")
+    def _grid(self) -> CommandAxisSpec:
+        if not self.stop > self.start:
+            raise ValueError(f"stop ({self.stop}) must exceed start ({self.start})")
+        if self.spacing == "log" and not self.start > 0:
+            raise ValueError(f"a log spacing needs start > 0, found {self.start}")
+        return self
+
+    def axis(self) -> OutputAxis:
+        """The axis: ``points`` from ``start`` to ``stop``, as the file must hold them."""
+        spread = np.geomspace if self.spacing == "log" else np.linspace
+        return OutputAxis(self.name, spread(self.start, self.stop, self.points), self.unit)
+
+
 class CommandOutputSpec(Section):
     """The file an external command writes in its work directory."""
 
     file: str = Field(description="file the command writes in its work directory")
     format: OutputFormat | None = Field(
-        default=None, description="default: from the file extension"
+        default=None,
+        description="table: whitespace-separated columns; default: from the extension "
+        "(.csv, .json, .npy, .npz)",
     )
     time_column: str = Field(default="time", description="checked against the grid if present")
+    axis: CommandAxisSpec | None = Field(
+        default=None, description="the outputs' own axis instead of time (not set: time)"
+    )
 
 
 class CommandModelSpec(ModelSection):
@@ -78,6 +114,8 @@ class CommandModelSpec(ModelSection):
             run_dir=None if self.run_dir is None else Path(self.run_dir).resolve(),
             keep=self.keep,
             time_column=self.output.time_column,
+            axis=None if self.output.axis is None else self.output.axis.axis(),
+            axis_column="frequency" if self.output.axis is None else self.output.axis.column,
         )
 
     @property

@@ -1,0 +1,113 @@
+"""Anisotropic tensor refinement (``method: {kind: adaptive, basis: tensor}``).
+
+The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set is always a
+box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
+(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the indicator of input
+k is the sum of the surplus indicators on the box's top face in k (the indices at level L_k
+there): what the last level of k added. Their sum over the faces estimates the error of the
+statistics. While it exceeds the tolerance, the input with the largest face indicator is
+raised by one level — one input direction at a time — within the budget of runs. The nested
+rules reuse every run; the result is the tensor projection on the box reached.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections.abc import Mapping
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.sparse import SparseGrid
+from pcmb.designs.adaptive import AdaptiveCollocation
+from pcmb.designs.base import MethodSettings
+from pcmb.result import Design
+
+__all__ = ["AnisotropicTensor"]
+
+
+def _box(levels: tuple[int, ...]) -> NDArray[np.int64]:
+    """(K, n) every level multi-index of the box 0..levels[k] in each input."""
+    return np.array(list(itertools.product(*(range(top + 1) for top in levels))), dtype=np.int64)
+
+
+class AnisotropicTensor(AdaptiveCollocation):
+    """``method: {kind: adaptive, basis: tensor, tolerance, max_runs, rule}``: a tensor grid
+    of nested rules raised one input at a time where the top-face surpluses say it pays
+    (see the module)."""
+
+    def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
+        super().__init__(inputs, dataclasses.replace(settings, basis=None))
+        self._levels = (1,) * len(self.distributions)
+        self._first = SparseGrid(self.distributions, _box(self._levels), self.rules)
+        if self.max_runs < self._first.size:
+            raise ValueError(
+                f"method.max_runs: {self.max_runs} runs do not allow one step: the tensor grid "
+                f"of level 1 in every input takes {self._first.size} runs"
+            )
+        self._reset()
+
+    def _reset(self) -> None:
+        super()._reset()
+        self._levels = (1,) * len(self.distributions)
+        self._refined = set(self._index)
+
+    def record(self) -> Design:
+        return dataclasses.replace(super().record(), basis="tensor", grid="adaptive tensor")
+
+    def _active(self) -> NDArray[np.bool_]:
+        """The indices on a top face of the box (what the last level of an input added)."""
+        index = np.array(self._index)
+        return np.any(index == np.array(self._levels), axis=1)
+
+    def _faces(self) -> NDArray[np.float64]:
+        """(n,) per input, the sum of the indicators on the box's top face in that input."""
+        index = np.array(self._index)
+        return np.array(
+            [
+                self._indicators[index[:, k] == top].sum() if top > 0 else 0.0
+                for k, top in enumerate(self._levels)
+            ]
+        )
+
+    def more(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> NodeSet | None:
+        """The nodes of the next input's level while the estimated error exceeds the
+        tolerance and the budget allows, else ``None``."""
+        if nodes.size == self._first.size:
+            self._reset()
+        order = self._order(nodes)
+        if not ok.all():
+            self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
+            return None
+        self._measure(np.stack(list(values.values()), axis=1)[order])
+        self._history.append((self._grid.size, self._estimate()))
+        if self._estimate() <= self.tolerance:
+            return None
+        faces = self._faces()
+        for k in np.argsort(-faces, kind="stable"):
+            rule = self.rules[k]
+            if rule.max_level is not None and self._levels[k] >= rule.max_level:
+                continue
+            levels = tuple(top + (j == k) for j, top in enumerate(self._levels))
+            box = _box(levels)
+            if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
+                self._stopped = (
+                    f"raising {self.names[k]} would pass the budget of {self.max_runs} runs "
+                    "(method.max_runs): raise it, or the tolerance"
+                )
+                return None
+            present = set(self._index)
+            added = [tuple(row) for row in box.tolist() if tuple(row) not in present]
+            self._levels = levels
+            self._refined.update(added)
+            return self._grow(added)
+        self._stopped = "every input is at its rule's last level: use rule leja"
+        return None

@@ -1,0 +1,316 @@
+"""What a sweep runs: the ``sweep:`` section expanded into one method setting per value.
+
+Each entry of ``sweep.methods`` is a ``method:`` block with exactly one key given as a list;
+every value of that list is one setting, an ordinary study. Without a ``sweep:`` section the
+config's own method is swept over a rising cost (:func:`default_sweep`). Seeded methods
+(sampling, regression) are run ``sweep.replicates`` times with seeds ``seed``, ``seed + 1``, …
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pydantic import ValidationError
+
+from pcmb.designs import MethodSettings, NodeDesign, design_key, make_design
+
+if TYPE_CHECKING:
+    from pcmb.config.schema import MethodSpec, StudyConfig
+
+__all__ = [
+    "SWEPT_DEFAULTS",
+    "Setting",
+    "SweepPlan",
+    "default_sweep",
+    "plan_sweep",
+    "sweep_problems",
+]
+
+#: Keys a sweep entry always sets unless it gives them: held-out runs and the nominal run are
+#: checks and extras, not part of a method's cost.
+SWEPT_DEFAULTS: Mapping[str, Any] = {"validation": 0}
+#: Keys that never appear in a method's label (the swept key and the seed are shown apart).
+_UNLABELLED = ("kind", "grid", "seed", "validation")
+#: Largest number of settings the default sweep makes of one cost key.
+_DEFAULT_STEPS = 8
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One study of a sweep.
+
+    Attributes
+    ----------
+    entry:
+        Index of its entry in ``sweep.methods`` (-1 for the reference).
+    method:
+        The method's label in tables and charts, e.g. ``collocation:smolyak`` or
+        ``collocation basis=total``.
+    setting:
+        The swept value as ``key=value``, e.g. ``order=3``.
+    replicate:
+        0, 1, … for the seeds of a seeded method (always 0 otherwise).
+    spec:
+        The full ``method:`` block of the study.
+    """
+
+    entry: int
+    method: str
+    setting: str
+    replicate: int
+    spec: MethodSpec
+
+    @property
+    def stem(self) -> str:
+        """File name of the setting's result, without ``.h5``."""
+        if self.entry < 0:
+            return "reference"
+        text = f"{self.entry:02d}-{self.method}-{self.setting}"
+        text += f"-r{self.replicate}" if self.replicate else ""
+        return re.sub(r"[^A-Za-z0-9=.,_-]+", "_", text)
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """The settings of a sweep, in order, the reference (``None``: a file given by the user),
+    and the outputs errors are computed for (``None``: every output of the reference)."""
+
+    settings: tuple[Setting, ...]
+    reference: Setting | None
+    outputs: tuple[str, ...] | None
+
+
+def _swept_key(entry: Mapping[str, Any]) -> list[str]:
+    return [key for key, value in entry.items() if isinstance(value, list)]
+
+
+def _key_of(spec: MethodSpec) -> str:
+    """The method's design key, e.g. ``collocation:smolyak``."""
+    orders = "auto" if spec.order == "auto" else None
+    return design_key(
+        MethodSettings(kind=spec.kind, grid=spec.grid, elements=spec.elements, orders=orders)
+    )
+
+
+def _labels(entries: list[tuple[Mapping[str, Any], MethodSpec, str]]) -> list[str]:
+    """One label per entry: its design key, followed, where entries share a key, by the
+    fixed keys that tell them apart (``collocation basis=total``)."""
+    keys = [_key_of(spec) for _, spec, _ in entries]
+    labels = []
+    for (entry, _, swept), key in zip(entries, keys, strict=True):
+        twins = [e for (e, _, w), k in zip(entries, keys, strict=True) if k == key]
+        differing = [
+            f"{name}={_text(value)}"
+            for name, value in entry.items()
+            if name not in (*_UNLABELLED, swept) and any(twin.get(name) != value for twin in twins)
+        ]
+        labels.append(" ".join([key, *differing]))
+    return labels
+
+
+def _text(value: Any) -> str:
+    """A setting value as compact text: ``3``, ``1e-04``, ``a:2,b:3``, ``0.0;1.0``."""
+    if isinstance(value, Mapping):
+        return ",".join(f"{k}:{_text(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ";".join(_text(v) for v in value)
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _expand(entry: Mapping[str, Any]) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """(swept key, index, method data) per value of the entry's list (nothing for a bad
+    entry: :func:`sweep_problems` says why)."""
+    keys = _swept_key(entry)
+    if len(keys) != 1:
+        return
+    key = keys[0]
+    for index, value in enumerate(entry[key]):
+        yield key, index, {**SWEPT_DEFAULTS, **entry, key: value}
+
+
+def _design(config: StudyConfig, spec: MethodSpec) -> NodeDesign:
+    """The design of a method block on the config's inputs."""
+    settings = MethodSettings(
+        orders=config.model_copy(update={"method": spec}).orders,
+        diagnostics_tolerance=config.diagnostics.tolerance,
+        **spec.model_dump(exclude={"order", "validation"}),
+    )
+    return make_design(dict(zip(config.input_names, config.distributions, strict=True)), settings)
+
+
+def _settings_of(
+    config: StudyConfig, entry: Mapping[str, Any], index: int, label: str, replicates: int
+) -> Iterator[Setting]:
+    from pcmb.config.schema import MethodSpec
+
+    for key, _, data in _expand(entry):
+        spec = MethodSpec.model_validate(data)
+        copies = replicates if _design(config, spec).record().seed is not None else 1
+        for replicate in range(copies):
+            seeded = spec.model_copy(update={"seed": spec.seed + replicate})
+            yield Setting(index, label, f"{key}={_text(data[key])}", replicate, seeded)
+
+
+def _rising(value: Any, key: str) -> list[Any]:
+    """Values of a cost key rising to ``value`` (the config's own)."""
+    if key == "order":
+        if isinstance(value, Mapping):  # every input's order raised together, capped at its own
+            top = max(value.values())
+            return [{k: min(p, step) for k, p in value.items()} for step in range(1, top + 1)]
+        return list(range(1, value + 1))[-_DEFAULT_STEPS:]
+    if key == "level":
+        return list(range(value + 1))[-_DEFAULT_STEPS:]
+    if key == "tolerance":
+        return [value * 100.0, value * 10.0, value]
+    return sorted({max(2, value // 8), max(2, value // 4), max(2, value // 2), value})
+
+
+def _finer(value: Any, key: str) -> Any:
+    """A much more accurate value of a cost key, for the default reference."""
+    if key == "order":
+        return {k: p + 2 for k, p in value.items()} if isinstance(value, Mapping) else value + 2
+    if key == "level":
+        return value + 2
+    if key == "tolerance":
+        return value / 100.0
+    return value * 16
+
+
+def _cost_key(method: Mapping[str, Any]) -> str:
+    if method.get("kind") == "regression":
+        return "samples"
+    if method.get("kind") == "adaptive" or method.get("tolerance") is not None:
+        return "tolerance"
+    for key in ("level", "samples", "order"):
+        if method.get(key) is not None and method.get(key) != "auto":
+            return key
+    return "max_runs"
+
+
+def default_sweep(method: Mapping[str, Any], runs: int) -> dict[str, Any]:
+    """The ``sweep:`` section used when a config has none.
+
+    Its own method at a rising cost (order 1 to its order, levels up to its level, samples
+    /8, /4, /2, 1, tolerances ×100, ×10, 1); Monte Carlo with 16, 64, 256, … samples up to
+    twice the ``runs`` of the config's method (at least 64), unless the method samples
+    itself; and the same method at a finer cost as the reference (order + 2, level + 2,
+    samples × 16, tolerance / 100).
+    """
+    method = dict(method)
+    key = _cost_key(method)
+    if key == "samples":  # a fixed sample at each cost: adding samples is what is swept
+        method = {k: v for k, v in method.items() if k not in ("tolerance", "max_samples")}
+    value = method.get(key)
+    if value is None:  # order: auto within max_runs: its budget is the cost
+        value = 1000
+    methods = [{**method, key: _rising(value, key)}]
+    if key != "samples":
+        top = max(64, 2 * runs)
+        samples = [16 * 4**k for k in range(_DEFAULT_STEPS) if 16 * 4**k <= top]
+        methods.append({"kind": "montecarlo", "samples": samples, "seed": 1})
+    return {"methods": methods, "reference": {**method, key: _finer(value, key)}}
+
+
+def plan_sweep(config: StudyConfig) -> SweepPlan:
+    """The settings a config's sweep runs (its ``sweep:``, else :func:`default_sweep`).
+
+    The config must have passed :func:`sweep_problems` (``load_config`` checks it).
+    """
+    from pcmb.config.schema import MethodSpec
+
+    section = config.sweep
+    if section is None:
+        runs = _design(config, config.method).runs
+        found = default_sweep(config.method.model_dump(exclude_defaults=True), runs)
+        methods, outputs, replicates = found["methods"], None, 1
+        reference_data = {**SWEPT_DEFAULTS, **found["reference"]}
+    else:
+        methods, outputs, replicates = section.methods, section.outputs, section.replicates
+        reference_data = (
+            None if section.reference is None else {**SWEPT_DEFAULTS, **section.reference}
+        )
+    firsts = [(entry, *next(_expand(entry))) for entry in methods]
+    labels = _labels([(e, MethodSpec.model_validate(data), key) for e, key, _, data in firsts])
+    settings = tuple(
+        setting
+        for index, (entry, label) in enumerate(zip(methods, labels, strict=True))
+        for setting in _settings_of(config, entry, index, label, replicates)
+    )
+    reference = None
+    if reference_data is not None:
+        spec = MethodSpec.model_validate(reference_data)
+        fixed = " ".join(
+            f"{k}={_text(v)}" for k, v in reference_data.items() if k not in _UNLABELLED
+        )
+        reference = Setting(-1, _key_of(spec), fixed, 0, spec)
+    return SweepPlan(settings, reference, None if outputs is None else tuple(outputs))
+
+
+def _design_problems(
+    config: StudyConfig, spec: MethodSpec, prefix: str, swept: str | None, index: int
+) -> Iterator[tuple[str, str]]:
+    from pcmb.config.checks import cross_check
+
+    for path, message in cross_check(config.model_copy(update={"method": spec})):
+        key = path.removeprefix("method").lstrip(".")
+        head = key.split(".")[0].split("[")[0]
+        where = f"{prefix}.{key}" if key else prefix
+        if swept is not None and head == swept and key == swept:
+            where += f"[{index}]"
+        yield where, message
+
+
+def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
+    """Every problem of the ``sweep:`` section, as (key path, message), before anything runs:
+    an entry that varies no key or more than one, a setting the schema or its design
+    refuses (named down to the list item, e.g. ``sweep.methods[1].order[2]``)."""
+    from pcmb.config.messages import schema_problems
+    from pcmb.config.schema import MethodSpec
+
+    section = config.sweep
+    if section is None:
+        return
+    seen: set[tuple[str, str]] = set()
+    for index, entry in enumerate(section.methods):
+        prefix = f"sweep.methods[{index}]"
+        keys = _swept_key(entry)
+        if len(keys) != 1:
+            found = f"found {', '.join(keys)}" if keys else "found none"
+            yield (
+                prefix,
+                "a sweep entry varies exactly one key, given as a list of values "
+                f"(e.g. order: [1, 2, 3]); {found}",
+            )
+            continue
+        for key, position, data in _expand(entry):
+            try:
+                spec = MethodSpec.model_validate(data)
+            except ValidationError as error:
+                problems = schema_problems(error, MethodSpec, prefix=("sweep", "methods", index))
+                found = [
+                    (
+                        f"{p.path}[{position}]" if p.path == f"{prefix}.{key}" else p.path,
+                        p.message,
+                    )
+                    for p in problems
+                ]
+            else:
+                found = list(_design_problems(config, spec, prefix, key, position))
+            for problem in found:
+                if problem not in seen:
+                    seen.add(problem)
+                    yield problem
+    if section.reference is not None:
+        data = {**SWEPT_DEFAULTS, **section.reference}
+        try:
+            spec = MethodSpec.model_validate(data)
+        except ValidationError as error:
+            for p in schema_problems(error, MethodSpec, prefix=("sweep", "reference")):
+                yield p.path, p.message
+        else:
+            yield from _design_problems(config, spec, "sweep.reference", None, 0)

@@ -1,0 +1,329 @@
+"""``pcmb sweep``: settings, errors against the reference, files, chart, report, resume."""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import itertools
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.cli import main
+from pcmb.config.schema import load_config
+from pcmb.sweep.plan import plan_sweep
+from pcmb.sweep.runner import LEDGER
+from pcmb.sweep.table import COLUMNS, read_sweep
+
+CONFIGS = sorted((Path(__file__).parent.parent / "configs").glob("*.yaml"))
+
+GROWTH_MODEL = '''
+import time
+
+import numpy as np
+
+
+class Growth:
+    """y = exp(a t) + b: E y = (e^t - 1)/t + E b, closed form for a ~ U[0, 1]."""
+
+    outputs = ("y",)
+
+    def __init__(self, a=0.5, b=0.0, delay=0.0):
+        self.parameters = {"a": a, "b": b}
+        self.delay = delay
+
+    def simulate(self, params, times):
+        a = np.asarray(params["a"], float)
+        b = np.broadcast_to(np.asarray(params["b"], float), a.shape)
+        if self.delay:
+            time.sleep(self.delay * a.size)
+        return {"y": np.exp(a[:, None] * times) + b[:, None]}
+'''
+
+
+def _study(folder: Path, sweep: str, *, delay: float = 0.0, points: int = 21) -> Path:
+    (folder / "growth.py").write_text(GROWTH_MODEL)
+    config = folder / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: growth
+            model:
+              kind: python
+              entry: growth.py:Growth
+              params: {{a: 0.5, b: 0.0, delay: {delay}}}
+            time: {{start: 0.0, stop: 2.0, points: {points}}}
+            inputs:
+              a: {{dist: uniform, low: 0.0, high: 1.0}}
+              b: {{dist: uniform, low: -0.1, high: 0.1}}
+            method: {{kind: collocation, order: 3}}
+            execution: {{jobs: 1}}
+            output: out.h5
+            """
+        )
+        + textwrap.dedent(sweep)
+    )
+    return config
+
+
+SWEEP = """\
+sweep:
+  methods:
+    - {kind: collocation, order: [1, 2, 3, 4]}
+    - {kind: montecarlo, samples: [40, 160], seed: 3}
+  reference: {kind: collocation, order: 12}
+  replicates: 2
+"""
+
+
+def _exact(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and std of exp(a t) + b, a ~ U[0, 1], b ~ U[-0.1, 0.1]."""
+    t = np.where(times == 0, 1.0, times)
+    first = np.where(times == 0, 1.0, np.expm1(t) / t)
+    second = np.where(times == 0, 1.0, np.expm1(2 * t) / (2 * t))
+    return first, np.sqrt(second - first**2 + 0.2**2 / 12)
+
+
+def _rows(folder: Path) -> list[dict[str, str]]:
+    with open(folder / "sweep.csv", newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("sweep")
+    config = _study(folder, SWEEP)
+    assert main(["sweep", str(config), "-o", str(folder / "out"), "--quiet"]) == 0
+    return folder / "out"
+
+
+def test_the_csv_errors_are_those_computed_from_the_result_files(swept):
+    rows = _rows(swept)
+    assert list(rows[0]) == list(COLUMNS)
+    reference = pcmb.load(swept / "reference.h5")
+    mean, std = _exact(reference.times)  # the reference is trusted: order 12 is exact here
+    np.testing.assert_allclose(reference.mean("y"), mean, rtol=1e-12)
+    np.testing.assert_allclose(reference.std("y"), std, rtol=1e-10)
+    # 4 collocation orders + 2 Monte Carlo sizes x 2 replicates, one output.
+    assert len(rows) == 8
+    for row in rows:
+        result = pcmb.load(swept / row["file"])
+        scale = np.max(reference.std("y"))
+        err_mean = np.max(np.abs(result.mean("y") - reference.mean("y"))) / scale
+        err_std = np.max(np.abs(result.std("y") - reference.std("y"))) / scale
+        rms = np.sqrt(np.mean((result.std("y") - reference.std("y")) ** 2)) / scale
+        np.testing.assert_allclose(float(row["err_mean"]), err_mean, rtol=1e-5, atol=1e-300)
+        np.testing.assert_allclose(float(row["err_std"]), err_std, rtol=1e-5, atol=1e-300)
+        np.testing.assert_allclose(float(row["err_std_rms"]), rms, rtol=1e-5, atol=1e-300)
+        assert int(row["runs"]) == result.n_nodes
+        assert float(row["seconds"]) >= float(row["model_seconds"]) > 0
+    settings = [(r["method"], r["setting"], r["replicate"]) for r in rows]
+    assert settings[:4] == [("collocation", f"order={p}", "0") for p in (1, 2, 3, 4)]
+    assert ("montecarlo", "samples=160", "1") in settings
+
+
+def test_collocation_converges_and_monte_carlo_sits_at_its_standard_error(swept):
+    rows = _rows(swept)
+    chaos = [float(r["err_std"]) for r in rows if r["method"] == "collocation"]
+    # Gauss-Legendre on exp(a t), t <= 2: each added point gains a factor
+    # (t/2)^2 / ((2n+1)(2n+2)) <= 1/12 in the error; allow a factor 5 for the constant.
+    for coarse, fine in itertools.pairwise(chaos):
+        assert fine < coarse / 5
+    reference = pcmb.load(swept / "reference.h5")
+    floor = read_sweep(swept / "sweep.h5").floors["y"]
+    assert floor == (0.0, 0.0)  # a quadrature reference has no sampling noise
+    for row in rows:
+        if row["method"] != "montecarlo":
+            continue
+        n = int(row["runs"])
+        # max over 21 times of |error| of a mean of n runs: well within 5 standard errors.
+        bound = 5 * np.max(reference.std("y")) / np.sqrt(n) / np.max(reference.std("y"))
+        assert 0 < float(row["err_mean"]) < bound
+
+
+def test_the_h5_table_holds_the_csv_rows_and_the_per_time_curves(swept):
+    table = read_sweep(swept / "sweep.h5")
+    rows = _rows(swept)
+    assert [r.file for r in table.rows] == [r["file"] for r in rows]
+    assert table.mean_curves.shape == (len(rows), 21)
+    for row, curve in zip(table.rows, table.std_curves, strict=True):
+        assert np.max(curve) == pytest.approx(row.err_std, rel=1e-12)
+    assert (swept / "sweep.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_report_of_a_sweep_draws_the_chart_and_the_table(swept, capsys):
+    assert main(["report", str(swept / "sweep.h5"), "-o", str(swept / "report")]) == 0
+    page = (swept / "report" / "index.html").read_text()
+    assert '<img src="sweep.png"' in page and "samples=160" in page
+    assert (swept / "report" / "sweep.png").stat().st_size > 10_000
+
+
+def test_a_reference_file_replaces_sweep_reference(tmp_path, swept):
+    config = _study(tmp_path, SWEEP.replace("  reference: {kind: collocation, order: 12}\n", ""))
+    out = tmp_path / "out"
+    reference = swept / "reference.h5"
+    assert main(["sweep", str(config), "-o", str(out), "--reference", str(reference)]) == 0
+    assert not (out / "reference.h5").exists()
+    mine, theirs = _rows(out), _rows(swept)
+    for a, b in zip(mine, theirs, strict=True):
+        assert (a["setting"], a["err_mean"], a["err_std"]) == (
+            b["setting"],
+            b["err_mean"],
+            b["err_std"],
+        )
+
+
+def test_without_any_reference_nothing_runs(tmp_path, capsys):
+    config = _study(tmp_path, SWEEP.replace("  reference: {kind: collocation, order: 12}\n", ""))
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out")]) == 2
+    assert "sweep.reference" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_reference_on_another_grid_is_refused(tmp_path, swept, capsys):
+    config = _study(tmp_path, SWEEP, points=11)
+    code = main(
+        [
+            "sweep",
+            str(config),
+            "-o",
+            str(tmp_path / "o"),
+            "--reference",
+            str(swept / "reference.h5"),
+        ]
+    )
+    assert code == 2
+    assert "another time grid" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("sweep", "key", "words"),
+    [
+        (
+            "sweep:\n  methods: [{kind: collocation, order: [1, 2], level: [1, 2]}]\n",
+            "sweep.methods[0]",
+            "found order, level",
+        ),
+        ("sweep:\n  methods: [{kind: collocation, order: 3}]\n", "sweep.methods[0]", "found none"),
+        (
+            "sweep:\n  methods: [{kind: collocation, order: [1, -2]}]\n",
+            "sweep.methods[0].order[1]",
+            "",
+        ),
+        ("sweep:\n  methods: [{kind: montecarlo, samples: [10, 0]}]\n", "samples[1]", ""),
+        ("sweep:\n  methods: [{kind: nonsense, order: [1]}]\n", "sweep.methods[0].kind", ""),
+        (
+            "sweep:\n  methods: [{kind: collocation, order: [1]}]\n  outputs: [q]\n",
+            "sweep.outputs[0]",
+            "'q' is not an output",
+        ),
+        (
+            "sweep:\n  methods: [{kind: collocation, order: [1]}]\n  reference: {kind: x}\n",
+            "sweep.reference.kind",
+            "",
+        ),
+    ],
+)
+def test_bad_sweeps_name_their_key_before_anything_runs(tmp_path, capsys, sweep, key, words):
+    config = _study(tmp_path, sweep)
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"{key}:" in err and words in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+    assert main(["validate", str(config)]) == 2  # the same check, without running
+
+
+def _sweep_process(folder: Path) -> subprocess.Popen[bytes]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "sweep", "study.yaml", "-o", "out", "--quiet"],
+        cwd=folder,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+
+
+def _finished(folder: Path) -> dict[str, dict]:
+    ledger = folder / "out" / LEDGER
+    with contextlib.suppress(OSError, ValueError):
+        return json.loads(ledger.read_text())["settings"]
+    return {}
+
+
+@pytest.mark.slow
+def test_a_sweep_killed_midway_resumes_where_it_stopped(tmp_path):
+    slow = """\
+    sweep:
+      methods:
+        - {kind: collocation, order: [1, 2, 3]}
+        - {kind: montecarlo, samples: [400], seed: 1}
+      reference: {kind: collocation, order: 6}
+    """
+    config = _study(tmp_path, slow, delay=0.01)
+    process = _sweep_process(tmp_path)
+    try:
+        deadline = time.monotonic() + 90
+        while len(_finished(tmp_path)) < 3:  # the reference and two orders
+            assert process.poll() is None, process.stderr.read().decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+        process.stderr.close()
+    done = _finished(tmp_path)
+    assert not (tmp_path / "out" / "sweep.csv").exists()
+    stamps = {stem: (tmp_path / "out" / f"{stem}.h5").stat().st_mtime_ns for stem in done}
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out"), "--quiet"]) == 2  # no --resume
+    assert main(["sweep", str(config), "-o", str(tmp_path / "out"), "--resume", "--quiet"]) == 0
+    for stem, stamp in stamps.items():  # finished settings were read back, not run again
+        assert (tmp_path / "out" / f"{stem}.h5").stat().st_mtime_ns == stamp
+    assert not (tmp_path / "out" / LEDGER).exists()
+    resumed = _rows(tmp_path / "out")
+    assert main(["sweep", str(config), "-o", str(tmp_path / "clean"), "--quiet"]) == 0
+    clean = _rows(tmp_path / "clean")
+    assert [(r["setting"], r["err_mean"], r["err_std"]) for r in resumed] == [
+        (r["setting"], r["err_mean"], r["err_std"]) for r in clean
+    ]
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
+def test_every_config_has_a_sweep_of_rising_cost_and_a_finer_reference(path, request):
+    text = path.read_text(encoding="utf-8")
+    if "ngspice" in text and shutil.which("ngspice") is None:
+        pytest.skip("ngspice is not on PATH (apt-get install ngspice, or conda-forge's ngspice)")
+    if "../models/fmu/build" in text:  # the FMU is built at test time
+        text = text.replace("../models/fmu/build", str(request.getfixturevalue("fmu_dir")))
+    config = load_config(path, text=text)
+    plan = plan_sweep(config)
+    assert plan.settings and plan.reference is not None
+    own = [s for s in plan.settings if s.entry == 0]
+    runs = [
+        pcmb.Study.from_config(config.model_copy(update={"method": s.spec})).design.runs
+        for s in own
+    ]
+    assert runs == sorted(runs) and len(set(runs)) == len(runs)
+    finer = pcmb.Study.from_config(config.model_copy(update={"method": plan.reference.spec}))
+    assert finer.design.runs > runs[-1]
+
+
+def test_inspect_of_a_sweep_gives_the_cheapest_setting_reaching_each_accuracy(swept, capsys):
+    assert main(["inspect", str(swept / "sweep.h5")]) == 0
+    line = next(x for x in capsys.readouterr().out.splitlines() if x.strip().startswith("coll"))
+    chaos = [r for r in _rows(swept) if r["method"] == "collocation"]
+    cells = []
+    for target in (1e-2, 1e-4):
+        runs = min(int(r["runs"]) for r in chaos if float(r["err_std"]) <= target)
+        cells.append(f"{runs} runs")
+    assert [cell for cell in cells if cell in line] == cells
+    assert line.index(cells[0]) < line.rindex(cells[1])
