@@ -222,7 +222,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
         _write_adaptive(file, result.adaptive, input_)
     if result.refinement is not None:
         _write_refinement(file, result.refinement, input_)
-    _write_processes(file, result, time_)
+    _write_processes(file, result, trails)
 
     index = result.multi_index
     term = None
@@ -295,10 +295,11 @@ def _write_elements(
         _attach(file.create_dataset("nodes/element", data=result.node_elements), node)
 
 
-def _write_processes(file: h5py.File, result: StudyResult, time_: h5py.Dataset) -> None:
+def _write_processes(file: h5py.File, result: StudyResult, trails: dict[str, _Trail]) -> None:
     """Each random process input under ``/processes/<name>``: ``grid`` (m,), ``eigenvalues``
     (K,), ``modes`` (K, m) (the field is germs @ modes), ``variance_error`` (m,), and per
-    output the total Sobol' index of its germs as a group, ``sobol_total/<output>`` (T,);
+    output the total Sobol' index of its germs as a group, ``sobol_total/<output>`` (T,) (or
+    on the output's own axis);
     attributes ``settings`` (JSON), ``germs`` (JSON names), ``captured_energy``,
     ``truncation_error``, ``total_variance``, ``eigenvalue_error``, ``nystrom_points``."""
     for name, found in result.processes.items():
@@ -317,7 +318,7 @@ def _write_processes(file: h5py.File, result: StudyResult, time_: h5py.Dataset) 
         for output, expansion in result.expansions.items():
             if isinstance(expansion, ChaosExpansion):
                 data = result.sobol_process(output, name)
-                _attach(group.create_dataset(f"sobol_total/{output}", data=data), time_)
+                _points(group, f"sobol_total/{output}", data, (), trails[output])
 
 
 def _read_processes(file: h5py.File) -> dict[str, RandomProcess]:
