@@ -25,6 +25,7 @@ from terrain_process import (
     L1_DEFAULT,
     L2_DEFAULT,
     MODES,
+    SampledProfile,
     mode_functions,
     random_profile,
     random_profile_form,
@@ -38,18 +39,18 @@ Params = Mapping[str, NDArray[np.float64]]
 # m, h, A1, A2 are Part II Eq. 24's (non-dimensional units); c and speed are ours (the paper's
 # are unreadable), chosen so that its finding holds -- see configs/oscillator_kl.yaml. The
 # resulting frequencies are ω1 = 0.603 and ω2 = 1.407.
-_DEFAULTS = {
-    "m": 10.0,
-    "c": 7.2,
-    "h": 1.0,
-    "A1": 4.0,
-    "A2": 2.0,
-    "L1": L1_DEFAULT,
-    "L2": L2_DEFAULT,
-    "speed": 3.2,
-    "x0": 0.0,
-    "v0": 0.0,
-    **dict.fromkeys(GERMS, 0.0),
+_BODY = {"m": 10.0, "c": 7.2, "h": 1.0, "speed": 3.2, "x0": 0.0, "v0": 0.0}
+# The forcing's own parameters: the two modes with their germs, or a sampled field whose
+# default grid covers the 640 units travelled in 200 time units at the default speed.
+_FORCINGS = {
+    "modes": {
+        "A1": 4.0,
+        "A2": 2.0,
+        "L1": L1_DEFAULT,
+        "L2": L2_DEFAULT,
+        **dict.fromkeys(GERMS, 0.0),
+    },
+    "field": {"road": 0.0, "road_start": 0.0, "road_stop": 700.0},
 }
 
 
@@ -58,12 +59,17 @@ class CubicOscillator(StackedODEModel):
 
     Parameters
     ----------
+    forcing:
+        ``"modes"``: f(t) = A1 (xi11 cos(ω1 t) + xi12 sin(ω1 t)) + A2 (...), the germs xi..
+        parameters. ``"field"``: f(t) = road(speed·t), with ``road`` a field input, (B, m)
+        values at ``numpy.linspace(road_start, road_stop, m)`` as pcmb hands a random
+        process input, interpolated by a cubic spline (nominal 0: no forcing).
     rtol, atol:
         Per-node DOP853 tolerances.
     **params:
-        Nominal values: m (10), c (7.2), h (1), A1 (4), A2 (2), L1 (100/(6π)), L2
-        (100/(14π)), speed (3.2), initial state x0, v0 (0: from rest), germs xi11, xi12,
-        xi21, xi22 (0).
+        Nominal values: m (10), c (7.2), h (1), speed (3.2), initial state x0, v0 (0: from
+        rest); modes: A1 (4), A2 (2), L1 (100/(6π)), L2 (100/(14π)), germs xi11, xi12, xi21,
+        xi22 (0); field: road (0), road_start (0), road_stop (700).
 
     Notes
     -----
@@ -82,9 +88,26 @@ class CubicOscillator(StackedODEModel):
     outputs: ClassVar[tuple[str, ...]] = ("x", "v")
     _positive = frozenset({"m", "L1", "L2"})
     _nonnegative = frozenset({"c", "h"})
+    _fields = frozenset({"road"})
 
-    def __init__(self, *, rtol: float = 1e-8, atol: float = 1e-10, **params: float) -> None:
-        super().__init__(_DEFAULTS, params, rtol=rtol, atol=atol)
+    def __init__(
+        self, *, forcing: str = "modes", rtol: float = 1e-8, atol: float = 1e-10, **params: float
+    ) -> None:
+        if forcing not in _FORCINGS:
+            raise ValueError(
+                f"CubicOscillator forcing must be one of {', '.join(_FORCINGS)}, got {forcing!r}"
+            )
+        super().__init__({**_BODY, **_FORCINGS[forcing]}, params, rtol=rtol, atol=atol)
+        self.forcing = forcing
+
+    def _prepare(self, p: dict[str, NDArray[np.float64]]) -> Mapping[str, object]:
+        if self.forcing != "field":
+            return p
+        return {**p, "road": SampledProfile(p["road"], p["road_start"], p["road_stop"])}
+
+    def _force(self, t: float, p: Params) -> NDArray[np.float64]:
+        s = p["speed"] * t
+        return p["road"](s) if self.forcing == "field" else random_profile(s, p)
 
     def polynomial_form(self, inputs: Sequence[str]) -> PolynomialForm:
         """m x'' + c x' + h x³ = f(t) as polynomials in (x, v, inputs, the forcing's four
@@ -115,7 +138,7 @@ class CubicOscillator(StackedODEModel):
 
     def _rhs(self, t: float, y: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
         x, v = y
-        force = random_profile(p["speed"] * t, p)
+        force = self._force(t, p)
         return np.stack([v, (force - p["c"] * v - p["h"] * x**3) / p["m"]])
 
     def _observe(

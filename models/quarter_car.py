@@ -24,6 +24,7 @@ from terrain_process import (
     L2_DEFAULT,
     MODES,
     PERIOD,
+    SampledProfile,
     mode_functions,
     random_profile,
     random_profile_form,
@@ -77,6 +78,11 @@ def _kl(t: float | NDArray[np.float64], p: Params) -> NDArray[np.float64]:
     return p["A0"] * np.sin(2 * np.pi * s / p["D"]) + random_profile(s, p)
 
 
+def _field(t: float | NDArray[np.float64], p: Params) -> NDArray[np.float64]:
+    s = p["speed"] * t
+    return p["A0"] * np.sin(2 * np.pi * s / p["D"]) + p["road"](s)
+
+
 _TERRAINS: dict[str, tuple[dict[str, float], Height]] = {
     "sine": ({"A": 0.05, "f": 1.0}, _sine),
     "bump": ({"bump_height": 0.25, "bump_start": 0.5, "bump_duration": 0.5}, _bump),
@@ -93,6 +99,11 @@ _TERRAINS: dict[str, tuple[dict[str, float], Height]] = {
             **dict.fromkeys(GERMS, 0.0),
         },
         _kl,
+    ),
+    # The same mean profile; the random part is a field input `road` sampled on a grid.
+    "field": (
+        {"speed": 10.0, "D": PERIOD, "A0": 0.5, "road": 0.0, "road_start": 0.0, "road_stop": 100.0},
+        _field,
     ),
 }
 
@@ -114,6 +125,11 @@ class QuarterCar(StackedODEModel):
         ``"kl"``: the periodic profile of Part II Eq. 11 driven over at ``speed`` (m/s):
         z(t) = A0 sin(2π s/D) + A1 (xi11 cos(s/L1) + xi12 sin(s/L1))
         + A2 (xi21 cos(s/L2) + xi22 sin(s/L2)), s = speed·t; the germs xi.. are parameters.
+        ``"field"``: the same mean profile plus a random part given as a field input: z(t) =
+        A0 sin(2π s/D) + road(s), with ``road`` (B, m) heights at
+        ``numpy.linspace(road_start, road_stop, m)`` (m), as pcmb hands a random process
+        input (``inputs.road: {process: kl, ...}`` with the same grid), interpolated by a
+        cubic spline (:class:`terrain_process.SampledProfile`); nominal ``road`` 0 is flat.
     damper:
         ``"linear"``: Fd = c·δ' (c in N·s/m). ``"mr"``: magneto-rheological damper
         Fd = (F0 + F1·I) tanh(mr_slope·δ') with the coil current I (A), F0 (N), F1 (N/A),
@@ -129,6 +145,7 @@ class QuarterCar(StackedODEModel):
         parameters, listed above, with defaults: sine A = 0.05, f = 1; bump bump_height =
         0.25, bump_start = 0.5, bump_duration = 0.5; kl speed = 10, D = 100, A0 = 0.5, A1 =
         0.2, A2 = 0.1, L1 = D/(6π), L2 = D/(14π) for the default D (set them with D), germs 0;
+        field speed = 10, D = 100, A0 = 0.5, road = 0, road_start = 0, road_stop = 100;
         linear damper c = 1000; MR damper I = 1, F0 = 1015, F1 = 2250, mr_slope = 14.3.
         A parameter that does not belong to the chosen options is rejected.
 
@@ -163,6 +180,7 @@ class QuarterCar(StackedODEModel):
         {"Ms", "Mu", "kT", "k", "f", "bump_duration", "D", "L1", "L2", "mr_slope"}
     )
     _nonnegative = frozenset({"c", "I", "F0", "F1", "bump_start"})
+    _fields = frozenset({"road"})
 
     def __init__(
         self,
@@ -248,6 +266,11 @@ class QuarterCar(StackedODEModel):
             method=self.method,
         )
 
+    def _prepare(self, p: dict[str, NDArray[np.float64]]) -> Mapping[str, object]:
+        if self.terrain != "field":
+            return p
+        return {**p, "road": SampledProfile(p["road"], p["road_start"], p["road_stop"])}
+
     def _initial_state(self, p: Params) -> NDArray[np.float64]:
         z0 = self._terrain(self.initial_time, p)
         return np.stack([z0 + p["x1_0"], z0 + p["x2_0"], p["v1_0"], p["v2_0"]])
@@ -283,7 +306,11 @@ class QuarterCar(StackedODEModel):
         self, times: NDArray[np.float64], states: NDArray[np.float64], p: Params
     ) -> dict[str, NDArray[np.float64]]:
         x1, x2, v1, v2 = states
-        column = {name: value[:, None] for name, value in p.items()}  # (B, 1) against (B, T)
+        # (B, 1) against (B, T); a sampled profile takes (B, T) distances as they are.
+        column = {
+            name: value[:, None] if isinstance(value, np.ndarray) else value
+            for name, value in p.items()
+        }
         return {
             "x1": x1,
             "x2": x2,

@@ -137,6 +137,14 @@ def _summary(config) -> str:
     for name, dist in study.inputs.items():
         described = ", ".join(f"{k}={v}" for k, v in dist.describe().items() if k != "dist")
         lines.append(f"  {name:<10} {dist.describe()['dist']}({described})")
+    for name, found in study.processes.items():
+        lines.append(
+            f"process  {name}: {found.covariance.description['kind']} covariance, "
+            f"{found.terms} germs {name}[0]..{name}[{found.terms - 1}] keep "
+            f"{found.captured_energy:.4f} of the variance (truncation error "
+            f"{found.truncation_error:.3g}; eigenvalues to ~{found.eigenvalue_error:.1g}), "
+            f"field of {found.grid.size} points"
+        )
     design = study.design.record()
     seed = f", seed {design.seed}" if design.seed is not None else ""
     made = "no nodes: solved from the model's equations" if design.grid == "none" else "nodes"
@@ -328,6 +336,12 @@ def _inspect(path: str) -> str:
     ]
     design = dataclasses.asdict(result.design)
     lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
+    for name, found in result.processes.items():
+        lines.append(
+            f"process  {name}: {found.covariance.description['kind']} covariance, "
+            f"{found.terms} germs keep {found.captured_energy:.4f} of the variance, field of "
+            f"{found.grid.size} points"
+        )
     if result.multi_index is not None:
         lines.append(f"chaos    {result.multi_index.shape[0]} terms")
     if result.partition is not None:

@@ -30,6 +30,7 @@ __all__ = [
     "cosine_covariance_kl",
     "damped_oscillator",
     "double_well",
+    "exponential_kl_eigenvalues",
     "gamma_moment",
     "ishigami",
     "ishigami_moments",
@@ -395,6 +396,52 @@ def cosine_covariance_kl(
     functions = np.stack([np.cos(phases), np.sin(phases)], axis=-1).reshape(x.size, -1)
     eigenvalues = np.repeat(period * np.asarray(variances, dtype=float) / 2, 2)
     return eigenvalues, functions * np.sqrt(2 / period)
+
+
+def exponential_kl_eigenvalues(variance: float, length: float, width: float, count: int) -> Array:
+    """The largest ``count`` Karhunen–Loève eigenvalues of σ² exp(-|x1 − x2|/ℓ) on an
+    interval of length ``width``.
+
+    With c = 1/ℓ and a = width/2, the eigenfunctions are cos(ω x) for the roots of
+    c − ω tan(ω a) = 0 and sin(ω x) for those of ω + c tan(ω a) = 0 (x from the centre), and
+    λ = 2cσ²/(ω² + c²). Both equations together are c ω cos(2ωa) + (c² − ω²) sin(2ωa)/2 = 0,
+    which has exactly one root in each interval ((n − 1)π/(2a), nπ/(2a)), n = 1, 2, ...:
+    found by bracketing, to machine precision.
+
+    Parameters
+    ----------
+    variance : float
+        σ².
+    length : float
+        ℓ.
+    width : float
+        b − a.
+    count : int
+        How many eigenvalues.
+
+    Returns
+    -------
+    ndarray, shape (count,)
+        Decreasing.
+
+    Notes
+    -----
+    Source: Ghanem & Spanos, Stochastic Finite Elements: A Spectral Approach (1991), §2.3.3;
+    Van Trees, Detection, Estimation and Modulation Theory I (1968), §3.3.
+    """
+    from scipy.optimize import brentq
+
+    c, a = 1.0 / length, width / 2.0
+
+    def equation(w: float) -> float:
+        return c * w * math.cos(2 * w * a) + (c * c - w * w) * math.sin(2 * w * a) / 2
+
+    step = math.pi / (2 * a)
+    roots = [
+        brentq(equation, max((n - 1) * step, 1e-12 * step), n * step, xtol=1e-15, rtol=1e-15)
+        for n in range(1, count + 1)
+    ]
+    return 2 * c * variance / (np.square(roots) + c * c)
 
 
 # --------------------------------------------------------------------------- germ moments

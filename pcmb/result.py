@@ -17,6 +17,7 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.process import RandomProcess, germ_names
 
 if TYPE_CHECKING:
     from pcmb.analysis.diagnostics import HeldOut, OutputDiagnostics
@@ -353,6 +354,9 @@ class StudyResult:
         ``holdout``...); empty without an expansion.
     held_out:
         The held-out runs that checked the expansions (``None``: none were made).
+    processes:
+        Random process inputs by name (:class:`pcmb.chaos.process.RandomProcess`); their
+        germs ``name[k]`` are among the inputs.
     axes:
         Output name -> its own axis (:class:`~pcmb.axes.OutputAxis`), or ``None`` for a
         scalar (a derived figure of merit, a model's scalar output); the outputs not listed
@@ -385,6 +389,7 @@ class StudyResult:
     refinement: Refinement | None = None
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
+    processes: dict[str, RandomProcess] = field(default_factory=dict)
     axes: dict[str, OutputAxis | None] = field(default_factory=dict)
     moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
@@ -478,6 +483,17 @@ class StudyResult:
     def sobol_total(self, name: str) -> NDArray[np.float64]:
         """(n, T) total Sobol' indices (needs an expansion)."""
         return self._expansion(name, "sobol_total").sobol_total()
+
+    def sobol_process(self, name: str, process: str) -> NDArray[np.float64]:
+        """(T,) total Sobol' index of a random process input: of its germs as one group."""
+        expansion = self._expansion(name, "sobol_process")
+        if process not in self.processes:
+            raise KeyError(f"no random process {process!r}; the result has {list(self.processes)}")
+        germs = germ_names(process, self.processes[process].terms)
+        group = [self.input_names.index(germ) for germ in germs]
+        if not isinstance(expansion, ChaosExpansion):
+            raise ValueError("sobol_process needs one global chaos expansion (not multi-element)")
+        return expansion.sobol_total_group(group)
 
     def warnings_for(self, output: str | None) -> tuple[WarningRecord, ...]:
         """The warnings about one output (``None``: those about the whole study)."""

@@ -26,6 +26,7 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import from_description
+from pcmb.chaos.process import RandomProcess, covariance_from_description, germ_names
 from pcmb.errors import ResultFileError
 from pcmb.result import (
     AdaptiveFit,
@@ -221,6 +222,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
         _write_adaptive(file, result.adaptive, input_)
     if result.refinement is not None:
         _write_refinement(file, result.refinement, input_)
+    _write_processes(file, result, trails)
 
     index = result.multi_index
     term = None
@@ -291,6 +293,51 @@ def _write_elements(
     _attach(group.create_dataset("probability", data=partition.probability), element)
     if result.node_elements is not None:
         _attach(file.create_dataset("nodes/element", data=result.node_elements), node)
+
+
+def _write_processes(file: h5py.File, result: StudyResult, trails: dict[str, _Trail]) -> None:
+    """Each random process input under ``/processes/<name>``: ``grid`` (m,), ``eigenvalues``
+    (K,), ``modes`` (K, m) (the field is germs @ modes), ``variance_error`` (m,), and per
+    output the total Sobol' index of its germs as a group, ``sobol_total/<output>`` (T,) (or
+    on the output's own axis);
+    attributes ``settings`` (JSON), ``germs`` (JSON names), ``captured_energy``,
+    ``truncation_error``, ``total_variance``, ``eigenvalue_error``, ``nystrom_points``."""
+    for name, found in result.processes.items():
+        group = file.create_group(f"processes/{name}")
+        group.attrs["settings"] = json.dumps(found.describe())
+        group.attrs["germs"] = json.dumps(list(germ_names(name, found.terms)))
+        for key in ("captured_energy", "truncation_error", "total_variance"):
+            group.attrs[key] = getattr(found, key)
+        group.attrs["eigenvalue_error"] = found.eigenvalue_error
+        group.attrs["nystrom_points"] = found.nystrom_points
+        grid = group.create_dataset("grid", data=found.grid)
+        grid.make_scale("grid")
+        group.create_dataset("eigenvalues", data=found.eigenvalues)
+        group.create_dataset("modes", data=found.modes).dims[1].attach_scale(grid)
+        _attach(group.create_dataset("variance_error", data=found.variance_error), grid)
+        for output, expansion in result.expansions.items():
+            if isinstance(expansion, ChaosExpansion):
+                data = result.sobol_process(output, name)
+                _points(group, f"sobol_total/{output}", data, (), trails[output])
+
+
+def _read_processes(file: h5py.File) -> dict[str, RandomProcess]:
+    if "processes" not in file:
+        return {}
+    found = {}
+    for name, group in file["processes"].items():
+        settings = json.loads(_text(group.attrs["settings"]))
+        found[name] = RandomProcess(
+            covariance=covariance_from_description(settings["covariance"]),
+            grid=group["grid"][()],
+            eigenvalues=group["eigenvalues"][()],
+            modes=group["modes"][()],
+            energy=settings.get("energy"),
+            total_variance=float(group.attrs["total_variance"]),
+            eigenvalue_error=float(group.attrs["eigenvalue_error"]),
+            nystrom_points=int(group.attrs["nystrom_points"]),
+        )
+    return found
 
 
 def _write_adaptive(file: h5py.File, fit: AdaptiveFit, input_: h5py.Dataset) -> None:
@@ -630,6 +677,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             refinement=_read_refinement(file),
             diagnostics=diagnostics,
             held_out=held_out,
+            processes=_read_processes(file),
             axes=axes,
             moments=moments,
         )

@@ -32,6 +32,7 @@ from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
+from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.designs.base import Recovery
 from pcmb.errors import (
@@ -86,12 +87,16 @@ def _derived(entries: Mapping[str, Any]) -> dict[str, DerivedOutput]:
     return {name: parsed.get(name, entry) for name, entry in entries.items()}
 
 
-def _check_inputs(inputs: Mapping[str, Distribution]) -> dict[str, Distribution]:
+def _check_inputs(
+    inputs: Mapping[str, Distribution | RandomProcess],
+) -> dict[str, Distribution | RandomProcess]:
     if not inputs:
         raise _usage("inputs", "a study needs at least one input")
     for name, dist in inputs.items():
-        if not isinstance(dist, Distribution):
-            raise _usage(f"inputs.{name}", f"must be a pcmb distribution, got {dist!r}")
+        if not isinstance(dist, Distribution | RandomProcess):
+            raise _usage(
+                f"inputs.{name}", f"must be a pcmb distribution or random process, got {dist!r}"
+            )
     return dict(inputs)
 
 
@@ -105,11 +110,15 @@ class Study:
         class (constructed with ``params``), a model object, or a function marked with
         :func:`pcmb.pointwise` or :func:`pcmb.batched`.
     inputs:
-        Ordered mapping input name -> distribution; the order is the germ order.
+        Ordered mapping input name -> distribution, or random process
+        (:class:`pcmb.chaos.process.RandomProcess`: its germs ``name[0]``, ``name[1]``, ...
+        become standard normal inputs and the model receives its field, (B, m)); the order
+        is the germ order.
     times:
         (T,) output grid.
     order:
-        Chaos order, one for all inputs or a mapping input -> order; ``"auto"`` (tensor
+        Chaos order, one for all inputs or a mapping input -> order (a process's order is
+        that of each of its germs); ``"auto"`` (tensor
         collocation) raises it in rounds until ``diagnostics_tolerance`` is met, within
         ``max_runs`` (:mod:`pcmb.designs.refine`).
     basis:
@@ -172,7 +181,7 @@ class Study:
     def __init__(
         self,
         model: Any,
-        inputs: Mapping[str, Distribution],
+        inputs: Mapping[str, Distribution | RandomProcess],
         times: ArrayLike,
         *,
         order: int | Mapping[str, int] | Literal["auto"] = 3,
@@ -210,7 +219,15 @@ class Study:
         diagnosed: Sequence[str] | None = None,
         derived: Mapping[str, DerivedOutput | Mapping[str, Any]] | None = None,
     ):
-        self.inputs = _check_inputs(inputs)
+        #: What the model receives, by name: distributions and random processes.
+        self.model_inputs = _check_inputs(inputs)
+        self.processes = {
+            name: value
+            for name, value in self.model_inputs.items()
+            if isinstance(value, RandomProcess)
+        }
+        #: The germ inputs (a process's germs in its place), in germ order.
+        self.inputs = germ_inputs(self.model_inputs)
         self.times = np.asarray(times, dtype=float)
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
             raise _usage("times", "must be a non-empty increasing 1-D grid")
@@ -243,7 +260,12 @@ class Study:
             # A per-point function receives every parameter by name: uncertain inputs it was
             # not given a nominal value for start at their mean (used by the nominal run).
             self.params = {
-                **{name: dist.expectation() for name, dist in self.inputs.items()},
+                **{
+                    name: np.zeros(value.grid.size)  # a process's mean field
+                    if isinstance(value, RandomProcess)
+                    else value.expectation()
+                    for name, value in self.model_inputs.items()
+                },
                 **self.params,
             }
         self.model_factory: ModelFactory = model_factory(model, self.params, _tuple(outputs))
@@ -299,7 +321,7 @@ class Study:
         execution = config.execution
         study = cls(
             config.model_factory(),
-            dict(zip(config.input_names, config.distributions, strict=True)),
+            config.study_inputs,
             config.times,
             order=_order(config),
             basis=method.basis,
@@ -355,7 +377,7 @@ class Study:
             If an argument is unknown or the changed study is invalid.
         """
         arguments = {
-            "inputs": self.inputs,
+            "inputs": self.model_inputs,
             "times": self.times,
             "order": self.order,
             "basis": self.basis,
@@ -405,10 +427,11 @@ class Study:
                 raise _usage("order", f"expected an int, a mapping or 'auto', got {self.order!r}")
             return "auto"
         if isinstance(self.order, Mapping):
-            missing = set(self.inputs) - set(self.order)
+            order = per_germ(self.order, self.model_inputs)
+            missing = set(self.inputs) - set(order)
             if missing:
                 raise _usage("order", f"no order given for input(s) {sorted(missing)}")
-            return tuple(int(self.order[name]) for name in self.inputs)
+            return tuple(int(order[name]) for name in self.inputs)
         return (int(self.order),) * len(self.inputs)
 
     def nominal_params(self) -> dict[str, float]:
@@ -430,7 +453,8 @@ class Study:
     def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> Fingerprint:
         """What the resume journal belongs to: everything that changes the node values.
 
-        Its ``digest`` hashes the nodes' parameters, the time grid, the input names (the
+        Its ``digest`` hashes the nodes' parameters, the time grid, the settings of every
+        random process (what its germs become), the input names (the
         order of the columns), the outputs, an explicit chunk size, ``fingerprint_extra``
         (for a study built from a config: the run-relevant part of the validated config,
         see :meth:`from_config`) and the pickled model factory (entry, params, or the object
@@ -445,6 +469,8 @@ class Study:
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
         settings = [list(outputs), self.chunk_size, list(self.input_names), self.fingerprint_extra]
+        if self.processes:  # by their settings: they make the modes, whose bits vary by BLAS
+            settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
         return Fingerprint(digest.hexdigest(), digest_files(model_files(self.model_factory)))
@@ -498,7 +524,7 @@ class Study:
             )
         parameters = facts.parameters
         if parameters is not None:
-            strangers = [name for name in self.inputs if name not in parameters]
+            strangers = [name for name in self.model_inputs if name not in parameters]
             if strangers:
                 raise _usage(
                     "inputs",
@@ -740,7 +766,7 @@ class Study:
         try:
             runs = run_nodes(
                 self.model_factory,
-                dict(zip(self.input_names, nodes.params.T, strict=True)),
+                model_params(self.model_inputs, nodes.params),
                 self.times,
                 outputs,
                 jobs=self.jobs,
@@ -851,7 +877,7 @@ class Study:
         """The deterministic run at the nominal parameters (not part of any statistic)."""
         return run_nodes(
             self.model_factory,
-            {name: np.array([value]) for name, value in self.nominal_params().items()},
+            model_params(self.model_inputs, [list(self.nominal_params().values())]),
             self.times,
             outputs,
             backend=self.backend,
@@ -922,6 +948,7 @@ class Study:
             node_elements=recovery.node_elements,
             adaptive=recovery.adaptive,
             refinement=recovery.refinement,
+            processes=self.processes,
         )
 
 

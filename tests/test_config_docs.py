@@ -137,9 +137,7 @@ def test_every_top_level_key_has_a_row(page):
 def test_every_registered_kind_is_listed(page):
     schema = config_json_schema()
     model_kinds = set(schema["properties"]["model"]["discriminator"]["mapping"])
-    dist_kinds = set(
-        schema["properties"]["inputs"]["additionalProperties"]["discriminator"]["mapping"]
-    )
+    dist_kinds = set(_dist_mapping(schema))
     method_kinds = set(_enum(schema, "MethodSpec", "kind"))
     backends = set(_enum(schema, "ExecutionSpec", "backend"))
     assert model_kinds == set(ADAPTERS)
@@ -157,6 +155,14 @@ def test_every_registered_kind_is_listed(page):
         assert f"`{backend}`" in rows["| `execution.backend`"]
 
 
+def _dist_mapping(schema: dict[str, Any]) -> dict[str, str]:
+    """The ``dist`` values of an input: the member of ``inputs``' union (a distribution or a
+    random process) that is picked by ``dist``."""
+    members = schema["properties"]["inputs"]["additionalProperties"]["oneOf"]
+    (found,) = [m for m in members if m.get("discriminator", {}).get("propertyName") == "dist"]
+    return found["discriminator"]["mapping"]
+
+
 def test_kinds_come_from_the_schema_not_from_the_generator():
     tree = ast.parse((ROOT / "pcmb" / "config" / "reference.py").read_text(encoding="utf-8"))
     texts = {  # the generator's string constants, not its header and example
@@ -169,8 +175,7 @@ def test_kinds_come_from_the_schema_not_from_the_generator():
         for node in ast.walk(statement)
         if isinstance(node, ast.Constant) and isinstance(node.value, str)
     }
-    dists = config_json_schema()["properties"]["inputs"]["additionalProperties"]["discriminator"]
-    kinds = {*METHOD_KINDS, *BACKENDS, *ADAPTERS, *dists["mapping"]}
+    kinds = {*METHOD_KINDS, *BACKENDS, *ADAPTERS, *_dist_mapping(config_json_schema())}
     assert not kinds & texts
 
 

@@ -350,6 +350,9 @@ class StackedODEModel(ABC):
     # Parameters that must be > 0 (masses, lengths) or >= 0 (currents, damping).
     _positive: ClassVar[frozenset[str]] = frozenset()
     _nonnegative: ClassVar[frozenset[str]] = frozenset()
+    # Parameters that may also come as (B, m) arrays: field inputs (a random process on a
+    # grid); their nominal value is a number, the same at every point.
+    _fields: ClassVar[frozenset[str]] = frozenset()
     initial_time: ClassVar[float] = 0.0
     #: Nodes per ``simulate`` call the executor should use (model protocol hint). A stacked
     #: solve costs a per-step Python overhead for the whole batch plus a small per-node
@@ -421,7 +424,7 @@ class StackedODEModel(ABC):
             The integration failed.
         """
         grid = _as_times(times, self.initial_time)
-        p = self._batch(params)
+        p = self._prepare(self._batch(params))
         states = self._integrate(p, grid)
         return self._observe(grid, states, p)
 
@@ -459,6 +462,11 @@ class StackedODEModel(ABC):
     ) -> dict[str, NDArray[np.float64]]:
         """Outputs from the (d, B, T) states at ``times``: name -> (B, T)."""
 
+    def _prepare(self, p: dict[str, NDArray[np.float64]]) -> Mapping[str, Any]:
+        """The batch's parameters as the physics hooks receive them; override to compute
+        per-batch data once (a spline through a field input). Default: ``p`` unchanged."""
+        return p
+
     def _breakpoints(self, p: Mapping[str, NDArray[np.float64]]) -> Sequence[float]:
         """Times where the right-hand side jumps (none by default)."""
         return ()
@@ -481,7 +489,8 @@ class StackedODEModel(ABC):
     # ------------------------------------------------------------------ parameters
 
     def _batch(self, params: Mapping[str, ArrayLike]) -> dict[str, NDArray[np.float64]]:
-        """Every parameter as a (B,) array: the uncertain ones from ``params``, others nominal."""
+        """Every parameter as a (B,) array ((B, m) for a field input given one): the uncertain
+        ones from ``params``, others nominal."""
         owner = type(self).__name__
         unknown = [name for name in params if name not in self.parameters]
         if unknown:
@@ -491,9 +500,14 @@ class StackedODEModel(ABC):
             )
         arrays = {name: np.asarray(value, dtype=float) for name, value in params.items()}
         shapes = {name: a.shape for name, a in arrays.items()}
-        if any(len(shape) != 1 for shape in shapes.values()) or len(set(shapes.values())) > 1:
+        allowed = all(
+            len(shape) == 1 or (len(shape) == 2 and name in self._fields)
+            for name, shape in shapes.items()
+        )
+        if not allowed or len({shape[0] for shape in shapes.values()}) > 1:
+            fields = f" ({', '.join(sorted(self._fields))} also (B, m))" if self._fields else ""
             raise ValueError(
-                f"{owner} parameters must all be 1-D arrays of one length B, got {shapes}"
+                f"{owner} parameters must all be 1-D arrays of one length B{fields}, got {shapes}"
             )
         n_nodes = next(iter(shapes.values()))[0] if shapes else 1
         if n_nodes == 0:
@@ -511,7 +525,8 @@ class StackedODEModel(ABC):
             elif name in self._nonnegative:
                 bad |= ~(values >= 0)
             if bad.any():
-                node = int(np.flatnonzero(bad)[0])
+                where = np.unravel_index(int(np.flatnonzero(bad)[0]), values.shape)
+                node = int(where[0])
                 need = (
                     "positive"
                     if name in self._positive
@@ -520,7 +535,7 @@ class StackedODEModel(ABC):
                     else "finite"
                 )
                 raise ValueError(
-                    f"{owner} parameter {name!r} must be {need}, got {float(values[node])!r}"
+                    f"{owner} parameter {name!r} must be {need}, got {float(values[where])!r}"
                     + (f" at node {node}" if values.size > 1 else "")
                 )
 

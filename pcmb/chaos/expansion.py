@@ -207,7 +207,7 @@ class ChaosExpansion:
         variance = self._sum_of_squares
         with np.errstate(divide="ignore", invalid="ignore"):
             indices = np.where(self._defined[0], partial / variance, np.nan)
-        return indices.reshape(self.n, *self.shape)
+        return indices.reshape(masks.shape[0], *self.shape)
 
     def sobol_first(self) -> NDArray[np.float64]:
         """First-order Sobol' indices S_k, shape (n, ...); NaN where the output does not vary."""
@@ -218,6 +218,13 @@ class ChaosExpansion:
     def sobol_total(self) -> NDArray[np.float64]:
         """Total Sobol' indices S_Tk, shape (n, ...); NaN where the output does not vary."""
         return self._sobol((self.multi_index > 0).T)
+
+    def sobol_total_group(self, group: Sequence[int]) -> NDArray[np.float64]:
+        """Total Sobol' index of a group of inputs (the germs of one random process): the
+        share of the variance in the terms that involve any of them, shape (...); NaN where
+        the output does not vary."""
+        involved = (self.multi_index[:, list(group)] > 0).any(axis=1)
+        return self._sobol(involved[None, :])[0]
 
     # -- the surrogate ----------------------------------------------------------------------
 

@@ -28,12 +28,12 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     except ConfigError as error:
         for problem in error.problems:
             yield problem.path, problem.message
-    method, names = config.method, config.input_names
+    method = config.method
     if isinstance(method.order, dict):
         unknown = [key for key in method.order if key not in config.inputs]
         for key in unknown:
-            yield f"method.order.{key}", f"names no input (inputs: {', '.join(names)})"
-        missing = [name for name in names if name not in method.order]
+            yield f"method.order.{key}", f"names no input (inputs: {', '.join(config.inputs)})"
+        missing = [name for name in config.inputs if name not in method.order]
         if missing:
             yield "method.order", f"no order given for input(s) {', '.join(missing)}"
         if unknown or missing:

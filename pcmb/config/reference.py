@@ -152,6 +152,9 @@ class _Nested:
     suffix: str
     forms: list[tuple[type[BaseModel], str | None]]
     selector: Any = None
+    #: The selector of each form when they differ (a union picked by key around unions
+    #: picked by a value, as ``inputs``: ``dist`` or ``process``); ``None``: ``selector``.
+    selectors: list[Any] | None = None
 
 
 def _unwrap(tp: Any, meta: typing.Iterable[Any] = ()) -> tuple[Any, list[Any], Any]:
@@ -207,6 +210,29 @@ def _label(section: type[BaseModel], selector: Any) -> str:
     return next(iter(section.model_fields))
 
 
+def _forms(members: list[Any], selector: Any) -> list[tuple[type[BaseModel], str, Any]] | None:
+    """(section, label, selector) of every form of a union whose members are sections or
+    unions of sections; ``None`` if some member is neither."""
+    found: list[tuple[type[BaseModel], str, Any]] = []
+    for member in members:
+        tp, _, inner = _unwrap(member)
+        if _is_section(tp):
+            found.append((tp, _label(tp, selector), selector))
+        elif get_origin(tp) in (typing.Union, types.UnionType):
+            more = _forms([m for m in get_args(tp) if m is not type(None)], inner)
+            if more is None:
+                return None
+            found += more
+        else:
+            return None
+    return found
+
+
+def _selector_key(section: type[BaseModel], selector: Any) -> str:
+    """The key that picks a form: ``selector``, else the section's first key."""
+    return selector if isinstance(selector, str) else next(iter(section.model_fields))
+
+
 def _describe(
     tp: Any, meta: typing.Iterable[Any] = (), selector: Any = None
 ) -> tuple[str, _Nested | None]:
@@ -237,6 +263,12 @@ def _describe(
             by = f"`{selector}`" if isinstance(selector, str) else "key"
             forms = [(s, _label(s, selector)) for s in sections]
             return f"section (one form per {by})", _Nested("", forms, selector)
+        picked = _forms(members, selector)
+        if picked is not None:  # unions of sections inside a union picked by key
+            forms = [(s, label) for s, label, _ in picked]
+            selectors = [chosen for _, _, chosen in picked]
+            keys = ", ".join(dict.fromkeys(f"`{_selector_key(s, c)}`" for s, _, c in picked))
+            return f"section (one form per {keys})", _Nested("", forms, selector, selectors)
         texts, nested = [], None
         for member in members:
             text, found = _describe(member)
@@ -252,13 +284,15 @@ def _describe(
         text, nested = _describe(get_args(tp)[0])
         distinct = "distinct " if unique in after else ""
         if nested is not None:
-            nested = _Nested(INDEX + nested.suffix, nested.forms, nested.selector)
+            nested = _Nested(INDEX + nested.suffix, nested.forms, nested.selector, nested.selectors)
         return f"{size}list of {distinct}{_plural(text)}", nested
     if origin is dict:
         key, _ = _describe(get_args(tp)[0])
         value, nested = _describe(get_args(tp)[1])
         if nested is not None:
-            nested = _Nested(f".{KEY}{nested.suffix}", nested.forms, nested.selector)
+            nested = _Nested(
+                f".{KEY}{nested.suffix}", nested.forms, nested.selector, nested.selectors
+            )
         return f"{size}mapping: {key} → {value}", nested
     if tp is typing.Any:
         return "any value", None
@@ -363,6 +397,8 @@ def _nested(path: str, nested: _Nested, level: int, context: str) -> _Table:
         return _table(section, path, f"`{path}`{where}", level, context, None)
     choices = [label for _, label in nested.forms]
     listed = ", ".join(f"`{c}`" for c in choices)
+    if nested.selectors is not None:
+        return _mixed(path, nested, level, context, where)
     if isinstance(nested.selector, str):
         doc = f"One form per `{nested.selector}`: {listed}."
         labels = [f"`{nested.selector}: {c}`" for c in choices]
@@ -382,6 +418,43 @@ def _nested(path: str, nested: _Nested, level: int, context: str) -> _Table:
             )
         )
     return group
+
+
+def _mixed(path: str, nested: _Nested, level: int, context: str, where: str) -> _Table:
+    """The tables of a union whose forms are picked by different keys (``dist: uniform``,
+    ..., ``process: kl``): one table per form, titled by its key and value."""
+    picks = [
+        (section, _selector_key(section, chosen), chosen)
+        for (section, _), chosen in zip(nested.forms, nested.selectors or [], strict=True)
+    ]
+    values = {key: [_first_value(s, key) for s, k, _ in picks if k == key] for _, key, _ in picks}
+    doc = (
+        "One form per "
+        + "; or ".join(
+            f"`{key}`: " + ", ".join(f"`{v}`" for v in listed) for key, listed in values.items()
+        )
+        + "."
+    )
+    group = _Table(path, f"`{path}`{where}", level, doc)
+    for section, key, chosen in picks:
+        label = f"`{key}: {_first_value(section, key)}`"
+        group.children.append(
+            _table(
+                section,
+                path,
+                f"`{path}` with {label}{where}",
+                level + 1,
+                label,
+                (key, values[key]) if isinstance(chosen, str) else None,
+            )
+        )
+    return group
+
+
+def _first_value(section: type[BaseModel], key: str) -> str:
+    """The value a form's selecting key must have (its ``Literal``)."""
+    (value,) = get_args(section.model_fields[key].annotation)
+    return str(value)
 
 
 def _tables() -> _Table:

@@ -35,11 +35,12 @@ from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
 from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
-from pcmb.chaos import inputs
+from pcmb.chaos import inputs, process
 from pcmb.chaos.nested import RULES
 from pcmb.config.checks import cross_check, model_check
 from pcmb.config.loader import parse_yaml
 from pcmb.config.messages import KeyPath, located, schema_problems
+from pcmb.config.processes import ProcessSpec
 from pcmb.config.types import (
     MAX_RUNS,
     MAX_VALUES,
@@ -54,6 +55,7 @@ from pcmb.config.types import (
     Real,
     Section,
     count,
+    tagged_by_key,
     unique,
 )
 from pcmb.designs import GRIDS, METHOD_KINDS
@@ -199,9 +201,15 @@ class ScipySpec(_InputSpec):
         return inputs.Transformed(target, self.germ)
 
 
-InputSpec = Annotated[
+DistributionSpec = Annotated[
     UniformSpec | BetaSpec | NormalSpec | GammaSpec | ScipySpec, Field(discriminator="dist")
 ]
+#: An input: a distribution (``dist: ...``) or a random process (``process: kl``).
+InputSpec = tagged_by_key(
+    DistributionSpec,
+    ProcessSpec,
+    error="expected a distribution (a dist key) or a random process (a process key)",
+)
 
 
 # --------------------------------------------------------------------------- models
@@ -505,14 +513,22 @@ class StudyConfig(Section):
         return np.linspace(self.time.start, self.time.stop, self.time.points)
 
     @property
+    def study_inputs(self) -> dict[str, inputs.Distribution | process.RandomProcess]:
+        """What the model receives by name: distributions and random processes (expanded)."""
+        return {
+            name: spec.expansion if isinstance(spec, ProcessSpec) else spec.distribution
+            for name, spec in self.inputs.items()
+        }
+
+    @property
     def input_names(self) -> tuple[str, ...]:
-        """Input names in germ order."""
-        return tuple(self.inputs)
+        """Input names in germ order (a process's germs ``name[k]`` in its place)."""
+        return tuple(process.germ_inputs(self.study_inputs))
 
     @property
     def distributions(self) -> list[inputs.Distribution]:
         """The input distributions in germ order."""
-        return [spec.distribution for spec in self.inputs.values()]
+        return list(process.germ_inputs(self.study_inputs).values())
 
     @property
     def orders(self) -> tuple[int, ...] | Literal["auto"] | None:
@@ -521,9 +537,11 @@ class StudyConfig(Section):
         order = self.method.order
         if order is None or order == "auto":
             return order
+        names = self.input_names
         if isinstance(order, int):
-            return (order,) * len(self.inputs)
-        return tuple(order[name] for name in self.inputs)
+            return (order,) * len(names)
+        order = process.per_germ(order, self.study_inputs)
+        return tuple(order[name] for name in names)
 
     @property
     def analysis_settings(self) -> AnalysisSettings | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import types
 import typing
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
@@ -119,13 +120,24 @@ class ModelSection(Section, ABC):
         return frozenset(self.params)  # type: ignore[attr-defined]
 
 
-def tagged_by_key(*variants: type[Section], error: str) -> Any:
+def _first_key(variant: Any) -> str:
+    """A section's first key; for a union of sections, that of its first member (a union
+    picked by a value, such as ``dist``, has it first in every member)."""
+    while typing.get_origin(variant) is Annotated:
+        variant = typing.get_args(variant)[0]
+    if typing.get_origin(variant) in (typing.Union, types.UnionType):
+        return _first_key(typing.get_args(variant)[0])
+    return next(iter(variant.model_fields))
+
+
+def tagged_by_key(*variants: Any, error: str) -> Any:
     """A union whose member is chosen by which one of the members' first keys is present.
 
-    A mapping with none or several of them is no member (``error`` says what is expected).
-    Tags contain a colon, so they can never be confused with a key of the config.
+    A member is a section, or a union of sections that share their first key. A mapping
+    with none or several of the keys is no member (``error`` says what is expected). Tags
+    contain a colon, so they can never be confused with a key of the config.
     """
-    first_keys = {next(iter(v.model_fields)): v for v in variants}
+    first_keys = {_first_key(v): v for v in variants}
 
     def tag(value: Any) -> str | None:
         if isinstance(value, BaseModel):
