@@ -2,7 +2,7 @@
 
 ``Ishigami`` (Ishigami & Homma 1990; three inputs on [-π, π], closed-form moments and Sobol'
 indices in ``pcmb.references.ishigami_moments``) and ``Borehole`` (Harper & Gupta 1983; eight
-inputs, ``pcmb.references.BOREHOLE_BOUNDS``). Each returns its output ``y`` as shape (B,): a
+inputs, ``pcmb.references.borehole_bounds``). Each returns its output ``y`` as shape (B,): a
 scalar per run (``output_axes``), not a time series.
 """
 
@@ -12,7 +12,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from pcmb.references import BOREHOLE_BOUNDS, borehole, ishigami
+from pcmb.references import borehole, borehole_bounds, ishigami
 
 BOREHOLE_INPUTS = ("rw", "r", "Tu", "Hu", "Tl", "Hl", "L", "Kw")
 
@@ -48,7 +48,7 @@ class Borehole:
 
     def __init__(self, **nominal):
         middle = {
-            n: sum(bounds) / 2 for n, bounds in zip(BOREHOLE_INPUTS, BOREHOLE_BOUNDS, strict=True)
+            n: sum(bounds) / 2 for n, bounds in zip(BOREHOLE_INPUTS, borehole_bounds(), strict=True)
         }
         self.parameters = {**middle, **nominal}
 

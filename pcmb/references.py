@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
-    "BOREHOLE_BOUNDS",
     "IshigamiMoments",
     "borehole",
+    "borehole_bounds",
     "cosine_covariance",
     "cosine_covariance_kl",
     "damped_oscillator",
@@ -497,17 +497,19 @@ def jacobi_moment(m: int, alpha: float, beta: float) -> float:
 
 # --------------------------------------------------------------------------- Borehole
 
-#: The Borehole function's inputs, uniform on these ranges: rw, r, Tu, Hu, Tl, Hl, L, Kw.
-BOREHOLE_BOUNDS = (
-    (0.05, 0.15),
-    (100.0, 50_000.0),
-    (63_070.0, 115_600.0),
-    (990.0, 1110.0),
-    (63.1, 116.0),
-    (700.0, 820.0),
-    (1120.0, 1680.0),
-    (9855.0, 12_045.0),
-)
+
+def borehole_bounds() -> tuple[tuple[float, float], ...]:
+    """The ranges of the Borehole function's uniform inputs rw, r, Tu, Hu, Tl, Hl, L, Kw."""
+    return (
+        (0.05, 0.15),
+        (100.0, 50_000.0),
+        (63_070.0, 115_600.0),
+        (990.0, 1110.0),
+        (63.1, 116.0),
+        (700.0, 820.0),
+        (1120.0, 1680.0),
+        (9855.0, 12_045.0),
+    )
 
 
 def borehole(x: ArrayLike) -> Array:
@@ -516,7 +518,7 @@ def borehole(x: ArrayLike) -> Array:
     Parameters
     ----------
     x : array_like, shape (N, 8)
-        rw, r, Tu, Hu, Tl, Hl, L, Kw (the ranges of :data:`BOREHOLE_BOUNDS`).
+        rw, r, Tu, Hu, Tl, Hl, L, Kw (the ranges of :func:`borehole_bounds`).
 
     Returns
     -------

@@ -38,7 +38,7 @@ from scipy.stats import qmc
 
 import pcmb
 from pcmb import references
-from pcmb.references import BOREHOLE_BOUNDS, ishigami, ishigami_moments
+from pcmb.references import borehole_bounds, ishigami, ishigami_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGETS = (1e-2, 1e-4, 1e-6)
@@ -80,7 +80,7 @@ class Problem:
 
 # ----------------------------------------------------------------------------- functions
 
-BOREHOLE = list(BOREHOLE_BOUNDS)
+BOREHOLE = list(borehole_bounds())
 EXP_WEIGHTS = 2.0 ** -np.arange(8)
 G_WEIGHTS = np.array([0.0, 1.0, 4.5, 9.0, 99.0, 99.0, 99.0, 99.0])
 

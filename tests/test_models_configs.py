@@ -70,10 +70,10 @@ def test_the_borehole_model_is_the_reference_function():
     import numpy as np
     from model_loading import model_class
 
-    from pcmb.references import BOREHOLE_BOUNDS, borehole
+    from pcmb.references import borehole, borehole_bounds
 
     model = model_class("test_functions", "Borehole")()
-    low, high = np.array(BOREHOLE_BOUNDS).T
+    low, high = np.array(borehole_bounds()).T
     x = low + (high - low) * np.random.default_rng(3).random((5, 8))
     names = ("rw", "r", "Tu", "Hu", "Tl", "Hl", "L", "Kw")
     found = model.simulate({n: x[:, k] for k, n in enumerate(names)}, np.array([0.0, 1.0]))
