@@ -425,7 +425,8 @@ class SweepSpec(Section):
         description="method block of the reference run (default: give --reference REF.h5)",
     )
     outputs: Annotated[list[Name], AfterValidator(unique)] | None = Field(
-        default=None, description="outputs whose errors are measured (default: all)"
+        default=None,
+        description="outputs whose errors are measured (default: diagnostics.outputs, else all)",
     )
     replicates: PositiveInt = Field(
         default=1, description="seeds per setting of a seeded method (sampling, regression)"

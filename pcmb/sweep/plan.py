@@ -78,7 +78,8 @@ class Setting:
 @dataclass(frozen=True)
 class SweepPlan:
     """The settings of a sweep, in order, the reference (``None``: a file given by the user),
-    and the outputs errors are computed for (``None``: every output of the reference)."""
+    and the outputs errors are computed for (``sweep.outputs``, else ``diagnostics.outputs``;
+    ``None``: every output of the reference)."""
 
     settings: tuple[Setting, ...]
     reference: Setting | None
@@ -239,10 +240,11 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
     if section is None:
         runs = _design(config, config.method).runs
         found = default_sweep(config.method.model_dump(exclude_defaults=True), runs)
-        methods, outputs, replicates = found["methods"], None, 1
+        methods, outputs, replicates = found["methods"], config.diagnostics.outputs, 1
         reference_data = {**SWEPT_DEFAULTS, **found["reference"]}
     else:
-        methods, outputs, replicates = section.methods, section.outputs, section.replicates
+        methods, replicates = section.methods, section.replicates
+        outputs = section.outputs or config.diagnostics.outputs
         reference_data = (
             None if section.reference is None else {**SWEPT_DEFAULTS, **section.reference}
         )
