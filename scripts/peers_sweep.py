@@ -6,7 +6,7 @@ Usage (after ``pcmb sweep CONFIG -o DIR``; peers from ``pip install -e ".[peers]
 
 Each peer runs the config's model through pcmb's executor (the same model file and workers,
 one call per chunk of nodes) at the peer's own nodes, at rising cost up to ``--max-runs``
-(default: the most runs of any row already in the table):
+(default: the most runs of any row already in the table, at most :data:`MAX_RUNS`):
 
 - ``chaospy:quadrature``: tensor Gauss quadrature of order p, projected on the orthonormal
   expansion of order p (``generate_quadrature``, ``fit_quadrature``);
