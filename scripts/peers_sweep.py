@@ -15,7 +15,8 @@ one call per chunk of nodes) at the peer's own nodes, at rising cost up to ``--m
 - ``chaospy:collocation``: point collocation (``fit_regression``), total order p on twice as
   many scrambled Sobol' points as terms;
 - ``openturns:lars``: LARS with the corrected leave-one-out error on a hyperbolic (q = 0.75)
-  candidate set, 2^k scrambled Sobol' points.
+  candidate set of the degree of the sweep's own regression entry (else 8), 2^k scrambled
+  Sobol' points.
 
 Their rows (``seconds`` = model runs + fit; ``model_seconds`` the runs; ``pcmb_seconds`` the
 peer's own fit time) are appended to ``DIR/sweep.csv`` and ``DIR/sweep.h5`` (replacing rows
@@ -48,6 +49,8 @@ Q = 0.75
 #: Largest design by default: OpenTURNS' LARS fits each time point of each output apart, and
 #: on the quarter car (2 x 301 of them) 512 points already took minutes.
 MAX_RUNS = 1024
+#: OpenTURNS' candidate degree when the sweep has no regression entry to copy.
+LARS_ORDER = 8
 
 
 @dataclass(frozen=True)
@@ -216,8 +219,19 @@ def _openturns_joint(model: Model):
     return joint, families
 
 
-def openturns_lars(model: Model, cap: int, order: int = 8) -> Iterator[Fit]:
+def _lars_order(config: StudyConfig) -> int:
+    """The candidate degree of pcmb's own LARS in the sweep (its first regression entry with
+    an integer order), so that both select from the same set; else :data:`LARS_ORDER`."""
+    for entry in config.sweep.methods if config.sweep is not None else ():
+        if entry.get("kind") == "regression" and isinstance(entry.get("order"), int):
+            return entry["order"]
+    return LARS_ORDER
+
+
+def openturns_lars(model: Model, cap: int) -> Iterator[Fit]:
     import openturns as ot
+
+    order = _lars_order(model.config)
 
     ot.Log.Show(ot.Log.NONE)
     joint, families = _openturns_joint(model)
@@ -281,8 +295,10 @@ def _rows(method: str, found: Fit, reference, outputs) -> tuple[list, list, list
                 pcmb_seconds=found.fit_seconds,
             )
         )
-        means.append(error.mean_curve)
-        stds.append(error.std_curve)
+        # Curves over time only; an output off the time grid keeps its errors in its rows.
+        blank = np.full(reference.times.size, np.nan)
+        means.append(error.mean_curve if reference.on_time(name) else blank)
+        stds.append(error.std_curve if reference.on_time(name) else blank)
     return rows, means, stds
 
 
