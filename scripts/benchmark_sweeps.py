@@ -53,14 +53,19 @@ def main() -> None:
     parser.add_argument("--folder", type=Path, default=ROOT / "results" / "benchmarks")
     parser.add_argument("--no-peers", action="store_true", help="pcmb's methods only")
     parser.add_argument("--resume", action="store_true", help="continue interrupted sweeps")
+    parser.add_argument(
+        "--docs-only", action="store_true", help="run nothing: rewrite the docs from <folder>"
+    )
     args = parser.parse_args()
+    if args.docs_only:
+        args.cases = []
     unknown = sorted(set(args.cases) - set(CASES))
     if unknown:
         parser.error(f"unknown case(s) {', '.join(unknown)}: choose from {', '.join(CASES)}")
     peers = not args.no_peers and all(
         importlib.util.find_spec(name) is not None for name in ("chaospy", "openturns")
     )
-    if not peers and not args.no_peers:
+    if args.cases and not peers and not args.no_peers:
         print("peers skipped: chaospy and OpenTURNS come with pip install -e '.[peers]'")
     for case in args.cases:
         config = ROOT / "configs" / f"{case}.yaml"
@@ -71,13 +76,13 @@ def main() -> None:
             _run(
                 [sys.executable, str(ROOT / "scripts" / "peers_sweep.py"), str(config), str(folder)]
             )
-        shutil.copyfile(folder / "sweep.png", ROOT / "docs" / "figures" / f"sweep_{case}.png")
     blocks = []
     for case in CASES:  # every case swept so far, in order
         found = args.folder / case / "sweep.h5"
         if not found.is_file():
             continue
         figure = ROOT / "docs" / "figures" / f"sweep_{case}.png"
+        shutil.copyfile(found.with_name("sweep.png"), figure)
         text = summary(read_sweep(found))
         blocks.append(
             f"### {case}: {CASES[case]}\n\n![{case}](figures/{figure.name})\n\n```\n{text}\n```\n"
