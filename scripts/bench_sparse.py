@@ -38,6 +38,8 @@ from scipy.stats import qmc
 
 import pcmb
 from pcmb import references
+from pcmb.chaos.nested import CONTINUED_LEVELS, nested_rule
+from pcmb.chaos.polynomials import Legendre
 from pcmb.references import borehole_bounds, ishigami, ishigami_moments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -251,7 +253,8 @@ def pcmb_tensor(problem: Problem):
 
 
 def pcmb_smolyak(problem: Problem):
-    for level in range(1, 20):
+    top = nested_rule(Legendre(), "auto").max_level + CONTINUED_LEVELS  # rule auto's last
+    for level in range(1, top + 1):
         row = _pcmb_run(problem, {"grid": "smolyak", "level": level})
         if row is None:
             return
