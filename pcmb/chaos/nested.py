@@ -31,10 +31,12 @@ stops at level 4 (31 points, degree 47), where the extension is still exact to ~
 
 ``auto`` continues Gauss–Patterson past level 4 and Genz–Keister past level 4 with weighted
 Leja points grown from their nodes (the Leja search starts from the rule's last level, so the
-sequence stays nested), doubling the points per level like Gauss–Patterson; the continued
-levels are interpolatory, exact to degree m_l - 1. Switching the whole sequence to another
-rule instead (Clenshaw–Curtis or Leja from the start) would make every level of that input
-less exact: a level-5 grid was then less accurate than the level-4 one.
+sequence stays nested), doubling the points per level like Gauss–Patterson, for
+:data:`CONTINUED_LEVELS` levels (127 and 143 points); the continued levels are interpolatory,
+exact to degree m_l - 1. Higher levels take ``rule: clenshaw-curtis`` or ``leja``.
+Switching the whole sequence to another rule instead (Clenshaw–Curtis or Leja from the start)
+would make every level of that input less exact: a level-5 grid was then less accurate than
+the level-4 one.
 
 Weighted Leja sequences (Narayan & Jakeman, SIAM J. Sci. Comput. 36, 2014) serve any
 family: x_0 is the germ's mean, then x_n maximises √w(x) Π_{j<n} |x - x_j| over the support,
