@@ -211,7 +211,7 @@ def test_a_tensor_grid_stops_at_its_budget_and_says_so():
             _exponential3, THREE, method="adaptive", basis="tensor", tolerance=1e-12, max_runs=60
         )
     assert result.n_nodes <= 60
-    with pytest.raises(pcmb.UsageError, match="level 1 in every input takes 27 runs"):
+    with pytest.raises(pcmb.UsageError, match=r"level 1 in every input\) needs 27 runs"):
         Study(
             _model(_exponential3, THREE),
             THREE,

@@ -78,16 +78,22 @@ class AdaptiveCollocation:
                 raise ValueError(f"method.rule: input {name!r}: {error}") from None
         self.rules = tuple(rules)
         self.tolerance = float(tolerance)
-        n = len(self.distributions)
-        first = np.vstack([np.zeros((1, n), dtype=np.int64), np.eye(n, dtype=np.int64)])
-        self._first = SparseGrid(self.distributions, first, self.rules)
+        self._first = SparseGrid(self.distributions, self._first_indices(), self.rules)
         self.max_runs = DEFAULT_MAX_RUNS if max_runs is None else int(max_runs)
         if self.max_runs < self._first.size:
             raise ValueError(
-                f"method.max_runs: {self.max_runs} runs do not allow one step: the level-0 grid "
-                f"and its first refinement take {self._first.size} runs"
+                f"method.max_runs: {self.max_runs} runs do not allow one step: the first round "
+                f"({self._FIRST}) needs {self._first.size} runs"
             )
         self._reset()
+
+    #: What the first round runs, for messages.
+    _FIRST = "the level-0 grid and its first refinement"
+
+    def _first_indices(self) -> NDArray[np.int64]:
+        """(K, n) the level multi-indices of the first round: 0 and its forward neighbours."""
+        n = len(self.distributions)
+        return np.vstack([np.zeros((1, n), dtype=np.int64), np.eye(n, dtype=np.int64)])
 
     def _reset(self) -> None:
         """The state of the first round: index 0 refined, its forward neighbours active."""
@@ -151,14 +157,8 @@ class AdaptiveCollocation:
         """The nodes of the next refinement while the estimated error exceeds the tolerance and
         the budget allows, else ``None`` (every node must have run: a failed one ends the
         rounds)."""
-        if nodes.size == self._first.size:  # the first round of a (new) run
-            self._reset()
-        order = self._order(nodes)
-        if not ok.all():
-            self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
+        if not self._measure_round(nodes, values, ok):
             return None
-        self._measure(np.stack(list(values.values()), axis=1)[order])
-        self._history.append((self._grid.size, self._estimate()))
         while True:
             active = np.flatnonzero(self._active())
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
@@ -183,6 +183,24 @@ class AdaptiveCollocation:
                 return None
             if added:
                 return self._grow(added)
+
+    def _measure_round(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> bool:
+        """Measure the indicators after a round and record the estimate; ``False`` (with the
+        reason kept) when a node failed, as the surpluses need every node."""
+        if nodes.size == self._first.size:  # the first round of a (new) run
+            self._reset()
+        order = self._order(nodes)
+        if not ok.all():
+            self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
+            return False
+        self._measure(np.stack(list(values.values()), axis=1)[order])
+        self._history.append((self._grid.size, self._estimate()))
+        return True
 
     def _measure(self, values: NDArray[np.float64]) -> None:
         """Surplus norms of the indices new since the last round, and every indicator

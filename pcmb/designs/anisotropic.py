@@ -39,16 +39,13 @@ class AnisotropicTensor(AdaptiveCollocation):
     of nested rules raised one input at a time where the top-face surpluses say it pays
     (see the module)."""
 
+    _FIRST = "the tensor grid of level 1 in every input"
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         super().__init__(inputs, dataclasses.replace(settings, basis=None))
-        self._levels = (1,) * len(self.distributions)
-        self._first = SparseGrid(self.distributions, _box(self._levels), self.rules)
-        if self.max_runs < self._first.size:
-            raise ValueError(
-                f"method.max_runs: {self.max_runs} runs do not allow one step: the tensor grid "
-                f"of level 1 in every input takes {self._first.size} runs"
-            )
-        self._reset()
+
+    def _first_indices(self) -> NDArray[np.int64]:
+        return _box((1,) * len(self.distributions))
 
     def _reset(self) -> None:
         super()._reset()
@@ -81,15 +78,7 @@ class AnisotropicTensor(AdaptiveCollocation):
     ) -> NodeSet | None:
         """The nodes of the next input's level while the estimated error exceeds the
         tolerance and the budget allows, else ``None``."""
-        if nodes.size == self._first.size:
-            self._reset()
-        order = self._order(nodes)
-        if not ok.all():
-            self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
-            return None
-        self._measure(np.stack(list(values.values()), axis=1)[order])
-        self._history.append((self._grid.size, self._estimate()))
-        if self._estimate() <= self.tolerance:
+        if not self._measure_round(nodes, values, ok) or self._estimate() <= self.tolerance:
             return None
         faces = self._faces()
         for k in np.argsort(-faces, kind="stable"):
