@@ -4,14 +4,12 @@
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import datetime as dt
 import io
 import json
 import os
 import platform
-import tempfile
 from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
@@ -38,7 +36,7 @@ from pcmb.result import (
     StudyResult,
     WarningRecord,
 )
-from pcmb.run.files import replace_durably
+from pcmb.run.files import write_durably
 from pcmb.run.output import write_error
 
 __all__ = ["SCHEMA_VERSION", "load", "write_result"]
@@ -548,20 +546,9 @@ def write_result(
     # file system turned read-only) is then an OSError here, never a failure inside HDF5's
     # C code (h5py crashed with SIGSEGV on ENOSPC while flushing to a full disk).
     image = _image(result, provenance)
-    temporary: Path | None = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        temporary = Path(name)
-        with os.fdopen(handle, "wb") as file:
-            # mkstemp creates the file private (0600); a result file gets the umask mode.
-            umask = os.umask(0)
-            os.umask(umask)
-            os.fchmod(file.fileno(), 0o666 & ~umask)
-            file.write(image)
-        replace_durably(temporary, path)
+        write_durably(path, image)
     except OSError as error:
-        _discard(temporary)
         kept = (
             f"the finished nodes are kept in {journal}: free some space (or fix the folder) "
             "and run again with --resume, which runs no node again"
@@ -569,9 +556,6 @@ def write_result(
             else "free some space (or fix the folder) and write it again"
         )
         raise write_error(error, path, "result file", kept) from error
-    except BaseException:
-        _discard(temporary)
-        raise
     return path
 
 
@@ -581,12 +565,6 @@ def _image(result: StudyResult, provenance: Mapping[str, str]) -> bytes:
     with h5py.File(buffer, "w") as file:
         _write(file, result, provenance)
     return buffer.getvalue()
-
-
-def _discard(temporary: Path | None) -> None:
-    if temporary is not None:
-        with contextlib.suppress(OSError):
-            temporary.unlink(missing_ok=True)
 
 
 def _text(value: Any) -> str:

@@ -281,16 +281,13 @@ def _rows(method: str, found: Fit, reference, outputs) -> tuple[list, list, list
     for name in outputs:
         error = errors(found.mean[name], found.std[name], reference.mean(name), reference.std(name))
         rows.append(
-            SweepRow(
+            SweepRow.measured(
+                error,
                 method=method,
                 setting=found.setting,
                 runs=found.runs,
                 seconds=seconds,
                 output=name,
-                err_mean=error.mean,
-                err_std=error.std,
-                err_mean_rms=error.mean_rms,
-                err_std_rms=error.std_rms,
                 model_seconds=found.model_seconds,
                 pcmb_seconds=found.fit_seconds,
             )

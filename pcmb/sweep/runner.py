@@ -152,16 +152,13 @@ def _rows(
     for output in outputs:
         found = result_errors(result, reference, output)
         rows.append(
-            SweepRow(
+            SweepRow.measured(
+                found,
                 method=setting.method,
                 setting=setting.setting,
                 runs=runs,
                 seconds=finished.seconds,
                 output=output,
-                err_mean=found.mean,
-                err_std=found.std,
-                err_mean_rms=found.mean_rms,
-                err_std_rms=found.std_rms,
                 replicate=setting.replicate,
                 held_out=held_out,
                 model_seconds=result.seconds,

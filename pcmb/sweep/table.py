@@ -13,17 +13,18 @@ import csv
 import dataclasses
 import io
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.errors import ResultFileError
-from pcmb.run.files import replace_durably
+from pcmb.run.files import write_durably
 from pcmb.run.output import write_error
+from pcmb.sweep.accuracy import Errors
 
 __all__ = [
     "COLUMNS",
@@ -66,6 +67,17 @@ class SweepRow:
     model_seconds: float = float("nan")
     pcmb_seconds: float = float("nan")
     file: str = ""
+
+    @classmethod
+    def measured(cls, errors: Errors, **fields: Any) -> SweepRow:
+        """A row with the errors of :func:`pcmb.sweep.accuracy.errors` and the other fields."""
+        return cls(
+            err_mean=errors.mean,
+            err_std=errors.std,
+            err_mean_rms=errors.mean_rms,
+            err_std_rms=errors.std_rms,
+            **fields,
+        )
 
 
 #: The columns of ``sweep.csv``, in order (the first seven are the documented contract).
@@ -223,17 +235,9 @@ def _h5_image(table: SweepTable) -> bytes:
 
 
 def _write_bytes(path: Path, data: bytes, what: str) -> None:
-    temporary: Path | None = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        temporary = Path(name)
-        with os.fdopen(handle, "wb") as file:
-            file.write(data)
-        replace_durably(temporary, path)
+        write_durably(path, data)
     except OSError as error:
-        if temporary is not None:
-            temporary.unlink(missing_ok=True)
         raise write_error(error, path, what, "the settings' result files are kept") from error
 
 
