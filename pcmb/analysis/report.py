@@ -48,6 +48,7 @@ __all__ = [
     "UNRELIABLE_COLOR",
     "WIDTH",
     "figure_pixels",
+    "save_png",
     "write_comparison_figures",
     "write_report",
 ]
@@ -71,6 +72,18 @@ def figure_pixels(panels: int) -> tuple[int, int]:
     """(width, height) in pixels of a figure with ``panels`` panels."""
     rows = -(-max(panels, 1) // PANELS_PER_ROW)
     return int(WIDTH * DPI), int(ROW_HEIGHT * rows * DPI)
+
+
+def save_png(figure: Any, path: Path, dpi: int = DPI) -> Path:
+    """Save a figure as a 256-colour PNG: a third of the size of Agg's RGBA output, and the
+    difference is invisible on line plots."""
+    from PIL import Image  # matplotlib's own dependency
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    image = Image.open(buffer).convert("RGB")
+    image.quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
+    return path
 
 
 def _matplotlib() -> tuple[Any, Any]:
@@ -148,15 +161,8 @@ class _Canvas:
         return figure, list(axes[:panels])
 
     def save(self, figure: Any, name: str) -> Path:
-        """Save as a 256-colour PNG: a third of the size of Agg's RGBA output, and the
-        difference is invisible on line plots."""
-        from PIL import Image  # matplotlib's own dependency
-
-        buffer = io.BytesIO()
-        figure.savefig(buffer, format="png", dpi=DPI)
-        image = Image.open(buffer).convert("RGB")
-        path = self.directory / name
-        image.quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(path, optimize=True)
+        """Save as a 256-colour PNG (:func:`save_png`)."""
+        path = save_png(figure, self.directory / name)
         self.written.append(path)
         return path
 

@@ -33,6 +33,10 @@ _COLORS = (
     "tab:olive",
     "tab:cyan",
     "tab:gray",
+    "black",
+    "darkgoldenrod",
+    "navy",
+    "lime",
 )
 
 
@@ -153,7 +157,8 @@ def draw_sweep(table: SweepTable, path: str | os.PathLike[str]) -> Path:
             fontsize=9,
             loc="left",
         )
+    from pcmb.analysis.report import save_png
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path)
-    return path
+    return save_png(figure, path, dpi=100)
