@@ -24,9 +24,9 @@ from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.basis import PolynomialBasis, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
-from pcmb.designs.intrusive import form_problems, no_nodes, polynomial_form
+from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.result import Design
 
 __all__ = ["Galerkin", "GalerkinSystem"]
@@ -137,7 +137,7 @@ def _germ_degrees(
     return (state_power[:, None] * orders[None, :] + input_power).max(axis=0)
 
 
-class Galerkin:
+class Galerkin(WithoutNodes):
     """``method: {kind: galerkin, order, basis}``: stochastic Galerkin on a tensor or total
     basis of order P (per input for ``tensor``); needs the model's polynomial form."""
 
@@ -153,14 +153,6 @@ class Galerkin:
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(int(p) for p in settings.orders)
         self.basis = settings.basis or "tensor"
-
-    runs = 0
-
-    def nodes(self) -> NodeSet:
-        return no_nodes(self.distributions)
-
-    def weights(self, nodes: NodeSet) -> None:
-        return None
 
     def record(self) -> Design:
         return Design(

@@ -12,13 +12,22 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
 from pcmb.errors import ConfigError, ConfigProblem
 
-__all__ = ["form_problems", "no_nodes", "polynomial_form"]
+__all__ = ["WithoutNodes", "form_problems", "polynomial_form"]
 
 
-def no_nodes(distributions: Sequence[Distribution]) -> NodeSet:
-    """The empty node set of a method that runs no nodes."""
-    empty = np.zeros((0, len(distributions)))
-    return NodeSet(tuple(distributions), empty, empty.copy())
+class WithoutNodes:
+    """The node side of an intrusive design: no runs, an empty node set, no weights.
+    Subclasses set ``distributions`` (germ order)."""
+
+    distributions: tuple[Distribution, ...]
+    runs = 0
+
+    def nodes(self) -> NodeSet:
+        empty = np.zeros((0, len(self.distributions)))
+        return NodeSet(self.distributions, empty, empty.copy())
+
+    def weights(self, nodes: NodeSet) -> None:
+        return None
 
 
 def _form(

@@ -22,9 +22,9 @@ from numpy.typing import NDArray
 
 from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.inputs import Distribution, Normal
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery
-from pcmb.designs.intrusive import form_problems, no_nodes, polynomial_form
+from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["GaussianMoments", "Linearization"]
@@ -186,7 +186,7 @@ class GaussianMoments:
         return out
 
 
-class Linearization:
+class Linearization(WithoutNodes):
     """``method: {kind: linearization}``: statistical linearization with Gaussian closure;
     needs the model's polynomial form. Non-Gaussian inputs enter by their mean and variance
     only (a warning record says so)."""
@@ -197,14 +197,6 @@ class Linearization:
         if settings.basis is not None:
             raise ValueError("method.basis: kind linearization has no chaos basis")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
-
-    runs = 0
-
-    def nodes(self) -> NodeSet:
-        return no_nodes(self.distributions)
-
-    def weights(self, nodes: NodeSet) -> None:
-        return None
 
     def record(self) -> Design:
         return Design(kind="linearization", grid="none")
