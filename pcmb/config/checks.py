@@ -14,10 +14,9 @@ from pcmb.designs import DESIGNS, MethodSettings, make_design
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
-    from pcmb.chaos.inputs import Distribution
     from pcmb.config.schema import StudyConfig
 
-__all__ = ["cross_check", "model_check"]
+__all__ = ["config_design", "cross_check", "model_check"]
 
 
 def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
@@ -41,9 +40,8 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     # MethodSpec's keys are MethodSettings' fields, but for order (one per input there) and
     # the held-out runs (the study's, not the design's); order auto refines to the
     # diagnostics' tolerance.
-    settings = _settings(config)
     try:
-        design = make_design(_inputs(config), settings)
+        design = config_design(config)
     except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
         key, _, message = str(error).partition(": ")
         yield key, message
@@ -67,7 +65,8 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         )
 
 
-def _settings(config: StudyConfig) -> MethodSettings:
+def _method_settings(config: StudyConfig) -> MethodSettings:
+    """The design settings of a config's ``method:`` (orders per input, in germ order)."""
     return MethodSettings(
         orders=config.orders,
         diagnostics_tolerance=config.diagnostics.tolerance,
@@ -75,8 +74,16 @@ def _settings(config: StudyConfig) -> MethodSettings:
     )
 
 
-def _inputs(config: StudyConfig) -> dict[str, Distribution]:
-    return dict(zip(config.input_names, config.distributions, strict=True))
+def config_design(config: StudyConfig) -> object:
+    """The design a config's ``method:`` makes on its inputs.
+
+    Raises
+    ------
+    ValueError
+        Settings the design cannot use (the message starts with the key).
+    """
+    inputs = dict(zip(config.input_names, config.distributions, strict=True))
+    return make_design(inputs, _method_settings(config))
 
 
 def _intrusive(config: StudyConfig) -> object:
@@ -86,7 +93,7 @@ def _intrusive(config: StudyConfig) -> object:
     if not hasattr(DESIGNS.get(config.method.kind), "check"):
         return None
     try:
-        return make_design(_inputs(config), _settings(config))
+        return config_design(config)
     except (ValueError, KeyError):
         return None
 
@@ -94,11 +101,14 @@ def _intrusive(config: StudyConfig) -> object:
 def _swept_intrusive(config: StudyConfig) -> Iterator[tuple[str, object]]:
     """(key path, check) of the first intrusive setting of each sweep entry (and of the
     sweep's reference), when the sweep itself is valid."""
-    from pcmb.sweep.plan import plan_sweep, sweep_problems
+    from pcmb.sweep.plan import plan_sweep
 
-    if config.sweep is None or next(iter(sweep_problems(config)), None) is not None:
+    if config.sweep is None:
         return
-    plan = plan_sweep(config)
+    try:
+        plan = plan_sweep(config)
+    except ValueError:  # a bad sweep: sweep_problems reports it
+        return
     seen = set()
     for setting in (*plan.settings, *([plan.reference] if plan.reference else [])):
         check = getattr(

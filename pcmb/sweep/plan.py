@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
-from pcmb.designs import MethodSettings, NodeDesign, design_key, make_design
+from pcmb.designs import MethodSettings, NodeDesign, design_key
 
 if TYPE_CHECKING:
     from pcmb.config.schema import MethodSpec, StudyConfig
@@ -145,14 +145,24 @@ def _expand(entry: Mapping[str, Any]) -> Iterator[tuple[str, int, dict[str, Any]
         yield key, index, {**SWEPT_DEFAULTS, **entry, key: value}
 
 
+def _first(entry: Mapping[str, Any], index: int) -> tuple[str, int, dict[str, Any]]:
+    """The first setting of an entry.
+
+    Raises
+    ------
+    ValueError
+        An entry with several lists (:func:`sweep_problems` explains it at its key).
+    """
+    for found in _expand(entry):
+        return found
+    raise ValueError(f"sweep.methods[{index}] varies more than one key")
+
+
 def _design(config: StudyConfig, spec: MethodSpec) -> NodeDesign:
     """The design of a method block on the config's inputs."""
-    settings = MethodSettings(
-        orders=config.model_copy(update={"method": spec}).orders,
-        diagnostics_tolerance=config.diagnostics.tolerance,
-        **spec.model_dump(exclude={"order", "validation"}),
-    )
-    return make_design(dict(zip(config.input_names, config.distributions, strict=True)), settings)
+    from pcmb.config.checks import config_design
+
+    return config_design(config.model_copy(update={"method": spec}))
 
 
 def _settings_of(
@@ -248,7 +258,7 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
         reference_data = (
             None if section.reference is None else {**SWEPT_DEFAULTS, **section.reference}
         )
-    firsts = [(entry, *next(_expand(entry))) for entry in methods]
+    firsts = [(entry, *_first(entry, index)) for index, entry in enumerate(methods)]
     labels = _labels([(e, MethodSpec.model_validate(data), key) for e, key, _, data in firsts])
     settings = tuple(
         setting
