@@ -168,15 +168,17 @@ def test_galerkin_converges_geometrically_to_the_collocation_statistics_of_the_q
         system = GalerkinSystem(form, QC_DISTS, index, ["x1"])
         coefficients = system.output_coefficients(system.solve(times), times)[0]
         errors.append(_error(ChaosExpansion(coefficients, index, QC_DISTS, QC_INPUTS), reference))
-    errors = np.array(errors)  # measured 0.22, 0.033, 0.019, 3.7e-4
+    errors = np.array(errors)
     assert errors[-1] > 3 * resolution  # the reference resolves every Galerkin error
-    # Geometric decay: the least-squares rate of log(error) against P is below 0.35 per
-    # order (measured 0.26), and every error is below the one two orders lower (uniform
-    # inputs make odd and even orders gain unevenly).
-    rate = np.exp(np.polyfit(orders, np.log(errors), 1)[0])
-    assert rate < 0.35, errors
+    # Both are spectral projections onto the same space at order P, so their errors track
+    # each other up to an O(1) factor (quasi-optimality); the check is against collocation of
+    # the same order, not against numbers this test printed. Every error is also below the
+    # one two orders lower (uniform inputs make odd and even orders gain unevenly).
+    collocation = np.array(
+        [_error(_collocation(model, (int(p),) * 3, times), reference) for p in orders]
+    )
+    assert np.all(errors < 3 * collocation), (errors, collocation)
     assert np.all(errors[2:] < errors[:-2] / 5), errors
-    assert errors[-1] < 1e-3
 
 
 def test_galerkin_study_end_to_end_stores_and_loads_like_collocation(tmp_path):
