@@ -5,7 +5,6 @@ Everything here is plain data (numpy and the chaos core); :mod:`pcmb.store` writ
 
 from __future__ import annotations
 
-import enum
 import json
 from dataclasses import asdict, dataclass, field
 from typing import TYPE_CHECKING
@@ -18,6 +17,7 @@ from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.process import RandomProcess, germ_names
+from pcmb.run.status import NodeFailure, Status
 
 if TYPE_CHECKING:
     from pcmb.analysis.diagnostics import HeldOut, OutputDiagnostics
@@ -33,14 +33,6 @@ __all__ = [
     "StudyResult",
     "WarningRecord",
 ]
-
-
-class Status(enum.IntEnum):
-    """The state of a node, with the codes stored in ``/nodes/status``."""
-
-    PENDING = 0
-    OK = 1
-    FAILED = 2
 
 
 @dataclass(frozen=True)
@@ -236,37 +228,6 @@ class AdaptiveFit:
         total = finite[refine.any(axis=1)].sum()
         shares = refine.T.astype(float) @ finite
         return shares / total if total > 0 else np.zeros(self.index_set.shape[1])
-
-
-@dataclass(frozen=True)
-class NodeFailure:
-    """A node whose model run failed.
-
-    Attributes
-    ----------
-    index:
-        The node's index in the full node set.
-    params:
-        The node's values of the uncertain inputs (a tuple for a field input).
-    message:
-        The model's message (exception type and text), ``"non-finite output 'x1' at t=..."``,
-        or ``"worker process died (...)"``.
-    """
-
-    index: int
-    params: dict[str, float | tuple[float, ...]]
-    message: str
-
-    def __str__(self) -> str:
-        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
-        return f"node {self.index} ({values}): {' '.join(self.message.split())}"
-
-
-def _format_value(value: float | tuple[float, ...]) -> str:
-    if isinstance(value, tuple):
-        shown = ", ".join(f"{v:.6g}" for v in value[:3])
-        return f"[{shown}, ... ({len(value)} values)]" if len(value) > 3 else f"[{shown}]"
-    return f"{value:.6g}"
 
 
 @dataclass(frozen=True)

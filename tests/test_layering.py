@@ -136,3 +136,17 @@ def test_the_public_core_api_loads_no_heavy_library():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_a_worker_starts_without_scipy():
+    # What every loky worker imports when it starts (pcmb.run.backends._warm_up): scipy is
+    # half a second of import per worker, on the main job's critical path, that only
+    # implicit integrators and the chaos machinery of the result need.
+    code = (
+        "import sys\n"
+        "from pcmb.run.backends import _warm_up\n"
+        "_warm_up()\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'joblib', 'h5py'}))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"

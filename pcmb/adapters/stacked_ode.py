@@ -18,9 +18,7 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
-import scipy.sparse
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
 
 from pcmb.adapters.runge_kutta import (
     PAIRS,
@@ -126,6 +124,9 @@ def solve_stacked(
 
     # advance(start, stop, y, t_eval) -> states at t_eval, (d·B, len(t_eval)).
     if method in _IMPLICIT_METHODS:
+        import scipy.sparse  # deferred: a quarter second of import that explicit methods skip
+        from scipy.integrate import solve_ivp
+
         scale = 1.0 / math.sqrt(n_nodes)
         options: dict[str, Any] = {
             "method": method,

@@ -42,10 +42,10 @@ from pcmb.errors import (
     PcmbError,
     UsageError,
 )
-from pcmb.result import NodeFailure, Status
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import Journal
 from pcmb.run.progress import Progress
+from pcmb.run.status import NodeFailure, Status
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model

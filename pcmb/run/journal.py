@@ -26,10 +26,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.errors import ResultFileError, UsageError
-from pcmb.result import Status
 from pcmb.run.files import replace_durably
 from pcmb.run.fingerprint import Fingerprint, changed_files
 from pcmb.run.output import write_error
+from pcmb.run.status import Status
 
 __all__ = ["Journal"]
 
