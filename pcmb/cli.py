@@ -190,7 +190,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from pcmb.config.schema import load_config
     from pcmb.study import Study
 
-    config = load_config(args.config)
+    config = load_config(args.config, check_sweep=False)  # a run ignores sweep:
     output = args.output or config.output
     if output is None:
         raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")

@@ -383,3 +383,15 @@ def test_an_intrusive_setting_the_model_cannot_take_is_refused_before_anything_r
     assert "sweep.methods[0].kind: galerkin" in err and "not polynomial in ['Ms']" in err
     assert "sweep.methods[1].kind: linearization" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_plain_run_leaves_the_sweeps_model_checks_to_sweep_and_validate(tmp_path, capsys):
+    # pcmb run ignores sweep:, so it does not pay for checking Galerkin's polynomial form in
+    # a worker; validate still finds the problem, at its key.
+    mass = "  Ms: {dist: uniform, low: 200.0, high: 300.0}\n"
+    config = _quarter_car(tmp_path, INTRUSIVE, extra_input=mass)
+    assert main(["validate", str(config)]) == 2
+    assert "sweep.methods[0].kind: galerkin" in capsys.readouterr().err
+    output = tmp_path / "run.h5"
+    assert main(["run", str(config), "-o", str(output), "--quiet"]) == 0
+    assert output.exists()

@@ -122,9 +122,10 @@ def _swept_intrusive(config: StudyConfig) -> Iterator[tuple[str, object]]:
             )
 
 
-def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
+def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple[str, str]]:
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
-    check the inputs, the analysis and the time grid against what it says of itself."""
+    check the inputs, the analysis and the time grid against what it says of itself; with
+    ``check_sweep``, also the sweep's intrusive settings against the model's polynomial form."""
     from pcmb.run.backends import checking_backend, open_pool
     from pcmb.run.executor import describe_model, run_in_worker
 
@@ -138,7 +139,7 @@ def model_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             check = getattr(_intrusive(config), "check", None)
             if check is not None:
                 yield from run_in_worker(factory, pool, check, config.output_names)
-            for where, swept in _swept_intrusive(config):
+            for where, swept in _swept_intrusive(config) if check_sweep else ():
                 for path, message in run_in_worker(factory, pool, swept, config.output_names):
                     yield where + path.removeprefix("method"), message
     except ConfigError as exc:

@@ -592,6 +592,7 @@ def _validate(
     base_dir: Path,
     lines: Mapping[KeyPath, int],
     problems: list[ConfigProblem],
+    check_sweep: bool = True,
 ) -> StudyConfig:
     try:
         config = StudyConfig.model_validate(data)
@@ -602,7 +603,7 @@ def _validate(
         config._base_dir = base_dir
         problems = located(cross_check(config), lines)
         problems += located(sweep_problems(config), lines)
-        problems += located(model_check(config), lines)
+        problems += located(model_check(config, check_sweep), lines)
     if problems:
         raise ConfigError(sorted(problems, key=lambda p: (p.line or 0, p.path)), source)
     return config
@@ -635,7 +636,9 @@ def validate_config(
     return _validate(data, source or "<config>", base, {}, [])
 
 
-def load_config(path: str | Path, *, text: str | None = None) -> StudyConfig:
+def load_config(
+    path: str | Path, *, text: str | None = None, check_sweep: bool = True
+) -> StudyConfig:
     """Load, validate and check a YAML study config before anything runs.
 
     Parameters
@@ -644,6 +647,10 @@ def load_config(path: str | Path, *, text: str | None = None) -> StudyConfig:
         The config file; its folder is where relative model paths resolve.
     text:
         The YAML text, when it is already in memory (``path`` then only names it).
+    check_sweep:
+        Also check the ``sweep:`` section's intrusive settings against the model in a worker
+        (Galerkin needs its polynomial form). A plain run, which ignores that section, skips
+        this model check; the section's own keys are checked either way.
 
     Returns
     -------
@@ -666,7 +673,7 @@ def load_config(path: str | Path, *, text: str | None = None) -> StudyConfig:
         except (OSError, UnicodeDecodeError) as exc:
             raise ConfigError(f"cannot read the config: {exc}", source) from None
     data, lines, problems = parse_yaml(text, source)
-    config = _validate(data, source, path.resolve().parent, lines, problems)
+    config = _validate(data, source, path.resolve().parent, lines, problems, check_sweep)
     config._source_text = text
     config._path = path
     return config
