@@ -355,8 +355,9 @@ def _inspect(path: str) -> str:
         )
     for name, found in result.diagnostics.items():
         held = (
-            f"held-out error up to {np.nanmax(found.holdout.error, initial=0.0):.3g} "
-            f"({found.holdout.count} runs)"
+            f"mean/std error up to {np.nanmax(found.holdout.statistics, initial=0.0):.3g}, "
+            f"surrogate error up to {np.nanmax(found.holdout.error, initial=0.0):.3g} "
+            f"({found.holdout.count} held-out runs)"
             if found.holdout is not None
             else "no held-out runs"
         )

@@ -405,6 +405,9 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
 
 #: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
 _DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimate": "estimate"}
+#: ... and those of its held-out check: the estimated errors of the mean and the std, and the
+#: standard error of the larger (same names in the file as on Holdout).
+_HOLDOUT_STATISTICS = ("mean_error", "std_error", "spread")
 
 
 def _write_diagnostics(
@@ -420,6 +423,8 @@ def _write_diagnostics(
         if found.holdout is not None:
             _points(group, "holdout_error", found.holdout.error, (), time_)
             _points(group, "holdout_upper", found.holdout.upper, (), time_)
+            for key in _HOLDOUT_STATISTICS:
+                _points(group, key, getattr(found.holdout, key), (), time_)
             group.attrs["holdout_count"] = found.holdout.count
             group.attrs["confidence"] = found.holdout.confidence
         group.attrs["failing_from"] = found.failing_from
@@ -450,9 +455,14 @@ def _read_diagnostics(
         scalar = name in scalars
         holdout = None
         if "holdout_error" in group:
+            error = _columns(group["holdout_error"][()], scalar)
             holdout = Holdout(
-                _columns(group["holdout_error"][()], scalar),
+                error,
                 _columns(group["holdout_upper"][()], scalar),
+                *(  # older files judged the surrogate only
+                    _columns(group[key][()], scalar) if key in group else np.nan * error
+                    for key in _HOLDOUT_STATISTICS
+                ),
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )

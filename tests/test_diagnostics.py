@@ -1,11 +1,10 @@
 """Tests of pcmb.analysis.diagnostics against responses whose true error is known.
 
-The true error is the RMS error of the surrogate over the inputs' distribution, relative to
-the output's largest std, computed by a Gauss rule far finer than the chaos order (exact to
-round-off for these smooth integrands). The held-out estimate from K = 16 runs is a χ²-type
-estimate: for normal errors the ratio estimate/true lies in [0.58, 1.43] with 99 %
-probability, so the verdict must fall between the times where the true error crosses half
-and twice the tolerance.
+The true error is the error of the expansion's mean and std, the larger of the two, relative
+to the output's largest std, computed by a Gauss rule far finer than the chaos order (exact
+to round-off for these smooth integrands). The held-out estimate from K runs has a standard
+error below RMS/√K, RMS being the surrogate's true pointwise error, so the verdict must fall
+between the first times where truth + 3 RMS/√K and truth - 3 RMS/√K exceed the tolerance.
 """
 
 from __future__ import annotations
@@ -18,24 +17,26 @@ import pytest
 import pcmb
 from pcmb.analysis.diagnostics import (
     TOLERANCE,
+    VALIDATION,
     diagnose,
     holdout_error,
     out_of_range,
     range_checks,
     spectral_decay,
+    statistics_error,
     tail_terms,
     verdict,
 )
 from pcmb.chaos.basis import tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Uniform
-from pcmb.chaos.nodes import TensorGrid, draw_germs
+from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.chaos.recovery import project_tensor
 from pcmb.errors import PcmbWarning
 from pcmb.references import double_well
 
 TIMES = np.linspace(0.0, 1.0, 101)
-HELD_OUT = 16
+HELD_OUT = VALIDATION
 
 
 def chaos(function, orders, index=None):
@@ -54,8 +55,29 @@ def true_error(expansion, function, points=120):
     return np.sqrt(grid.weights @ error**2) / expansion.std().max()
 
 
+def true_statistics_error(expansion, function, points=120):
+    """(T,) exact error of the expansion's mean and std (the larger) over the largest std."""
+    grid = TensorGrid(expansion.distributions, (points - 1,) * expansion.n)
+    values = function(grid.nodes)
+    mean = grid.weights @ values
+    std = np.sqrt(grid.weights @ (values - mean) ** 2)
+    error = np.maximum(abs(expansion.mean() - mean), abs(expansion.std() - std))
+    return error / expansion.std().max()
+
+
+def verdict_window(times, truth, rms):
+    """(earliest, latest) times the verdict may take (module docstring); where the truth
+    minus the noise never exceeds the tolerance, the latest is where the truth doubles it."""
+    noise = 3 * rms / np.sqrt(HELD_OUT)
+    late = crossing(times, truth - noise, TOLERANCE)
+    if np.isnan(late):
+        late = crossing(times, truth, 2 * TOLERANCE)
+    return crossing(times, truth + noise, TOLERANCE), late
+
+
 def held_out(expansion, function, seed=1):
-    germ = draw_germs(expansion.distributions, HELD_OUT, np.random.default_rng(seed))
+    """Surrogate and model at K held-out inputs, a Latin hypercube as a study draws them."""
+    germ = random_nodes(expansion.distributions, HELD_OUT, "lhs", seed).nodes
     return expansion.evaluate_germ(germ), function(germ)
 
 
@@ -114,16 +136,17 @@ def test_a_smooth_response_raises_nothing():
 
 
 def test_a_steepening_response_is_flagged_when_its_true_error_crosses_the_tolerance():
-    expansion, values = chaos(steepening, (7,))
-    truth = true_error(expansion, steepening)
+    expansion, values = chaos(steepening, (5,))
+    truth = true_statistics_error(expansion, steepening)
     assert truth.max() > 2 * TOLERANCE
-    found = diagnose("y", expansion, values, TIMES, held_out(expansion, steepening))
-    early = crossing(TIMES, truth, TOLERANCE / 2)
-    late = crossing(TIMES, truth, 2 * TOLERANCE)
-    assert early <= found.failing_from <= late
+    early, late = verdict_window(TIMES, truth, true_error(expansion, steepening))
+    for seed in range(1, 9):
+        found = diagnose("y", expansion, values, TIMES, held_out(expansion, steepening, seed))
+        assert early <= found.failing_from <= late
     (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
     assert record.output == "y" and record.time_range == (found.failing_from, 1.0)
     assert record.message.startswith(f"polynomial chaos unreliable from t = {found.failing_from}")
+    assert "held-out runs" in record.message and "surrogate error" in record.message
     assert "method.elements" in record.message and "x0" in record.message
 
 
@@ -131,7 +154,7 @@ def test_an_even_response_defeats_the_top_shell_but_not_the_decay():
     expansion, values = chaos(even, (7,))
     top_shell = expansion.coefficients[tail_terms(expansion.multi_index, depth=1)]
     assert np.abs(top_shell).max() < 1e-12  # degree 7 is odd: exactly zero by symmetry
-    truth = true_error(expansion, even)
+    truth = true_statistics_error(expansion, even)
     assert truth.max() > 2 * TOLERANCE
     # With the decay alone (no held-out runs) the failure is still found, and no later
     # than the true error's crossing of twice the tolerance.
@@ -139,15 +162,18 @@ def test_an_even_response_defeats_the_top_shell_but_not_the_decay():
     assert alone.holdout is None
     assert alone.failing_from <= crossing(TIMES, truth, 2 * TOLERANCE)
     assert alone.decay.max() > TOLERANCE
-    found = diagnose("y", expansion, values, TIMES, held_out(expansion, even))
-    assert crossing(TIMES, truth, TOLERANCE / 2) <= found.failing_from
-    assert found.failing_from <= crossing(TIMES, truth, 2 * TOLERANCE)
+    early, late = verdict_window(TIMES, truth, true_error(expansion, even))
+    for seed in range(1, 9):
+        found = diagnose("y", expansion, values, TIMES, held_out(expansion, even, seed))
+        assert early <= found.failing_from <= late
 
 
 def test_an_error_spread_over_the_inputs_and_growing_points_to_sampling():
     expansion, values = chaos(spreading, (5, 5))
     found = diagnose("y", expansion, values, TIMES, held_out(expansion, spreading))
-    assert found.failing_from <= crossing(TIMES, true_error(expansion, spreading), 2 * TOLERANCE)
+    truth = true_statistics_error(expansion, spreading)
+    early, late = verdict_window(TIMES, truth, true_error(expansion, spreading))
+    assert early <= found.failing_from <= late
     assert "sampling" in found.warnings[0].message
 
 
@@ -159,17 +185,25 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
     study = Study(model, {"x0": Uniform(-0.625, 0.375)}, times, order=7, jobs=1)
     with pytest.warns(PcmbWarning, match=r"x: t in \[.*polynomial chaos unreliable from t ="):
         result = study.run(progress=False)  # the study's own held-out runs find it too
-    checks = study.replace(method="montecarlo", samples=HELD_OUT, seed=7).run(progress=False)
+    checks = study.replace(method="lhs", samples=HELD_OUT, seed=7).run(progress=False)
     expansion = result.expansions["x"]
     predicted = expansion.evaluate_germ(checks.germ)
     found = diagnose("x", expansion, result.values["x"], times, (predicted, checks.values["x"]))
     fine = TensorGrid(expansion.distributions, (399,))
     exact = double_well(times, fine.params[:, 0])
-    truth = np.sqrt(fine.weights @ (expansion.evaluate_germ(fine.nodes) - exact) ** 2)
-    truth /= expansion.std().max()
+    mean = fine.weights @ exact
+    std = np.sqrt(fine.weights @ (exact - mean) ** 2)
+    scale = expansion.std().max()
+    truth = np.maximum(abs(expansion.mean() - mean), abs(expansion.std() - std)) / scale
+    rms = np.sqrt(fine.weights @ (expansion.evaluate_germ(fine.nodes) - exact) ** 2) / scale
+    # The statistics are wrong from about t = 3 (the pointwise surrogate from about 2.1).
+    assert 2.9 < crossing(times, truth, TOLERANCE) < 3.3
+    early, _ = verdict_window(times, truth, rms)
+    # Its truth peaks at 0.097, below twice the tolerance: no late bound follows from the
+    # noise, so the issue's standard applies (within a tenth of the horizon of the truth).
     for verdict_time in (found.failing_from, result.diagnostics["x"].failing_from):
-        assert crossing(times, truth, TOLERANCE / 2) <= verdict_time
-        assert verdict_time <= crossing(times, truth, 2 * TOLERANCE)
+        assert early <= verdict_time
+        assert abs(verdict_time - crossing(times, truth, TOLERANCE)) <= 0.1 * times[-1]
 
 
 # -- the held-out bound ------------------------------------------------------------------------
@@ -186,6 +220,24 @@ def test_the_held_out_bound_is_the_chi_square_bound_and_covers_at_its_level():
     # Each column is one experiment with true RMS error 1/2: the bound covers it in 90 %
     # of them, within 3 binomial standard deviations (0.0067) of 2000 experiments.
     assert np.mean(found.upper >= 0.5) == pytest.approx(0.9, abs=0.02)
+
+
+def test_the_statistics_errors_are_estimated_without_bias_and_with_a_fair_standard_error():
+    # Model f ~ N(1, 1) and surrogate s = 0.9 (f - 1) + 1.05: the surrogate's mean is 0.05 low
+    # ... high, its std 0.1 low; 4000 experiments of K runs each (one per column).
+    rng = np.random.default_rng(5)
+    observed = rng.normal(1.0, 1.0, size=(HELD_OUT, 4000))
+    predicted = 0.9 * (observed - 1.0) + 1.05
+    mean_error, std_error, spread = statistics_error(
+        predicted, observed, np.full(4000, 1.05), np.full(4000, 0.9), scale=1.0
+    )
+    # Unbiased: the averages over 4000 experiments are within 3 of their standard errors.
+    assert mean_error.mean() == pytest.approx(0.05, abs=3 * 0.1 / np.sqrt(HELD_OUT * 4000))
+    assert std_error.mean() == pytest.approx(0.1, abs=0.01)
+    # Fair: the reported standard error is the spread of the estimates over experiments
+    # (the residual r = 0.1 (f - 1) - 0.05 has sd 0.1, so that of its mean is 0.025).
+    assert np.median(spread) == pytest.approx(np.std(std_error - mean_error + 0.05), rel=0.5)
+    assert np.std(mean_error) == pytest.approx(0.1 / np.sqrt(HELD_OUT), rel=0.1)
 
 
 def test_failed_held_out_runs_are_left_out():

@@ -169,15 +169,19 @@ def random_nodes(
     if method == "montecarlo":
         germ = draw_germs(distributions, samples, rng)
     elif method in ("lhs", "sobol"):
-        from scipy.stats import qmc  # deferred: scipy.stats is slow to import
+        if method == "lhs":  # one point in each of N equal-probability slices, per input
+            slices = np.column_stack([rng.permutation(samples) for _ in range(n)])
+            u = (slices + rng.random((samples, n))) / samples
+        else:
+            from scipy.stats import qmc  # deferred: scipy.stats is slow to import
 
-        engine_type = qmc.LatinHypercube if method == "lhs" else qmc.Sobol
-        engine = engine_type(d=n, scramble=True, rng=rng)
-        with warnings.catch_warnings():
-            # Sobol' balance with N not a power of two: the sampling design reports it.
-            warnings.filterwarnings("ignore", message=".*balance properties", category=UserWarning)
-            u = engine.random(samples)
-        germ = np.column_stack([d.family.germ.ppf(u[:, k]) for k, d in enumerate(distributions)])
+            with warnings.catch_warnings():
+                # Balance with N not a power of two: the sampling design reports it.
+                warnings.filterwarnings(
+                    "ignore", message=".*balance properties", category=UserWarning
+                )
+                u = qmc.Sobol(d=n, scramble=True, rng=rng).random(samples)
+        germ = np.column_stack([d.family.quantile(u[:, k]) for k, d in enumerate(distributions)])
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
     return NodeSet(distributions, germ, _physical(distributions, germ))

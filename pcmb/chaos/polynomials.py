@@ -89,6 +89,11 @@ class OrthonormalFamily(ABC):
         """(size,) independent germ draws with numpy's generator (the same draws as the
         scipy.stats germ's ``rvs``, without importing scipy.stats)."""
 
+    @abstractmethod
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        """The germ's inverse CDF at probabilities ``u`` (its ``ppf``, without importing
+        scipy.stats)."""
+
     @property
     def support(self) -> tuple[float, float]:
         """Closed support of the germ."""
@@ -160,6 +165,9 @@ class Legendre(OrthonormalFamily):
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return -1.0 + 2.0 * rng.uniform(0.0, 1.0, size)
 
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        return -1.0 + 2.0 * np.asarray(u, dtype=float)
+
     @cached_property
     def germ(self) -> st.rv_continuous:
         import scipy.stats as st  # deferred: 1.3 s of import that collocation never needs
@@ -201,6 +209,9 @@ class Jacobi(OrthonormalFamily):
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return -1.0 + 2.0 * rng.beta(self.beta + 1.0, self.alpha + 1.0, size)
 
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        return -1.0 + 2.0 * sp.betaincinv(self.beta + 1.0, self.alpha + 1.0, u)
+
     @cached_property
     def germ(self) -> st.rv_continuous:
         import scipy.stats as st
@@ -222,6 +233,9 @@ class Hermite(OrthonormalFamily):
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return rng.standard_normal(size)
+
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        return sp.ndtri(u)
 
     @cached_property
     def germ(self) -> st.rv_continuous:
@@ -251,6 +265,9 @@ class Laguerre(OrthonormalFamily):
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return rng.standard_gamma(self.alpha + 1.0, size)
+
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        return sp.gammaincinv(self.alpha + 1.0, u)
 
     @cached_property
     def germ(self) -> st.rv_continuous:

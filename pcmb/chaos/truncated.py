@@ -250,7 +250,10 @@ class TruncatedFamily(OrthonormalFamily):
         return _conditional_law(self.parent.germ, self.lower, self.upper, self.shift, self.scale)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
-        return self.germ.ppf(rng.uniform(0.0, 1.0, size))
+        return self.quantile(rng.uniform(0.0, 1.0, size))
+
+    def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
+        return self.germ.ppf(u)
 
 
 @dataclass(frozen=True)
