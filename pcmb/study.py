@@ -50,12 +50,14 @@ from pcmb.run.backends import BACKENDS, Pool, checking_backend, open_pool
 from pcmb.run.executor import (
     Layout,
     ModelFacts,
+    PendingRun,
     RunResult,
     chunk_bounds,
     describe_model,
     join_runs,
     run_in_worker,
     run_nodes,
+    start_run,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import Journal
@@ -609,6 +611,9 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
                 )
+        # The nominal run goes first, as one more task: it runs while the nodes keep the other
+        # workers busy (with a timeout, chunks must not wait behind it: it runs after them).
+        early = self._start_nominal(facts, outputs, pool) if self.timeout is None else None
         intrusive = hasattr(self.design, "solve")
         if intrusive:
             # An intrusive method: one solve in a worker, nothing to journal but the held-out
@@ -619,7 +624,9 @@ class Study:
             runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
             nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
         held_out, held_out_failed = self._run_held_out(facts, outputs, pool, journal_dir, progress)
-        nominal = self._run_nominal(facts, outputs, pool) if self.nominal_run else None
+        nominal = early.result() if early is not None else None
+        if self.nominal_run and nominal is None:
+            nominal = self._run_nominal(facts, outputs, pool)
         if not intrusive:
             runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
             axes = {
@@ -874,6 +881,15 @@ class Study:
             held_out=held_out,
             warnings=(*warnings, *records),
         )
+
+    def _start_nominal(
+        self, facts: ModelFacts, outputs: Sequence[str], pool: Pool
+    ) -> PendingRun | None:
+        """The nominal run sent ahead (:func:`~pcmb.run.executor.start_run`), if wanted."""
+        if not self.nominal_run:
+            return None
+        params = model_params(self.model_inputs, [list(self.nominal_params().values())])
+        return start_run(self.model_factory, params, self.times, outputs, pool, facts)
 
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
         """The deterministic run at the nominal parameters (not part of any statistic)."""

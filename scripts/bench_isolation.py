@@ -7,7 +7,8 @@ median wall time of each and the ratios to the first:
   temporary worktree of this repository), which ran small campaigns in its own process;
 - ``workers``: this tree's default, the model's code in warm loky workers, with the held-out
   check off (``method.validation: 0``) so that only isolation differs from the baseline;
-- ``in-process``: this tree with ``--backend inprocess`` (no isolation, no parallelism).
+- ``in-process``: this tree with ``--backend inprocess`` (no isolation, no parallelism);
+- ``workers, held-out on``: this tree's main job as it ships, with its held-out check.
 
 The machine is shared and noisy: the runs alternate, and medians are reported.
 
@@ -75,6 +76,7 @@ def main() -> None:
         ways = {
             "workers": (ROOT, config, []),
             "in-process": (ROOT, config, ["--backend", "inprocess"]),
+            "workers, held-out on": (ROOT, CONFIG, []),
         }
         if args.baseline:
             baseline = folder / "baseline"

@@ -2,9 +2,10 @@
 
 Every run is a real ``python -m pcmb.cli`` process. The models of this file block instead of
 sleeping, so that a kill always lands at a known point: ``BLOCK_AFTER=K`` in a run's
-environment makes its model hang (until the run is killed) at the (K+1)-th node, after K
-journaled chunks of one node each; ``GATE=path`` makes it wait after the first node for as
-long as ``path`` exists.
+environment makes its model hang (until the run is killed) at its (K+1)-th call; a study's
+first call is its nominal run, so that is after K - 1 journaled chunks of one node each;
+``GATE=path`` makes it wait after the nominal run and the first node for as long as ``path``
+exists.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ def line(params, times):
     if block is not None and CALLS[0] > int(block):
         time.sleep(3600)
     gate = os.environ.get("GATE")
-    while gate and CALLS[0] > 1 and os.path.exists(gate):
+    while gate and CALLS[0] > 2 and os.path.exists(gate):
         time.sleep(0.01)
     return {"y": params["a"] * times + params["b"] ** 2}
 """
@@ -135,7 +136,8 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
         cwd=folder,
-        env={**os.environ, "BLOCK_AFTER": str(after), **env},
+        # The model's first call is the nominal run (not journaled), then the nodes.
+        env={**os.environ, "BLOCK_AFTER": str(after + 1), **env},
         stderr=subprocess.PIPE,
         start_new_session=True,
     )

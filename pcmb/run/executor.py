@@ -52,12 +52,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ModelFacts",
+    "PendingRun",
     "RunResult",
     "chunk_bounds",
     "describe_model",
     "join_runs",
     "run_in_worker",
     "run_nodes",
+    "start_run",
 ]
 
 TARGET_CHUNKS = 16
@@ -1113,3 +1115,54 @@ def run_nodes(
     finally:
         campaign.progress.close()
     return campaign.result(time.perf_counter() - start)
+
+
+@dataclass
+class PendingRun:
+    """A few nodes sent to a pool as one task ahead of a campaign on the same pool (see
+    :func:`start_run`)."""
+
+    campaign: _Campaign
+    task: _Task
+    future: Future[_Outcome]
+    started: float
+
+    def result(self) -> RunResult | None:
+        """The run (its failed nodes named as :func:`run_nodes` names them), or ``None`` if
+        the task itself was lost — its worker died or the pool was rebuilt under it — so the
+        caller runs the nodes again the usual way."""
+        try:
+            outcome = self.future.result()
+        except Exception:  # a dead worker, a broken pool: nothing of the model's own
+            return None
+        self.campaign.accept_outcome(self.task, outcome)
+        return self.campaign.result(time.perf_counter() - self.started)
+
+
+def start_run(
+    model_factory: Callable[[], Model],
+    params: Mapping[str, ArrayLike],
+    times: ArrayLike,
+    outputs: Sequence[str],
+    pool: Pool,
+    facts: ModelFacts,
+) -> PendingRun:
+    """Send a few nodes (one task, no journal, no retries) to ``pool`` now and return at once,
+    so that they run while the caller's next campaign keeps the other workers busy: how a
+    study overlaps its nominal run with its nodes. Only for pools without a timeout, whose
+    chunks may wait in the queue behind it.
+
+    Raises
+    ------
+    UsageError
+        For invalid arguments, or a model without a requested output.
+    """
+    started = time.perf_counter()
+    arrays, time_grid, names = _check_arguments(
+        params, times, outputs, None, "loky", None, None, 0, None
+    )
+    _check_outputs(facts, names)
+    campaign = _Campaign(_factory(model_factory), arrays, time_grid, names, 0, None, facts.axes)
+    (task,) = campaign.plan([(0, len(next(iter(arrays.values()))))])
+    future = pool.submit(_execute, *campaign.arguments(task))
+    return PendingRun(campaign, task, future, started)
