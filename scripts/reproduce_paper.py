@@ -223,7 +223,7 @@ def run_case(name: str, case: Case, out: Path, *, quick: bool, jobs: int | None)
         "config": case.config,
         "quick": quick,
         "runs": {
-            method_label(r): {"seconds": r.seconds, "warnings": list(r.warnings)}
+            method_label(r): {"seconds": r.seconds, "warnings": [str(w) for w in r.warnings]}
             for r in (chaos, *others.values())
         },
         "comparisons": {},
