@@ -42,6 +42,7 @@ from pcmb.errors import (
     ModelDefinitionError,
     ModelError,
     ModelRunError,
+    PcmbError,
     PcmbWarning,
     UsageError,
 )
@@ -615,15 +616,24 @@ class Study:
         # workers busy (with a timeout, chunks must not wait behind it: it runs after them).
         early = self._start_nominal(facts, outputs, pool) if self.timeout is None else None
         intrusive = hasattr(self.design, "solve")
-        if intrusive:
-            # An intrusive method: one solve in a worker, nothing to journal but the held-out
-            # runs, which are few and run again on a resume.
-            journal, journal_dir = None, None
-            found = self._solve(nodes, outputs, pool)
-        else:
-            runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
-            nodes, runs = self._run_rounds(nodes, runs, facts, outputs, pool, journal_dir, progress)
-        held_out, held_out_failed = self._run_held_out(facts, outputs, pool, journal_dir, progress)
+        try:
+            if intrusive:
+                # An intrusive method: one solve in a worker, nothing to journal but the
+                # held-out runs, which are few and run again on a resume.
+                journal, journal_dir = None, None
+                found = self._solve(nodes, outputs, pool)
+            else:
+                runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+                nodes, runs = self._run_rounds(
+                    nodes, runs, facts, outputs, pool, journal_dir, progress
+                )
+            held_out, held_out_failed = self._run_held_out(
+                facts, outputs, pool, journal_dir, progress
+            )
+        except PcmbError:
+            if early is not None:
+                early.result()  # the nominal run sent ahead ends too: no run is left half done
+            raise
         nominal = early.result() if early is not None else None
         if self.nominal_run and nominal is None:
             nominal = self._run_nominal(facts, outputs, pool)
