@@ -69,6 +69,23 @@ def test_two_elements_beat_one_tenfold_through_the_python_api():
     assert two.partition.probability == pytest.approx([0.625, 0.375], abs=ROUND_OFF)
 
 
+def test_the_held_out_verdict_calls_one_element_failing_and_two_fixed_at_equal_cost(tmp_path):
+    # 8 runs each: one element of order 7 fails from t ≈ 3.1 (its mean passes 5 % of the
+    # largest std there), two elements of order 3 stay within 1 % (docs/diagnostics.md).
+    one = pcmb.Study(DoubleWell, X0, TIMES, backend="inprocess", order=7)
+    with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
+        failing = one.run()
+    fixed = pcmb.Study(
+        DoubleWell, X0, TIMES, backend="inprocess", order=3, elements={"x0": [0.0]}
+    ).run(tmp_path / "fixed.h5")
+    scale = failing.std("x").max()
+    assert _mean_error(failing) > 0.05 * scale and _mean_error(fixed) < 0.01 * scale
+    assert not failing.diagnostics["x"].reliable
+    found = pcmb.load(tmp_path / "fixed.h5").diagnostics["x"]  # through the file, too
+    assert found.reliable and np.isnan(found.failing_from)
+    assert found.holdout.statistics.max() < 0.05 and found.holdout.count == 32
+
+
 def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     out = tmp_path / "dw.h5"
     run = _pcmb("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
@@ -264,6 +281,10 @@ def test_the_chaotic_lorenz_case_is_not_reported_as_fixed(tmp_path):
     assert 2 < result.partition.size <= 16
     assert {w.output for w in result.warnings if w.code == "element-decay"} == {"x", "y", "z"}
     assert [w.code for w in result.warnings].count("element-budget") == 1
+    # The held-out runs judge the piecewise result as any other: unreliable, never fixed.
+    assert not any(found.reliable for found in result.diagnostics.values())
+    assert set(result.diagnostics) == {"x", "y", "z"}
+    assert "[chaos-unreliable]" in run.stderr
 
 
 # -- errors before any run ---------------------------------------------------------------------

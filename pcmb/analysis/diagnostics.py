@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.axes import OutputAxis
+from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import draw_germs
 from pcmb.result import WarningRecord
@@ -120,8 +121,21 @@ def tail_terms(multi_index: ArrayLike, depth: int = 2) -> NDArray[np.bool_]:
     return tail & (index.sum(axis=1) >= 2)
 
 
-def spectral_decay(expansion: ChaosExpansion, scale: float) -> NDArray[np.float64]:
-    """(T,) share of the largest variance carried by the tail terms (:func:`tail_terms`).
+#: The expansions the diagnostics judge: one element, or a multi-element one.
+Expansion = ChaosExpansion | PiecewiseExpansion
+
+
+def _energies(expansion: Expansion) -> NDArray[np.float64]:
+    """(S, T) the squared coefficients, summed over the elements by their probability."""
+    if isinstance(expansion, PiecewiseExpansion):
+        weights = expansion.partition.probability
+        return np.einsum("e,es...->s...", weights, expansion.coefficients**2)
+    return expansion.coefficients**2
+
+
+def spectral_decay(expansion: Expansion, scale: float) -> NDArray[np.float64]:
+    """(T,) share of the largest variance carried by the tail terms (:func:`tail_terms`);
+    of a multi-element expansion, the elements' tails weighted by their probability.
 
     Σ_{α in tail} c_α² / scale²: a converged expansion has little energy in its outer
     layers. As a share of variance it is the square of the tail's norm over the scale, so
@@ -131,10 +145,17 @@ def spectral_decay(expansion: ChaosExpansion, scale: float) -> NDArray[np.float6
     false alarms, while a spectrum that does not decay (a jump, chaos) passes this mark.
     Zero where the scale is zero.
     """
-    tail = expansion.coefficients[tail_terms(expansion.multi_index)]
+    tail = tail_terms(expansion.multi_index)
     if not scale > 0 or not np.isfinite(scale):
-        return np.zeros(tail.shape[1:])
-    return np.sum((tail / scale) ** 2, axis=0)  # scaled before squaring: outputs near 1e200
+        return np.zeros(expansion.shape)
+    if isinstance(expansion, PiecewiseExpansion):
+        return sum(  # scaled before squaring: outputs near 1e200
+            share * np.sum((element.coefficients[tail] / scale) ** 2, axis=0)
+            for share, element in zip(
+                expansion.partition.probability, expansion.elements, strict=True
+            )
+        )
+    return np.sum((expansion.coefficients[tail] / scale) ** 2, axis=0)
 
 
 def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float) -> NDArray:
@@ -315,7 +336,7 @@ def holdout_error(
 
 
 def out_of_range(
-    expansion: ChaosExpansion,
+    expansion: Expansion,
     node_values: ArrayLike,
     draws: int = RANGE_DRAWS,
     seed: int = RANGE_SEED,
@@ -353,7 +374,7 @@ def out_of_range(
 
 def range_checks(
     output: str,
-    expansion: ChaosExpansion,
+    expansion: Expansion,
     node_values: ArrayLike,
     times: ArrayLike,
     out_of_range_share: NDArray[np.float64] | None = None,
@@ -484,7 +505,7 @@ class OutputDiagnostics:
 
 def diagnose(
     output: str,
-    expansion: ChaosExpansion,
+    expansion: Expansion,
     node_values: ArrayLike,
     times: ArrayLike,
     holdout: tuple[ArrayLike, ArrayLike] | None = None,
@@ -591,7 +612,7 @@ def _inaccurate(
 
 
 def _remedy(
-    expansion: ChaosExpansion,
+    expansion: Expansion,
     estimate: NDArray[np.float64],
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
@@ -611,7 +632,7 @@ def _remedy(
     index = expansion.multi_index
     tail = tail_terms(index)
     before = tail_terms(index, 4) & ~tail
-    energy = np.nansum(expansion.coefficients[:, failing] ** 2, axis=1)
+    energy = np.nansum(_energies(expansion)[:, failing], axis=1)
     by_input = (index[tail] > 0).T.astype(float) @ energy[tail]
     total = by_input.sum()
     top = int(np.argmax(by_input))
@@ -630,6 +651,11 @@ def _remedy(
         steep = _FLAT <= energy[tail].sum() / previous <= 1.0
     else:  # an order below 4: too few layers to see a decay, the overshoot tells
         steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+    if steep and isinstance(expansion, PiecewiseExpansion):
+        return (
+            f"more elements along {name} (finer method.elements cuts, or auto): the response "
+            f"is still steep or discontinuous within an element"
+        )
     if steep:
         return (
             f"multi-element chaos (method.elements): the response is steep or discontinuous "
@@ -671,18 +697,16 @@ def diagnose_all(
     tolerance: float = TOLERANCE,
     axes: Mapping[str, OutputAxis | None] | None = None,
 ) -> dict[str, OutputDiagnostics]:
-    """:func:`diagnose` every output with a (single-element) chaos expansion, each on its
-    own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points of
-    its axis or ``[0.]`` for a scalar.
+    """:func:`diagnose` every output with a chaos expansion (one element or several), each on
+    its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
+    of its axis or ``[0.]`` for a scalar.
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
-    nodes that succeeded; the
-    held-out check uses the successful held-out runs. Piecewise (multi-element) expansions are
-    left to their own element indicators.
+    nodes that succeeded; the held-out check uses the successful held-out runs.
     """
     found = {}
     for name, expansion in expansions.items():
-        if not isinstance(expansion, ChaosExpansion):
+        if not isinstance(expansion, ChaosExpansion | PiecewiseExpansion):
             continue
         holdout = None
         if held_out is not None and held_out.ok.any():

@@ -29,9 +29,12 @@ __all__ = [
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary; surrogate values beyond the runs' range, which
 #: the verdict of the diagnostics already weighs; a surrogate less accurate pointwise than its
-#: statistics): kept in the result, its file, ``pcmb inspect`` and the report, and not worth
-#: a Python warning at every run.
-RECORDED_ONLY = frozenset({"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate"})
+#: statistics; an element's decay indicator, which the held-out verdict judges): kept in the
+#: result, its file, ``pcmb inspect`` and the report, and not worth a Python warning at every
+#: run.
+RECORDED_ONLY = frozenset(
+    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "element-decay"}
+)
 #: Magnitudes whose squares exceed the largest float.
 _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 
