@@ -134,3 +134,22 @@ def test_the_file_mode_follows_the_umask(written, tmp_path):
     finally:
         os.umask(umask)
     assert stat.S_IMODE(target.stat().st_mode) == 0o644
+
+
+def test_the_diagnostics_round_trip_and_older_files_load(written, tmp_path):
+    path, result = written
+    for name in ("y", "w"):
+        found, back = result.diagnostics[name], pcmb.load(path).diagnostics[name]
+        for key in ("error", "upper", "mean_error", "std_error", "spread"):
+            np.testing.assert_array_equal(getattr(back.holdout, key), getattr(found.holdout, key))
+        np.testing.assert_array_equal(back.estimate, found.estimate)
+    # A file from before the statistics' errors were stored judged the surrogate only: it
+    # loads, with NaN where those arrays would be.
+    old = tmp_path / "old.h5"
+    old.write_bytes(path.read_bytes())
+    with h5py.File(old, "r+") as file:
+        for key in ("mean_error", "std_error", "spread"):
+            del file[f"diagnostics/y/{key}"]
+    holdout = pcmb.load(old).diagnostics["y"].holdout
+    assert np.isnan(holdout.mean_error).all() and np.isnan(holdout.spread).all()
+    np.testing.assert_array_equal(holdout.error, result.diagnostics["y"].holdout.error)
