@@ -125,12 +125,13 @@ def tail_terms(multi_index: ArrayLike, depth: int = 2) -> NDArray[np.bool_]:
 Expansion = ChaosExpansion | PiecewiseExpansion
 
 
-def _energies(expansion: Expansion) -> NDArray[np.float64]:
-    """(S, T) the squared coefficients, summed over the elements by their probability."""
+def _energies(expansion: Expansion, scale: float = 1.0) -> NDArray[np.float64]:
+    """(S, T) the squared coefficients over ``scale`` (scaled before squaring: outputs near
+    1e200), summed over the elements by their probability."""
     if isinstance(expansion, PiecewiseExpansion):
         weights = expansion.partition.probability
-        return np.einsum("e,es...->s...", weights, expansion.coefficients**2)
-    return expansion.coefficients**2
+        return np.einsum("e,es...->s...", weights, (expansion.coefficients / scale) ** 2)
+    return (expansion.coefficients / scale) ** 2
 
 
 def spectral_decay(expansion: Expansion, scale: float) -> NDArray[np.float64]:
@@ -145,17 +146,9 @@ def spectral_decay(expansion: Expansion, scale: float) -> NDArray[np.float64]:
     false alarms, while a spectrum that does not decay (a jump, chaos) passes this mark.
     Zero where the scale is zero.
     """
-    tail = tail_terms(expansion.multi_index)
     if not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape)
-    if isinstance(expansion, PiecewiseExpansion):
-        return sum(  # scaled before squaring: outputs near 1e200
-            share * np.sum((element.coefficients[tail] / scale) ** 2, axis=0)
-            for share, element in zip(
-                expansion.partition.probability, expansion.elements, strict=True
-            )
-        )
-    return np.sum((expansion.coefficients[tail] / scale) ** 2, axis=0)
+    return np.sum(_energies(expansion, scale)[tail_terms(expansion.multi_index)], axis=0)
 
 
 def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float) -> NDArray:
@@ -277,10 +270,10 @@ def statistics_error(
 def holdout_error(
     predicted: ArrayLike,
     observed: ArrayLike,
+    mean: ArrayLike,
+    std: ArrayLike,
     scale: float,
     confidence: float = CONFIDENCE,
-    mean: ArrayLike | None = None,
-    std: ArrayLike | None = None,
 ) -> Holdout:
     """The surrogate at K held-out runs: its RMS error with an upper confidence bound, and
     the estimated errors of its mean and std (:func:`statistics_error`).
@@ -296,13 +289,12 @@ def holdout_error(
     predicted, observed:
         (K, T) surrogate and model values at the same K inputs; rows with a non-finite
         model value (failed runs) are left out.
+    mean, std:
+        (T,) the expansion's mean and std.
     scale:
         The output's largest standard deviation over time.
     confidence:
         Level of the upper bound, in (0, 1).
-    mean, std:
-        (T,) the expansion's mean and std (default: the mean and std of ``predicted``,
-        for a check without an expansion at hand).
 
     Returns
     -------
@@ -321,8 +313,6 @@ def holdout_error(
         nan = np.full(observed.shape[1:], np.nan)
         return Holdout(nan, nan, nan, nan, nan, 0, confidence)
     quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
-    mean = predicted[kept].mean(axis=0) if mean is None else mean
-    std = predicted[kept].std(axis=0) if std is None else std
     return Holdout(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
@@ -545,7 +535,7 @@ def diagnose(
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None:
-        checked = holdout_error(*holdout, scale, mean=expansion.mean(), std=std)
+        checked = holdout_error(*holdout, expansion.mean(), std, scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
