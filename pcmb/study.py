@@ -612,9 +612,7 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     "continue with --resume, or delete it to start over"
                 )
-        # The nominal run goes first, as one more task: it runs while the nodes keep the other
-        # workers busy (with a timeout, chunks must not wait behind it: it runs after them).
-        early = self._start_nominal(facts, outputs, pool) if self.timeout is None else None
+        early = self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")
         try:
             if intrusive:
@@ -895,17 +893,22 @@ class Study:
     def _start_nominal(
         self, facts: ModelFacts, outputs: Sequence[str], pool: Pool
     ) -> PendingRun | None:
-        """The nominal run sent ahead (:func:`~pcmb.run.executor.start_run`), if wanted."""
-        if not self.nominal_run:
+        """The nominal run sent to the pool ahead of the nodes, to run beside them
+        (:func:`~pcmb.run.executor.start_run`); ``None`` if not wanted, or with a timeout,
+        when chunks must not wait behind it (it runs after them, :meth:`_run_nominal`)."""
+        if not self.nominal_run or self.timeout is not None:
             return None
-        params = model_params(self.model_inputs, [list(self.nominal_params().values())])
-        return start_run(self.model_factory, params, self.times, outputs, pool, facts)
+        return start_run(self.model_factory, self._nominal_node(), self.times, outputs, pool, facts)
+
+    def _nominal_node(self) -> dict[str, NDArray[np.float64]]:
+        """The nominal parameters as a one-node batch of the model's inputs."""
+        return model_params(self.model_inputs, [list(self.nominal_params().values())])
 
     def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
         """The deterministic run at the nominal parameters (not part of any statistic)."""
         return run_nodes(
             self.model_factory,
-            model_params(self.model_inputs, [list(self.nominal_params().values())]),
+            self._nominal_node(),
             self.times,
             outputs,
             backend=self.backend,

@@ -405,17 +405,21 @@ def _nested(path: str, nested: _Nested, level: int, context: str) -> _Table:
     else:
         doc = f"One form per key present: {listed}."
         labels = [f"key `{c}`" for c in choices]
+    rows = [
+        (section, label, (nested.selector, choices))
+        for (section, _), label in zip(nested.forms, labels, strict=True)
+    ]
+    return _form_tables(path, level, where, doc, rows)
+
+
+def _form_tables(
+    path: str, level: int, where: str, doc: str, rows: list[tuple[type, str, Any]]
+) -> _Table:
+    """A table headed ``path`` with one child table per form: (section, label, selector)."""
     group = _Table(path, f"`{path}`{where}", level, doc)
-    for (section, _), label in zip(nested.forms, labels, strict=True):
+    for section, label, selector in rows:
         group.children.append(
-            _table(
-                section,
-                path,
-                f"`{path}` with {label}{where}",
-                level + 1,
-                label,
-                (nested.selector, choices),
-            )
+            _table(section, path, f"`{path}` with {label}{where}", level + 1, label, selector)
         )
     return group
 
@@ -435,20 +439,15 @@ def _mixed(path: str, nested: _Nested, level: int, context: str, where: str) -> 
         )
         + "."
     )
-    group = _Table(path, f"`{path}`{where}", level, doc)
-    for section, key, chosen in picks:
-        label = f"`{key}: {_first_value(section, key)}`"
-        group.children.append(
-            _table(
-                section,
-                path,
-                f"`{path}` with {label}{where}",
-                level + 1,
-                label,
-                (key, values[key]) if isinstance(chosen, str) else None,
-            )
+    rows = [
+        (
+            section,
+            f"`{key}: {_first_value(section, key)}`",
+            (key, values[key]) if isinstance(chosen, str) else None,
         )
-    return group
+        for section, key, chosen in picks
+    ]
+    return _form_tables(path, level, where, doc, rows)
 
 
 def _first_value(section: type[BaseModel], key: str) -> str:
