@@ -1159,7 +1159,7 @@ def start_run(
     """
     started = time.perf_counter()
     arrays, time_grid, names = _check_arguments(
-        params, times, outputs, None, "loky", None, None, 0, None
+        params, times, outputs, jobs=None, backend="loky", address=None, chunk_size=None, retries=0
     )
     _check_outputs(facts, names)
     campaign = _Campaign(_factory(model_factory), arrays, time_grid, names, 0, None, facts.axes)
