@@ -24,7 +24,7 @@ import numpy as np
 import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["KarhunenLoeve", "line_covariance", "spectral_covariance"]
+__all__ = ["KarhunenLoeve", "Spectrum", "line_covariance", "spectral_covariance"]
 
 Kernel = Callable[[NDArray[np.float64], NDArray[np.float64]], NDArray[np.float64]]
 
@@ -85,8 +85,26 @@ def spectral_covariance(omega: ArrayLike, density: ArrayLike) -> Kernel:
     return kernel
 
 
+class Spectrum:
+    """What a truncated Karhunen–Loève expansion says of itself, from its kept
+    ``eigenvalues`` and the ``total_variance`` of the process (both set by the subclass)."""
+
+    eigenvalues: NDArray[np.float64]
+    total_variance: float
+
+    @property
+    def terms(self) -> int:
+        """K, the number of kept terms: the germ inputs the process adds to a study."""
+        return self.eigenvalues.size
+
+    @property
+    def captured_energy(self) -> float:
+        """Share of the total variance the kept terms carry, Σ_{k<=K} λ_k / ∫ R(x, x) dx."""
+        return float(self.eigenvalues.sum() / self.total_variance)
+
+
 @dataclass(frozen=True)
-class KarhunenLoeve:
+class KarhunenLoeve(Spectrum):
     """A truncated Karhunen–Loève expansion on an interval.
 
     Attributes
@@ -191,16 +209,6 @@ class KarhunenLoeve:
             kernel=kernel,
             total_variance=total,
         )
-
-    @property
-    def terms(self) -> int:
-        """Number of retained terms K (germ inputs this process adds to a study)."""
-        return self.eigenvalues.size
-
-    @property
-    def captured_energy(self) -> float:
-        """Fraction of the total variance carried by the retained terms."""
-        return float(self.eigenvalues.sum() / self.total_variance)
 
     def eigenfunctions(self, x: ArrayLike) -> NDArray[np.float64]:
         """g_k(x) by Nyström interpolation, (M,) -> (M, K)."""

@@ -33,7 +33,7 @@ import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.inputs import Distribution, Normal
-from pcmb.chaos.kl import ZERO_RATIO, Kernel, line_covariance, spectral_covariance
+from pcmb.chaos.kl import ZERO_RATIO, Kernel, Spectrum, line_covariance, spectral_covariance
 
 _T = TypeVar("_T")
 _STANDARD_NORMAL = Normal(0.0, 1.0)
@@ -334,7 +334,7 @@ class _Nystrom:
 
 
 @dataclass(frozen=True)
-class RandomProcess:
+class RandomProcess(Spectrum):
     """A zero-mean Gaussian process on a uniform grid, truncated Karhunen–Loève.
 
     Attributes
@@ -446,16 +446,6 @@ class RandomProcess:
             eigenvalue_error=float(change.max()),
             nystrom_points=fine,
         )
-
-    @property
-    def terms(self) -> int:
-        """K, the number of germs."""
-        return self.eigenvalues.size
-
-    @property
-    def captured_energy(self) -> float:
-        """Share of the total variance the kept terms carry, Σ_{k<=K} λ_k / ∫ R(0) dx."""
-        return float(self.eigenvalues.sum() / self.total_variance)
 
     @property
     def truncation_error(self) -> float:
