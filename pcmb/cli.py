@@ -35,6 +35,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.run.backends import BACKENDS
+from pcmb.wording import plural
 
 if TYPE_CHECKING:
     from pcmb.axes import OutputAxis
@@ -219,7 +220,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     for warning in result.warnings:
         if warning.code not in RECORDED_ONLY:  # shown by inspect and report
             _log(f"pcmb: warning: {warning}")
-    _log(f"pcmb: wrote {output} ({result.n_nodes} nodes, {result.seconds:.2f} s of runs)")
+    _log(f"pcmb: wrote {output} ({plural(result.n_nodes, 'node')}, {result.seconds:.2f} s of runs)")
     unreliable = [name for name, found in result.diagnostics.items() if not found.reliable]
     if args.strict and unreliable:
         _log(f"pcmb: --strict: the expansion of {', '.join(unreliable)} is unreliable")
@@ -256,8 +257,12 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
             backend=args.backend,
             command_line=shlex.join(["pcmb", *argv]),
         )
-    settings = len({(row.method, row.setting, row.replicate) for row in outcome.table.rows})
-    _log(f"pcmb: wrote {', '.join(str(p) for p in outcome.files[:3])} ({settings} settings)")
+    settings = len({(row.method, row.setting) for row in outcome.table.rows})
+    studies = len({(row.method, row.setting, row.replicate) for row in outcome.table.rows})
+    count = plural(settings, "setting")
+    if studies != settings:
+        count += f", {plural(studies, 'study', 'studies')} with replicates"
+    _log(f"pcmb: wrote {', '.join(str(p) for p in outcome.files[:3])} ({count})")
     return EXIT_OK
 
 
@@ -277,13 +282,13 @@ def _report(args: argparse.Namespace) -> int:
 
         folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
         written = write_sweep_report(read_sweep(args.result), folder, source=args.result)
-        _log(f"pcmb: wrote {len(written) - 1} figures and {written[-1]}")
+        _log(f"pcmb: wrote {plural(len(written) - 1, 'figure')} and {written[-1]}")
         return EXIT_OK
     result = _load(args.result)
     others = [_load(path) for path in args.compare]
     folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
     written = write_report(result, folder, source=args.result, comparisons=others)
-    _log(f"pcmb: wrote {len(written) - 1} figures and {written[-1]}")
+    _log(f"pcmb: wrote {plural(len(written) - 1, 'figure')} and {written[-1]}")
     return EXIT_OK
 
 
@@ -303,7 +308,7 @@ def _compare(args: argparse.Namespace) -> int:
         from pcmb.analysis.report import write_comparison_figures
 
         written = write_comparison_figures(reference, others, args.output, labels=args.others)
-        _log(f"pcmb: wrote {len(written)} figures to {args.output}")
+        _log(f"pcmb: wrote {plural(len(written), 'figure')} to {args.output}")
     return EXIT_OK
 
 

@@ -259,7 +259,7 @@ class WarningRecord:
         return f"{where}{self.message} [{self.code}]"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class StudyResult:
     """Everything a study produced (and everything a result file holds).
 
@@ -353,6 +353,24 @@ class StudyResult:
     processes: dict[str, RandomProcess] = field(default_factory=dict)
     axes: dict[str, OutputAxis | None] = field(default_factory=dict)
     moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        """A summary: method, runs, inputs, outputs and warnings (not the arrays)."""
+        held_out = 0 if self.held_out is None else len(self.held_out.ok)
+        grid = f"{len(self.times)} times in [{self.times[0]:g}, {self.times[-1]:g}]"
+        codes = sorted({w.code for w in self.warnings})
+        lines = [
+            f"StudyResult {self.name!r}: {self.design.label}",
+            f"  runs: {self.n_nodes} design ({int(self.ok.sum())} ok), {held_out} held-out, "
+            f"{1 if self.nominal else 0} nominal; {self.seconds:.2f} s",
+            *(
+                f"  input {name} ~ {law.law}"
+                for name, law in zip(self.input_names, self.distributions, strict=True)
+            ),
+            f"  outputs: {', '.join(self.outputs)} ({grid})",
+            f"  warnings: {len(self.warnings)}" + (f" ({', '.join(codes)})" if codes else ""),
+        ]
+        return "\n".join(lines)
 
     @property
     def method(self) -> str:

@@ -174,7 +174,14 @@ BROKEN = [
     ("negative-std", "std: 1e-1", "std: -1e-1", "inputs.y0", "y0: {", "std must be > 0"),
     ("order<0", "order: 3", "order: -1", "method.order", "order:", "expected a value >= 0"),
     ("missing-file", "toy_models.py", "nope.py", "model.entry", "entry:", "does not exist"),
-    ("missing-attr", ":Decay", ":Decya", "model.entry", "entry:", "has no attribute 'Decya'"),
+    (
+        "missing-attr",
+        ":Decay",
+        ":Decya",
+        "model.entry",
+        "entry:",
+        "has no attribute 'Decya'; did you mean 'Decay'?",
+    ),
     (
         "broken-import",
         "toy_models.py:Decay",
@@ -238,7 +245,8 @@ BROKEN = [
         "dist: unifrom",
         "inputs.k.dist",
         "unifrom",
-        "expected one of uniform, beta, normal, gamma, scipy, found the text 'unifrom'",
+        "expected one of uniform, beta, normal, gamma, scipy, found the text 'unifrom'; "
+        "did you mean 'uniform'?",
     ),
     (
         "unknown-scipy",

@@ -14,3 +14,13 @@ def test_the_python_example_runs(tmp_path, monkeypatch):
     exec(compile(blocks[0], "README.md", "exec"), namespace)
     assert (tmp_path / "results" / "toy.h5").is_file()
     assert namespace["result"].std("y").shape == (201,)
+
+
+def test_the_example_config_is_the_quick_start_config():
+    import yaml
+
+    blocks = re.findall(r"```yaml\n(.*?)```", README.read_text(), flags=re.S)
+    shown = yaml.safe_load(blocks[0])
+    config = yaml.safe_load((README.parent / "configs" / "quarter_car.yaml").read_text())
+    del config["sweep"]
+    assert shown == config

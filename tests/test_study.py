@@ -310,3 +310,18 @@ def test_the_nominal_run_can_be_left_out(tmp_path):
     # The nodes and a = 2 (no node: 4 Gauss points), which runs beside the nodes.
     assert len(runs[True]) == 4 + 1 and runs[True].count("2.0") == 1
     assert len(runs[False]) == 4 and "2.0" not in runs[False]
+
+
+def test_a_result_prints_as_a_summary_not_its_arrays():
+    result = pcmb.Study(pointwise, INPUTS, TIMES, order=2, params={"a": 2.0, "b": 0.0}).run()
+    text = repr(result)
+    assert text == str(result) and len(text) < 600
+    assert text.splitlines()[:-1] == [
+        "StudyResult 'study': chaos order 2",
+        f"  runs: 9 design (9 ok), {len(result.held_out.ok)} held-out, 1 nominal; "
+        f"{result.seconds:.2f} s",
+        "  input a ~ uniform(low=1, high=3)",
+        "  input b ~ normal(mean=0, std=1)",
+        "  outputs: y (5 times in [0, 2])",
+    ]
+    assert text.splitlines()[-1].startswith(f"  warnings: {len(result.warnings)}")

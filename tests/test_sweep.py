@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import io
 import itertools
 import json
 import os
@@ -103,7 +104,11 @@ def _rows(folder: Path) -> list[dict[str, str]]:
 def swept(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("sweep")
     config = _study(folder, SWEEP)
-    assert main(["sweep", str(config), "-o", str(folder / "out"), "--quiet"]) == 0
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said):
+        assert main(["sweep", str(config), "-o", str(folder / "out"), "--quiet"]) == 0
+    # 4 collocation orders + 2 Monte Carlo sizes (x 2 replicates).
+    assert said.getvalue().rstrip().endswith("(6 settings, 8 studies with replicates)")
     return folder / "out"
 
 

@@ -80,6 +80,17 @@ class Distribution(ABC):
     def describe(self) -> dict[str, Any]:
         """A JSON-able description, e.g. ``{"dist": "uniform", "low": 0.0, "high": 1.0}``."""
 
+    @property
+    def law(self) -> str:
+        """The law as text, e.g. ``uniform(low=0.025, high=0.075)``."""
+        settings = self.describe()
+        name = settings.pop("dist")
+        shown = (
+            f"{key}={value:.4g}" if isinstance(value, float) else f"{key}={value}"
+            for key, value in settings.items()
+        )
+        return f"{name}({', '.join(shown)})"
+
     def expectation(self) -> float:
         """E[θ]."""
         return float(self.physical.mean())

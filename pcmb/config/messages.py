@@ -6,7 +6,6 @@ member tags are dropped where they stand and keys are kept, whatever their names
 
 from __future__ import annotations
 
-import difflib
 import re
 import types
 import typing
@@ -17,6 +16,7 @@ from pydantic import BaseModel, Tag, ValidationError
 from pydantic.fields import FieldInfo
 
 from pcmb.errors import ConfigProblem
+from pcmb.wording import did_you_mean
 
 __all__ = [
     "INVALID",
@@ -217,25 +217,30 @@ def _show(value: Any) -> str:
     return f"the text {text}" if isinstance(value, str) else text
 
 
+def _then(hint: str) -> str:
+    """A hint appended to a message, if there is one."""
+    return f"; {hint}" if hint else ""
+
+
 def _message(error: Mapping[str, Any], root: Any) -> tuple[str, str | None]:
     """Message of one pydantic error, and the key to append to its path (if any)."""
     kind, ctx, found = error["type"], error.get("ctx", {}), _show(error["input"])
     if kind in ("union_tag_invalid", "union_tag_not_found"):
         key = str(ctx["discriminator"]).strip("'")
-        expected = ", ".join(_union_tags(root, error["loc"]))
+        tags = _union_tags(root, error["loc"])
+        expected = ", ".join(tags)
         if kind == "union_tag_not_found":
             return f"required key is missing (one of {expected})", key
-        return f"expected one of {expected}, found {_show(ctx['tag'])}", key
+        hint = did_you_mean(str(ctx["tag"]), tags)
+        return f"expected one of {expected}, found {_show(ctx['tag'])}{_then(hint)}", key
     if kind == "missing":
         # pydantic's own 'missing' has no context; the validators' ones explain the need.
         return (error["msg"] if ctx else "required key is missing"), None
     if kind == "extra_forbidden":
         key = str(error["loc"][-1])
         allowed = _allowed_keys(root, error["loc"][:-1])
-        close = difflib.get_close_matches(key, allowed, n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
         listing = f" (allowed: {', '.join(allowed)})" if allowed else ""
-        return f"unknown key{listing}{hint}", None
+        return f"unknown key{listing}{_then(did_you_mean(key, allowed))}", None
     if kind == "value_error":
         return str(ctx.get("error", error["msg"])), None
     if kind == "literal_error":

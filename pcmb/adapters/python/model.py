@@ -34,6 +34,7 @@ from pcmb.adapters.protocol import (
     describe_exception,
 )
 from pcmb.errors import ConfigError, ConfigProblem, ModelError, UsageError
+from pcmb.wording import did_you_mean
 
 __all__ = [
     "MARKER",
@@ -254,7 +255,8 @@ def load_entry(entry: str, base_dir: Path) -> object:
     for depth, part in enumerate(parts):
         if not hasattr(obj, part):
             owner = ".".join([target, *parts[:depth]])
-            raise _problem("model.entry", f"{owner} has no attribute {part!r}")
+            hint = did_you_mean(part, (name for name in dir(obj) if not name.startswith("_")))
+            raise _problem("model.entry", f"{owner} has no attribute {part!r}; {hint}".rstrip("; "))
         obj = getattr(obj, part)
     return obj
 
