@@ -132,7 +132,7 @@ def _summary(config) -> str:
             + "".join(f", {key} {value:g}" for key, value in entry.options.items())
             for name, entry in study.derived.items()
         ),
-        f"time     {config.time.start} .. {config.time.stop}, {config.time.points} points",
+        f"time     {config.time.describe()}",
         "inputs   (germ order)",
     ]
     for name, dist in study.inputs.items():

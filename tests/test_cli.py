@@ -6,12 +6,15 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import pcmb
 from pcmb.cli import main
+
+DATA = Path(__file__).parent / "data"
 
 
 def test_run_writes_a_complete_result(tmp_path, linear_study, capsys):
@@ -154,3 +157,49 @@ def test_a_run_imports_no_heavy_module_it_does_not_need(linear_study):
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def _decay_config(tmp_path, time: str, extra: str = "") -> str:
+    """y = exp(-k t) with k log-uniform on [0.1, 10] (tests/data/toy_models.py's Decay)."""
+    config = tmp_path / "decay.yaml"
+    config.write_text(
+        f"""\
+name: decay
+model:
+  kind: python
+  entry: {DATA / "toy_models.py"}:Decay
+  params: {{k: 1.0, y0: 1.0}}
+  outputs: [y]
+time: {time}
+inputs:
+  k: {{dist: loguniform, low: 0.1, high: 10.0}}
+method: {{kind: collocation, order: 10}}
+execution: {{jobs: 1}}
+output: {tmp_path / "decay.h5"}
+{extra}"""
+    )
+    return str(config)
+
+
+def test_log_spaced_times_and_a_loguniform_rate(tmp_path):
+    from scipy.special import exp1
+
+    config = _decay_config(tmp_path, "{start: 1.0e-3, stop: 20.0, points: 30, spacing: log}")
+    assert main(["run", config, "--quiet"]) == 0
+    result = pcmb.load(tmp_path / "decay.h5")
+    np.testing.assert_allclose(result.times, np.geomspace(1e-3, 20.0, 30), rtol=1e-15)
+    # E exp(-k t) for ln k ~ U[ln 0.1, ln 10]: (E1(0.1 t) - E1(10 t)) / ln 100. An 11-point
+    # Gauss-Legendre rule in ln k integrates it to below 1e-7 (measured apart, with numpy).
+    t = result.times
+    exact = (exp1(0.1 * t) - exp1(10.0 * t)) / np.log(100.0)
+    np.testing.assert_allclose(result.mean("y"), exact, atol=1e-6)
+
+
+def test_listed_times_are_the_grid_and_a_spectrum_refuses_them(tmp_path, capsys):
+    config = _decay_config(tmp_path, "{values: [0.0, 0.5, 2.0, 5.0]}")
+    assert main(["run", config, "--quiet"]) == 0
+    np.testing.assert_array_equal(pcmb.load(tmp_path / "decay.h5").times, [0.0, 0.5, 2.0, 5.0])
+    capsys.readouterr()
+    config = _decay_config(tmp_path, "{values: [0.0, 0.5, 2.0, 5.0]}", "analysis: {psd: [y]}\n")
+    assert main(["validate", config]) == 2
+    assert "analysis.psd: a spectrum needs a uniform time grid" in capsys.readouterr().err

@@ -245,7 +245,8 @@ BROKEN = [
         "dist: unifrom",
         "inputs.k.dist",
         "unifrom",
-        "expected one of uniform, beta, normal, gamma, scipy, found the text 'unifrom'; "
+        "expected one of uniform, loguniform, beta, normal, gamma, scipy, found the text "
+        "'unifrom'; "
         "did you mean 'uniform'?",
     ),
     (
@@ -816,3 +817,33 @@ def test_fuzz_random_documents(document):
 )
 def test_fuzz_text_edits(position, cut, insert):
     check_outcome(BASE[:position] + insert + BASE[position + cut :])
+
+
+@pytest.mark.parametrize(
+    ("time", "key", "message"),
+    [
+        (
+            "{values: [0.0, 2.0, 0.5]}",
+            "time.values",
+            "expected strictly increasing times, found 0.5 after 2.0 (entry 2)",
+        ),
+        ("{start: 0.0, stop: 2.0, points: 5, spacing: log}", "time.spacing", "needs start > 0"),
+        ("{values: [0.0, 1.0], stop: 2.0}", "time", "expected a grid (stop, points"),
+        ("{values: [1.0]}", "time.values", "expected at least 2 entries, found 1"),
+    ],
+)
+def test_a_bad_time_form_is_refused_at_its_key(time, key, message):
+    with pytest.raises(ConfigError) as error:
+        load(BASE.replace("{start: 0.0, stop: 2.0, points: 21}", time))
+    assert f"{key}: " in str(error.value) and message in str(error.value)
+
+
+def test_the_time_forms_give_their_grids():
+    listed = load(BASE.replace("{start: 0.0, stop: 2.0, points: 21}", "{values: [0.0, 0.3, 2.0]}"))
+    np.testing.assert_array_equal(listed.times, [0.0, 0.3, 2.0])
+    logged = load(
+        BASE.replace(
+            "start: 0.0, stop: 2.0, points: 21", "start: 0.01, stop: 100.0, points: 5, spacing: log"
+        )
+    )
+    np.testing.assert_allclose(logged.times, [0.01, 0.1, 1.0, 10.0, 100.0], rtol=1e-14)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.stats as st
 
-from pcmb.chaos.inputs import Beta, Gamma, Normal, Transformed, Uniform
+from pcmb.chaos.inputs import Beta, Gamma, LogUniform, Normal, Transformed, Uniform
 from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
 
 INPUTS = [
@@ -12,6 +12,7 @@ INPUTS = [
     Beta(2.0, 5.0, 800.0, 1200.0),
     Normal(3.0, 0.5),
     Gamma(2.5, 0.3, 1.0),
+    LogUniform(1e-3, 20.0),
     Transformed(st.lognorm(0.25, scale=2.0), germ="normal"),
     Transformed(st.triang(0.3, loc=1.0, scale=2.0), germ="uniform"),
     Transformed(st.truncnorm(-1.5, 2.0, loc=1.0, scale=0.2), germ="uniform"),
@@ -78,6 +79,8 @@ def test_transformed_tails_stay_finite():
         (lambda: Normal(0.0, -1.0), "std must be > 0"),
         (lambda: Gamma(-1.0, 1.0), "shape must be > 0"),
         (lambda: Gamma(1.0, 0.0), "scale must be > 0"),
+        (lambda: LogUniform(0.0, 1.0), "low must be > 0"),
+        (lambda: LogUniform(2.0, 1.0), "low must be < high"),
         (lambda: Transformed(st.poisson(3.0)), "continuous scipy.stats"),
         (lambda: Transformed(st.norm(), germ="gamma"), "germ must be"),
     ],
@@ -107,3 +110,10 @@ def test_description_round_trip(dist):
 @pytest.mark.parametrize("dist", INPUTS, ids=lambda d: d.describe()["dist"])
 def test_expectation_matches_scipy(dist):
     assert dist.expectation() == pytest.approx(float(dist.physical.mean()), rel=1e-12, abs=1e-14)
+
+
+def test_loguniform_is_uniform_in_the_logarithm_with_a_legendre_germ():
+    dist = LogUniform(1e-3, 10.0)
+    assert dist.family == Legendre()
+    np.testing.assert_allclose(dist.to_physical([-1.0, 0.0, 1.0]), [1e-3, 0.1, 10.0], rtol=1e-12)
+    assert dist.law == "loguniform(low=0.001, high=10)"

@@ -10,6 +10,7 @@ distribution                               germ           map θ = T(ξ)
 ``Beta(alpha, beta, low, high)``           Jacobi         affine
 ``Normal(mean, std)``                      N(0, 1)        affine
 ``Gamma(shape, scale, loc)``               Gamma(shape)   affine
+``LogUniform(low, high)``                  U[-1, 1]       θ = exp(affine): uniform in ln θ
 ``Transformed(target, germ)``              U[-1,1]/N(0,1) θ = F⁻¹(G(ξ))  (isoprobabilistic)
 =========================================  =============  ==========================
 
@@ -31,7 +32,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
 
-__all__ = ["Beta", "Distribution", "Gamma", "Normal", "Transformed", "Uniform", "from_description"]
+__all__ = [
+    "Beta",
+    "Distribution",
+    "Gamma",
+    "LogUniform",
+    "Normal",
+    "Transformed",
+    "Uniform",
+    "from_description",
+]
 
 # Parameter-free families are shared so their cached germ distributions are built once.
 _LEGENDRE = Legendre()
@@ -254,6 +264,50 @@ class Gamma(_Affine):
         return {"dist": "gamma", "shape": self.shape, "scale": self.scale, "loc": self.loc}
 
 
+@dataclass(frozen=True)
+class LogUniform(Distribution):
+    """θ with ln θ ~ U[ln low, ln high] (rates and material constants spanning decades).
+
+    Germ U[-1, 1], Legendre chaos, θ = exp(m + h ξ): smooth in ξ but not polynomial, so even a
+    linear response converges geometrically in the order rather than exactly.
+    """
+
+    low: float
+    high: float
+
+    def __post_init__(self) -> None:
+        _finite(low=self.low, high=self.high)
+        _require(self.low > 0, f"low must be > 0, got {self.low}")
+        _require(self.low < self.high, f"low must be < high, got low={self.low}, high={self.high}")
+
+    @property
+    def family(self) -> OrthonormalFamily:
+        return _LEGENDRE
+
+    @cached_property
+    def physical(self) -> Any:
+        return _stats().loguniform(self.low, self.high)
+
+    @property
+    def _centre_half_width(self) -> tuple[float, float]:
+        logs = np.log([self.low, self.high])
+        return 0.5 * float(logs.sum()), 0.5 * float(logs[1] - logs[0])
+
+    def to_physical(self, xi: ArrayLike) -> NDArray[np.float64]:
+        centre, half = self._centre_half_width
+        return np.exp(centre + half * np.asarray(xi, dtype=float))
+
+    def to_germ(self, theta: ArrayLike) -> NDArray[np.float64]:
+        centre, half = self._centre_half_width
+        return (np.log(np.asarray(theta, dtype=float)) - centre) / half
+
+    def expectation(self) -> float:
+        return (self.high - self.low) / float(np.log(self.high / self.low))
+
+    def describe(self) -> dict[str, Any]:
+        return {"dist": "loguniform", "low": self.low, "high": self.high}
+
+
 _GERMS: dict[str, OrthonormalFamily] = {"uniform": _LEGENDRE, "normal": _HERMITE}
 
 
@@ -307,6 +361,12 @@ class Transformed(Distribution):
         lower = theta <= self.target.median()
         return np.where(lower, germ.ppf(self.target.cdf(theta)), germ.isf(self.target.sf(theta)))
 
+    @property
+    def law(self) -> str:
+        shown = [f"{a:.4g}" for a in self.target.args]
+        shown += [f"{k}={v:.4g}" for k, v in self.target.kwds.items()]
+        return f"{self.target.dist.name}({', '.join(shown)}), germ {self.germ}"
+
     def describe(self) -> dict[str, Any]:
         return {
             "dist": "scipy",
@@ -337,6 +397,7 @@ def from_description(description: dict[str, Any]) -> Distribution:
         "beta": Beta,
         "normal": Normal,
         "gamma": Gamma,
+        "loguniform": LogUniform,
     }
     if kind not in classes:
         raise ValueError(f"unknown distribution {kind!r}")

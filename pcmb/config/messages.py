@@ -16,7 +16,7 @@ from pydantic import BaseModel, Tag, ValidationError
 from pydantic.fields import FieldInfo
 
 from pcmb.errors import ConfigProblem
-from pcmb.wording import did_you_mean
+from pcmb.wording import did_you_mean, plural
 
 __all__ = [
     "INVALID",
@@ -249,7 +249,8 @@ def _message(error: Mapping[str, Any], root: Any) -> tuple[str, str | None]:
         symbol, name = _BOUNDS[kind]
         return f"expected a value {symbol} {ctx[name]}, found {found}", None
     if kind == "too_short":
-        return f"expected at least {ctx['min_length']} entry, found {ctx['actual_length']}", None
+        least = plural(ctx["min_length"], "entry", "entries")
+        return f"expected at least {least}, found {ctx['actual_length']}", None
     if kind in _EXPECTED:
         return f"{_EXPECTED[kind]}, found {found}", None
     text = str(error["msg"])

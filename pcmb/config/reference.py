@@ -23,7 +23,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, Discriminator
 from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
-from pcmb.config.types import Name, unique
+from pcmb.config.types import Name, selecting_key, unique
 
 __all__ = ["EXAMPLE", "config_reference", "main", "undescribed_keys"]
 
@@ -207,7 +207,7 @@ def _label(section: type[BaseModel], selector: Any) -> str:
     if isinstance(selector, str):
         (value,) = get_args(section.model_fields[selector].annotation)
         return str(value)
-    return next(iter(section.model_fields))
+    return selecting_key(section)
 
 
 def _forms(members: list[Any], selector: Any) -> list[tuple[type[BaseModel], str, Any]] | None:
@@ -230,7 +230,7 @@ def _forms(members: list[Any], selector: Any) -> list[tuple[type[BaseModel], str
 
 def _selector_key(section: type[BaseModel], selector: Any) -> str:
     """The key that picks a form: ``selector``, else the section's first key."""
-    return selector if isinstance(selector, str) else next(iter(section.model_fields))
+    return selector if isinstance(selector, str) else selecting_key(section)
 
 
 def _describe(
@@ -250,7 +250,7 @@ def _describe(
     min_length = max(
         (m.min_length for m in meta if isinstance(m, annotated_types.MinLen)), default=0
     )
-    size = "non-empty " if min_length == 1 else f"at least {min_length} " if min_length else ""
+    size = "non-empty " if min_length == 1 else f"{min_length} or more: " if min_length else ""
     bounds = _bounds(meta)
     origin = get_origin(tp)
 

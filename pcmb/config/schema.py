@@ -79,7 +79,9 @@ __all__ = [
     "ModelSpec",
     "StudyConfig",
     "SweepSpec",
+    "TimeGridSpec",
     "TimeSpec",
+    "TimeValuesSpec",
     "config_json_schema",
     "load_config",
     "validate_config",
@@ -125,6 +127,17 @@ class UniformSpec(_InputSpec):
 
     def _build(self) -> inputs.Distribution:
         return inputs.Uniform(self.low, self.high)
+
+
+class LogUniformSpec(_InputSpec):
+    """``{dist: loguniform, low, high}``: uniform in the logarithm."""
+
+    dist: Literal["loguniform"]
+    low: Real = Field(description="lower end of the support (> 0)")
+    high: Real = Field(description="upper end of the support")
+
+    def _build(self) -> inputs.Distribution:
+        return inputs.LogUniform(self.low, self.high)
 
 
 class BetaSpec(_InputSpec):
@@ -202,7 +215,8 @@ class ScipySpec(_InputSpec):
 
 
 DistributionSpec = Annotated[
-    UniformSpec | BetaSpec | NormalSpec | GammaSpec | ScipySpec, Field(discriminator="dist")
+    UniformSpec | LogUniformSpec | BetaSpec | NormalSpec | GammaSpec | ScipySpec,
+    Field(discriminator="dist"),
 ]
 #: An input: a distribution (``dist: ...``) or a random process (``process: kl``).
 InputSpec = tagged_by_key(
@@ -225,12 +239,17 @@ ModelSpec = Annotated[
 # --------------------------------------------------------------------------- other sections
 
 
-class TimeSpec(Section):
-    """The output grid ``numpy.linspace(start, stop, points)``."""
+class TimeGridSpec(Section):
+    """A grid of ``points`` output times from ``start`` to ``stop``: evenly spaced
+    (``numpy.linspace``) or evenly spaced in the logarithm (``spacing: log``,
+    ``numpy.geomspace``)."""
 
-    start: Real = Field(default=0.0, description="first output time")
+    start: Real = Field(default=0.0, description="first output time (> 0 for spacing: log)")
     stop: Real = Field(description="last output time (> start)")
     points: Points = Field(description="number of output times")
+    spacing: Literal["linear", "log"] = Field(
+        default="linear", description="even steps (linear) or even ratios (log)"
+    )
 
     @field_validator("stop")
     @classmethod
@@ -239,6 +258,63 @@ class TimeSpec(Section):
         if start is not None and not stop > start:
             raise ValueError(f"expected stop > start = {start!r}, found {stop!r}")
         return stop
+
+    @field_validator("spacing")
+    @classmethod
+    def _positive_for_log(cls, spacing: str, info: ValidationInfo) -> str:
+        start = info.data.get("start")
+        if spacing == "log" and start is not None and not start > 0:
+            raise ValueError(f"spacing: log needs start > 0, found start = {start!r}")
+        return spacing
+
+    def grid(self) -> NDArray[np.float64]:
+        """The output times, (points,)."""
+        spaced = np.geomspace if self.spacing == "log" else np.linspace
+        return spaced(self.start, self.stop, self.points)
+
+    def describe(self) -> str:
+        spacing = ", log-spaced" if self.spacing == "log" else ""
+        return f"{self.start} .. {self.stop}, {self.points} points{spacing}"
+
+
+class TimeValuesSpec(Section):
+    """The output times listed one by one (measured data's own times), strictly
+    increasing."""
+
+    values: Annotated[list[Real], Field(min_length=2, max_length=MAX_RUNS)] = Field(
+        description="the output times, strictly increasing"
+    )
+
+    @field_validator("values")
+    @classmethod
+    def _increasing(cls, values: list[float]) -> list[float]:
+        steps = np.diff(values)
+        if np.any(steps <= 0):
+            at = int(np.argmax(steps <= 0)) + 1
+            raise ValueError(
+                f"expected strictly increasing times, found {values[at]!r} after "
+                f"{values[at - 1]!r} (entry {at})"
+            )
+        return values
+
+    @property
+    def points(self) -> int:
+        return len(self.values)
+
+    def grid(self) -> NDArray[np.float64]:
+        """The output times, (points,)."""
+        return np.asarray(self.values, dtype=float)
+
+    def describe(self) -> str:
+        return f"{self.values[0]} .. {self.values[-1]}, {self.points} given times"
+
+
+#: The output times: a grid (``stop`` and ``points``) or a list (``values``).
+TimeSpec = tagged_by_key(
+    TimeGridSpec,
+    TimeValuesSpec,
+    error="expected a grid (stop, points and optionally start, spacing) or a list (values)",
+)
 
 
 def _order_tag(value: Any) -> str:
@@ -462,7 +538,7 @@ class StudyConfig(Section):
         description="study name, stored in the result file"
     )
     model: ModelSpec = Field(description="the simulator: one section per model.kind")
-    time: TimeSpec
+    time: TimeSpec = Field(description="the output times: a grid (stop, points) or a list (values)")
     inputs: Annotated[dict[Name, InputSpec], Field(min_length=1)] = Field(
         description="ordered: the order is the germ order"
     )
@@ -511,7 +587,7 @@ class StudyConfig(Section):
     @property
     def times(self) -> NDArray[np.float64]:
         """The output grid, (T,)."""
-        return np.linspace(self.time.start, self.time.stop, self.time.points)
+        return self.time.grid()
 
     @property
     def study_inputs(self) -> dict[str, inputs.Distribution | process.RandomProcess]:

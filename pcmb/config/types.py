@@ -39,6 +39,7 @@ __all__ = [
     "Section",
     "count",
     "reject_text_and_bool",
+    "selecting_key",
     "tagged_by_key",
     "unique",
 ]
@@ -120,18 +121,25 @@ class ModelSection(Section, ABC):
         return frozenset(self.params)  # type: ignore[attr-defined]
 
 
+def selecting_key(section: type[BaseModel]) -> str:
+    """The key whose presence picks ``section`` among the members of a
+    :func:`tagged_by_key` union: its first required key."""
+    return next(name for name, info in section.model_fields.items() if info.is_required())
+
+
 def _first_key(variant: Any) -> str:
-    """A section's first key; for a union of sections, that of its first member (a union
+    """A section's selecting key; for a union of sections, that of its first member (a union
     picked by a value, such as ``dist``, has it first in every member)."""
     while typing.get_origin(variant) is Annotated:
         variant = typing.get_args(variant)[0]
     if typing.get_origin(variant) in (typing.Union, types.UnionType):
         return _first_key(typing.get_args(variant)[0])
-    return next(iter(variant.model_fields))
+    return selecting_key(variant)
 
 
 def tagged_by_key(*variants: Any, error: str) -> Any:
-    """A union whose member is chosen by which one of the members' first keys is present.
+    """A union whose member is chosen by which one of the members' selecting keys (their
+    first required keys) is present.
 
     A member is a section, or a union of sections that share their first key. A mapping
     with none or several of the keys is no member (``error`` says what is expected). Tags
@@ -141,7 +149,7 @@ def tagged_by_key(*variants: Any, error: str) -> Any:
 
     def tag(value: Any) -> str | None:
         if isinstance(value, BaseModel):
-            return f"key:{next(iter(type(value).model_fields))}"
+            return f"key:{_first_key(type(value))}"
         if isinstance(value, Mapping):
             present = [k for k in first_keys if k in value]
             return f"key:{present[0]}" if len(present) == 1 else None
