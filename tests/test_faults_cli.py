@@ -118,13 +118,15 @@ def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Pa
     with open(folder / "sweep.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert [(r["method"], r["setting"]) for r in rows] == [
-        ("collocation", "order 1"),
-        ("collocation", "order 2"),
+        ("collocation", "order=1"),
+        ("collocation", "order=2"),
     ]
     assert all(np.isfinite(float(r["err_mean"])) for r in rows)
     assert not (folder / LEDGER).exists()
     assert not [p.name for p in folder.iterdir() if p.name.startswith(".")]  # no temporaries
-    for name in ("reference.h5", "collocation_order1.h5", "collocation_order2.h5"):
+    files = ["reference.h5", *(r["file"] for r in rows)]
+    assert sorted(p.name for p in folder.glob("*.h5")) == sorted([*files, "sweep.h5"])
+    for name in files:
         assert pcmb.load(folder / name).status.min() == 1  # every node ok
 
 
