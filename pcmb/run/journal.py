@@ -231,8 +231,8 @@ class Journal:
         if not meta_path.is_file():
             if records:
                 raise ResultFileError(
-                    f"journal {self.directory} has records but no {_META}: it is not a complete "
-                    f"pcmb journal; delete it or {FRESH}"
+                    f"journal {self.directory} has records but no {_META}: it is not a pcmb "
+                    f"journal; delete it or {FRESH}"
                 )
             meta = json.dumps(self._metadata(), indent=1).encode()
             self._write_atomically(meta_path, lambda handle: handle.write(meta))
