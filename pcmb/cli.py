@@ -202,6 +202,10 @@ def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
     if output is None:
         return size
     free = check_output(output, estimate)
+    if Path(output).exists():  # a run refuses what is not a pcmb result without --force
+        from pcmb.store import check_replaceable
+
+        check_replaceable(output)
     return size if free is None else f"{size}; {format_bytes(free)} free there"
 
 

@@ -25,50 +25,51 @@ from pcmb.study import Study
 from pcmb.sweep.runner import LEDGER
 
 GROWTH = '''
+import os
 import time
 
 import numpy as np
 
 
 class Growth:
-    """y = exp(a t): slow on purpose when ``delay`` is set (seconds per node)."""
+    """y = exp(a t); slow on purpose: waits while the file named by $GATE exists."""
 
     outputs = ("y",)
 
-    def __init__(self, a=0.5, delay=0.0):
+    def __init__(self, a=0.5):
         self.parameters = {"a": a}
-        self.delay = delay
 
     def simulate(self, params, times):
+        gate = os.environ.get("GATE")
+        while gate and os.path.exists(gate):
+            time.sleep(0.01)
         a = np.asarray(params["a"], float)
-        if self.delay:
-            time.sleep(self.delay * a.size)
         return {"y": np.exp(a[:, None] * times)}
 '''
 
 
-def _growth_sweep(folder: Path, delay: float) -> Path:
+def _growth_sweep(folder: Path) -> Path:
     """A one-input sweep of ``Growth``: collocation orders 1 and 2 against order 4."""
     (folder / "growth.py").write_text(GROWTH)
     config = folder / "study.yaml"
     config.write_text(
         textwrap.dedent(
-            f"""\
+            """\
             name: growth
             model:
               kind: python
               entry: growth.py:Growth
-              params: {{a: 0.5, delay: {delay}}}
-            time: {{start: 0.0, stop: 1.0, points: 5}}
+              params: {a: 0.5}
+            time: {start: 0.0, stop: 1.0, points: 5}
             inputs:
-              a: {{dist: uniform, low: 0.0, high: 1.0}}
-            method: {{kind: collocation, order: 2, validation: 0}}
-            execution: {{jobs: 1, chunk_size: 1}}
+              a: {dist: uniform, low: 0.0, high: 1.0}
+            method: {kind: collocation, order: 2, validation: 0}
+            execution: {jobs: 1, chunk_size: 1}
             output: out.h5
             sweep:
               methods:
-                - {{kind: collocation, order: [1, 2]}}
-              reference: {{kind: collocation, order: 4}}
+                - {kind: collocation, order: [1, 2]}
+              reference: {kind: collocation, order: 4}
             """
         )
     )
@@ -89,10 +90,13 @@ def _pcmb(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Path) -> None:
-    _growth_sweep(tmp_path, delay=0.4)
+    _growth_sweep(tmp_path)
+    gate = tmp_path / "gate"
+    gate.touch()
     first = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "sweep", "study.yaml", "-o", "out", "--quiet"],
         cwd=tmp_path,
+        env={**os.environ, "GATE": str(gate)},
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
@@ -108,6 +112,7 @@ def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Pa
         assert f"(PID {first.pid}) is writing the sweep folder out;" in second.stderr
         assert "pcmb.cli sweep study.yaml -o out --quiet" in second.stderr  # its command
         assert "Traceback" not in second.stderr
+        gate.unlink()
         _, err = first.communicate(timeout=120)
         assert first.returncode == 0, err
     finally:
@@ -225,7 +230,7 @@ def test_fresh_in_the_python_api(tmp_path, linear_study) -> None:
 
 
 def test_a_sweep_with_an_unreadable_ledger_starts_over_with_fresh(tmp_path, capsys) -> None:
-    config = _growth_sweep(tmp_path, delay=0.0)
+    config = _growth_sweep(tmp_path)
     folder = tmp_path / "out"
     folder.mkdir()
     (folder / LEDGER).write_text("{broken")
@@ -316,6 +321,8 @@ def test_a_foreign_file_at_the_output_is_not_overwritten(
     assert str(out) in err and "not a pcmb result" in err and "--force" in err
     assert out.read_bytes() == before
     assert not (tmp_path / "out.h5.journal").exists()
+    assert main(["validate", str(config)]) == 2  # the same check, without running
+    assert "not a pcmb result" in capsys.readouterr().err
     assert main(["run", str(config), "--quiet", "--force"]) == 0
     assert pcmb.load(out).status.min() == 1
 

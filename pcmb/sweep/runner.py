@@ -206,6 +206,31 @@ def _rows(
     return rows, means, stds
 
 
+def _table(
+    plan: SweepPlan, finished: list[_Finished], reference: StudyResult, source: str
+) -> SweepTable:
+    """The rows and error curves of the finished settings against ``reference``."""
+    outputs = _outputs(plan, reference, source)
+    rows: list[SweepRow] = []
+    means: list[np.ndarray] = []
+    stds: list[np.ndarray] = []
+    for setting, done in zip(plan.settings, finished, strict=True):
+        found = _rows(setting, done, reference, outputs, f"{setting.stem}.h5")
+        rows += found[0]
+        means += found[1]
+        stds += found[2]
+    label = f"{source} ({reference.design.label}, {int(reference.status.size)} runs)"
+    return SweepTable(
+        tuple(rows),
+        reference.times,
+        np.reshape(means, (-1, reference.times.size)),
+        np.reshape(stds, (-1, reference.times.size)),
+        label,
+        str(Path(source).resolve()),
+        {output: noise_floor(reference, output) for output in outputs},
+    )
+
+
 def _run_setting(
     config: StudyConfig,
     setting: Setting,
@@ -294,6 +319,8 @@ def run_sweep(
     from pcmb.store import load
     from pcmb.sweep.chart import draw_sweep, plotting
 
+    if resume and fresh:
+        raise UsageError("resume continues a sweep, fresh starts it over: give one")
     plotting()  # the chart needs matplotlib: say so before anything runs
     folder = Path(folder)
     plan = plan_sweep(config)
@@ -315,8 +342,6 @@ def run_sweep(
         config = config.model_copy(
             update={"execution": config.execution.model_copy(update=changes)}
         )
-    if resume and fresh:
-        raise UsageError("resume continues a sweep, fresh starts it over: give one")
     with _holding(folder):
         ledger = _Ledger(folder, resume, fresh)
         provenance = {
@@ -345,25 +370,7 @@ def run_sweep(
             source = str(folder / "reference.h5")
         else:
             source = str(reference)
-        outputs = _outputs(plan, given, source)
-        rows: list[SweepRow] = []
-        means: list[np.ndarray] = []
-        stds: list[np.ndarray] = []
-        for setting, done in zip(plan.settings, finished, strict=True):
-            found = _rows(setting, done, given, outputs, f"{setting.stem}.h5")
-            rows += found[0]
-            means += found[1]
-            stds += found[2]
-        label = f"{source} ({given.design.label}, {int(given.status.size)} runs)"
-        table = SweepTable(
-            tuple(rows),
-            given.times,
-            np.reshape(means, (-1, given.times.size)),
-            np.reshape(stds, (-1, given.times.size)),
-            label,
-            str(Path(source).resolve()),
-            {output: noise_floor(given, output) for output in outputs},
-        )
+        table = _table(plan, finished, given, source)
         csv_path, h5_path = write_sweep(table, folder)
         chart = draw_sweep(table, folder / "sweep.png")
         ledger.remove()
