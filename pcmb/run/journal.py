@@ -192,7 +192,10 @@ class Journal:
                     "or give another output (-o)"
                 )
             return
-        lock = FolderLock.acquire(directory / _LOCK, str(directory))
+        try:
+            lock = FolderLock.acquire(directory / _LOCK, str(directory))
+        except OSError as error:  # a read-only file system, a missing permission
+            raise write_error(error, directory, "journal", "delete it by hand") from error
         strangers = _strangers(directory)
         if strangers:
             lock.release()
