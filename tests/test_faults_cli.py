@@ -32,7 +32,8 @@ import numpy as np
 
 
 class Growth:
-    """y = exp(a t); slow on purpose: waits while the file named by $GATE exists."""
+    """y = exp(a t); slow on purpose: waits while the file named by $GATE exists (and says
+    so in $GATE.reached)."""
 
     outputs = ("y",)
 
@@ -41,6 +42,8 @@ class Growth:
 
     def simulate(self, params, times):
         gate = os.environ.get("GATE")
+        if gate and os.path.exists(gate):
+            open(gate + ".reached", "w").close()
         while gate and os.path.exists(gate):
             time.sleep(0.01)
         a = np.asarray(params["a"], float)
@@ -89,6 +92,15 @@ def _pcmb(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
 # -- 10: one sweep at a time in a folder ------------------------------------------------------
 
 
+def _stamps(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``folder`` with its inode and modification time."""
+    return {
+        str(p.relative_to(folder)): (p.stat().st_ino, p.stat().st_mtime_ns)
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
 def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Path) -> None:
     _growth_sweep(tmp_path)
     gate = tmp_path / "gate"
@@ -103,12 +115,14 @@ def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Pa
     )
     try:
         deadline = time.monotonic() + 60
-        while not (tmp_path / "out" / LEDGER).exists():  # written once the folder is its own
+        while not (tmp_path / "gate.reached").exists():  # the first holds the folder, waits
             assert first.poll() is None, first.stderr.read()
             assert time.monotonic() < deadline
             time.sleep(0.02)
+        before = _stamps(tmp_path / "out")
         second = _pcmb(tmp_path, "sweep", "study.yaml", "-o", "out", "--resume", "--quiet")
         assert second.returncode == 2, second.stderr
+        assert _stamps(tmp_path / "out") == before  # nothing written, not even the ledger
         assert f"(PID {first.pid}) is writing the sweep folder out;" in second.stderr
         assert "pcmb.cli sweep study.yaml -o out --quiet" in second.stderr  # its command
         assert "Traceback" not in second.stderr
