@@ -21,7 +21,7 @@ import threading
 import traceback
 import warnings
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -41,6 +41,22 @@ if TYPE_CHECKING:
     from pcmb.axes import OutputAxis
 
 
+_QUIET = "no progress bar, no log of the dask backend"
+
+
+def _journal_flags(command: argparse.ArgumentParser, what: str) -> None:
+    """``--resume`` and ``--fresh``: continue the journals of an interrupted ``what``, or
+    discard them and start over (one or the other)."""
+    either = command.add_mutually_exclusive_group()
+    either.add_argument("--resume", action="store_true", help=f"continue an interrupted {what}")
+    either.add_argument(
+        "--fresh",
+        action="store_true",
+        help=f"discard what an interrupted {what} left (its journal, even unreadable) and "
+        "start over",
+    )
+
+
 def _parser() -> argparse.ArgumentParser:
     kinds = "\n".join(f"  {kind:<9} {entry.summary}" for kind, entry in ADAPTERS.items())
     parser = argparse.ArgumentParser(
@@ -56,8 +72,13 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("-o", "--output", help="result file (overrides the config's output)")
     run.add_argument("--jobs", type=int, help="worker processes (default: config, else all cores)")
     run.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
-    run.add_argument("--resume", action="store_true", help="continue an interrupted run")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    _journal_flags(run, "run")
+    run.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite a file at the output that is not a pcmb result",
+    )
+    run.add_argument("--quiet", action="store_true", help=_QUIET)
     run.add_argument(
         "--strict",
         action="store_true",
@@ -105,8 +126,13 @@ def _parser() -> argparse.ArgumentParser:
         "--jobs", type=int, help="worker processes (default: config, else all cores)"
     )
     sweep.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
-    sweep.add_argument("--resume", action="store_true", help="continue an interrupted sweep")
-    sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    _journal_flags(sweep, "sweep")
+    sweep.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite files at the settings' result paths that are not pcmb results",
+    )
+    sweep.add_argument("--quiet", action="store_true", help=_QUIET)
 
     commands.add_parser("schema", help="print the config JSON Schema (for editors)")
     return parser
@@ -177,7 +203,18 @@ def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
     if output is None:
         return size
     free = check_output(output, estimate)
+    if Path(output).exists():  # a run refuses what is not a pcmb result without --force
+        from pcmb.store import check_replaceable
+
+        check_replaceable(output)
     return size if free is None else f"{size}; {format_bytes(free)} free there"
+
+
+def _quiet_backend(quiet: bool, backend: str) -> AbstractContextManager[None]:
+    """With ``--quiet``, the backend's own logging silenced for the command."""
+    from pcmb.run.backends import silenced
+
+    return silenced(backend) if quiet else nullcontext()
 
 
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -207,11 +244,13 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "config_sha256": config.sha256,
         "command_line": shlex.join(["pcmb", *argv]),
     }
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.backend):
         warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
         result = study.run(
             output,
             resume=args.resume,
+            fresh=args.fresh,
+            force=args.force,
             progress=False if args.quiet else None,
             provenance=provenance,
         )
@@ -245,13 +284,16 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
         if config.output is None:
             raise UsageError(f"{args.config}: no output folder: give -o DIR or set 'output:'")
         folder = config.output.removesuffix(".h5") + "_sweep"
-    with warnings.catch_warnings():
+    backend = args.backend or config.execution.backend
+    with warnings.catch_warnings(), _quiet_backend(args.quiet, backend):
         warnings.simplefilter("ignore", PcmbWarning)  # stored in each setting's file
         outcome = run_sweep(
             config,
             folder,
             reference=args.reference,
             resume=args.resume,
+            fresh=args.fresh,
+            force=args.force,
             progress=False if args.quiet else None,
             jobs=args.jobs,
             backend=args.backend,

@@ -39,7 +39,7 @@ from pcmb.result import (
 from pcmb.run.files import write_durably
 from pcmb.run.output import write_error
 
-__all__ = ["SCHEMA_VERSION", "load", "write_result"]
+__all__ = ["SCHEMA_VERSION", "check_replaceable", "is_result_file", "load", "write_result"]
 
 SCHEMA_VERSION = 1
 #: The scale of an output's points: /time, /<axis name>, or None for a scalar output.
@@ -567,6 +567,31 @@ def write_result(
         )
         raise write_error(error, path, "result file", kept) from error
     return path
+
+
+def is_result_file(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is an HDF5 file pcmb wrote as a result (its root carries the
+    ``pcmb_version`` and ``schema_version`` attributes); False for anything else."""
+    try:
+        with h5py.File(path, "r") as file:
+            return "pcmb_version" in file.attrs and "schema_version" in file.attrs
+    except (OSError, ValueError):
+        return False
+
+
+def check_replaceable(path: str | os.PathLike[str]) -> None:
+    """Raise unless the file at ``path`` (if any) is a pcmb result, which a run may replace.
+
+    Raises
+    ------
+    ResultFileError
+        Naming the path: it is not a pcmb result, and is left as it is.
+    """
+    if Path(path).exists() and not is_result_file(path):
+        raise ResultFileError(
+            f"{path} exists and is not a pcmb result; pcmb does not overwrite it: give "
+            "another output (-o), move it away, or overwrite it with --force"
+        )
 
 
 def _image(result: StudyResult, provenance: Mapping[str, str]) -> bytes:

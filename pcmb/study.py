@@ -61,7 +61,7 @@ from pcmb.run.executor import (
     start_run,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
-from pcmb.run.journal import Journal
+from pcmb.run.journal import FRESH, Journal
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
@@ -548,6 +548,8 @@ class Study:
         output: str | Path | None = None,
         *,
         resume: bool = False,
+        fresh: bool = False,
+        force: bool = False,
         progress: bool | None = None,
         provenance: Mapping[str, str] | None = None,
         pool: Pool | None = None,
@@ -561,6 +563,13 @@ class Study:
             and journals nothing.
         resume:
             Continue from the journal ``<output>.journal`` of an interrupted run.
+        fresh:
+            Start over: discard the journal ``<output>.journal`` first, whatever its state
+            (unreadable, of another config); never one a live run holds, nor a folder
+            holding anything a journal does not (``--fresh``).
+        force:
+            Overwrite a file at ``output`` that is not a pcmb result (``--force``); without
+            it such a file is refused. A pcmb result is always replaced.
         progress:
             Progress bar on stderr (default: when stderr is a terminal).
         provenance:
@@ -580,19 +589,29 @@ class Study:
         Raises
         ------
         UsageError
-            Bad settings, or an unfinished journal exists and ``resume`` is False.
+            Bad settings, ``resume`` and ``fresh`` together, an unfinished journal exists and
+            neither ``resume`` nor ``fresh`` is given, or another process writes the journal.
         ResultFileError
-            The output cannot be written (a folder, read-only, not enough space), before any
-            node runs; or a write failed during the run (the journal keeps finished nodes).
+            The output cannot be written (a folder, read-only, not enough space, a file that
+            is not a pcmb result without ``force``), before any node runs; or a write failed
+            during the run (the journal keeps finished nodes).
         ModelRunError
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
+        if resume and fresh:
+            raise _usage("fresh", "resume continues the journal, fresh discards it: give one")
         nodes = self.node_set()
         if pool is None:
             tasks = len(chunk_bounds(nodes.size, self.chunk_size)) if nodes.size else 1
             with open_pool(self.backend, self.jobs, self.address, tasks=tasks) as own:
                 return self.run(
-                    output, resume=resume, progress=progress, provenance=provenance, pool=own
+                    output,
+                    resume=resume,
+                    fresh=fresh,
+                    force=force,
+                    progress=progress,
+                    provenance=provenance,
+                    pool=own,
                 )
         facts = describe_model(self.model_factory, pool)
         outputs = self._outputs(facts)
@@ -605,12 +624,18 @@ class Study:
             # written (a folder, a read-only or full file system) is found now.
             estimate = self.size_estimate(nodes.size, outputs, facts.axes)
             check_output(output, estimate, create=True)
+            if not force and Path(output).exists():
+                from pcmb.store import check_replaceable
+
+                check_replaceable(output)
             journal_dir = Path(f"{output}.journal")
+            if fresh:
+                Journal.discard(journal_dir)
             Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
             if Journal.exists(journal_dir) and not resume:
                 raise UsageError(
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
-                    "continue with --resume, or delete it to start over"
+                    f"continue with --resume, or delete it or {FRESH} (which discards them)"
                 )
         early = self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")

@@ -568,7 +568,7 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
 
 def test_a_journal_of_another_shape_is_refused(tmp_path: Path) -> None:
     journal = Journal(tmp_path / "j", "fp", 16, ["y"], TIMES.size)
-    with pytest.raises(UsageError, match="delete it or drop --resume"):
+    with pytest.raises(UsageError, match="delete it or start over with --fresh"):
         run_nodes(em.Ramp, ramp_params(32), TIMES, ["y"], journal=journal)
 
 

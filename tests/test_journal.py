@@ -75,7 +75,7 @@ def test_a_journal_of_another_config_is_refused(tmp_path: Path) -> None:
     make(tmp_path / "j", fingerprint="abc")
     with pytest.raises(ResultFileError, match="was written for a different config; delete it"):
         make(tmp_path / "j", fingerprint="xyz")
-    with pytest.raises(ResultFileError, match=r"n_nodes: 10 != 11.*drop --resume"):
+    with pytest.raises(ResultFileError, match=r"n_nodes: 10 != 11.*--fresh"):
         make(tmp_path / "j", n_nodes=11)
     with pytest.raises(ResultFileError, match="outputs"):
         Journal(tmp_path / "j", "abc", 10, ("x",), N_TIMES)

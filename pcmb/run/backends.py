@@ -9,6 +9,7 @@ are started early (:func:`warm_up`) and kept warm between campaigns.
 from __future__ import annotations
 
 import atexit
+import logging
 import os
 import re
 import threading
@@ -29,6 +30,7 @@ __all__ = [
     "Pool",
     "default_workers",
     "open_pool",
+    "silenced",
 ]
 
 _T = TypeVar("_T")
@@ -192,6 +194,54 @@ class DaskPool:
         self._client.close()
         if self._cluster is not None:
             self._cluster.close()
+
+
+#: The loggers dask.distributed gives a level of their own (the others inherit theirs).
+_DASK_LOGGERS = (
+    "distributed",
+    "distributed.client",
+    "distributed.gc",
+    "tornado",
+    "tornado.application",
+    "bokeh",
+)
+#: dask's setting of the level of its ``distributed`` logger, read by the processes it starts.
+_DASK_LOG_LEVEL = "DASK_LOGGING__DISTRIBUTED"
+
+
+@contextmanager
+def silenced(backend: str) -> Iterator[None]:
+    """The backend's own logging limited to CRITICAL messages while the block runs
+    (``--quiet``).
+
+    For dask: the loggers of this process (the local cluster's scheduler and nannies, the
+    client) and, through the environment, those of the worker processes started meanwhile;
+    pcmb reports every failure they would log (a dead worker is a failed node). The other
+    backends log nothing.
+    """
+    if backend != "dask":
+        yield
+        return
+    try:
+        import distributed  # noqa: F401  (its import sets the levels: override them after)
+    except ImportError:  # the pool says what to install
+        yield
+        return
+    loggers = [logging.getLogger(name) for name in _DASK_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    environment = os.environ.get(_DASK_LOG_LEVEL)
+    os.environ[_DASK_LOG_LEVEL] = "critical"
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)
+        if environment is None:
+            os.environ.pop(_DASK_LOG_LEVEL, None)
+        else:
+            os.environ[_DASK_LOG_LEVEL] = environment
 
 
 class InProcessPool:

@@ -43,7 +43,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.run.backends import BACKENDS, Pool, open_pool
-from pcmb.run.journal import Journal
+from pcmb.run.journal import FRESH, Journal
 from pcmb.run.progress import Progress
 from pcmb.run.status import NodeFailure, Status
 
@@ -983,7 +983,7 @@ def _check_journal(journal: Journal, n_nodes: int, layout: Layout) -> None:
     if found != (n_nodes, layout.outputs, layout.widths):
         raise UsageError(
             f"journal {journal.directory} holds (nodes, outputs, columns) = {found}, this run "
-            f"has {(n_nodes, layout.outputs, layout.widths)}; delete it or drop --resume"
+            f"has {(n_nodes, layout.outputs, layout.widths)}; delete it or {FRESH}"
         )
 
 

@@ -10,17 +10,15 @@ as a process writes the journal, so two runs never write the same journal.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import json
 import os
 import re
 import shutil
 import time
-import weakref
 import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import BinaryIO, ClassVar
+from typing import BinaryIO
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,139 +26,56 @@ from numpy.typing import ArrayLike, NDArray
 from pcmb.errors import ResultFileError, UsageError
 from pcmb.run.files import replace_durably
 from pcmb.run.fingerprint import Fingerprint, changed_files
+from pcmb.run.lock import FolderLock
 from pcmb.run.output import write_error
 from pcmb.run.status import Status
 
-__all__ = ["Journal"]
+__all__ = ["FRESH", "Journal"]
 
 _FORMAT = 3
 _META = "journal.json"
 _LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
 _TEMP_PREFIX = ".tmp-"
-# How long taking the lock is retried before the holder is reported: long enough for a
-# process that only probes it (Journal.check_free) to let go, short enough to go unnoticed.
-_LOCK_PATIENCE = 0.25
-_PID_PATIENCE = 0.5
+#: The folders of a journal's later parts (an adaptive design's rounds, the held-out runs).
+_PART = re.compile(r"round-\d+|validation")
+#: How to start over when a journal cannot be continued (the flag of pcmb run and sweep).
+FRESH = "start over with --fresh"
 
 
-# --------------------------------------------------------------------------- the lock
+def _strangers(directory: Path, parts: bool = True) -> list[Path]:
+    """What ``directory`` holds that a journal does not: its files, and its part folders
+    (when ``parts``) holding a journal's files."""
+    found = []
+    for entry in sorted(directory.iterdir()):
+        if entry.is_symlink():
+            found.append(entry)
+        elif parts and entry.is_dir() and _PART.fullmatch(entry.name):
+            found += _strangers(entry, parts=False)
+        elif not entry.is_file() or not (
+            entry.name in (_META, _LOCK)
+            or _RECORD.fullmatch(entry.name)
+            or entry.name.startswith(_TEMP_PREFIX)
+        ):
+            found.append(entry)
+    return found
 
 
-def _busy(directory: Path, lock_path: Path) -> UsageError:
-    """The refusal naming the process that holds the lock (its PID, once it has written it)."""
-    deadline = time.monotonic() + _PID_PATIENCE
-    pid = ""
-    while True:
-        try:
-            pid = lock_path.read_text().strip()
-        except OSError:
-            pid = ""
-        # The holder writes its PID just after taking the lock: give it a moment.
-        if pid or time.monotonic() >= deadline:
-            break
-        time.sleep(0.01)
-    return UsageError(
-        f"another pcmb run (PID {pid or 'unknown'}) is writing {directory}; wait for it to "
-        "finish, or give this run another output (-o)"
-    )
+def _delete(directory: Path, lock: FolderLock | None) -> None:
+    """Delete a journal ``directory``, then let go of its ``lock``.
 
-
-class _Lock:
-    """An exclusive ``flock`` on ``<journal>/lock``, held by this process.
-
-    Every :class:`Journal` of one directory in one process shares it (so a process can reopen
-    its own journal); it is released when the last of them is gone, by :meth:`release`, or
-    by the operating system when the process ends, however it ends: a killed run leaves no
-    stale lock, only a ``lock`` file that the next run locks again.
+    The directory is first renamed aside, so that a run starting meanwhile finds no journal
+    (or makes a new one) instead of a half-deleted one.
     """
-
-    _held: ClassVar[weakref.WeakValueDictionary[str, _Lock]] = weakref.WeakValueDictionary()
-
-    def __init__(self, key: str, path: Path, fd: int) -> None:
-        self.key, self.path, self.fd = key, path, fd
-        self._close = weakref.finalize(self, os.close, fd)
-
-    def valid(self) -> bool:
-        """Whether the lock is still held on the file at ``path`` (not deleted or replaced)."""
-        if not self._close.alive:
-            return False
-        try:
-            held, current = os.fstat(self.fd), os.stat(self.path)
-        except OSError:
-            return False
-        return (held.st_dev, held.st_ino) == (current.st_dev, current.st_ino)
-
-    def release(self) -> None:
-        """Let go of the lock (closing the file releases the ``flock``)."""
-        if _Lock._held.get(self.key) is self:
-            del _Lock._held[self.key]
-        self._close()
-
-    @classmethod
-    def _mine(cls, directory: Path) -> _Lock | None:
-        lock = cls._held.get(str(directory.resolve()))
-        return lock if lock is not None and lock.valid() else None
-
-    @classmethod
-    def acquire(cls, directory: Path) -> _Lock:
-        """Take the lock of ``directory`` (an existing folder) or share this process's.
-
-        Raises
-        ------
-        UsageError
-            Another process holds it ("another pcmb run (PID N) is writing ...").
-        """
-        mine = cls._mine(directory)
-        if mine is not None:
-            return mine
-        key = str(directory.resolve())
-        path = Path(key) / _LOCK  # absolute: valid() must not depend on the working directory
-        deadline = time.monotonic() + _LOCK_PATIENCE
-        while True:
-            try:
-                fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-            except FileNotFoundError:  # the folder was just removed by the run that held it
-                directory.mkdir(parents=True, exist_ok=True)
-                continue
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                os.close(fd)
-                if time.monotonic() >= deadline:
-                    raise _busy(directory, path) from None
-                time.sleep(0.01)
-                continue
-            lock = cls(key, path, fd)
-            # The file may have been deleted (with its journal, by the run that held it
-            # until now) between opening and locking it: a lock on it would guard nothing.
-            if not lock.valid():
-                lock.release()
-                continue
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-            cls._held[lock.key] = lock
-            return lock
-
-    @classmethod
-    def check_free(cls, directory: Path) -> None:
-        """Raise if another process holds the lock of ``directory`` (this one may).
-
-        Probes with a shared lock, released at once, so that two probes never see each other.
-        """
-        if cls._mine(directory) is not None:
-            return
-        path = directory / _LOCK
-        try:
-            fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
-        except OSError:  # no lock file (or no folder): nobody holds it
-            return
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise _busy(directory, path) from None
-        finally:
-            os.close(fd)
+    doomed = directory.with_name(f".{directory.name}.removed-{os.getpid()}-{time.monotonic_ns()}")
+    try:
+        os.rename(directory, doomed)
+        shutil.rmtree(doomed, ignore_errors=False)
+    except FileNotFoundError:
+        pass
+    finally:
+        if lock is not None:
+            lock.release()
 
 
 class Journal:
@@ -233,7 +148,7 @@ class Journal:
         self.outputs = outputs
         self.widths = widths
         self._next_record = 0
-        self._lock: _Lock | None = None
+        self._lock: FolderLock | None = None
         try:
             self._open()
         except BaseException:
@@ -254,7 +169,43 @@ class Journal:
         UsageError
             Naming the PID of the run that holds it.
         """
-        _Lock.check_free(Path(directory))
+        FolderLock.check_free(Path(directory) / _LOCK, str(directory))
+
+    @staticmethod
+    def discard(directory: str | os.PathLike[str]) -> None:
+        """Delete the journal in ``directory`` whatever its state (unreadable, of another
+        config or format), to start a run over; nothing to do when there is none.
+
+        Raises
+        ------
+        UsageError
+            Another process holds its lock (a live run writes it): nothing is deleted.
+        ResultFileError
+            ``directory`` holds something a journal does not (a file of another name, a
+            link, a folder other than a round's or the held-out runs'): nothing is deleted.
+        """
+        directory = Path(directory)
+        if not directory.is_dir() or directory.is_symlink():
+            if directory.exists() or directory.is_symlink():
+                raise ResultFileError(
+                    f"{directory} is not a journal folder; pcmb leaves it alone: move it away "
+                    "or give another output (-o)"
+                )
+            return
+        try:
+            lock = FolderLock.acquire(directory / _LOCK, str(directory))
+        except OSError as error:  # a read-only file system, a missing permission
+            raise write_error(error, directory, "journal", "delete it by hand") from error
+        strangers = _strangers(directory)
+        if strangers:
+            lock.release()
+            named = ", ".join(str(p.relative_to(directory)) for p in strangers[:3])
+            more = f" and {len(strangers) - 3} more" if len(strangers) > 3 else ""
+            raise ResultFileError(
+                f"{directory} holds what a pcmb journal does not ({named}{more}); pcmb does "
+                "not discard it: move it away or give another output (-o)"
+            )
+        _delete(directory, lock)
 
     # -- opening -------------------------------------------------------------------------------
 
@@ -273,7 +224,7 @@ class Journal:
             raise ResultFileError(f"journal {self.directory} exists and is not a directory")
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
-            self._lock = _Lock.acquire(self.directory)
+            self._lock = FolderLock.acquire(self.directory / _LOCK, str(self.directory))
         except OSError as error:  # a read-only or full file system, a missing permission
             raise write_error(
                 error, self.directory, "journal", "give another output (-o) or free space"
@@ -284,7 +235,7 @@ class Journal:
             if records:
                 raise ResultFileError(
                     f"journal {self.directory} has records but no {_META}: it is not a pcmb "
-                    "journal; delete it or drop --resume"
+                    f"journal; delete it or {FRESH}"
                 )
             meta = json.dumps(self._metadata(), indent=1).encode()
             self._write_atomically(meta_path, lambda handle: handle.write(meta))
@@ -293,29 +244,26 @@ class Journal:
             found = json.loads(meta_path.read_text())
         except (OSError, ValueError) as exc:
             raise ResultFileError(
-                f"journal {self.directory}: cannot read {_META} ({exc}); delete it or drop --resume"
+                f"journal {self.directory}: cannot read {_META} ({exc}); delete it or {FRESH}"
             ) from exc
         if not isinstance(found, dict):
             found = {}
         if found.get("format") != _FORMAT:
             raise ResultFileError(
                 f"journal {self.directory} was written by another version of pcmb (journal "
-                f"format {found.get('format')!r}, this one reads {_FORMAT}); delete it to "
-                "start over"
+                f"format {found.get('format')!r}, this one reads {_FORMAT}); delete it or {FRESH}"
             )
         if found.get("fingerprint") != self.fingerprint:
             raise ResultFileError(
                 f"journal {self.directory} was written for a different config; delete it or "
-                "drop --resume (the model, inputs, method, time grid, outputs or chunk_size "
-                "differ)"
+                f"{FRESH} (the model, inputs, method, time grid, outputs or chunk_size differ)"
             )
         expected = self._metadata()
         differing = [key for key in expected if key != "files" and found.get(key) != expected[key]]
         if differing:
             detail = ", ".join(f"{k}: {found.get(k)!r} != {expected[k]!r}" for k in differing)
             raise ResultFileError(
-                f"journal {self.directory} does not match this run ({detail}); "
-                "delete it or drop --resume"
+                f"journal {self.directory} does not match this run ({detail}); delete it or {FRESH}"
             )
         recorded = found.get("files")
         changed = changed_files(recorded if isinstance(recorded, dict) else {}, self.files)
@@ -328,7 +276,7 @@ class Journal:
             raise UsageError(
                 f"cannot resume: {what} changed since {self.directory} was written, so its "
                 "finished nodes may not be what this run would compute; restore the old "
-                f"contents, or delete {self.directory} to start over"
+                f"contents, or delete {self.directory} or {FRESH}"
             )
         if records:
             self._next_record = int(_RECORD.fullmatch(records[-1].name).group(1)) + 1
@@ -438,8 +386,7 @@ class Journal:
                     values, text = data["values"], data["messages"]
             except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
                 raise ResultFileError(
-                    f"journal record {path} is unreadable ({exc}); delete the journal or drop "
-                    "--resume"
+                    f"journal record {path} is unreadable ({exc}); delete the journal or {FRESH}"
                 ) from exc
             if values.shape != (idx.size, *shape) or codes.shape != idx.shape:
                 raise ResultFileError(f"journal record {path} does not match the journal's shape")
@@ -490,24 +437,9 @@ class Journal:
 
     def remove(self) -> None:
         """Delete the journal directory (once the result file is safely written), then let go
-        of the lock.
-
-        The directory is first renamed aside, so that a run starting meanwhile finds no
-        journal (or makes a new one) instead of a half-deleted one.
-        """
-        doomed = self.directory.with_name(
-            f".{self.directory.name}.removed-{os.getpid()}-{time.monotonic_ns()}"
-        )
-        try:
-            os.rename(self.directory, doomed)
-            shutil.rmtree(doomed, ignore_errors=False)
-        except FileNotFoundError:
-            pass
-        finally:
-            # Gone for every journal of this process too: nothing is left to guard.
-            if self._lock is not None:
-                self._lock.release()
-            self._lock = None
+        of the lock (for every journal of this process too: nothing is left to guard)."""
+        _delete(self.directory, self._lock)
+        self._lock = None
 
     def close(self) -> None:
         """Stop writing: the journal can still be read, not written. The lock is released

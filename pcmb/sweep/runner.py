@@ -4,8 +4,10 @@ Each setting runs through the same workers (one pool for the whole sweep), its o
 and failure policy, and writes ``<folder>/<stem>.h5``. A ledger ``<folder>/sweep.ledger.json``
 records every finished setting (its fingerprint and timing) as soon as it is written, so a
 sweep stopped midway continues with ``resume=True`` where it stopped: finished settings are
-read back, an interrupted one resumes from its journal. The ledger is removed once
-``sweep.csv``, ``sweep.h5`` and ``sweep.png`` are written.
+read back, an interrupted one resumes from its journal; ``fresh=True`` discards the ledger
+and the journals instead. The ledger is removed once ``sweep.csv``, ``sweep.h5`` and
+``sweep.png`` are written. One sweep at a time writes a folder: it holds the lock
+``<folder>/sweep.lock`` (:class:`~pcmb.run.lock.FolderLock`) while it runs.
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import json
 import os
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,7 +25,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pcmb.errors import ResultFileError, UsageError
+from pcmb.run.files import write_durably
 from pcmb.run.fingerprint import changed_files, digest_files, model_files
+from pcmb.run.journal import FRESH
+from pcmb.run.lock import FolderLock
+from pcmb.run.output import write_error
 from pcmb.run.progress import Progress
 from pcmb.sweep.accuracy import noise_floor, result_errors
 from pcmb.sweep.plan import Setting, SweepPlan, plan_sweep
@@ -33,10 +40,12 @@ if TYPE_CHECKING:
     from pcmb.result import StudyResult
     from pcmb.study import Study
 
-__all__ = ["LEDGER", "SweepOutcome", "run_sweep"]
+__all__ = ["LEDGER", "LOCK", "SweepOutcome", "run_sweep"]
 
 #: File of the finished settings while a sweep runs.
 LEDGER = "sweep.ledger.json"
+#: The lock file a running sweep holds in its folder.
+LOCK = "sweep.lock"
 
 
 @dataclass(frozen=True)
@@ -72,19 +81,22 @@ def _identity(study: Study) -> tuple[str, dict[str, str]]:
 class _Ledger:
     """The finished settings of a sweep, rewritten atomically after each one."""
 
-    def __init__(self, folder: Path, resume: bool):
+    def __init__(self, folder: Path, resume: bool, fresh: bool):
         self.path = folder / LEDGER
         self.entries: dict[str, dict[str, Any]] = {}
-        if self.path.exists():
+        if self.path.exists() and not fresh:
             if not resume:
                 raise UsageError(
                     f"{self.path} lists the finished settings of an interrupted sweep: "
-                    "continue with --resume, or delete it to start over"
+                    f"continue with --resume, or delete it or {FRESH} (which runs every "
+                    "setting again)"
                 )
             try:
                 self.entries = json.loads(self.path.read_text(encoding="utf-8"))["settings"]
             except (OSError, ValueError, KeyError, TypeError) as error:
-                raise ResultFileError(f"{self.path}: unreadable sweep ledger ({error})") from error
+                raise ResultFileError(
+                    f"{self.path}: unreadable sweep ledger ({error}); delete it or {FRESH}"
+                ) from error
         self._save()
 
     def finished(self, stem: str, study: Study, path: Path) -> _Finished | None:
@@ -101,7 +113,7 @@ class _Ledger:
         if changed:
             raise UsageError(
                 f"cannot resume the sweep: model file {changed[0]} changed since {path} was "
-                f"written; restore it, or delete {self.path} to start over"
+                f"written; restore it, or delete {self.path} or {FRESH}"
             )
         return _Finished(load(path), float(entry["seconds"]))
 
@@ -111,13 +123,33 @@ class _Ledger:
         self._save()
 
     def _save(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        temporary = self.path.with_name(f".{self.path.name}.tmp")
-        temporary.write_text(json.dumps({"settings": self.entries}, indent=1), encoding="utf-8")
-        os.replace(temporary, self.path)
+        write_durably(self.path, json.dumps({"settings": self.entries}, indent=1).encode())
 
     def remove(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+@contextmanager
+def _holding(folder: Path) -> Iterator[None]:
+    """Hold the lock of the sweep ``folder`` while the block runs (made if missing).
+
+    Raises
+    ------
+    UsageError
+        Another sweep holds it (the message names its PID and command).
+    ResultFileError
+        The folder or its lock file cannot be made.
+    """
+    path = folder / LOCK
+    try:
+        lock = FolderLock.acquire(path, f"the sweep folder {folder}")
+    except OSError as error:
+        raise write_error(error, folder, "sweep folder", "give another folder (-o)") from error
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)  # still held: a sweep starting meanwhile locks a new file
+        lock.release()
 
 
 def _check_reference(reference: StudyResult, config: StudyConfig, source: str) -> None:
@@ -174,6 +206,31 @@ def _rows(
     return rows, means, stds
 
 
+def _table(
+    plan: SweepPlan, finished: list[_Finished], reference: StudyResult, source: str
+) -> SweepTable:
+    """The rows and error curves of the finished settings against ``reference``."""
+    outputs = _outputs(plan, reference, source)
+    rows: list[SweepRow] = []
+    means: list[np.ndarray] = []
+    stds: list[np.ndarray] = []
+    for setting, done in zip(plan.settings, finished, strict=True):
+        found = _rows(setting, done, reference, outputs, f"{setting.stem}.h5")
+        rows += found[0]
+        means += found[1]
+        stds += found[2]
+    label = f"{source} ({reference.design.label}, {int(reference.status.size)} runs)"
+    return SweepTable(
+        tuple(rows),
+        reference.times,
+        np.reshape(means, (-1, reference.times.size)),
+        np.reshape(stds, (-1, reference.times.size)),
+        label,
+        str(Path(source).resolve()),
+        {output: noise_floor(reference, output) for output in outputs},
+    )
+
+
 def _run_setting(
     config: StudyConfig,
     setting: Setting,
@@ -181,6 +238,9 @@ def _run_setting(
     ledger: _Ledger,
     pool: Any,
     provenance: Mapping[str, str],
+    *,
+    fresh: bool,
+    force: bool,
 ) -> _Finished:
     study = _study(config, setting)
     path = folder / f"{setting.stem}.h5"
@@ -190,7 +250,13 @@ def _run_setting(
     journal = Path(f"{path}.journal")
     start = time.perf_counter()
     result = study.run(
-        path, resume=journal.exists(), progress=False, provenance=provenance, pool=pool
+        path,
+        resume=not fresh and journal.exists(),
+        fresh=fresh,
+        force=force,
+        progress=False,
+        provenance=provenance,
+        pool=pool,
     )
     seconds = time.perf_counter() - start
     ledger.add(setting.stem, study, seconds)
@@ -203,6 +269,8 @@ def run_sweep(
     *,
     reference: str | os.PathLike[str] | None = None,
     resume: bool = False,
+    fresh: bool = False,
+    force: bool = False,
     progress: bool | None = None,
     jobs: int | None = None,
     backend: str | None = None,
@@ -222,6 +290,11 @@ def run_sweep(
         not run).
     resume:
         Continue a sweep stopped midway in ``folder``.
+    fresh:
+        Start over: discard the ledger and the settings' journals a sweep stopped midway
+        left in ``folder`` (see :meth:`pcmb.study.Study.run`).
+    force:
+        Overwrite files at the settings' result paths that are not pcmb results.
     progress:
         One progress line over the settings on stderr (default: when stderr is a terminal).
     jobs, backend:
@@ -233,8 +306,9 @@ def run_sweep(
     ------
     UsageError
         No reference (neither ``sweep.reference`` nor ``reference``), a reference on another
-        time grid or without the outputs, or an unfinished sweep in ``folder`` without
-        ``resume``.
+        time grid or without the outputs, an unfinished sweep in ``folder`` without
+        ``resume`` or ``fresh``, both of them, or another sweep running in ``folder`` (the
+        message names its PID and command).
     MissingDependencyError
         matplotlib is missing (the chart needs it), before anything runs.
     ModelRunError
@@ -245,6 +319,8 @@ def run_sweep(
     from pcmb.store import load
     from pcmb.sweep.chart import draw_sweep, plotting
 
+    if resume and fresh:
+        raise UsageError("resume continues a sweep, fresh starts it over: give one")
     plotting()  # the chart needs matplotlib: say so before anything runs
     folder = Path(folder)
     plan = plan_sweep(config)
@@ -266,50 +342,37 @@ def run_sweep(
         config = config.model_copy(
             update={"execution": config.execution.model_copy(update=changes)}
         )
-    ledger = _Ledger(folder, resume)
-    provenance = {
-        "config": config.source_text or "",
-        "config_sha256": config.sha256,
-        "command_line": command_line,
-    }
-    todo = ([] if given is not None or plan.reference is None else [plan.reference]) + list(
-        plan.settings
-    )
-    show = sys.stderr.isatty() if progress is None else progress
-    bar = Progress(len(todo), 0, sys.stderr if show else None, unit="settings")
-    finished: list[_Finished] = []
-    execution = config.execution
-    with open_pool(execution.backend, execution.jobs, execution.address) as pool:
-        for setting in todo:
-            finished.append(_run_setting(config, setting, folder, ledger, pool, provenance))
-            bar.advance(1)
-    bar.close()
-    if given is None:
-        given, finished = finished[0].result, finished[1:]
-        source = str(folder / "reference.h5")
-    else:
-        source = str(reference)
-    outputs = _outputs(plan, given, source)
-    rows: list[SweepRow] = []
-    means: list[np.ndarray] = []
-    stds: list[np.ndarray] = []
-    for setting, done in zip(plan.settings, finished, strict=True):
-        found = _rows(setting, done, given, outputs, f"{setting.stem}.h5")
-        rows += found[0]
-        means += found[1]
-        stds += found[2]
-    label = f"{source} ({given.design.label}, {int(given.status.size)} runs)"
-    table = SweepTable(
-        tuple(rows),
-        given.times,
-        np.reshape(means, (-1, given.times.size)),
-        np.reshape(stds, (-1, given.times.size)),
-        label,
-        str(Path(source).resolve()),
-        {output: noise_floor(given, output) for output in outputs},
-    )
-    csv_path, h5_path = write_sweep(table, folder)
-    chart = draw_sweep(table, folder / "sweep.png")
-    ledger.remove()
-    files = (csv_path, h5_path, chart, *(folder / f"{s.stem}.h5" for s in plan.settings))
-    return SweepOutcome(table, files)
+    with _holding(folder):
+        ledger = _Ledger(folder, resume, fresh)
+        provenance = {
+            "config": config.source_text or "",
+            "config_sha256": config.sha256,
+            "command_line": command_line,
+        }
+        todo = ([] if given is not None or plan.reference is None else [plan.reference]) + list(
+            plan.settings
+        )
+        show = sys.stderr.isatty() if progress is None else progress
+        bar = Progress(len(todo), 0, sys.stderr if show else None, unit="settings")
+        finished: list[_Finished] = []
+        execution = config.execution
+        with open_pool(execution.backend, execution.jobs, execution.address) as pool:
+            for setting in todo:
+                finished.append(
+                    _run_setting(
+                        config, setting, folder, ledger, pool, provenance, fresh=fresh, force=force
+                    )
+                )
+                bar.advance(1)
+        bar.close()
+        if given is None:
+            given, finished = finished[0].result, finished[1:]
+            source = str(folder / "reference.h5")
+        else:
+            source = str(reference)
+        table = _table(plan, finished, given, source)
+        csv_path, h5_path = write_sweep(table, folder)
+        chart = draw_sweep(table, folder / "sweep.png")
+        ledger.remove()
+        files = (csv_path, h5_path, chart, *(folder / f"{s.stem}.h5" for s in plan.settings))
+        return SweepOutcome(table, files)
