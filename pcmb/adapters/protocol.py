@@ -45,6 +45,9 @@ class Model(Protocol):
       the adapter was given (``model.params``): an uncertain input then needs one there;
     - ``check_times(times)`` raising :class:`~pcmb.errors.ConfigError` when the model cannot
       produce the grid; the config validator calls it before anything runs;
+    - ``check_inputs(names)`` raising :class:`~pcmb.errors.ConfigError` (at ``inputs.<name>``)
+      when the model cannot vary these uncertain inputs independently (an FMU's aliased
+      variables); the config validator calls it before anything runs;
     - ``chunk_size: int``, the nodes per call the model prefers (a stacked integrator pays
       per call); ``execution.chunk_size`` overrides it;
     - ``output_axes: Mapping[str, OutputAxis | None]``, the outputs that are not time

@@ -396,6 +396,9 @@ class ModelFacts:
     axes:
         Its ``output_axes`` (model protocol): output name -> its own axis, or ``None`` for a
         scalar; the outputs not listed are on time.
+    input_problems:
+        ``(key, message)`` of what its ``check_inputs`` found wrong with the uncertain inputs
+        asked about (see :func:`describe_model`).
     """
 
     name: str
@@ -406,18 +409,29 @@ class ModelFacts:
     nominal_from_params: bool = False
     time_problems: tuple[tuple[str, str], ...] = ()
     axes: Mapping[str, OutputAxis | None] = dataclasses.field(default_factory=dict)
+    input_problems: tuple[tuple[str, str], ...] = ()
 
 
-def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelFacts:
+def _problems(model: Model, check: str, argument: object, key: str) -> tuple[tuple[str, str], ...]:
+    """``(key, message)`` of what the model's optional ``check`` method raises as a
+    :class:`~pcmb.errors.ConfigError` about ``argument`` (none without the method)."""
+    method = getattr(model, check, None)
+    if not callable(method):
+        return ()
+    try:
+        _model_code(method, argument)
+    except ConfigError as error:
+        return tuple((p.path or key, p.message) for p in error.problems)
+    return ()
+
+
+def _model_facts(
+    factory: _Factory, times: NDArray[np.float64] | None, inputs: tuple[str, ...]
+) -> ModelFacts:
     """Build (or reuse) the model in this process and describe it."""
     model, seconds = _cached_model(factory)
-    time_problems: tuple[tuple[str, str], ...] = ()
-    check_times = getattr(model, "check_times", None)
-    if times is not None and callable(check_times):
-        try:
-            _model_code(check_times, times)
-        except ConfigError as error:
-            time_problems = tuple((p.path or "time", p.message) for p in error.problems)
+    time_problems = () if times is None else _problems(model, "check_times", times, "time")
+    input_problems = _problems(model, "check_inputs", inputs, "inputs") if inputs else ()
     offered = getattr(model, "outputs", None)
     if offered is None or not callable(getattr(model, "simulate", None)):
         raise UsageError(
@@ -438,6 +452,7 @@ def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelF
         nominal_from_params=bool(getattr(model, "nominal_from_params", False)),
         time_problems=time_problems,
         axes=axes,
+        input_problems=input_problems,
     )
 
 
@@ -455,10 +470,14 @@ def _factory(model_factory: Callable[[], Model]) -> _Factory:
 
 
 def describe_model(
-    model_factory: Callable[[], Model], pool: Pool, times: ArrayLike | None = None
+    model_factory: Callable[[], Model],
+    pool: Pool,
+    times: ArrayLike | None = None,
+    inputs: Sequence[str] = (),
 ) -> ModelFacts:
     """Build the model in one of ``pool``'s workers and say what it offers (and, given
-    ``times``, what it finds wrong with that time grid).
+    ``times`` or ``inputs``, what it finds wrong with that time grid or those uncertain
+    inputs).
 
     Raises
     ------
@@ -472,7 +491,7 @@ def describe_model(
     grid = None if times is None else np.asarray(times, dtype=np.float64)
     # Twice: a worker of a kept pool may have died before this task (killed from outside).
     for _ in range(2):
-        facts, death = _wait(pool, pool.submit(_model_facts, factory, grid))
+        facts, death = _wait(pool, pool.submit(_model_facts, factory, grid, tuple(inputs)))
         if death is None:
             return facts
     raise ModelDefinitionError(f"could not build the model: {death}")

@@ -209,6 +209,11 @@ class FmuModel(PointwiseModel):
         self._check_units(units, problems)
         if problems:
             raise ConfigError(problems)
+        self._params = tuple(params)
+        problems = self._aliases(self._params, ())
+        if problems:
+            raise ConfigError(problems)
+        self._inputs_checked: set[frozenset[str]] = set()
 
         self.parameters: Mapping[str, float] = MappingProxyType(self._nominal(params))
         self._getters = self._group([self._variables[name] for name in self.outputs], "get")
@@ -387,6 +392,53 @@ class FmuModel(PointwiseModel):
                 if problem is not None:
                     problems.append(problem)
         return {name: tuple(targets) for name, targets in bind.items()}
+
+    def _value_of(self, variable: ScalarVariable) -> tuple[object, ...]:
+        """What identifies a variable's value: its value reference, per FMI 2.0 base type
+        (FMI 3.0 references are unique across types). Aliases share it."""
+        if self._fmi3:
+            return (variable.valueReference,)
+        return (self._types[variable.type][1], variable.valueReference)
+
+    def _aliases(self, params: Sequence[str], inputs: Sequence[str]) -> list[ConfigProblem]:
+        """Problems where two names of the study (``model.params`` keys, uncertain inputs)
+        set one value of the FMU through different (aliased) variables: the last one set
+        would silently win. With inputs, only the clashes involving one are reported."""
+        setters = {name: f"model.params.{name}" for name in params}
+        setters.update({name: f"inputs.{name}" for name in inputs})
+        first: dict[tuple[object, ...], tuple[str, str]] = {}
+        problems = []
+        for name, path in setters.items():
+            for target in self._bind.get(name, (name,)):
+                variable = self._variables.get(target)
+                if variable is None or variable.type not in self._types:
+                    continue  # reported by the other checks
+                owner, aliased = first.setdefault(self._value_of(variable), (name, target))
+                if owner == name or (inputs and name not in inputs and owner not in inputs):
+                    continue
+                problems.append(
+                    _problem(
+                        path,
+                        f"{name!r} and {owner!r} ({setters[owner]}) set one value of the FMU "
+                        f"({target!r} and {aliased!r} share valueReference "
+                        f"{variable.valueReference}), so they cannot vary independently; "
+                        "keep one of them",
+                    )
+                )
+        return problems
+
+    def check_inputs(self, names: Sequence[str]) -> None:
+        """Check that the uncertain inputs ``names`` set independent values of the FMU.
+
+        Raises
+        ------
+        ConfigError
+            At ``inputs.<name>``: two of them, or one and a ``model.params`` entry, set one
+            value through aliased variables (variables sharing a value reference).
+        """
+        problems = self._aliases(self._params, [n for n in names if n in self.parameters])
+        if problems:
+            raise ConfigError(problems)
 
     def _check_outputs(
         self, outputs: Sequence[str] | None, problems: list[ConfigProblem]
@@ -591,6 +643,13 @@ class FmuModel(PointwiseModel):
             ended the simulation early; the message says which call at which time, with
             the FMU's last log messages.
         """
+        key = frozenset(values)
+        if key not in self._inputs_checked:  # the same at every node: checked once
+            try:
+                self.check_inputs(tuple(values))
+            except ConfigError as error:
+                raise ModelDefinitionError(str(error)) from error
+            self._inputs_checked.add(key)
         times = np.asarray(times, dtype=float)
         start = dict(self._fixed)
         for name, value in values.items():

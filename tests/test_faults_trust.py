@@ -1,0 +1,131 @@
+"""Trust: a resumed run never mixes old and new model code, an FMU's aliased variables are
+not two inputs, and the FMU cache is never taken from another user's hands.
+
+FMUs are built with pythonfmu at test time (DampedOscillator, co-simulation FMI 2.0:
+x'' + c x' + k x = 0 stepped by its exact solution) and edited as the zip archives they are.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# --------------------------------------------------------------------------- helpers
+
+FMU_CONFIG = """\
+name: trust-fmu
+model:
+  kind: fmu
+  fmu: {fmu}
+  params: {{x0: 1.0, v0: 0.0}}
+  outputs: [x]
+time: {{start: 0.0, stop: 2.0, points: 11}}
+inputs:
+{inputs}
+method: {{kind: collocation, order: 2, validation: 0}}
+execution: {{jobs: 1}}
+output: out.h5
+"""
+K_INPUT = "  k: {dist: uniform, low: 3.5, high: 4.5}"
+C_INPUT = "  c: {dist: uniform, low: 0.2, high: 0.6}"
+
+
+def pcmb_cli(folder: Path, *args: str, env: dict[str, str] | None = None):
+    """``python -m pcmb.cli ARGS`` in ``folder``, waited for."""
+    return subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", *args],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+        env=env,
+    )
+
+
+@pytest.fixture(scope="module")
+def oscillator_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """DampedOscillator.fmu, built by pythonfmu (skips without a binary for this platform)."""
+    pytest.importorskip("fmpy", reason="the FMU tests need fmpy")
+    pythonfmu = pytest.importorskip("pythonfmu", reason="the test FMUs are built by pythonfmu")
+    from fmpy import platform, supported_platforms
+
+    dest = tmp_path_factory.mktemp("fmu")
+    built = Path(
+        pythonfmu.FmuBuilder.build_FMU(ROOT / "models" / "fmu" / "DampedOscillator.py", dest=dest)
+    )
+    if platform not in supported_platforms(str(built)):
+        pytest.skip(f"pythonfmu ships no FMU binary for this platform ({platform})")
+    return built
+
+
+def edited_fmu(source: Path, dest: Path, edit: dict[str, object]) -> Path:
+    """A copy of the FMU ``source`` at ``dest`` with members replaced: name -> new bytes, or a
+    function of the old bytes."""
+    with zipfile.ZipFile(source) as old, zipfile.ZipFile(dest, "w") as new:
+        for item in old.infolist():
+            data = old.read(item.filename)
+            change = edit.get(item.filename)
+            if change is not None:
+                data = change(data) if callable(change) else change
+            new.writestr(item, data)
+    return dest
+
+
+def damped_x(times: np.ndarray, k: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """x of x'' + c x' + k x = 0 from x = 1 at rest, (N, T) for (N,) k and c."""
+    from pcmb.references import damped_oscillator
+
+    return np.array([damped_oscillator(times, ki, ci) for ki, ci in zip(k, c, strict=True)])
+
+
+# --------------------------------------------------------------------------- item 4: aliases
+
+
+def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
+    oscillator_fmu: Path, tmp_path: Path
+) -> None:
+    # c gets k's value reference: the two names are aliases of one value of the FMU.
+    aliased = edited_fmu(
+        oscillator_fmu,
+        tmp_path / "Aliased.fmu",
+        {
+            "modelDescription.xml": lambda xml: xml.replace(
+                b'name="c" valueReference="1"', b'name="c" valueReference="0"'
+            )
+        },
+    )
+    (tmp_path / "study.yaml").write_text(
+        FMU_CONFIG.format(fmu=aliased, inputs=f"{K_INPUT}\n{C_INPUT}")
+    )
+    for command in (("validate", "study.yaml"), ("run", "study.yaml", "--quiet")):
+        done = pcmb_cli(tmp_path, *command)
+        assert done.returncode == 2, done.stdout + done.stderr
+        assert re.search(r"inputs\.c: .*inputs\.k", done.stderr), done.stderr
+        assert "valueReference 0" in done.stderr
+        assert "Traceback" not in done.stderr
+    assert not (tmp_path / "out.h5").exists()
+
+    # From Python, where no validator runs, the first node refuses it.
+    import pcmb
+    from pcmb.adapters.fmu.factory import FmuModelFactory
+    from pcmb.errors import ModelDefinitionError
+
+    study = pcmb.Study(
+        FmuModelFactory(fmu=aliased, outputs=("x",)),
+        {"k": pcmb.Uniform(3.5, 4.5), "c": pcmb.Uniform(0.2, 0.6)},
+        np.linspace(0.0, 2.0, 11),
+        order=1,
+        jobs=1,
+        validation=0,
+    )
+    with pytest.raises(ModelDefinitionError, match=r"inputs\.c: 'c' and 'k' \(inputs\.k\)"):
+        study.run()
