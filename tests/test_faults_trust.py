@@ -7,9 +7,13 @@ x'' + c x' + k x = 0 stepped by its exact solution) and edited as the zip archiv
 
 from __future__ import annotations
 
+import hashlib
+import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -129,3 +133,78 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
     )
     with pytest.raises(ModelDefinitionError, match=r"inputs\.c: 'c' and 'k' \(inputs\.k\)"):
         study.run()
+
+
+# --------------------------------------------------------------------------- item 9: FMU cache
+
+
+def study_env(cache: Path) -> dict[str, str]:
+    """The environment of a run whose per-user cache folder is ``cache``."""
+    return {**os.environ, "XDG_CACHE_HOME": str(cache)}
+
+
+def plant(archive: Path, folder: Path, marker: Path) -> None:
+    """Extract ``archive`` into ``folder`` with its model code tampered: it writes ``marker``
+    when loaded and steps the oscillator with twice its stiffness."""
+    with zipfile.ZipFile(archive) as zipped:
+        zipped.extractall(folder)
+    code = folder / "resources" / "DampedOscillator.py"
+    text = code.read_text().replace("w = math.sqrt(self.k", "w = math.sqrt(2 * self.k")
+    code.write_text(f"open({str(marker)!r}, 'w').close()\n" + text)
+
+
+def test_a_planted_fmu_cache_entry_never_runs(oscillator_fmu: Path, tmp_path: Path) -> None:
+    marker = tmp_path / "planted-code-ran"
+    digest = hashlib.sha256(oscillator_fmu.read_bytes()).hexdigest()[:32]
+    cache = tmp_path / "cache"
+    # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it), and
+    # where it does now: the user's own cache, private, whose entries it checks.
+    shared = Path(tempfile.gettempdir()) / "pcmb-fmu" / digest
+    private = cache / "pcmb" / "fmu" / digest
+    for folder in (shared, private):
+        plant(oscillator_fmu, folder, marker)
+    for folder in (cache / "pcmb", cache / "pcmb" / "fmu", private):
+        folder.chmod(0o700)
+    (tmp_path / "study.yaml").write_text(
+        FMU_CONFIG.format(fmu=oscillator_fmu, inputs=f"{K_INPUT}\n{C_INPUT}")
+    )
+    try:
+        done = pcmb_cli(tmp_path, "run", "study.yaml", "--quiet", env=study_env(cache))
+    finally:
+        shutil.rmtree(shared)
+    assert done.returncode == 0, done.stderr
+    assert not marker.exists()
+    import pcmb
+
+    result = pcmb.load(tmp_path / "out.h5")
+    np.testing.assert_allclose(
+        result.values["x"], damped_x(result.times, *result.params.T), atol=1e-12
+    )
+    # The tampered entry was replaced by the archive's own content.
+    with zipfile.ZipFile(oscillator_fmu) as zipped:
+        genuine = zipped.read("resources/DampedOscillator.py")
+    assert (private / "resources" / "DampedOscillator.py").read_bytes() == genuine
+
+
+@pytest.mark.parametrize("folder", ["pcmb", "pcmb/fmu"])
+@pytest.mark.parametrize("spoiled", ["owned by uid 65534", "writable by other users"])
+def test_an_fmu_cache_folder_of_another_user_or_open_to_all_is_refused(
+    oscillator_fmu: Path, tmp_path: Path, folder: str, spoiled: str
+) -> None:
+    cache = tmp_path / "cache"
+    spoilt = cache / folder
+    spoilt.mkdir(parents=True, mode=0o700)
+    if spoiled.startswith("owned"):
+        if os.getuid() != 0:
+            pytest.skip("giving a folder to another user (chown) needs root")
+        os.chown(spoilt, 65534, 65534)  # nobody
+    else:
+        spoilt.chmod(0o777)
+    (tmp_path / "study.yaml").write_text(FMU_CONFIG.format(fmu=oscillator_fmu, inputs=K_INPUT))
+    done = pcmb_cli(tmp_path, "run", "study.yaml", "--quiet", env=study_env(cache))
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert f"model.fmu: the FMU cache folder {spoilt} is {spoiled}" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert not (tmp_path / "out.h5").exists()
+    assert not any(p.name not in ("fmu",) for p in (cache / "pcmb").iterdir())
+    assert not (cache / "pcmb" / "fmu").exists() or not any((cache / "pcmb" / "fmu").iterdir())

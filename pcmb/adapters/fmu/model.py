@@ -1,9 +1,10 @@
 """Functional Mock-up Units as models (``model.kind: fmu``); the only pcmb module importing fmpy.
 
 The FMU's ``modelDescription.xml`` is read and checked at construction (variable names,
-causalities, units), its archive extracted (once per machine, into a cache) and one
-instance made: a worker builds the model once and runs every node of its chunks on that
-instance, resetting it between nodes.
+causalities, units, aliases), its archive extracted (once per user, into a private cache
+checked before every use: :mod:`pcmb.adapters.fmu.cache`) and one instance made: a worker
+builds the model once and runs every node of its chunks on that instance, resetting it
+between nodes.
 Co-simulation FMUs are stepped from one output time to the next (``fmi*DoStep`` exactly onto
 the grid); model-exchange FMUs are integrated by FMPy's CVode. An FMI error, discard or fatal
 status, or a solver failure, is a failed run of that node. See ``docs/models.md``.
@@ -13,11 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
-import hashlib
 import math
-import os
-import shutil
-import tempfile
 import weakref
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -26,11 +23,12 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
-from fmpy import extract, platform, supported_platforms
+from fmpy import platform, supported_platforms
 from fmpy.model_description import ModelDescription, ScalarVariable, read_model_description
 from fmpy.simulation import instantiate_fmu, settable_in_instantiated, simulate_fmu
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.adapters.fmu.cache import CacheError, extracted
 from pcmb.adapters.fmu.factory import Interface
 from pcmb.adapters.protocol import PointwiseModel, describe_exception
 from pcmb.errors import ConfigError, ConfigProblem, ModelDefinitionError, ModelError
@@ -514,34 +512,15 @@ class FmuModel(PointwiseModel):
         return [(m, refs, np.array(pos, dtype=np.intp)) for m, (refs, pos) in groups.items()]
 
     @staticmethod
-    @staticmethod
     def _extract(path: Path) -> str:
-        """The folder of the extracted FMU: ``path`` itself, or the FMU's folder in the cache.
-
-        Extracted once per machine into ``<temp>/pcmb-fmu/<SHA-256 of the archive>``, shared
-        by every worker and later runs: a worker killed mid-run leaves nothing behind, and
-        a changed archive gets a folder of its own. Made under a temporary name and renamed
-        into place, so a worker never sees a half-extracted FMU.
-        """
+        """The folder of the extracted FMU: ``path`` itself, or the FMU's folder in this
+        user's cache, checked before use (:mod:`pcmb.adapters.fmu.cache`)."""
         if path.is_dir():
             return str(path)
         try:
-            digest = hashlib.sha256(path.read_bytes()).hexdigest()
-            cache = Path(tempfile.gettempdir()) / "pcmb-fmu"
-            folder = cache / digest[:32]
-            if not (folder / "modelDescription.xml").is_file():
-                cache.mkdir(exist_ok=True)
-                staging = tempfile.mkdtemp(prefix=".extracting-", dir=cache)
-                extract(str(path), unzipdir=staging)
-                try:
-                    os.rename(staging, folder)
-                except OSError:  # another worker was first: use its folder
-                    shutil.rmtree(staging, ignore_errors=True)
-            return str(folder)
-        except Exception as exc:
-            raise ConfigError(
-                [_problem("model.fmu", f"cannot extract {path}: {describe_exception(exc)}")]
-            ) from exc
+            return str(extracted(path))
+        except CacheError as exc:
+            raise ConfigError([_problem("model.fmu", str(exc))]) from exc
 
     def _new_instance(self) -> Any:
         """A new FMPy instance of the FMU.
