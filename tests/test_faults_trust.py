@@ -91,6 +91,99 @@ def damped_x(times: np.ndarray, k: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.array([damped_oscillator(times, ki, ci) for ki, ci in zip(k, c, strict=True)])
 
 
+# --------------------------------------------------------------------------- item 2: resume
+
+# The model's entry imports helper.py (beside it) and reads data/scale.txt (listed under
+# model.files); FAIL_ABOVE=a makes the nodes above a fail, so that an aborted run leaves a
+# journal of the nodes below it.
+ENTRY = """
+import os
+from pathlib import Path
+
+import pcmb
+
+import helper
+
+SCALE = Path(__file__).with_name("data") / "scale.txt"
+
+
+@pcmb.pointwise(outputs=("y",))
+def line(params, times):
+    limit = os.environ.get("FAIL_ABOVE")
+    if limit is not None and params["a"] > float(limit):
+        raise RuntimeError("stopped here")
+    scale = float(SCALE.read_text())
+    return {"y": scale * helper.slope(params["a"]) * times}
+"""
+HELPER = "def slope(a):\n    return a\n"
+PYTHON_CONFIG = """\
+name: trust-resume
+model:
+  kind: python
+  entry: model.py:line
+  params: {a: 1.0}
+  files: [data/scale.txt]
+time: {start: 0.0, stop: 1.0, points: 3}
+inputs:
+  a: {dist: uniform, low: 1.0, high: 3.0}
+method: {kind: collocation, order: 3, validation: 0}
+execution: {jobs: 1, chunk_size: 1}
+output: out.h5
+"""
+
+
+@pytest.fixture
+def interrupted(tmp_path: Path) -> Path:
+    """A python study whose run stopped with 2 of its 4 nodes finished, its journal kept."""
+    (tmp_path / "model.py").write_text(ENTRY)
+    (tmp_path / "helper.py").write_text(HELPER)
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "scale.txt").write_text("1.0\n")
+    (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
+    stopped = pcmb_cli(
+        tmp_path, "run", "study.yaml", "--quiet", env={**os.environ, "FAIL_ABOVE": "2.0"}
+    )
+    assert stopped.returncode == 3, stopped.stderr
+    assert (tmp_path / "out.h5.journal").is_dir()
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    ("edited", "content"),
+    [("helper.py", "def slope(a):\n    return 2 * a\n"), ("data/scale.txt", "2.0\n")],
+)
+def test_resume_refuses_an_edited_imported_module_or_listed_file(
+    interrupted: Path, edited: str, content: str
+) -> None:
+    folder = interrupted
+    journal = sorted((folder / "out.h5.journal").iterdir())
+    changed = folder / edited
+    original = changed.read_text()
+    changed.write_text(content)
+    refused = pcmb_cli(folder, "run", "study.yaml", "--quiet", "--resume")
+    assert refused.returncode == 2, refused.stderr
+    assert f"model file {changed.resolve()} has changed since" in refused.stderr
+    assert not (folder / "out.h5").exists()
+    assert sorted((folder / "out.h5.journal").iterdir()) == journal
+
+    changed.write_text(original)  # the old content again: resumable, every node the same code
+    resumed = pcmb_cli(folder, "run", "study.yaml", "--quiet", "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    import pcmb
+
+    result = pcmb.load(folder / "out.h5")
+    np.testing.assert_array_equal(result.values["y"], result.params[:, [0]] * result.times)
+
+
+def test_a_missing_listed_model_file_is_named_at_its_key(tmp_path: Path) -> None:
+    (tmp_path / "model.py").write_text(ENTRY)
+    (tmp_path / "helper.py").write_text(HELPER)
+    (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
+    done = pcmb_cli(tmp_path, "validate", "study.yaml")
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert "model.files[0]: file " in done.stderr and "scale.txt does not exist" in done.stderr
+
+
 # --------------------------------------------------------------------------- item 4: aliases
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -93,6 +94,17 @@ class ModelFactory(ABC):
     @abstractmethod
     def __call__(self) -> Model:
         """Build the model."""
+
+    def model_files(self) -> list[Path]:
+        """The files the model reads that are known before it is built (its entry file, its
+        program, its scene, its archive, the files its config lists), absolute; a resume
+        journal holds their digests. Default: none."""
+        return []
+
+    def loaded_files(self) -> list[Path]:
+        """The files the model loaded while it was built (its own modules), absolute; called
+        in the worker process right after building it. Default: none."""
+        return []
 
 
 def describe_exception(exc: BaseException) -> str:

@@ -348,28 +348,33 @@ class _Factory:
     payload: bytes
     path: tuple[str, ...]
 
-    def build(self) -> Model:
+    def build(self) -> tuple[Model, tuple[str, ...]]:
+        """The model, and the files it loaded while built (its factory's ``loaded_files``)."""
         missing = [entry for entry in self.path if entry not in sys.path]
         sys.path.extend(missing)
-        return cloudpickle.loads(self.payload)()
+        factory = cloudpickle.loads(self.payload)
+        model = factory()
+        loaded = getattr(factory, "loaded_files", None)
+        return model, tuple(str(path) for path in loaded()) if callable(loaded) else ()
 
 
-def _cached_model(factory: _Factory) -> tuple[Model, float]:
-    """The model built by ``factory`` in this thread, and the seconds spent building it now."""
+def _cached_model(factory: _Factory) -> tuple[Model, float, tuple[str, ...]]:
+    """The model built by ``factory`` in this thread, the seconds spent building it now, and
+    the files it loaded while built."""
     token = factory.token
     held = getattr(_MODEL_CACHE, "held", None)
     if held is not None and held[0] == token:
-        return held[1], 0.0
+        return held[1], 0.0, held[2]
     _MODEL_CACHE.held = None  # release the previous model before building the next one
     start = time.perf_counter()
     try:
-        model = _model_code(factory.build)
+        model, loaded = _model_code(factory.build)
     except PcmbError:
         raise
     except Exception as exc:
         raise ModelDefinitionError(f"could not build the model: {_describe(exc)}") from exc
-    _MODEL_CACHE.held = (token, model)
-    return model, time.perf_counter() - start
+    _MODEL_CACHE.held = (token, model, loaded)
+    return model, time.perf_counter() - start, loaded
 
 
 @dataclass(frozen=True)
@@ -399,6 +404,9 @@ class ModelFacts:
     input_problems:
         ``(key, message)`` of what its ``check_inputs`` found wrong with the uncertain inputs
         asked about (see :func:`describe_model`).
+    loaded_files:
+        The files it loaded while built, absolute (its factory's ``loaded_files``: a python
+        model's own modules), for the resume journal's fingerprint.
     """
 
     name: str
@@ -410,6 +418,7 @@ class ModelFacts:
     time_problems: tuple[tuple[str, str], ...] = ()
     axes: Mapping[str, OutputAxis | None] = dataclasses.field(default_factory=dict)
     input_problems: tuple[tuple[str, str], ...] = ()
+    loaded_files: tuple[str, ...] = ()
 
 
 def _problems(model: Model, check: str, argument: object, key: str) -> tuple[tuple[str, str], ...]:
@@ -429,7 +438,7 @@ def _model_facts(
     factory: _Factory, times: NDArray[np.float64] | None, inputs: tuple[str, ...]
 ) -> ModelFacts:
     """Build (or reuse) the model in this process and describe it."""
-    model, seconds = _cached_model(factory)
+    model, seconds, loaded = _cached_model(factory)
     time_problems = () if times is None else _problems(model, "check_times", times, "time")
     input_problems = _problems(model, "check_inputs", inputs, "inputs") if inputs else ()
     offered = getattr(model, "outputs", None)
@@ -453,6 +462,7 @@ def _model_facts(
         time_problems=time_problems,
         axes=axes,
         input_problems=input_problems,
+        loaded_files=loaded,
     )
 
 
@@ -519,7 +529,7 @@ def run_in_worker(
 
 
 def _with_model(factory: _Factory, task: Callable[..., _T], args: tuple[Any, ...]) -> _T:
-    model, _ = _cached_model(factory)
+    model, _, _ = _cached_model(factory)
     return _model_code(task, model, *args)
 
 
@@ -606,7 +616,7 @@ def _execute(
     batch would only return a NaN row, so each node runs once (``1 + retries`` times if it
     fails) and its failure keeps its message.
     """
-    model, _ = _cached_model(factory)
+    model, _, _ = _cached_model(factory)
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
     params = {name: _read_only(array) for name, array in params.items()}
