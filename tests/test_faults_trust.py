@@ -184,6 +184,47 @@ def test_a_missing_listed_model_file_is_named_at_its_key(tmp_path: Path) -> None
     assert "model.files[0]: file " in done.stderr and "scale.txt does not exist" in done.stderr
 
 
+def test_a_package_entry_reports_the_modules_it_loaded_from_its_folder_tree(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pcmb.adapters.python.model import PythonModelFactory
+
+    monkeypatch.setattr(sys, "path", list(sys.path))  # the model extends it
+
+    name = f"trust_pkg_{tmp_path.name.replace('-', '_')}"  # a fresh name in this process
+    package = tmp_path / name
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "util.py").write_text("def slope(a):\n    return a\n")
+    (tmp_path / f"{name}_shared.py").write_text("OFFSET = 0.0\n")
+    # A folder of installed packages inside the tree (a virtual environment) does not count.
+    installed = tmp_path / "venv" / "site-packages"
+    installed.mkdir(parents=True)
+    (installed / f"{name}_installed.py").write_text("")
+    (package / "model.py").write_text(
+        "import sys\n"
+        f"sys.path.append({str(installed)!r})\n"
+        f"import {name}_installed\n"
+        f"import {name}_shared\n"
+        f"from {name}.util import slope\n\n"
+        "import pcmb\n\n\n"
+        "@pcmb.pointwise(outputs=('y',))\n"
+        "def line(params, times):\n"
+        "    return {'y': slope(params['a']) * times}\n"
+    )
+    factory = PythonModelFactory(f"{name}.model:line", tmp_path, {"a": 1.0})
+    factory()
+    assert factory.model_files() == [package / "model.py"]
+    assert factory.loaded_files() == sorted(
+        [
+            package / "__init__.py",
+            package / "model.py",
+            package / "util.py",
+            tmp_path / f"{name}_shared.py",
+        ]
+    )
+
+
 # --------------------------------------------------------------------------- item 4: aliases
 
 

@@ -14,6 +14,7 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
+import os
 import re
 import site
 import sys
@@ -311,10 +312,14 @@ def local_modules(root: Path) -> list[Path]:
     if _installed(root, environment):
         return []
     found = set()
+    folders: dict[str, Path] = {}  # each folder resolved once: modules share few folders
     for module in list(sys.modules.values()):
         name = getattr(module, "__file__", None)
         if isinstance(name, str):
-            path = Path(name).resolve()
+            head, tail = os.path.split(name)
+            if head not in folders:
+                folders[head] = Path(head).resolve()
+            path = folders[head] / tail
             if path.is_relative_to(root) and not _installed(path, environment):
                 found.add(path)
     return sorted(found)
