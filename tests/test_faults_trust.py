@@ -287,17 +287,27 @@ def plant(archive: Path, folder: Path, marker: Path) -> None:
     code.write_text(f"open({str(marker)!r}, 'w').close()\n" + text)
 
 
-def test_a_planted_fmu_cache_entry_never_runs(oscillator_fmu: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("how", ["edited", "linked"])
+def test_a_planted_fmu_cache_entry_never_runs(
+    oscillator_fmu: Path, tmp_path: Path, how: str
+) -> None:
     marker = tmp_path / "planted-code-ran"
     digest = hashlib.sha256(oscillator_fmu.read_bytes()).hexdigest()[:32]
     cache = tmp_path / "cache"
     # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it), and
-    # where it does now: the user's own cache, private, whose entries it checks.
+    # where it does now: the user's own cache, private, whose entries it checks (an entry
+    # edited in place, or a link to a folder elsewhere).
     shared = Path(tempfile.gettempdir()) / "pcmb-fmu" / digest
     private = cache / "pcmb" / "fmu" / digest
-    for folder in (shared, private):
-        plant(oscillator_fmu, folder, marker)
-    for folder in (cache / "pcmb", cache / "pcmb" / "fmu", private):
+    plant(oscillator_fmu, shared, marker)
+    if how == "edited":
+        plant(oscillator_fmu, private, marker)
+        private.chmod(0o700)
+    else:
+        plant(oscillator_fmu, tmp_path / "elsewhere", marker)
+        private.parent.mkdir(parents=True)
+        private.symlink_to(tmp_path / "elsewhere")
+    for folder in (cache / "pcmb", cache / "pcmb" / "fmu"):
         folder.chmod(0o700)
     (tmp_path / "study.yaml").write_text(
         FMU_CONFIG.format(fmu=oscillator_fmu, inputs=f"{K_INPUT}\n{C_INPUT}")
@@ -315,6 +325,7 @@ def test_a_planted_fmu_cache_entry_never_runs(oscillator_fmu: Path, tmp_path: Pa
         result.values["x"], damped_x(result.times, *result.params.T), atol=1e-12
     )
     # The tampered entry was replaced by the archive's own content.
+    assert not private.is_symlink()
     with zipfile.ZipFile(oscillator_fmu) as zipped:
         genuine = zipped.read("resources/DampedOscillator.py")
     assert (private / "resources" / "DampedOscillator.py").read_bytes() == genuine

@@ -8,9 +8,10 @@ with other users; its folders are made private (mode 0700). Before every use:
 
 - the cache folders (``pcmb`` and ``pcmb/fmu``) and the entry must be real folders (not
   symbolic links) owned by this user and writable by no one else, or the FMU is refused;
-- the entry must hold exactly the archive's files, each a regular file with the size and
-  SHA-256 of its archive member, and nothing else; an entry that does not (half deleted,
-  tampered with) is replaced by a fresh extraction.
+- the entry must be private (mode 0700) and hold every file of the archive as a regular
+  file (no symbolic link on its way) with the size and SHA-256 of its archive member; an
+  entry that does not (half deleted, tampered with) is replaced by a fresh extraction.
+  Other files in it are left alone: an FMU may write into its own folder while it runs.
 """
 
 from __future__ import annotations
@@ -107,27 +108,28 @@ def _members(archive: zipfile.ZipFile) -> dict[Path, tuple[int, str]]:
 
 
 def _matches(folder: Path, members: dict[Path, tuple[int, str]]) -> bool:
-    """Whether ``folder`` is a private folder of this user holding exactly ``members``: no
-    link, no other file, every file of the right size and content."""
+    """Whether ``folder`` is a private folder of this user (mode 0700 or less) holding every
+    member as a regular file of the right size and content, with no link on the way.
+
+    Other files are allowed: an FMU may write into its own folder while it runs.
+    """
     try:
         _private(folder)
+        if stat.S_IMODE(os.lstat(folder).st_mode) & 0o077:
+            return False
+        real = folder.resolve()
+        for relative, expected in members.items():
+            path = real / relative
+            if Path(os.path.realpath(path)) != path:  # a link in the way
+                return False
+            with open(path, "rb", opener=_no_links) as handle:
+                if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+                    return False
+                if _sha256(handle) != expected:
+                    return False
     except (OSError, CacheError):
         return False
-    found = {}
-    for base, folders, files in os.walk(folder):
-        for name in folders:
-            if os.path.islink(os.path.join(base, name)):
-                return False
-        for name in files:
-            path = Path(base) / name
-            try:
-                with open(path, "rb", opener=_no_links) as handle:
-                    if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
-                        return False
-                    found[path.relative_to(folder)] = _sha256(handle)
-            except OSError:
-                return False
-    return found == members
+    return True
 
 
 def _no_links(path: str, flags: int) -> int:
