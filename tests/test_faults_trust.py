@@ -225,6 +225,30 @@ def test_a_package_entry_reports_the_modules_it_loaded_from_its_folder_tree(
     )
 
 
+@pytest.mark.parametrize("kind", ["python", "command", "mujoco", "fmu"])
+def test_every_adapter_declares_the_files_its_model_reads(
+    kind: str, oscillator_fmu: Path, tmp_path: Path
+) -> None:
+    from pcmb.adapters.protocol import ModelFactory
+    from pcmb.adapters.registry import spec_class
+    from pcmb.config.loader import parse_yaml
+    from pcmb.run.fingerprint import model_files
+
+    if kind == "mujoco":
+        pytest.importorskip("mujoco")
+    examples = ROOT / "tests" / "data" / "adapters"
+    text = (examples / f"{kind}.yaml").read_text()
+    text = text.replace("${PYTHON}", sys.executable).replace(
+        "${FMU_DIR}", str(oscillator_fmu.parent)
+    )
+    data, _, problems = parse_yaml(text, kind)
+    assert not problems
+    factory = spec_class(kind).model_validate(data["model"]).factory(examples)
+    assert type(factory).model_files is not ModelFactory.model_files
+    found = model_files(factory)
+    assert found and all(path.is_absolute() and path.is_file() for path in found), found
+
+
 # --------------------------------------------------------------------------- item 4: aliases
 
 
