@@ -1,8 +1,8 @@
 """The per-user cache of extracted FMUs, trusted only once checked.
 
 An FMU's binaries (and a pythonfmu FMU's Python code) run inside the worker that loads them,
-so the folder they are loaded from must hold exactly the archive's content, put there by
-this user. The cache lives in the user's cache folder (``platformdirs.user_cache_dir``:
+so the folder they are loaded from must hold the archive's files as they are in the archive,
+put there by this user. The cache lives in the user's cache folder (``platformdirs.user_cache_dir``:
 ``$XDG_CACHE_HOME/pcmb/fmu`` or ``~/.cache/pcmb/fmu`` on Linux), never in a folder shared
 with other users; its folders are made private (mode 0700). Before every use:
 
@@ -150,8 +150,8 @@ def extracted(archive: Path) -> Path:
 
     The entry (``<cache>/<SHA-256 of the archive>``) is made under a temporary name and
     renamed into place, so a worker never sees a half-extracted FMU; workers of one machine
-    share it. An entry that does not hold exactly the archive's content is removed and
-    extracted again.
+    share it. An entry that does not hold the archive's files intact (or is not private) is
+    removed and extracted again.
 
     Raises
     ------
