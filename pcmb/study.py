@@ -453,7 +453,9 @@ class Study:
         """The nodes this study runs (made by its design)."""
         return self.design.nodes()
 
-    def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> Fingerprint:
+    def fingerprint(
+        self, nodes: TensorGrid | NodeSet, outputs: Sequence[str], loaded: Sequence[str] = ()
+    ) -> Fingerprint:
         """What the resume journal belongs to: everything that changes the node values.
 
         Its ``digest`` hashes the nodes' parameters, the time grid, the settings of every
@@ -462,9 +464,12 @@ class Study:
         (for a study built from a config: the run-relevant part of the validated config,
         see :meth:`from_config`) and the pickled model factory (entry, params, or the object
         itself). Its ``files`` table holds the SHA-256 of the content of every file the model
-        is known to depend on (:func:`pcmb.run.fingerprint.model_files`: the python entry
-        file, a command's program, templates and files, an MJCF scene and what it
-        references), so that editing one between a kill and a resume is refused, naming it.
+        is known to depend on, so that editing one between a kill and a resume is refused,
+        naming it: those its factory declares (:func:`pcmb.run.fingerprint.model_files`: the
+        python entry file and ``model.files``, a command's program, templates and files, an
+        MJCF scene and what it references, an FMU) and ``loaded``, the files the model
+        loaded while built in a worker (:attr:`~pcmb.run.executor.ModelFacts.loaded_files`:
+        a python model's own modules).
         Execution settings that cannot change a node's values (jobs, backend, failure
         policy) and the analysis are left out: changing them keeps the finished work.
         """
@@ -476,7 +481,8 @@ class Study:
             settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
-        return Fingerprint(digest.hexdigest(), digest_files(model_files(self.model_factory)))
+        files = digest_files([*model_files(self.model_factory), *loaded])
+        return Fingerprint(digest.hexdigest(), files)
 
     # -- running ------------------------------------------------------------------------------
 
@@ -800,9 +806,8 @@ class Study:
         if journal_dir is not None:
             fresh_journal = not Journal.exists(journal_dir)
             widths = Layout.of(outputs, self.times, facts.axes).widths
-            journal = Journal(
-                journal_dir, self.fingerprint(nodes, outputs), nodes.size, outputs, widths
-            )
+            fingerprint = self.fingerprint(nodes, outputs, facts.loaded_files)
+            journal = Journal(journal_dir, fingerprint, nodes.size, outputs, widths)
         try:
             runs = run_nodes(
                 self.model_factory,

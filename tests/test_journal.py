@@ -16,19 +16,13 @@ import numpy as np
 import pytest
 
 import pcmb
+from pcmb.adapters.command.model import command_files
+from pcmb.adapters.mujoco.files import mjcf_files
+from pcmb.adapters.python.model import python_entry_files
 from pcmb.errors import ResultFileError, UsageError
 from pcmb.result import Status
 from pcmb.run import journal as journal_module
-from pcmb.run.fingerprint import (
-    MISSING,
-    Fingerprint,
-    changed_files,
-    command_files,
-    digest_files,
-    mjcf_files,
-    model_files,
-    python_entry_files,
-)
+from pcmb.run.fingerprint import MISSING, Fingerprint, changed_files, digest_files, model_files
 from pcmb.run.journal import Journal
 
 OUTPUTS = ("x", "v")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -45,6 +46,9 @@ class Model(Protocol):
       the adapter was given (``model.params``): an uncertain input then needs one there;
     - ``check_times(times)`` raising :class:`~pcmb.errors.ConfigError` when the model cannot
       produce the grid; the config validator calls it before anything runs;
+    - ``check_inputs(names)`` raising :class:`~pcmb.errors.ConfigError` (at ``inputs.<name>``)
+      when the model cannot vary these uncertain inputs independently (an FMU's aliased
+      variables); the config validator calls it before anything runs;
     - ``chunk_size: int``, the nodes per call the model prefers (a stacked integrator pays
       per call); ``execution.chunk_size`` overrides it;
     - ``output_axes: Mapping[str, OutputAxis | None]``, the outputs that are not time
@@ -90,6 +94,17 @@ class ModelFactory(ABC):
     @abstractmethod
     def __call__(self) -> Model:
         """Build the model."""
+
+    def model_files(self) -> list[Path]:
+        """The files the model reads that are known before it is built (its entry file, its
+        program, its scene, its archive, the files its config lists), absolute; a resume
+        journal holds their digests. Default: none."""
+        return []
+
+    def loaded_files(self) -> list[Path]:
+        """The files the model loaded while it was built (its own modules), absolute; called
+        in the worker process right after building it. Default: none."""
+        return []
 
 
 def describe_exception(exc: BaseException) -> str:

@@ -134,7 +134,7 @@ def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple
     try:
         with open_pool(backend, config.execution.jobs) as pool:
             factory = config.model_factory()
-            facts = describe_model(factory, pool, config.times)
+            facts = describe_model(factory, pool, config.times, tuple(config.inputs))
             # An intrusive method checks the model's polynomial form where the model lives.
             check = getattr(_intrusive(config), "check", None)
             if check is not None:
@@ -168,6 +168,7 @@ def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple
                     f"inputs.{name}",
                     f"{name!r} is not a parameter of {label} (parameters: {', '.join(declared)})",
                 )
+    yield from facts.input_problems
     kept = tuple(config.output_names or facts.outputs)
     on_time = tuple(name for name in kept if name not in facts.axes)
     every = (*kept, *config.derived)  # a figure of merit is an output too

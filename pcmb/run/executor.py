@@ -348,28 +348,33 @@ class _Factory:
     payload: bytes
     path: tuple[str, ...]
 
-    def build(self) -> Model:
+    def build(self) -> tuple[Model, tuple[str, ...]]:
+        """The model, and the files it loaded while built (its factory's ``loaded_files``)."""
         missing = [entry for entry in self.path if entry not in sys.path]
         sys.path.extend(missing)
-        return cloudpickle.loads(self.payload)()
+        factory = cloudpickle.loads(self.payload)
+        model = factory()
+        loaded = getattr(factory, "loaded_files", None)
+        return model, tuple(str(path) for path in loaded()) if callable(loaded) else ()
 
 
-def _cached_model(factory: _Factory) -> tuple[Model, float]:
-    """The model built by ``factory`` in this thread, and the seconds spent building it now."""
+def _cached_model(factory: _Factory) -> tuple[Model, float, tuple[str, ...]]:
+    """The model built by ``factory`` in this thread, the seconds spent building it now, and
+    the files it loaded while built."""
     token = factory.token
     held = getattr(_MODEL_CACHE, "held", None)
     if held is not None and held[0] == token:
-        return held[1], 0.0
+        return held[1], 0.0, held[2]
     _MODEL_CACHE.held = None  # release the previous model before building the next one
     start = time.perf_counter()
     try:
-        model = _model_code(factory.build)
+        model, loaded = _model_code(factory.build)
     except PcmbError:
         raise
     except Exception as exc:
         raise ModelDefinitionError(f"could not build the model: {_describe(exc)}") from exc
-    _MODEL_CACHE.held = (token, model)
-    return model, time.perf_counter() - start
+    _MODEL_CACHE.held = (token, model, loaded)
+    return model, time.perf_counter() - start, loaded
 
 
 @dataclass(frozen=True)
@@ -396,6 +401,12 @@ class ModelFacts:
     axes:
         Its ``output_axes`` (model protocol): output name -> its own axis, or ``None`` for a
         scalar; the outputs not listed are on time.
+    input_problems:
+        ``(key, message)`` of what its ``check_inputs`` found wrong with the uncertain inputs
+        asked about (see :func:`describe_model`).
+    loaded_files:
+        The files it loaded while built, absolute (its factory's ``loaded_files``: a python
+        model's own modules), for the resume journal's fingerprint.
     """
 
     name: str
@@ -406,18 +417,30 @@ class ModelFacts:
     nominal_from_params: bool = False
     time_problems: tuple[tuple[str, str], ...] = ()
     axes: Mapping[str, OutputAxis | None] = dataclasses.field(default_factory=dict)
+    input_problems: tuple[tuple[str, str], ...] = ()
+    loaded_files: tuple[str, ...] = ()
 
 
-def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelFacts:
+def _problems(model: Model, check: str, argument: object, key: str) -> tuple[tuple[str, str], ...]:
+    """``(key, message)`` of what the model's optional ``check`` method raises as a
+    :class:`~pcmb.errors.ConfigError` about ``argument`` (none without the method)."""
+    method = getattr(model, check, None)
+    if not callable(method):
+        return ()
+    try:
+        _model_code(method, argument)
+    except ConfigError as error:
+        return tuple((p.path or key, p.message) for p in error.problems)
+    return ()
+
+
+def _model_facts(
+    factory: _Factory, times: NDArray[np.float64] | None, inputs: tuple[str, ...]
+) -> ModelFacts:
     """Build (or reuse) the model in this process and describe it."""
-    model, seconds = _cached_model(factory)
-    time_problems: tuple[tuple[str, str], ...] = ()
-    check_times = getattr(model, "check_times", None)
-    if times is not None and callable(check_times):
-        try:
-            _model_code(check_times, times)
-        except ConfigError as error:
-            time_problems = tuple((p.path or "time", p.message) for p in error.problems)
+    model, seconds, loaded = _cached_model(factory)
+    time_problems = () if times is None else _problems(model, "check_times", times, "time")
+    input_problems = _problems(model, "check_inputs", inputs, "inputs") if inputs else ()
     offered = getattr(model, "outputs", None)
     if offered is None or not callable(getattr(model, "simulate", None)):
         raise UsageError(
@@ -438,6 +461,8 @@ def _model_facts(factory: _Factory, times: NDArray[np.float64] | None) -> ModelF
         nominal_from_params=bool(getattr(model, "nominal_from_params", False)),
         time_problems=time_problems,
         axes=axes,
+        input_problems=input_problems,
+        loaded_files=loaded,
     )
 
 
@@ -455,10 +480,14 @@ def _factory(model_factory: Callable[[], Model]) -> _Factory:
 
 
 def describe_model(
-    model_factory: Callable[[], Model], pool: Pool, times: ArrayLike | None = None
+    model_factory: Callable[[], Model],
+    pool: Pool,
+    times: ArrayLike | None = None,
+    inputs: Sequence[str] = (),
 ) -> ModelFacts:
     """Build the model in one of ``pool``'s workers and say what it offers (and, given
-    ``times``, what it finds wrong with that time grid).
+    ``times`` or ``inputs``, what it finds wrong with that time grid or those uncertain
+    inputs).
 
     Raises
     ------
@@ -472,7 +501,7 @@ def describe_model(
     grid = None if times is None else np.asarray(times, dtype=np.float64)
     # Twice: a worker of a kept pool may have died before this task (killed from outside).
     for _ in range(2):
-        facts, death = _wait(pool, pool.submit(_model_facts, factory, grid))
+        facts, death = _wait(pool, pool.submit(_model_facts, factory, grid, tuple(inputs)))
         if death is None:
             return facts
     raise ModelDefinitionError(f"could not build the model: {death}")
@@ -500,7 +529,7 @@ def run_in_worker(
 
 
 def _with_model(factory: _Factory, task: Callable[..., _T], args: tuple[Any, ...]) -> _T:
-    model, _ = _cached_model(factory)
+    model, _, _ = _cached_model(factory)
     return _model_code(task, model, *args)
 
 
@@ -587,7 +616,7 @@ def _execute(
     batch would only return a NaN row, so each node runs once (``1 + retries`` times if it
     fails) and its failure keeps its message.
     """
-    model, _ = _cached_model(factory)
+    model, _, _ = _cached_model(factory)
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
     params = {name: _read_only(array) for name, array in params.items()}

@@ -26,7 +26,7 @@ import numpy as np
 
 from pcmb.errors import ResultFileError, UsageError
 from pcmb.run.files import write_durably
-from pcmb.run.fingerprint import changed_files, digest_files, model_files
+from pcmb.run.fingerprint import changed_files
 from pcmb.run.journal import FRESH
 from pcmb.run.lock import FolderLock
 from pcmb.run.output import write_error
@@ -71,11 +71,15 @@ def _study(config: StudyConfig, setting: Setting) -> Study:
     return Study.from_config(config.model_copy(update=changes))
 
 
-def _identity(study: Study) -> tuple[str, dict[str, str]]:
+def _identity(study: Study, pool: Any) -> tuple[str, dict[str, str]]:
     """What a finished setting's result belongs to: a digest of everything that changes its
-    values, and the digests of the model's files."""
-    found = study.fingerprint(study.node_set(), study.outputs or ())
-    return found.digest, digest_files(model_files(study.model_factory))
+    values, and the digests of the model's files (the modules it loads too, asked of a
+    worker of ``pool`` that built it)."""
+    from pcmb.run.executor import describe_model
+
+    loaded = describe_model(study.model_factory, pool).loaded_files
+    found = study.fingerprint(study.node_set(), study.outputs or (), loaded)
+    return found.digest, dict(found.files)
 
 
 class _Ledger:
@@ -99,14 +103,14 @@ class _Ledger:
                 ) from error
         self._save()
 
-    def finished(self, stem: str, study: Study, path: Path) -> _Finished | None:
+    def finished(self, stem: str, study: Study, path: Path, pool: Any) -> _Finished | None:
         """The stored result of a setting finished earlier with the same fingerprint."""
         from pcmb.store import load
 
         entry = self.entries.get(stem)
         if entry is None or not path.is_file():
             return None
-        digest, files = _identity(study)
+        digest, files = _identity(study, pool)
         if entry["digest"] != digest:
             return None  # the setting itself changed: run it again
         changed = changed_files(entry["files"], files)
@@ -117,8 +121,8 @@ class _Ledger:
             )
         return _Finished(load(path), float(entry["seconds"]))
 
-    def add(self, stem: str, study: Study, seconds: float) -> None:
-        digest, files = _identity(study)
+    def add(self, stem: str, study: Study, seconds: float, pool: Any) -> None:
+        digest, files = _identity(study, pool)
         self.entries[stem] = {"digest": digest, "files": files, "seconds": seconds}
         self._save()
 
@@ -244,7 +248,7 @@ def _run_setting(
 ) -> _Finished:
     study = _study(config, setting)
     path = folder / f"{setting.stem}.h5"
-    finished = ledger.finished(setting.stem, study, path)
+    finished = ledger.finished(setting.stem, study, path, pool)
     if finished is not None:
         return finished
     journal = Path(f"{path}.journal")
@@ -259,7 +263,7 @@ def _run_setting(
         pool=pool,
     )
     seconds = time.perf_counter() - start
-    ledger.add(setting.stem, study, seconds)
+    ledger.add(setting.stem, study, seconds, pool)
     return _Finished(result, seconds)
 
 

@@ -22,7 +22,7 @@ import tempfile
 import time
 import typing
 import zipfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -40,7 +40,14 @@ from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 from pcmb.run.lifeline import kernel_kills_orphans
 
-__all__ = ["FORMATS", "KEEP_POLICIES", "CommandModel", "CommandModelFactory", "split_command"]
+__all__ = [
+    "FORMATS",
+    "KEEP_POLICIES",
+    "CommandModel",
+    "CommandModelFactory",
+    "command_files",
+    "split_command",
+]
 
 OutputFormat = Literal["csv", "table", "json", "npy", "npz"]
 KeepPolicy = Literal["failed", "all", "none"]
@@ -546,6 +553,24 @@ _READERS: dict[str, Callable[[Path, Sequence[str]], Mapping[str, Any]]] = {
 }
 
 
+def command_files(
+    command: Iterable[str],
+    templates: Iterable[str],
+    files: Iterable[str],
+    base_dir: str | os.PathLike[str],
+) -> list[Path]:
+    """The files a command model reads, resolved like the adapter resolves them: the program
+    when given as a path (a bare name found on ``PATH`` is not), every argument that is an
+    absolute path of an existing file, every template and linked file."""
+    base = Path(base_dir)
+    argv = list(command)
+    found = [base / name for name in (*templates, *files)]
+    if argv and os.sep in argv[0]:
+        found.append(base / argv[0])
+    found += [Path(arg) for arg in argv[1:] if os.path.isabs(arg) and Path(arg).is_file()]
+    return [path.resolve() for path in found]
+
+
 @dataclass(frozen=True)
 class CommandModelFactory(ModelFactory):
     """Builds a :class:`CommandModel`; the fields are its constructor's arguments."""
@@ -564,6 +589,11 @@ class CommandModelFactory(ModelFactory):
     time_column: str = "time"
     axis: OutputAxis | None = None
     axis_column: str = "frequency"
+
+    def model_files(self) -> list[Path]:
+        """The program, its file arguments, the templates and files (:func:`command_files`)."""
+        base = Path.cwd() if self.base_dir is None else self.base_dir
+        return command_files(self.command, self.templates, self.files, base)
 
     def __call__(self) -> CommandModel:
         """Build the model (raises ConfigError as :class:`CommandModel` does)."""

@@ -35,6 +35,13 @@ class FmuModelFactory(ModelFactory):
     interface: Interface | None = None
     rtol: float | None = None
 
+    def model_files(self) -> list[Path]:
+        """The ``.fmu`` archive, or every file of an extracted FMU's folder."""
+        path = Path(self.fmu)
+        if path.is_dir():
+            return sorted(p.resolve() for p in path.rglob("*") if p.is_file())
+        return [path.resolve()] if path.is_file() else []
+
     def __call__(self) -> FmuModel:
         """Read, check, extract and instantiate the FMU.
 

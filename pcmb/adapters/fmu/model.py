@@ -1,9 +1,10 @@
 """Functional Mock-up Units as models (``model.kind: fmu``); the only pcmb module importing fmpy.
 
 The FMU's ``modelDescription.xml`` is read and checked at construction (variable names,
-causalities, units), its archive extracted (once per machine, into a cache) and one
-instance made: a worker builds the model once and runs every node of its chunks on that
-instance, resetting it between nodes.
+causalities, units, aliases), its archive extracted (once per user, into a private cache
+checked before every use: :mod:`pcmb.adapters.fmu.cache`) and one instance made: a worker
+builds the model once and runs every node of its chunks on that instance, resetting it
+between nodes.
 Co-simulation FMUs are stepped from one output time to the next (``fmi*DoStep`` exactly onto
 the grid); model-exchange FMUs are integrated by FMPy's CVode. An FMI error, discard or fatal
 status, or a solver failure, is a failed run of that node. See ``docs/models.md``.
@@ -13,11 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
-import hashlib
 import math
-import os
-import shutil
-import tempfile
 import weakref
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -26,11 +23,12 @@ from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numpy as np
-from fmpy import extract, platform, supported_platforms
+from fmpy import platform, supported_platforms
 from fmpy.model_description import ModelDescription, ScalarVariable, read_model_description
 from fmpy.simulation import instantiate_fmu, settable_in_instantiated, simulate_fmu
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.adapters.fmu.cache import CacheError, extracted
 from pcmb.adapters.fmu.factory import Interface
 from pcmb.adapters.protocol import PointwiseModel, describe_exception
 from pcmb.errors import ConfigError, ConfigProblem, ModelDefinitionError, ModelError
@@ -209,6 +207,11 @@ class FmuModel(PointwiseModel):
         self._check_units(units, problems)
         if problems:
             raise ConfigError(problems)
+        self._params = tuple(params)
+        problems = self._aliases(self._params, ())
+        if problems:
+            raise ConfigError(problems)
+        self._inputs_checked: set[frozenset[str]] = set()
 
         self.parameters: Mapping[str, float] = MappingProxyType(self._nominal(params))
         self._getters = self._group([self._variables[name] for name in self.outputs], "get")
@@ -388,6 +391,53 @@ class FmuModel(PointwiseModel):
                     problems.append(problem)
         return {name: tuple(targets) for name, targets in bind.items()}
 
+    def _value_of(self, variable: ScalarVariable) -> tuple[object, ...]:
+        """What identifies a variable's value: its value reference, per FMI 2.0 base type
+        (FMI 3.0 references are unique across types). Aliases share it."""
+        if self._fmi3:
+            return (variable.valueReference,)
+        return (self._types[variable.type][1], variable.valueReference)
+
+    def _aliases(self, params: Sequence[str], inputs: Sequence[str]) -> list[ConfigProblem]:
+        """Problems where two names of the study (``model.params`` keys, uncertain inputs)
+        set one value of the FMU through different (aliased) variables: the last one set
+        would silently win. With inputs, only the clashes involving one are reported."""
+        setters = {name: f"model.params.{name}" for name in params}
+        setters.update({name: f"inputs.{name}" for name in inputs})
+        first: dict[tuple[object, ...], tuple[str, str]] = {}
+        problems = []
+        for name, path in setters.items():
+            for target in self._bind.get(name, (name,)):
+                variable = self._variables.get(target)
+                if variable is None or variable.type not in self._types:
+                    continue  # reported by the other checks
+                owner, aliased = first.setdefault(self._value_of(variable), (name, target))
+                if owner == name or (inputs and name not in inputs and owner not in inputs):
+                    continue
+                problems.append(
+                    _problem(
+                        path,
+                        f"{name!r} and {owner!r} ({setters[owner]}) set one value of the FMU "
+                        f"({target!r} and {aliased!r} share valueReference "
+                        f"{variable.valueReference}), so they cannot vary independently; "
+                        "keep one of them",
+                    )
+                )
+        return problems
+
+    def check_inputs(self, names: Sequence[str]) -> None:
+        """Check that the uncertain inputs ``names`` set independent values of the FMU.
+
+        Raises
+        ------
+        ConfigError
+            At ``inputs.<name>``: two of them, or one and a ``model.params`` entry, set one
+            value through aliased variables (variables sharing a value reference).
+        """
+        problems = self._aliases(self._params, [n for n in names if n in self.parameters])
+        if problems:
+            raise ConfigError(problems)
+
     def _check_outputs(
         self, outputs: Sequence[str] | None, problems: list[ConfigProblem]
     ) -> tuple[str, ...]:
@@ -462,34 +512,15 @@ class FmuModel(PointwiseModel):
         return [(m, refs, np.array(pos, dtype=np.intp)) for m, (refs, pos) in groups.items()]
 
     @staticmethod
-    @staticmethod
     def _extract(path: Path) -> str:
-        """The folder of the extracted FMU: ``path`` itself, or the FMU's folder in the cache.
-
-        Extracted once per machine into ``<temp>/pcmb-fmu/<SHA-256 of the archive>``, shared
-        by every worker and later runs: a worker killed mid-run leaves nothing behind, and
-        a changed archive gets a folder of its own. Made under a temporary name and renamed
-        into place, so a worker never sees a half-extracted FMU.
-        """
+        """The folder of the extracted FMU: ``path`` itself, or the FMU's folder in this
+        user's cache, checked before use (:mod:`pcmb.adapters.fmu.cache`)."""
         if path.is_dir():
             return str(path)
         try:
-            digest = hashlib.sha256(path.read_bytes()).hexdigest()
-            cache = Path(tempfile.gettempdir()) / "pcmb-fmu"
-            folder = cache / digest[:32]
-            if not (folder / "modelDescription.xml").is_file():
-                cache.mkdir(exist_ok=True)
-                staging = tempfile.mkdtemp(prefix=".extracting-", dir=cache)
-                extract(str(path), unzipdir=staging)
-                try:
-                    os.rename(staging, folder)
-                except OSError:  # another worker was first: use its folder
-                    shutil.rmtree(staging, ignore_errors=True)
-            return str(folder)
-        except Exception as exc:
-            raise ConfigError(
-                [_problem("model.fmu", f"cannot extract {path}: {describe_exception(exc)}")]
-            ) from exc
+            return str(extracted(path))
+        except CacheError as exc:
+            raise ConfigError([_problem("model.fmu", str(exc))]) from exc
 
     def _new_instance(self) -> Any:
         """A new FMPy instance of the FMU.
@@ -591,6 +622,13 @@ class FmuModel(PointwiseModel):
             ended the simulation early; the message says which call at which time, with
             the FMU's last log messages.
         """
+        key = frozenset(values)
+        if key not in self._inputs_checked:  # the same at every node: checked once
+            try:
+                self.check_inputs(tuple(values))
+            except ConfigError as error:
+                raise ModelDefinitionError(str(error)) from error
+            self._inputs_checked.add(key)
         times = np.asarray(times, dtype=float)
         start = dict(self._fixed)
         for name, value in values.items():

@@ -25,6 +25,7 @@ import mujoco.batch
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.adapters.mujoco.files import mjcf_files
 from pcmb.adapters.mujoco.spec import (
     FieldBind,
     InitSpec,
@@ -1026,3 +1027,7 @@ class MujocoModelFactory(ModelFactory):
         return MujocoModel(
             xml=self.xml, params=self.params, bind=self.bind, init=self.init, outputs=self.outputs
         )
+
+    def model_files(self) -> list[Path]:
+        """The scene, its includes and its asset files (:func:`mjcf_files`)."""
+        return mjcf_files(self.xml)

@@ -14,8 +14,11 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
+import os
 import re
+import site
 import sys
+import sysconfig
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,8 +50,10 @@ __all__ = [
     "function_kind",
     "is_function_model",
     "load_entry",
+    "local_modules",
     "model_factory",
     "pointwise",
+    "python_entry_files",
 ]
 
 #: The attribute :func:`pointwise` and :func:`batched` set on a function: ``"pointwise"`` or
@@ -259,6 +264,67 @@ def load_entry(entry: str, base_dir: Path) -> object:
             raise _problem("model.entry", f"{owner} has no attribute {part!r}; {hint}".rstrip("; "))
         obj = getattr(obj, part)
     return obj
+
+
+def python_entry_files(entry: str, base_dir: str | Path) -> list[Path]:
+    """The file of a python entry: ``file.py:Name`` -> that file; ``pkg.mod:Name`` -> the
+    module's file (found as :func:`load_entry` imports it: ``base_dir`` first on ``sys.path``).
+
+    A module that cannot be found or has no file (built-in, namespace package) gives none.
+    """
+    target = entry.rpartition(":")[0]
+    if not target:
+        return []
+    if target.endswith(".py"):
+        return [(Path(base_dir) / target).resolve()]
+    module = sys.modules.get(target)
+    origin = getattr(module, "__file__", None) if module is not None else None
+    if origin is None:
+        try:
+            with _on_sys_path(Path(base_dir).resolve()):
+                spec = importlib.util.find_spec(target)
+        except (ImportError, ValueError):
+            spec = None
+        origin = spec.origin if spec is not None and spec.has_location else None
+    return [] if origin is None else [Path(origin).resolve()]
+
+
+def _environment() -> tuple[Path, ...]:
+    """The folders of the installed environment: the standard library, site-packages and
+    pcmb itself."""
+    paths = sysconfig.get_paths()
+    found = {paths[key] for key in ("stdlib", "platstdlib", "purelib", "platlib") if key in paths}
+    found.update(site.getsitepackages(), [site.getusersitepackages()])
+    found.add(str(Path(__file__).parents[2]))  # the pcmb package
+    return tuple(Path(folder).resolve() for folder in found)
+
+
+def _installed(path: Path, environment: tuple[Path, ...]) -> bool:
+    return any(path.is_relative_to(folder) for folder in environment) or bool(
+        {"site-packages", "dist-packages"} & set(path.parts)
+    )
+
+
+def local_modules(root: Path) -> list[Path]:
+    """The files of the loaded modules (``sys.modules``) under the folder ``root``, outside
+    the installed environment (the standard library, site-packages, pcmb); none when
+    ``root`` itself is installed."""
+    root = root.resolve()
+    environment = _environment()
+    if _installed(root, environment):
+        return []
+    found = set()
+    folders: dict[str, Path] = {}  # each folder resolved once: modules share few folders
+    for module in list(sys.modules.values()):
+        name = getattr(module, "__file__", None)
+        if isinstance(name, str):
+            head, tail = os.path.split(name)
+            if head not in folders:
+                folders[head] = Path(head).resolve()
+            path = folders[head] / tail
+            if path.is_relative_to(root) and not _installed(path, environment):
+                found.add(path)
+    return sorted(found)
 
 
 # --------------------------------------------------------------------------- as_model
@@ -567,16 +633,47 @@ class PythonModelFactory(ModelFactory):
         Nominal parameters (constructor keywords of a class, or a function's defaults).
     outputs:
         Outputs wanted (``None``: every output; for a function, its declared ones).
+    files:
+        Further files the model reads (data, scripts), relative to ``base_dir``: each must
+        exist; their digests go into a resume journal with the entry's and its modules'.
     """
 
     entry: str
     base_dir: Path
     params: Mapping[str, Any]
     outputs: tuple[str, ...] | None = None
+    files: tuple[str, ...] = ()
 
     def __call__(self) -> Model:
-        """Load and build the model (raises ConfigError as :func:`as_model` does)."""
+        """Load and build the model (raises ConfigError as :func:`as_model` does, and at
+        ``model.files[i]`` for a listed file that does not exist)."""
+        missing = [
+            ConfigProblem(f"model.files[{i}]", f"file {path} does not exist")
+            for i, path in enumerate(self._listed())
+            if not path.is_file()
+        ]
+        if missing:
+            raise ConfigError(missing)
         return as_model(load_entry(self.entry, self.base_dir), self.params, self.outputs)
+
+    def _listed(self) -> list[Path]:
+        return [(Path(self.base_dir) / name).resolve() for name in self.files]
+
+    def model_files(self) -> list[Path]:
+        """The entry's file (:func:`python_entry_files`) and the listed ``files``."""
+        return [*python_entry_files(self.entry, self.base_dir), *self._listed()]
+
+    def loaded_files(self) -> list[Path]:
+        """The modules loaded from the entry's folder tree (:func:`local_modules`): the
+        entry file's folder, or the folder holding a ``package.module`` entry's top package."""
+        target = self.entry.rpartition(":")[0]
+        found = python_entry_files(self.entry, self.base_dir)
+        if not found:
+            return []
+        if target.endswith(".py"):
+            return local_modules(found[0].parent)
+        depth = target.count(".") + (found[0].name == "__init__.py")
+        return local_modules(found[0].parents[depth])
 
 
 # How as_model's config keys read for a Python caller (Study's arguments).

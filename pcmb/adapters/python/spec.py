@@ -23,11 +23,18 @@ class PythonModelSpec(ModelSection):
         description="nominal parameters (constructor keywords, or every parameter of a function)",
     )
     outputs: NameList | None = Field(default=None, description="outputs to keep (default: all)")
+    files: list[str] = Field(
+        default_factory=list,
+        description="further files the model reads (data, scripts), relative to the config: "
+        "a resumed run refuses to continue when one changed",
+    )
 
     def factory(self, base_dir: Path) -> PythonModelFactory:
         """A factory that loads the entry and builds the model (see :func:`as_model`)."""
         outputs = None if self.outputs is None else tuple(self.outputs)
-        return PythonModelFactory(self.entry, base_dir, dict(self.params), outputs)
+        return PythonModelFactory(
+            self.entry, base_dir, dict(self.params), outputs, tuple(self.files)
+        )
 
     @property
     def output_names(self) -> tuple[str, ...] | None:
