@@ -751,7 +751,9 @@ class Study:
                 break
             round_number += 1
             folder = None if journal_dir is None else journal_dir / f"round-{round_number}"
-            found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress)
+            found, journal = self._run_nodes(
+                batch, facts, outputs, pool, folder, progress, proven=True
+            )
             if journal is not None:
                 journal.close()  # the folder goes with the whole journal at the end
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
@@ -766,10 +768,13 @@ class Study:
         journal_dir: Path | None,
         progress: bool | None,
         chunk_size: int | None = None,
+        *,
+        proven: bool = False,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
         be removed once the result is written); raise by the failure policy. ``chunk_size``
-        overrides the study's."""
+        overrides the study's; ``proven``: the model ran at the study's nodes already (see
+        :func:`~pcmb.run.executor.run_nodes`)."""
         journal = None
         fresh_journal = False
         if journal_dir is not None:
@@ -795,6 +800,7 @@ class Study:
                 stop_on_failure=self.on_failure == "abort",
                 pool=pool,
                 facts=facts,
+                proven=proven,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -843,7 +849,11 @@ class Study:
         folder = None if journal_dir is None else journal_dir / "validation"
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.chunk_size or -(-self.validation // 2)
-        found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress, halves)
+        # After the nodes (not after an intrusive solve) the model is known to work.
+        proven = not hasattr(self.design, "solve")
+        found, journal = self._run_nodes(
+            batch, facts, outputs, pool, folder, progress, halves, proven=proven
+        )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
@@ -916,6 +926,7 @@ class Study:
             progress=False,
             pool=pool,
             facts=facts,
+            proven=True,  # its failure is a warning (_with_nominal)
         )
 
     def _with_nominal(self, result: StudyResult, run: RunResult | None) -> StudyResult:

@@ -1,0 +1,145 @@
+"""Faults of the model protocol: a model whose result breaks the protocol at one node only.
+
+A per-point function that returns a scalar, an empty dict, ``None`` or a (1, T) array at one
+node, after others succeeded, is a failure of that node (named with its parameters) under
+the failure policy, and the journal keeps the finished nodes; only a model that breaks the
+protocol at every node it tried is a model error (exit 3, nothing left behind).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.result import Status
+
+#: Order 31 on one input: 32 nodes, cut into 16 chunks of two (the default rule).
+ORDER = 31
+NODES = pcmb.TensorGrid([pcmb.Uniform(0.0, 1.0)], (ORDER,)).params[:, 0]
+#: The model breaks the protocol above this value of ``a``: at the last node only.
+CUT = float(0.5 * (NODES[-2] + NODES[-1]))
+
+MODEL = '''
+import os
+
+import numpy as np
+
+import pcmb
+
+BAD = {{
+    "scalar": lambda times: {{"y": float("nan")}},
+    "empty": lambda times: {{}},
+    "none": lambda times: None,
+    "row": lambda times: {{"y": np.zeros((1, times.size))}},
+}}
+
+
+@pcmb.pointwise(outputs=("y",))
+def model(params, times):
+    """y = a t; breaks the protocol (``how``) above ``cut`` while the file ``broken`` exists,
+    or everywhere with ``cut`` < 0. Every call appends its ``a`` to ``calls.log``."""
+    with open({log!r}, "a") as log:
+        log.write(f"{{params['a']!r}}\\n")
+    if params["a"] > params["cut"] and os.path.exists({flag!r}):
+        return BAD[params["how"]](times)
+    return {{"y": params["a"] * times}}
+'''
+
+
+def _study(folder: Path, how: str, policy: str, cut: float = CUT) -> Path:
+    """A study of the model above, broken (``how``) above ``cut``; returns the config."""
+    log, flag = folder / "calls.log", folder / "broken"
+    (folder / "protocol_model.py").write_text(MODEL.format(log=str(log), flag=str(flag)))
+    flag.touch()
+    config = folder / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: protocol
+            model:
+              kind: python
+              entry: protocol_model.py:model
+              params: {{a: 0.5, cut: {cut!r}, how: {how}}}
+              outputs: [y]
+            time: {{start: 0.0, stop: 1.0, points: 5}}
+            inputs:
+              a: {{dist: uniform, low: 0.0, high: 1.0}}
+            method: {{kind: collocation, order: {ORDER}, validation: 0}}
+            execution: {{jobs: 1, backend: loky, on_failure: {policy}, nominal_run: false}}
+            output: {str(folder / "result.h5")!r}
+            """
+        )
+    )
+    return config
+
+
+def _run(config: Path, *extra: str) -> tuple[int, str]:
+    process = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet", *extra],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    return process.returncode, process.stderr
+
+
+def _journaled(journal: Path) -> dict[int, int]:
+    """Node index -> status of the journal's records (later records win)."""
+    status: dict[int, int] = {}
+    for record in sorted(journal.glob("record-*.npz")):
+        with np.load(record) as data:
+            status.update(zip(data["indices"].tolist(), data["status"].tolist(), strict=True))
+    return status
+
+
+def _calls(folder: Path) -> list[float]:
+    return [float(line) for line in (folder / "calls.log").read_text().split()]
+
+
+@pytest.mark.parametrize("how", ["scalar", "empty", "none", "row"])
+def test_a_protocol_break_at_one_node_aborts_keeping_the_finished_nodes(
+    tmp_path: Path, how: str
+) -> None:
+    config = _study(tmp_path, how, "abort")
+    code, stderr = _run(config)
+    assert code == 3, stderr
+    assert "model failure" in stderr and "1 of 32 node(s)" in stderr, stderr
+    assert f"node {ORDER} (a={NODES[-1]:.6g})" in stderr, stderr
+    journal = tmp_path / "result.h5.journal"
+    status = _journaled(journal)
+    assert sum(s == Status.OK for s in status.values()) == ORDER, status
+    assert status[ORDER] == Status.FAILED
+    assert not (tmp_path / "result.h5").exists()
+
+    (tmp_path / "broken").unlink()  # the model is fixed (its data, not its code)
+    before = len(_calls(tmp_path))
+    code, stderr = _run(config, "--resume")
+    assert code == 0, stderr
+    assert _calls(tmp_path)[before:] == [NODES[-1]]  # only the failed node ran again
+    assert not journal.exists()
+    result = pcmb.load(tmp_path / "result.h5")
+    np.testing.assert_allclose(result.mean("y"), 0.5 * np.linspace(0.0, 1.0, 5), atol=1e-12)
+
+
+def test_a_protocol_break_at_one_node_is_regressed_over(tmp_path: Path) -> None:
+    code, stderr = _run(_study(tmp_path, "scalar", "regress"))
+    assert code == 0, stderr
+    result = pcmb.load(tmp_path / "result.h5")
+    assert list(result.status).count(Status.FAILED) == 1
+    assert result.status[ORDER] == Status.FAILED
+
+
+def test_a_protocol_break_at_every_node_is_a_model_error(tmp_path: Path) -> None:
+    code, stderr = _run(_study(tmp_path, "scalar", "regress", cut=-1.0))
+    assert code == 3, stderr
+    assert "model error" in stderr and "returned a float for output 'y'" in stderr, stderr
+    assert stderr.count("returned a float") == 1, stderr
+    assert len(_calls(tmp_path)) < NODES.size  # it stopped early
+    assert not (tmp_path / "result.h5").exists()
+    assert not (tmp_path / "result.h5.journal").exists()
