@@ -8,6 +8,7 @@ protocol at every node it tried is a model error (exit 3, nothing left behind).
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import textwrap
@@ -143,3 +144,63 @@ def test_a_protocol_break_at_every_node_is_a_model_error(tmp_path: Path) -> None
     assert len(_calls(tmp_path)) < NODES.size  # it stopped early
     assert not (tmp_path / "result.h5").exists()
     assert not (tmp_path / "result.h5.journal").exists()
+
+
+COMPLEX_MODEL = '''
+import numpy as np
+
+import pcmb
+
+
+class Batch:
+    """y = a t, complex (with an imaginary part) above ``cut``."""
+
+    outputs = ("y",)
+
+    def __init__(self, a=0.5, cut=2.0):
+        self.parameters = {"a": a}
+        self.cut = cut
+
+    def simulate(self, params, times):
+        a = np.asarray(params["a"], dtype=float)
+        y = (a[:, None] * times).astype(complex)
+        y[a > self.cut] += 1j
+        return {"y": y}
+
+
+@pcmb.pointwise(outputs=("y",))
+def point(params, times):
+    """y = a t, complex (with an imaginary part) above ``cut``."""
+    y = params["a"] * times + 0j
+    return {"y": y + 1j if params["a"] > params["cut"] else y}
+'''
+
+
+@pytest.mark.parametrize("entry", ["Batch", "point"])
+def test_a_complex_output_is_a_failed_node_not_its_real_part(tmp_path: Path, entry: str) -> None:
+    (tmp_path / "complex_model.py").write_text(COMPLEX_MODEL)
+    config = tmp_path / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: complex
+            model:
+              kind: python
+              entry: complex_model.py:{entry}
+              params: {{a: 0.5, cut: {CUT!r}}}
+              outputs: [y]
+            time: {{start: 0.0, stop: 1.0, points: 5}}
+            inputs:
+              a: {{dist: uniform, low: 0.0, high: 1.0}}
+            method: {{kind: collocation, order: {ORDER}, validation: 0}}
+            execution: {{jobs: 1, backend: loky, on_failure: abort, nominal_run: false}}
+            output: {str(tmp_path / "result.h5")!r}
+            """
+        )
+    )
+    code, stderr = _run(config)
+    assert code == 3, stderr
+    assert f"node {ORDER} (a={NODES[-1]:.6g})" in stderr, stderr
+    assert re.search(r"output 'y'( of the [\w -]+)? is complex \(imaginary part up to 1\)", stderr)
+    assert "ComplexWarning" not in stderr, stderr
+    assert not (tmp_path / "result.h5").exists()

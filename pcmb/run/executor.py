@@ -41,6 +41,7 @@ from pcmb.errors import (
     ModelDefinitionError,
     PcmbError,
     UsageError,
+    complex_output,
 )
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import Journal
@@ -566,7 +567,13 @@ def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str
         if name not in result:
             return f"the model returned no output {name!r}"
         try:
-            array = np.asarray(result[name], dtype=np.float64)
+            given = np.asarray(result[name])
+            if np.iscomplexobj(given):  # nothing may be lost but imaginary zeros
+                imaginary = np.abs(given.imag)
+                if imaginary.any():
+                    return str(complex_output(f"output {name!r}", float(np.max(imaginary))))
+                given = given.real
+            array = np.asarray(given, dtype=np.float64)
         except (TypeError, ValueError) as exc:
             return f"output {name!r} is not a float array ({exc})"
         if array.shape != (n, *shape):

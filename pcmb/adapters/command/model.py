@@ -35,6 +35,7 @@ from pcmb.adapters.protocol import (
     PointwiseModel,
     check_point_result,
     describe_exception,
+    float_array,
 )
 from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
@@ -77,13 +78,6 @@ def split_command(text: str) -> list[str]:
         Unbalanced quotes.
     """
     return shlex.split(_PLACEHOLDER.sub(lambda m: "{{" + m.group(1) + "}}", text))
-
-
-def _float_array(value: Any, what: str) -> NDArray[np.float64]:
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{what} is not numeric: {describe_exception(exc)}") from exc
 
 
 @dataclass(frozen=True)
@@ -447,7 +441,7 @@ class CommandModel(PointwiseModel):
         return result
 
     def _check_time_column(self, column: Any, times: NDArray[np.float64], key: str) -> None:
-        file_times = _float_array(column, f"{key!r} in {self.output_file}")
+        file_times = float_array(column, f"{key!r} in {self.output_file}")
         # A simulator may print times with few digits; a row must still be unmistakably its
         # grid time, i.e. within a small fraction of the grid step.
         step = np.min(np.diff(times)) if times.size > 1 else max(1.0, abs(float(times[0])))
