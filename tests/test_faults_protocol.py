@@ -204,3 +204,58 @@ def test_a_complex_output_is_a_failed_node_not_its_real_part(tmp_path: Path, ent
     assert re.search(r"output 'y'( of the [\w -]+)? is complex \(imaginary part up to 1\)", stderr)
     assert "ComplexWarning" not in stderr, stderr
     assert not (tmp_path / "result.h5").exists()
+
+
+DUPLICATE_WRITER = """
+import json
+import sys
+
+with open("params.json") as handle:
+    document = json.load(handle)
+a, times = document["params"]["a"], document["times"]
+y, other = [a * t for t in times], [-a * t for t in times]  # two outputs named y
+with open(sys.argv[1], "w") as out:
+    if sys.argv[1].endswith(".csv"):
+        out.write("time,y,y\\n")
+        out.writelines(f"{t!r},{p!r},{q!r}\\n" for t, p, q in zip(times, y, other))
+    else:
+        out.write(f'{{"time": {times}, "y": {y}, "y": {other}}}')
+"""
+
+#: What each output format says of an output named twice.
+TWICE = {
+    "out.csv": "column 'y' appears twice (columns 2 and 3) with different values",
+    "out.json": "key 'y' appears more than once, with different values",
+}
+
+
+@pytest.mark.parametrize("file", sorted(TWICE))
+def test_an_output_named_twice_in_its_file_is_a_failed_run(tmp_path: Path, file: str) -> None:
+    (tmp_path / "writer.py").write_text(DUPLICATE_WRITER)
+    config = tmp_path / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: duplicate
+            model:
+              kind: command
+              command: [{sys.executable}, writer.py, {file}]
+              files: [writer.py]
+              params: {{a: 0.5}}
+              outputs: [y]
+              output: {{file: {file}}}
+              keep: none
+            time: {{start: 0.0, stop: 1.0, points: 5}}
+            inputs:
+              a: {{dist: uniform, low: 0.0, high: 1.0}}
+            method: {{kind: collocation, order: 1, validation: 0}}
+            execution: {{jobs: 1, backend: loky, on_failure: abort, nominal_run: false}}
+            output: {str(tmp_path / "result.h5")!r}
+            """
+        )
+    )
+    code, stderr = _run(config)
+    assert code == 3, stderr
+    assert "model failure" in stderr and "node 0 (a=" in stderr, stderr
+    assert f"cannot parse {file} as {file[4:]}" in stderr and TWICE[file] in stderr, stderr
+    assert not (tmp_path / "result.h5").exists()

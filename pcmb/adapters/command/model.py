@@ -494,7 +494,11 @@ def _read_table(path: Path, outputs: Sequence[str]) -> dict[str, NDArray[np.floa
 
 
 def _columns(rows: list[list[str]]) -> dict[str, NDArray[np.float64]]:
-    """Columns by name of a table whose first row names them."""
+    """Columns by name of a table whose first row names them.
+
+    A name may repeat only for columns of equal values (ngspice's ``wrdata`` repeats its
+    scale column before every vector): otherwise which column is meant cannot be told.
+    """
     if not rows:
         raise ValueError("the file is empty")
     header = [cell.strip() for cell in rows[0]]
@@ -507,13 +511,36 @@ def _columns(rows: list[list[str]]) -> dict[str, NDArray[np.float64]]:
                 table[number - 2, j] = float(cell)
             except ValueError:
                 raise ValueError(f"line {number}: {cell.strip()!r} is not a number") from None
-    return {name: table[:, j] for j, name in enumerate(header)}
+    columns: dict[str, NDArray[np.float64]] = {}
+    for j, name in enumerate(header):
+        if name in columns and not np.array_equal(columns[name], table[:, j], equal_nan=True):
+            where = [k + 1 for k, other in enumerate(header) if other == name]
+            count = "twice" if len(where) == 2 else f"{len(where)} times"
+            raise ValueError(
+                f"column {name!r} appears {count} (columns {', '.join(map(str, where[:-1]))} "
+                f"and {where[-1]}) with different values: which one is meant is unknown"
+            )
+        columns[name] = table[:, j]
+    return columns
 
 
 def _read_json(path: Path, outputs: Sequence[str]) -> dict[str, Any]:
-    document = json.loads(path.read_text(encoding="utf-8", errors="replace"))
+    document = json.loads(
+        path.read_text(encoding="utf-8", errors="replace"), object_pairs_hook=_unique_keys
+    )
     if not isinstance(document, dict):
         raise ValueError(f"expected an object {{name: [values]}}, found {type(document).__name__}")
+    return document
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose keys repeat only with equal values (else the meant one is unknown;
+    ``json`` alone would keep the last)."""
+    document: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in document and document[key] != value:
+            raise ValueError(f"key {key!r} appears more than once, with different values")
+        document[key] = value
     return document
 
 
