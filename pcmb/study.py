@@ -31,7 +31,7 @@ from pcmb.analysis.diagnostics import (
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.designs.base import Recovery
@@ -450,8 +450,26 @@ class Study:
         return values
 
     def node_set(self) -> TensorGrid | NodeSet:
-        """The nodes this study runs (made by its design)."""
-        return self.design.nodes()
+        """The nodes this study runs (made by its design).
+
+        Raises
+        ------
+        UsageError
+            At ``inputs.<name>``: an input's map from the germ overflows at a node.
+        """
+        nodes = self.design.nodes()
+        self._check_finite(nodes)
+        return nodes
+
+    def _check_finite(self, nodes: TensorGrid | NodeSet) -> None:
+        """Every input's value at every node is a finite number (see
+        :func:`~pcmb.chaos.nodes.overflowing_inputs`)."""
+        problems = [
+            ConfigProblem(f"inputs.{name}", message)
+            for name, message in overflowing_inputs(nodes, self.input_names)
+        ]
+        if problems:
+            raise UsageError(problems, source="Study")
 
     def fingerprint(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> Fingerprint:
         """What the resume journal belongs to: everything that changes the node values.
@@ -775,6 +793,7 @@ class Study:
         be removed once the result is written); raise by the failure policy. ``chunk_size``
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`)."""
+        self._check_finite(nodes)  # the held-out runs' and later rounds' nodes too
         journal = None
         fresh_journal = False
         if journal_dir is not None:
