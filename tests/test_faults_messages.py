@@ -79,3 +79,26 @@ def test_an_input_whose_nodes_overflow_is_refused_at_the_input(
     assert f"{config}:12: inputs.a: " in stderr and "run_nodes" not in stderr, stderr
     assert "not a finite number" in stderr, stderr
     assert not (tmp_path / "result.h5.journal").exists()
+
+
+@pytest.mark.parametrize(
+    "covariance",
+    [
+        "{kind: exponential, sigma: 1.0, length: 1.0e-6}",
+        "{kind: squared-exponential, sigma: 1.0, length: 1.0e-6}",
+        "{kind: matern, sigma: 1.0, length: 1.0e-6, nu: 1.5}",
+    ],
+)
+def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
+    tmp_path: Path, covariance: str
+) -> None:
+    process = (
+        f"r: {{process: kl, covariance: {covariance}, grid: {{start: 0, stop: 10, points: 11}}, "
+        "energy: 0.9}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.r.covariance.length: the correlation length 1e-06" in stderr
+    assert "no term of the expansion resolves it" in stderr, stderr
+    assert "Traceback" not in stderr and "zero-size array" not in stderr, stderr
