@@ -102,3 +102,28 @@ def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
     assert f"{config}:12: inputs.r.covariance.length: the correlation length 1e-06" in stderr
     assert "no term of the expansion resolves it" in stderr, stderr
     assert "Traceback" not in stderr and "zero-size array" not in stderr, stderr
+
+
+def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
+    tmp_path: Path,
+) -> None:
+    process = (
+        "r: {process: kl, covariance: {kind: squared-exponential, sigma: 1.0, length: 0.006}, "
+        "grid: {start: 0, stop: 10, points: 11}, energy: 0.9}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.r.covariance.length: the expansion needs " in stderr, stderr
+    assert "more than the 11 points of the grid" in stderr and "runs" not in stderr, stderr
+
+
+def test_a_run_count_beyond_the_floats_is_reported_not_a_crash(tmp_path: Path) -> None:
+    process = (
+        "r: {process: kl, covariance: {kind: exponential, sigma: 1.0, length: 1.0}, "
+        "grid: {start: 0, stop: 10, points: 801}, terms: 700}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert "method.order: the design asks for ~10^333 runs" in stderr, stderr

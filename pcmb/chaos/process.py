@@ -451,6 +451,18 @@ class RandomProcess(Spectrum):
         if terms is None:
             captured = np.cumsum(values[:positive]) / total
             terms = min(positive, int(np.searchsorted(captured, energy * (1 - 1e-12)) + 1))
+            if terms > points:
+                # The field at m points has at most m independent germs: the rest would be
+                # inputs that change nothing the model sees.
+                key = "grid.points" if covariance.length is None else "covariance.length"
+                raise ValueError(
+                    f"{key}: the expansion needs {terms} terms to carry {energy:g} of the "
+                    f"variance, more than the {points} points of the grid, whose spacing "
+                    f"{(stop - start) / (points - 1):g} does not resolve the covariance"
+                    + ("" if covariance.length is None else f" (length {covariance.length:g})")
+                    + f"; give grid.points of at least {terms}, a longer correlation, or a "
+                    "smaller energy"
+                )
         elif terms > positive:
             raise ValueError(
                 f"terms: the covariance has {positive} non-zero eigenvalues on this grid, "

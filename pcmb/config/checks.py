@@ -56,7 +56,7 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     else:
         key, runs = ("method.level" if method.level is not None else "method.order"), design.runs
     if runs > MAX_RUNS:
-        yield key, f"the design asks for {runs:.3g} runs, more than the limit of {MAX_RUNS:.0e}"
+        yield key, f"the design asks for {_many(runs)} runs, more than the limit of {MAX_RUNS:.0e}"
     elif runs * config.time.points > MAX_VALUES:
         yield (
             key,
@@ -68,6 +68,11 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     else:  # a design of a size to run: its nodes are made now, as the run will make them
         for name, message in overflowing_inputs(design.nodes(), config.input_names):
             yield f"inputs.{name}", message
+
+
+def _many(count: int) -> str:
+    """A count for a message: ``1.26e+263``, or ``~10^417`` beyond the floats."""
+    return f"{count:.3g}" if count < 1e300 else f"~10^{len(str(int(count))) - 1}"
 
 
 def _method_settings(config: StudyConfig) -> MethodSettings:
