@@ -159,6 +159,17 @@ class PcmbWarning(UserWarning):
     """The category of every warning pcmb issues (see :class:`pcmb.result.WarningRecord`)."""
 
 
+def complex_output(what: str, imaginary: float) -> ModelError:
+    """The error for a model output (``what``: ``"output 'y'"``, with where it comes from)
+    that is complex with a non-zero imaginary part (largest: ``imaginary``), which a float
+    would drop."""
+    return ModelError(
+        f"{what} is complex (imaginary part up to {imaginary:.3g}); pcmb takes real outputs "
+        "only: return its real and imaginary parts, or its modulus and phase, as outputs of "
+        "their own"
+    )
+
+
 def missing_dependency(package: str, extra: str, needed_for: str) -> MissingDependencyError:
     """The error for an optional ``package`` (from the ``extra``) that failed to import."""
     return MissingDependencyError(package, extra, needed_for)

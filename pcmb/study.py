@@ -31,7 +31,7 @@ from pcmb.analysis.diagnostics import (
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
 from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
 from pcmb.designs.base import Recovery
@@ -450,8 +450,26 @@ class Study:
         return values
 
     def node_set(self) -> TensorGrid | NodeSet:
-        """The nodes this study runs (made by its design)."""
-        return self.design.nodes()
+        """The nodes this study runs (made by its design).
+
+        Raises
+        ------
+        UsageError
+            At ``inputs.<name>``: an input's map from the germ overflows at a node.
+        """
+        nodes = self.design.nodes()
+        self._check_finite(nodes)
+        return nodes
+
+    def _check_finite(self, nodes: TensorGrid | NodeSet) -> None:
+        """Every input's value at every node is a finite number (see
+        :func:`~pcmb.chaos.nodes.overflowing_inputs`)."""
+        problems = [
+            ConfigProblem(f"inputs.{name}", message)
+            for name, message in overflowing_inputs(nodes, self.input_names)
+        ]
+        if problems:
+            raise UsageError(problems, source="Study")
 
     def fingerprint(
         self, nodes: TensorGrid | NodeSet, outputs: Sequence[str], loaded: Sequence[str] = ()
@@ -782,7 +800,9 @@ class Study:
                 break
             round_number += 1
             folder = None if journal_dir is None else journal_dir / f"round-{round_number}"
-            found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress)
+            found, journal = self._run_nodes(
+                batch, facts, outputs, pool, folder, progress, proven=True
+            )
             if journal is not None:
                 journal.close()  # the folder goes with the whole journal at the end
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
@@ -797,10 +817,14 @@ class Study:
         journal_dir: Path | None,
         progress: bool | None,
         chunk_size: int | None = None,
+        *,
+        proven: bool = False,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
         be removed once the result is written); raise by the failure policy. ``chunk_size``
-        overrides the study's."""
+        overrides the study's; ``proven``: the model ran at the study's nodes already (see
+        :func:`~pcmb.run.executor.run_nodes`)."""
+        self._check_finite(nodes)  # the held-out runs' and later rounds' nodes too
         journal = None
         fresh_journal = False
         if journal_dir is not None:
@@ -825,6 +849,7 @@ class Study:
                 stop_on_failure=self.on_failure == "abort",
                 pool=pool,
                 facts=facts,
+                proven=proven,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -873,7 +898,11 @@ class Study:
         folder = None if journal_dir is None else journal_dir / "validation"
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.chunk_size or -(-self.validation // 2)
-        found, journal = self._run_nodes(batch, facts, outputs, pool, folder, progress, halves)
+        # After the nodes (not after an intrusive solve) the model is known to work.
+        proven = not hasattr(self.design, "solve")
+        found, journal = self._run_nodes(
+            batch, facts, outputs, pool, folder, progress, halves, proven=proven
+        )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
@@ -946,6 +975,7 @@ class Study:
             progress=False,
             pool=pool,
             facts=facts,
+            proven=True,  # its failure is a warning (_with_nominal)
         )
 
     def _with_nominal(self, result: StudyResult, run: RunResult | None) -> StudyResult:

@@ -14,7 +14,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.errors import ModelDefinitionError, ModelError
+from pcmb.errors import ModelDefinitionError, ModelError, complex_output
 
 __all__ = [
     "Model",
@@ -24,6 +24,7 @@ __all__ = [
     "check_batch",
     "check_point_result",
     "describe_exception",
+    "float_array",
 ]
 
 
@@ -113,9 +114,23 @@ def describe_exception(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def _float_array(value: Any, what: str) -> NDArray[np.float64]:
+def float_array(value: Any, what: str) -> NDArray[np.float64]:
+    """``value`` as a float array.
+
+    Raises
+    ------
+    ModelError
+        Naming ``what`` (``"output 'y' in out.npy"``): it is not numeric, or it is complex
+        with an imaginary part (a float array would keep only its real part).
+    """
     try:
-        return np.asarray(value, dtype=float)
+        array = np.asarray(value)
+        if np.iscomplexobj(array):
+            imaginary = np.abs(array.imag)
+            if imaginary.any():
+                raise complex_output(what, float(np.max(imaginary)))
+            array = array.real
+        return np.asarray(array, dtype=float)
     except (TypeError, ValueError) as exc:
         raise ModelError(f"{what} is not numeric: {describe_exception(exc)}") from exc
 
@@ -140,7 +155,7 @@ def check_point_result(
         )
     checked = {}
     for name in outputs:
-        values = _float_array(result[name], f"output {name!r} in {where}")
+        values = float_array(result[name], f"output {name!r} in {where}")
         if values.shape != (n_times,):
             raise ModelError(
                 f"output {name!r} in {where} has shape {values.shape}, expected ({n_times},)"

@@ -65,6 +65,16 @@ def _finite(**values: float) -> None:
         _require(bool(np.isfinite(value)), f"{name} must be a finite number, got {value!r}")
 
 
+def _interval(low: float, high: float) -> None:
+    """``low < high``, and ``high - low`` a float: the germ's map needs the width."""
+    _require(low < high, f"low must be < high, got low={low}, high={high}")
+    _require(
+        bool(np.isfinite(high - low)),
+        f"the range from low={low!r} to high={high!r} is wider than the largest float "
+        f"({np.finfo(float).max:.3g}); give this parameter in other units",
+    )
+
+
 class Distribution(ABC):
     """An uncertain input: a probability law and its map from the standard germ."""
 
@@ -148,7 +158,7 @@ class Uniform(_Affine):
 
     def __post_init__(self) -> None:
         _finite(low=self.low, high=self.high)
-        _require(self.low < self.high, f"low must be < high, got low={self.low}, high={self.high}")
+        _interval(self.low, self.high)
 
     @property
     def family(self) -> OrthonormalFamily:
@@ -184,7 +194,7 @@ class Beta(_Affine):
         _finite(alpha=self.alpha, beta=self.beta, low=self.low, high=self.high)
         _require(self.alpha > 0, f"alpha must be > 0, got {self.alpha}")
         _require(self.beta > 0, f"beta must be > 0, got {self.beta}")
-        _require(self.low < self.high, f"low must be < high, got low={self.low}, high={self.high}")
+        _interval(self.low, self.high)
 
     @cached_property
     def family(self) -> OrthonormalFamily:

@@ -8,7 +8,7 @@ values of shape (N, ...) reshape to (q_1, ..., q_n, ...).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
@@ -20,7 +20,7 @@ from pcmb.chaos.basis import tensor_index_set
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.polynomials import GaussRule
 
-__all__ = ["NodeSet", "TensorGrid", "draw_germs", "random_nodes"]
+__all__ = ["NodeSet", "TensorGrid", "draw_germs", "overflowing_inputs", "random_nodes"]
 
 SamplingMethod = Literal["montecarlo", "lhs", "sobol"]
 
@@ -185,6 +185,25 @@ def random_nodes(
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
     return NodeSet(distributions, germ, _physical(distributions, germ))
+
+
+def overflowing_inputs(
+    nodes: TensorGrid | NodeSet, names: Sequence[str]
+) -> Iterator[tuple[str, str]]:
+    """``(name, what is wrong)`` for each input (``names`` in germ order) whose value is not
+    a finite number at some node: a distribution too wide for floating point (a normal of
+    std 1e307) overflows in its map from the germ."""
+    for k, name in enumerate(names):
+        values = nodes.params[:, k]
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            i = bad[0]
+            yield (
+                name,
+                f"at {bad.size} of {values.size} node(s) its value is not a finite number "
+                f"(germ value {nodes.nodes[i, k]:.6g} gives {values[i]}): the distribution is "
+                "too wide for floating point; give this parameter in other units",
+            )
 
 
 def join_nodes(first: TensorGrid | NodeSet, second: TensorGrid | NodeSet) -> NodeSet:

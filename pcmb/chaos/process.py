@@ -82,6 +82,9 @@ class Covariance:
     rate:
         p, the order in the spacing h of the Nyström eigenvalues' error (4 with the kink
         corrected), used to estimate that error from a grid of half the points.
+    length:
+        ℓ, the correlation length (``None`` for a spectrum): the expansion refuses a grid
+        whose spacing no ℓ-sized feature spans.
     """
 
     function: Callable[[NDArray[np.float64]], NDArray[np.float64]]
@@ -89,6 +92,7 @@ class Covariance:
     slope: float
     description: dict[str, object]
     rate: float = 4.0
+    length: float | None = None
 
 
 def _positive(**values: float) -> None:
@@ -117,6 +121,7 @@ def exponential(sigma: float, length: float) -> Covariance:
         sigma**2,
         -(sigma**2) / length,
         {"kind": "exponential", "sigma": sigma, "length": length},
+        length=length,
     )
 
 
@@ -128,6 +133,7 @@ def squared_exponential(sigma: float, length: float) -> Covariance:
         sigma**2,
         0.0,
         {"kind": "squared-exponential", "sigma": sigma, "length": length},
+        length=length,
     )
 
 
@@ -157,6 +163,7 @@ def matern(sigma: float, length: float, nu: float) -> Covariance:
         slope,
         {"kind": "matern", "sigma": sigma, "length": length, "nu": nu},
         rate=4.0 if nu == 0.5 else min(4.0, 1 + 2 * nu),
+        length=length,
     )
 
 
@@ -399,8 +406,11 @@ class RandomProcess(Spectrum):
         Raises
         ------
         ValueError
-            A bad grid or truncation setting ("key: message", naming ``grid``, ``energy`` or
-            ``terms``), or a covariance with fewer non-zero eigenvalues than ``terms``.
+            "key: message", naming ``grid``, ``energy`` or ``terms`` for a bad grid or
+            truncation setting, or a covariance with fewer non-zero eigenvalues than
+            ``terms``; ``covariance.length`` for a correlation length shorter than the
+            spacing of the Nyström grid (no term resolves it); ``covariance`` for a
+            covariance without a positive eigenvalue on the grid.
         """
         if not start < stop:
             raise ValueError(f"grid: expected start < stop, found {start!r} >= {stop!r}")
@@ -420,13 +430,39 @@ class RandomProcess(Spectrum):
         factor = max(1, math.ceil((NYSTROM_POINTS - 1) / (points - 1)))
         factor += factor * (points - 1) % 2
         fine = factor * (points - 1) + 1
+        spacing = (stop - start) / (fine - 1)
+        if covariance.length is not None and covariance.length < spacing:
+            raise ValueError(
+                f"covariance.length: the correlation length {covariance.length:g} is shorter "
+                f"than the spacing {spacing:.3g} of the grid the expansion is solved on "
+                f"({fine} points on [{start:g}, {stop:g}]), so no term of the expansion "
+                "resolves it (the field would be noise from point to point); give a length "
+                f"of at least {spacing:.3g}, or a shorter interval"
+            )
         nystrom = _Nystrom(covariance, start, stop, fine)
         values, _ = nystrom.spectrum
         total = covariance.variance * (stop - start)
+        if not values[0] > 0:
+            raise ValueError(
+                "covariance: no eigenvalue of the covariance is positive on this grid, so the "
+                "expansion would capture none of its variance"
+            )
         positive = int(np.sum(values > ZERO_RATIO * values[0]))
         if terms is None:
             captured = np.cumsum(values[:positive]) / total
             terms = min(positive, int(np.searchsorted(captured, energy * (1 - 1e-12)) + 1))
+            if terms > points:
+                # The field at m points has at most m independent germs: the rest would be
+                # inputs that change nothing the model sees.
+                key = "grid.points" if covariance.length is None else "covariance.length"
+                raise ValueError(
+                    f"{key}: the expansion needs {terms} terms to carry {energy:g} of the "
+                    f"variance, more than the {points} points of the grid, whose spacing "
+                    f"{(stop - start) / (points - 1):g} does not resolve the covariance"
+                    + ("" if covariance.length is None else f" (length {covariance.length:g})")
+                    + f"; give grid.points of at least {terms}, a longer correlation, or a "
+                    "smaller energy"
+                )
         elif terms > positive:
             raise ValueError(
                 f"terms: the covariance has {positive} non-zero eigenvalues on this grid, "

@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
 from pcmb.analysis.derived import derived_problems
+from pcmb.chaos.nodes import overflowing_inputs
 from pcmb.config.types import MAX_RUNS, MAX_VALUES
 from pcmb.designs import DESIGNS, MethodSettings, make_design
 from pcmb.errors import ConfigError
@@ -20,8 +21,9 @@ __all__ = ["config_design", "cross_check", "model_check"]
 
 
 def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
-    """Order mapping against the inputs; the number of runs and of stored values; the
-    ``derived:`` entries (one figure kind each, with its options)."""
+    """Order mapping against the inputs; the number of runs and of stored values; every
+    input's value at every node a finite number; the ``derived:`` entries (one figure kind
+    each, with its options)."""
     try:
         config.derived_outputs  # noqa: B018 - parsed for its problems
     except ConfigError as error:
@@ -54,7 +56,7 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
     else:
         key, runs = ("method.level" if method.level is not None else "method.order"), design.runs
     if runs > MAX_RUNS:
-        yield key, f"the design asks for {runs:.3g} runs, more than the limit of {MAX_RUNS:.0e}"
+        yield key, f"the design asks for {_many(runs)} runs, more than the limit of {MAX_RUNS:.0e}"
     elif runs * config.time.points > MAX_VALUES:
         yield (
             key,
@@ -63,6 +65,14 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                 f"{runs * config.time.points:.3g} values per output, more than {MAX_VALUES:.0e}"
             ),
         )
+    else:  # a design of a size to run: its nodes are made now, as the run will make them
+        for name, message in overflowing_inputs(design.nodes(), config.input_names):
+            yield f"inputs.{name}", message
+
+
+def _many(count: int) -> str:
+    """A count for a message: ``1.26e+263``, or ``~10^417`` beyond the floats."""
+    return f"{count:.3g}" if count < 1e300 else f"~10^{len(str(int(count))) - 1}"
 
 
 def _method_settings(config: StudyConfig) -> MethodSettings:

@@ -20,6 +20,7 @@ from pcmb.wording import did_you_mean, plural
 
 __all__ = [
     "INVALID",
+    "SETTING_ERROR",
     "KeyPath",
     "format_path",
     "line_of",
@@ -32,6 +33,11 @@ KeyPath = tuple[str | int, ...]
 
 #: Stands for a value already reported as a problem (by the YAML reader).
 INVALID: Any = object()
+
+#: The pydantic error type (``PydanticCustomError``) of a section's objection to one of its
+#: own keys, raised where the whole section is known: ctx ``key`` (a key path inside the
+#: section, ``"covariance.length"``) and ``message``; the problem is located at that key.
+SETTING_ERROR = "setting_error"
 
 
 def format_path(path: Sequence[str | int]) -> str:
@@ -223,7 +229,8 @@ def _then(hint: str) -> str:
 
 
 def _message(error: Mapping[str, Any], root: Any) -> tuple[str, str | None]:
-    """Message of one pydantic error, and the key to append to its path (if any)."""
+    """Message of one pydantic error, and the key path to append to its location (if
+    any)."""
     kind, ctx, found = error["type"], error.get("ctx", {}), _show(error["input"])
     if kind in ("union_tag_invalid", "union_tag_not_found"):
         key = str(ctx["discriminator"]).strip("'")
@@ -243,6 +250,8 @@ def _message(error: Mapping[str, Any], root: Any) -> tuple[str, str | None]:
         return f"unknown key{listing}{_then(did_you_mean(key, allowed))}", None
     if kind == "value_error":
         return str(ctx.get("error", error["msg"])), None
+    if kind == SETTING_ERROR:
+        return str(ctx["message"]), str(ctx["key"])
     if kind == "literal_error":
         return f"expected {ctx['expected']}, found {found}", None
     if kind in _BOUNDS:
@@ -282,6 +291,6 @@ def schema_problems(
             continue  # already reported while reading the YAML
         message, extra_key = _message(error, root)
         path, _ = _walk(root, error["loc"])
-        path = (*prefix, *path, *((extra_key,) if extra_key is not None else ()))
+        path = (*prefix, *path, *(parse_path(extra_key) if extra_key is not None else ()))
         problems.append(ConfigProblem(format_path(path), message, line_of(path, lines or {})))
     return problems

@@ -10,12 +10,15 @@ from __future__ import annotations
 import functools
 import itertools
 import json
+import re
 import typing
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Self
 
-from pydantic import AfterValidator, Field, ValidationInfo, field_validator
+from pydantic import AfterValidator, Field, ValidationInfo, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from pcmb.chaos import process as kl
+from pcmb.config.messages import SETTING_ERROR
 from pcmb.config.types import NonNegativeReal, PositiveInt, PositiveReal, Real, Section, count
 
 __all__ = ["CovarianceSpec", "GridSpec", "ProcessSpec"]
@@ -169,18 +172,26 @@ class ProcessSpec(Section):
 
     @field_validator("terms")
     @classmethod
-    def _expandable(cls, terms: int | None, info: ValidationInfo) -> int | None:
-        # The last key: the expansion is made here, so that its errors name this key.
-        energy = info.data.get("energy")
-        if terms is not None and energy is not None:
+    def _one_truncation(cls, terms: int | None, info: ValidationInfo) -> int | None:
+        if terms is not None and info.data.get("energy") is not None:
             raise ValueError("give energy or terms, not both")
-        covariance, grid = info.data.get("covariance"), info.data.get("grid")
-        if covariance is not None and grid is not None and "energy" in info.data:
-            try:
-                _expansion(_settings(covariance, grid, energy, terms))
-            except ValueError as error:
-                raise ValueError(str(error).removeprefix("terms: ")) from None
         return terms
+
+    @model_validator(mode="after")
+    def _expandable(self) -> Self:
+        """Make the expansion now; its objections name their key of this section
+        (``covariance.length: ...``, see :meth:`RandomProcess.karhunen_loeve
+        <pcmb.chaos.process.RandomProcess.karhunen_loeve>`), else the section itself."""
+        try:
+            self.expansion  # noqa: B018 - made for its errors (and cached)
+        except ValueError as error:
+            key, _, message = str(error).partition(": ")
+            if message and re.fullmatch(r"[a-z]+(\.[a-z]+)*", key):
+                raise PydanticCustomError(
+                    SETTING_ERROR, "{message}", {"key": key, "message": message}
+                ) from None
+            raise
+        return self
 
     @property
     def expansion(self) -> kl.RandomProcess:

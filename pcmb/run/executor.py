@@ -41,6 +41,7 @@ from pcmb.errors import (
     ModelDefinitionError,
     PcmbError,
     UsageError,
+    complex_output,
 )
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import FRESH, Journal
@@ -156,11 +157,12 @@ class _Task:
 @dataclass(frozen=True)
 class _Outcome:
     """A finished task: (B, W) values (:class:`Layout`), per-node messages ("" = ok), model
-    seconds."""
+    seconds, and the nodes where the model broke the protocol (a ``ModelDefinitionError``)."""
 
     values: NDArray[np.float64]
     messages: tuple[str, ...]
     seconds: float
+    broken: tuple[bool, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -554,22 +556,24 @@ def _wait(
 
 def _run_batch(
     model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout
-) -> tuple[NDArray[np.float64], list[str], bool]:
-    """One ``simulate`` call: (B, W) values, per-node messages ("" = ok), and whether the
-    call as a whole failed (it raised or returned a wrong result), so that which node made
-    it fail is unknown."""
+) -> tuple[NDArray[np.float64], list[str], bool, bool]:
+    """One ``simulate`` call: (B, W) values, per-node messages ("" = ok), whether the call
+    as a whole failed (it raised or returned a wrong result), so that which node made it fail
+    is unknown, and whether that failure is a break of the protocol (a
+    ``ModelDefinitionError``: a failure of the call, which the campaign turns into a model
+    error only if the model broke it at every node it tried)."""
     n = len(next(iter(params.values())))
     values = layout.empty(n)
     try:
         result = _model_code(model.simulate, params, layout.times)
         # Reading the result runs the model's code too (a mapping's lookup, an __array__).
         problem = _model_code(_collect, result, layout, values)
-    except ModelDefinitionError:
-        raise  # the same at every node: stop with its one message
+    except ModelDefinitionError as exc:
+        return values, [str(exc)] * n, True, True
     except Exception as exc:  # the model's own failure, whatever its type, is data here
-        return values, [_describe(exc)] * n, True
+        return values, [_describe(exc)] * n, True, False
     if problem:
-        return values, [problem] * n, True
+        return values, [problem] * n, True, False
     messages = []
     columns = [np.isfinite(part) for part in layout.split(values).values()]
     for i in range(n):
@@ -580,7 +584,7 @@ def _run_batch(
             messages.append(f"non-finite output {layout.outputs[k]!r}{layout.where(k, j)}")
         else:
             messages.append("")
-    return values, messages, False
+    return values, messages, False, False
 
 
 def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str:
@@ -592,7 +596,13 @@ def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str
         if name not in result:
             return f"the model returned no output {name!r}"
         try:
-            array = np.asarray(result[name], dtype=np.float64)
+            given = np.asarray(result[name])
+            if np.iscomplexobj(given):  # nothing may be lost but imaginary zeros
+                imaginary = np.abs(given.imag)
+                if imaginary.any():
+                    return str(complex_output(f"output {name!r}", float(np.max(imaginary))))
+                given = given.real
+            array = np.asarray(given, dtype=np.float64)
         except (TypeError, ValueError) as exc:
             return f"output {name!r} is not a float array ({exc})"
         if array.shape != (n, *shape):
@@ -625,13 +635,13 @@ def _execute(
     n = len(next(iter(params.values())))
     values = layout.empty(n)
     messages = ["not run"] * n
-    narrow = _Narrowing(model, params, layout, retries, values, messages)
+    narrow = _Narrowing(model, params, layout, retries, values, messages, [False] * n)
     if batched and n > 1 and not callable(getattr(model, "run_point", None)):
         narrow.batch(0, n)
     else:
         for i in range(n):
             narrow.alone(i)
-    return _Outcome(values, tuple(messages), time.perf_counter() - start)
+    return _Outcome(values, tuple(messages), time.perf_counter() - start, tuple(narrow.broken))
 
 
 @dataclass
@@ -644,15 +654,16 @@ class _Narrowing:
     retries: int
     values: NDArray[np.float64]
     messages: list[str]
+    broken: list[bool]
 
     def alone(self, i: int) -> None:
         """Run node ``i`` in a one-node batch, ``1 + retries`` times at most."""
         single = {name: array[i : i + 1] for name, array in self.params.items()}
         for _ in range(1 + self.retries):
-            row, (message,), _ = _run_batch(self.model, single, self.layout)
+            row, (message,), _, broken = _run_batch(self.model, single, self.layout)
             if not message:
                 break
-        self.values[i], self.messages[i] = row[0], message
+        self.values[i], self.messages[i], self.broken[i] = row[0], message, broken
 
     def batch(self, start: int, stop: int) -> None:
         """Run nodes ``[start, stop)`` in one batched call; narrow it down if it fails.
@@ -669,7 +680,7 @@ class _Narrowing:
             self.alone(start)
             return
         part = {name: array[start:stop] for name, array in self.params.items()}
-        rows, found, failed = _run_batch(self.model, part, self.layout)
+        rows, found, failed, _ = _run_batch(self.model, part, self.layout)
         if failed:
             middle = (start + stop) // 2
             self.batch(start, middle)
@@ -690,7 +701,11 @@ def _read_only(array: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 class _Campaign:
-    """The state of one :func:`run_nodes` call: arguments, results so far, journal, progress."""
+    """The state of one :func:`run_nodes` call: arguments, results so far, journal, progress.
+
+    ``proven``: the model is known to work (see :func:`run_nodes`), so that a break of the
+    protocol is never taken for a model error.
+    """
 
     def __init__(
         self,
@@ -701,6 +716,7 @@ class _Campaign:
         retries: int,
         journal: Journal | None,
         axes: Mapping[str, OutputAxis | None] | None = None,
+        proven: bool = False,
     ) -> None:
         layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
@@ -713,6 +729,8 @@ class _Campaign:
         }
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
+        self.broken: set[int] = set()  # the failed nodes where the model broke the protocol
+        self.proven = proven
         self.resumed = 0
         self.progress: Progress | None = None
 
@@ -753,8 +771,15 @@ class _Campaign:
             self.retries,
         )
 
-    def accept(self, task: _Task, values: NDArray[np.float64], messages: Sequence[str]) -> None:
-        """Store a finished task, journal it at once and advance the progress line."""
+    def accept(
+        self,
+        task: _Task,
+        values: NDArray[np.float64],
+        messages: Sequence[str],
+        broken: Sequence[bool] = (),
+    ) -> None:
+        """Store a finished task, journal it at once and advance the progress line;
+        ``broken``: the nodes whose failure is a break of the protocol."""
         failed = np.array([bool(m) for m in messages])
         chunk = {
             name: np.where(failed[:, None], np.nan, part)
@@ -766,14 +791,34 @@ class _Campaign:
         found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
         for i in task.indices:
             self.messages.pop(int(i), None)
+            self.broken.discard(int(i))
         self.messages.update(found)
+        self.broken.update(int(i) for i, b in zip(task.indices, broken, strict=False) if b)
         if self.journal is not None:
             self.journal.record(task.indices, chunk, self.status[task.indices], found)
         if self.progress is not None:
             self.progress.advance(task.indices.size)
 
     def accept_outcome(self, task: _Task, outcome: _Outcome) -> None:
-        self.accept(task, outcome.values, outcome.messages)
+        self.accept(task, outcome.values, outcome.messages, outcome.broken)
+
+    @property
+    def broken_everywhere(self) -> bool:
+        """Whether the model, not known to work, broke the protocol at every node it tried:
+        none succeeded (none resumed either) and none failed otherwise."""
+        return (
+            not self.proven
+            and bool(self.broken)
+            and len(self.broken) == len(self.messages)
+            and not (self.status == Status.OK).any()
+        )
+
+    def definition_error(self) -> ModelDefinitionError:
+        """The model error of a model that broke the protocol at every node it tried."""
+        first = min(self.broken)
+        return ModelDefinitionError(
+            f"{self.messages[first]} (at each of the {len(self.broken)} node(s) tried)"
+        )
 
     def accept_death(self, task: _Task, message: str) -> None:
         n = task.indices.size
@@ -854,7 +899,10 @@ def _run_pooled(
     A task past its deadline has its workers killed (the pool is rebuilt); the other tasks
     in flight then are run again, and the late task is isolated like one whose worker died.
     With ``stop_on_failure``, no task is started once a node has failed; the tasks in flight
-    finish (and are journaled), the others stay pending.
+    finish (and are journaled), the others stay pending. While the model has broken the
+    protocol at every node it tried, no task is started either: if the tasks in flight do
+    not show it working somewhere, the loop ends there (a model error, see
+    :func:`run_nodes`); if they do, the campaign goes on under the failure policy.
     """
     queue = deque(tasks)
     # One task queued beyond the workers hides the round trip between tasks (no more: loky's
@@ -864,10 +912,12 @@ def _run_pooled(
     in_flight: dict[Future[_Outcome], tuple[_Task, float]] = {}
     lost: list[_Task] = []
     while queue or in_flight:
+        if campaign.broken_everywhere and not in_flight:
+            break
         # After a death, feed nothing more: let the chunks in flight finish or fail first.
         if stop_on_failure and campaign.messages:
             queue.clear()
-        while queue and not lost and len(in_flight) < most:
+        while queue and not lost and len(in_flight) < most and not campaign.broken_everywhere:
             task = queue.popleft()
             future = pool.submit(_execute, *campaign.arguments(task))
             in_flight[future] = (task, limits.deadline(task, time.monotonic()))
@@ -1036,6 +1086,7 @@ def run_nodes(
     stop_on_failure: bool = False,
     pool: Pool | None = None,
     facts: ModelFacts | None = None,
+    proven: bool = False,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -1081,6 +1132,10 @@ def run_nodes(
         campaigns; default: a pool of ``backend`` opened and closed by this call.
     facts:
         What :func:`describe_model` said of this factory on ``pool``, to skip asking again.
+    proven:
+        The model is known to work (it ran at other nodes: a study's later rounds, held-out
+        and nominal runs), so that a node where it breaks the protocol is a failed node,
+        never a :class:`~pcmb.errors.ModelDefinitionError`.
 
     Returns
     -------
@@ -1093,7 +1148,12 @@ def run_nodes(
         Before anything runs, for invalid arguments, a model without a requested output, or a
         journal that does not match this run.
     ModelDefinitionError
-        If the model cannot be built (its code failed or killed the worker).
+        If the model cannot be built (its code failed or killed the worker), or breaks the
+        protocol (:class:`~pcmb.adapters.protocol.Model`) at every node it was tried at: no
+        node succeeded, none of those tried failed otherwise, and the model is not
+        ``proven``. The model stops being tried at the first such node of a campaign, as soon
+        as the tasks in flight have finished. A break of the protocol at some nodes only is a
+        failure of each of those nodes, like any other.
     """
     start = time.perf_counter()
     arrays, time_grid, names = _check_arguments(
@@ -1115,6 +1175,7 @@ def run_nodes(
                 progress=progress,
                 stop_on_failure=stop_on_failure,
                 pool=own,
+                proven=proven,
             )
     if timeout is not None and not pool.kills:
         raise UsageError(
@@ -1130,7 +1191,9 @@ def run_nodes(
     _check_outputs(facts, names)
     if journal is not None:
         _check_journal(journal, n_nodes, Layout.of(names, time_grid, facts.axes))
-    campaign = _Campaign(factory, arrays, time_grid, names, retries, journal, facts.axes)
+    campaign = _Campaign(
+        factory, arrays, time_grid, names, retries, journal, facts.axes, proven=proven
+    )
     if journal is not None:
         campaign.resume(journal)
     # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
@@ -1143,6 +1206,8 @@ def run_nodes(
         _run_pooled(campaign, pool, tasks, limits, stop_on_failure)
     finally:
         campaign.progress.close()
+    if campaign.broken_everywhere:
+        raise campaign.definition_error()
     return campaign.result(time.perf_counter() - start)
 
 
@@ -1179,7 +1244,8 @@ def start_run(
     """Send a few nodes (one task, no journal, no retries) to ``pool`` now and return at once,
     so that they run while the caller's next campaign keeps the other workers busy: how a
     study overlaps its nominal run with its nodes. Only for pools without a timeout, whose
-    chunks may wait in the queue behind it.
+    chunks may wait in the queue behind it. A break of the protocol is a failure of its
+    node here (the run is ``proven``, see :func:`run_nodes`).
 
     Raises
     ------
@@ -1191,7 +1257,9 @@ def start_run(
         params, times, outputs, jobs=None, backend="loky", address=None, chunk_size=None, retries=0
     )
     _check_outputs(facts, names)
-    campaign = _Campaign(_factory(model_factory), arrays, time_grid, names, 0, None, facts.axes)
+    campaign = _Campaign(
+        _factory(model_factory), arrays, time_grid, names, 0, None, facts.axes, proven=True
+    )
     (task,) = campaign.plan([(0, len(next(iter(arrays.values()))))])
     future = pool.submit(_execute, *campaign.arguments(task))
     return PendingRun(campaign, task, future, started)

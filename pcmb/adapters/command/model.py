@@ -35,6 +35,7 @@ from pcmb.adapters.protocol import (
     PointwiseModel,
     check_point_result,
     describe_exception,
+    float_array,
 )
 from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
@@ -84,13 +85,6 @@ def split_command(text: str) -> list[str]:
         Unbalanced quotes.
     """
     return shlex.split(_PLACEHOLDER.sub(lambda m: "{{" + m.group(1) + "}}", text))
-
-
-def _float_array(value: Any, what: str) -> NDArray[np.float64]:
-    try:
-        return np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{what} is not numeric: {describe_exception(exc)}") from exc
 
 
 @dataclass(frozen=True)
@@ -454,7 +448,7 @@ class CommandModel(PointwiseModel):
         return result
 
     def _check_time_column(self, column: Any, times: NDArray[np.float64], key: str) -> None:
-        file_times = _float_array(column, f"{key!r} in {self.output_file}")
+        file_times = float_array(column, f"{key!r} in {self.output_file}")
         # A simulator may print times with few digits; a row must still be unmistakably its
         # grid time, i.e. within a small fraction of the grid step.
         step = np.min(np.diff(times)) if times.size > 1 else max(1.0, abs(float(times[0])))
@@ -507,7 +501,11 @@ def _read_table(path: Path, outputs: Sequence[str]) -> dict[str, NDArray[np.floa
 
 
 def _columns(rows: list[list[str]]) -> dict[str, NDArray[np.float64]]:
-    """Columns by name of a table whose first row names them."""
+    """Columns by name of a table whose first row names them.
+
+    A name may repeat only for columns of equal values (ngspice's ``wrdata`` repeats its
+    scale column before every vector): otherwise which column is meant cannot be told.
+    """
     if not rows:
         raise ValueError("the file is empty")
     header = [cell.strip() for cell in rows[0]]
@@ -520,13 +518,36 @@ def _columns(rows: list[list[str]]) -> dict[str, NDArray[np.float64]]:
                 table[number - 2, j] = float(cell)
             except ValueError:
                 raise ValueError(f"line {number}: {cell.strip()!r} is not a number") from None
-    return {name: table[:, j] for j, name in enumerate(header)}
+    columns: dict[str, NDArray[np.float64]] = {}
+    for j, name in enumerate(header):
+        if name in columns and not np.array_equal(columns[name], table[:, j], equal_nan=True):
+            where = [k + 1 for k, other in enumerate(header) if other == name]
+            count = "twice" if len(where) == 2 else f"{len(where)} times"
+            raise ValueError(
+                f"column {name!r} appears {count} (columns {', '.join(map(str, where[:-1]))} "
+                f"and {where[-1]}) with different values: which one is meant is unknown"
+            )
+        columns[name] = table[:, j]
+    return columns
 
 
 def _read_json(path: Path, outputs: Sequence[str]) -> dict[str, Any]:
-    document = json.loads(path.read_text(encoding="utf-8", errors="replace"))
+    document = json.loads(
+        path.read_text(encoding="utf-8", errors="replace"), object_pairs_hook=_unique_keys
+    )
     if not isinstance(document, dict):
         raise ValueError(f"expected an object {{name: [values]}}, found {type(document).__name__}")
+    return document
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose keys repeat only with equal values (else the meant one is unknown;
+    ``json`` alone would keep the last)."""
+    document: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in document and document[key] != value:
+            raise ValueError(f"key {key!r} appears more than once, with different values")
+        document[key] = value
     return document
 
 

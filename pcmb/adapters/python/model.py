@@ -35,6 +35,7 @@ from pcmb.adapters.protocol import (
     PointwiseModel,
     check_batch,
     describe_exception,
+    float_array,
 )
 from pcmb.errors import ConfigError, ConfigProblem, ModelError, UsageError
 from pcmb.wording import did_you_mean
@@ -497,12 +498,7 @@ class _MarkedFunction:
         return _returned_mapping(result, self.outputs, self._who, due)
 
     def _numeric(self, name: str, value: Any) -> NDArray[np.float64]:
-        try:
-            return np.asarray(value, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ModelError(
-                f"output {name!r} of the {self._who} is not numeric: {describe_exception(exc)}"
-            ) from exc
+        return float_array(value, f"output {name!r} of the {self._who}")
 
 
 class FunctionModel(_MarkedFunction, PointwiseModel):

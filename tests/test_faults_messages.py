@@ -1,0 +1,129 @@
+"""Inputs that cannot work say so at their config key, before anything runs.
+
+An input whose range overflows floating point (uniform bounds of ±1e308) or whose nodes do
+(a normal input of std 1e307) is refused at ``inputs.<name>``, by ``pcmb validate`` where
+the range alone shows it; a random process input whose correlation length no term of its
+grid resolves is refused at its ``covariance.length``, saying so.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+MODEL = """
+import pcmb
+
+
+@pcmb.pointwise(outputs=("y",))
+def model(params, times):
+    return {"y": 0.0 * times + 1.0}
+"""
+
+
+def _config(folder: Path, inputs: str, params: str = "a: 0.0") -> Path:
+    (folder / "flat_model.py").write_text(MODEL)
+    config = folder / "study.yaml"
+    config.write_text(
+        textwrap.dedent(
+            f"""\
+            name: messages
+            model:
+              kind: python
+              entry: flat_model.py:model
+              params: {{{params}}}
+              outputs: [y]
+            time: {{start: 0.0, stop: 1.0, points: 3}}
+            method: {{kind: collocation, order: 2, validation: 0}}
+            execution: {{jobs: 1, backend: loky}}
+            output: {str(folder / "result.h5")!r}
+            inputs:
+            """
+        )
+        + textwrap.indent(inputs, "  ")
+        + "\n"
+    )
+    return config
+
+
+def _pcmb(*args: str) -> tuple[int, str]:
+    process = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", *args], capture_output=True, text=True, timeout=300
+    )
+    return process.returncode, process.stderr
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_uniform_bounds_whose_range_overflows_are_refused_at_the_input(
+    tmp_path: Path, command: str
+) -> None:
+    config = _config(tmp_path, "a: {dist: uniform, low: -1.0e+308, high: 1.0e+308}")
+    code, stderr = _pcmb(command, str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.a: " in stderr and "run_nodes" not in stderr, stderr
+    assert "wider than the largest float" in stderr, stderr
+    assert not (tmp_path / "result.h5.journal").exists()
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+def test_an_input_whose_nodes_overflow_is_refused_at_the_input(
+    tmp_path: Path, command: str
+) -> None:
+    config = _config(tmp_path, "a: {dist: normal, mean: 1.0e+308, std: 1.0e+308}")
+    code, stderr = _pcmb(command, str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.a: " in stderr and "run_nodes" not in stderr, stderr
+    assert "not a finite number" in stderr, stderr
+    assert not (tmp_path / "result.h5.journal").exists()
+
+
+@pytest.mark.parametrize(
+    "covariance",
+    [
+        "{kind: exponential, sigma: 1.0, length: 1.0e-6}",
+        "{kind: squared-exponential, sigma: 1.0, length: 1.0e-6}",
+        "{kind: matern, sigma: 1.0, length: 1.0e-6, nu: 1.5}",
+    ],
+)
+def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
+    tmp_path: Path, covariance: str
+) -> None:
+    process = (
+        f"r: {{process: kl, covariance: {covariance}, grid: {{start: 0, stop: 10, points: 11}}, "
+        "energy: 0.9}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.r.covariance.length: the correlation length 1e-06" in stderr
+    assert "no term of the expansion resolves it" in stderr, stderr
+    assert "Traceback" not in stderr and "zero-size array" not in stderr, stderr
+
+
+def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
+    tmp_path: Path,
+) -> None:
+    process = (
+        "r: {process: kl, covariance: {kind: squared-exponential, sigma: 1.0, length: 0.006}, "
+        "grid: {start: 0, stop: 10, points: 11}, energy: 0.9}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert f"{config}:12: inputs.r.covariance.length: the expansion needs " in stderr, stderr
+    assert "more than the 11 points of the grid" in stderr and "runs" not in stderr, stderr
+
+
+def test_a_run_count_beyond_the_floats_is_reported_not_a_crash(tmp_path: Path) -> None:
+    process = (
+        "r: {process: kl, covariance: {kind: exponential, sigma: 1.0, length: 1.0}, "
+        "grid: {start: 0, stop: 10, points: 801}, terms: 700}"
+    )
+    config = _config(tmp_path, process, params="r: 0.0")
+    code, stderr = _pcmb("validate", str(config))
+    assert code == 2, stderr
+    assert "method.order: the design asks for ~10^333 runs" in stderr, stderr
