@@ -146,6 +146,7 @@ def test_sigkill_then_resume_gives_identical_results(tmp_path, linear_study):
         )
 
 
+@pytest.mark.slow
 def test_a_run_imports_no_heavy_module_it_does_not_need(linear_study):
     """`pcmb run` of a python-kind study must not import mujoco, matplotlib, scipy.stats/signal."""
     config = linear_study()

@@ -81,6 +81,7 @@ def test_a_failed_node_reports_its_stderr_and_kept_directory(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_regress_names_every_kept_directory_in_a_warning_record(tmp_path, capsys):
     run_dir = tmp_path / "nodes"
     text = config_text("", run_dir, on_failure="regress").replace("validation: 0", "validation: 16")
@@ -180,6 +181,7 @@ def test_the_readme_and_models_page_list_every_key_with_its_default(page, headin
             assert rows[key] == default, key
 
 
+@pytest.mark.slow
 def test_the_ac_sweep_example_is_tensor_collocation_on_a_frequency_axis(tmp_path, capsys):
     """configs/command_frequency_response.yaml against an independent tensor Gauss-Legendre
     quadrature of the closed-form response at the same order: the same nodes and weights,

@@ -26,6 +26,7 @@ def _run(high, **options):
     return pcmb.Study(ramp, inputs, TIMES, order=1, params={"a": 2.0}, jobs=1, **options).run()
 
 
+@pytest.mark.slow
 def test_differences_of_two_chaos_results_match_the_closed_form():
     reference, other = _run(3.0), _run(4.0)
     found = compare(reference, other).differences["y"]
@@ -63,6 +64,7 @@ def test_chaos_against_chaos_is_judged_by_the_stored_tolerance():
     assert strict.tolerance == 0.05 and strict.verdict() == "beyond tolerance"
 
 
+@pytest.mark.slow
 def test_monte_carlo_noise_and_the_verdict():
     chaos = _run(3.0)
     same = _run(3.0, method="montecarlo", samples=4000, seed=2)
@@ -222,6 +224,7 @@ def test_method_labels():
     assert method_label(fitted).startswith("sobol + chaos fit, total order 1 (32 runs)")
 
 
+@pytest.mark.slow
 def test_pcmb_compare_prints_the_table_and_writes_figures(tmp_path, capsys):
     paths = []
     for name, result in [("chaos", _run(3.0)), ("wide", _run(4.0))]:

@@ -419,6 +419,7 @@ BROKEN = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("old", "new", "path", "marker", "fragment"),
     [case[1:] for case in BROKEN],
@@ -444,6 +445,7 @@ def test_every_problem_is_reported_at_once():
     assert [p.line for p in exc.value.problems] == [9, 17, 21]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("text", "message"),
     [
@@ -508,6 +510,7 @@ def test_marked_functions_load_from_a_config():
     assert out["y"].shape == (2, 3)
 
 
+@pytest.mark.slow
 def test_loading_a_python_config_does_not_import_mujoco():
     code = (
         "import sys; from pcmb.config.schema import load_config; "
@@ -549,6 +552,7 @@ def test_command_config_builds_a_working_model(tmp_path):
     np.testing.assert_array_equal(out["y"], np.exp(-k[:, None] * config.times))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("old", "new", "path", "marker", "fragment"),
     [
@@ -649,6 +653,7 @@ method: {kind: collocation, order: 1}
 """
 
 
+@pytest.mark.slow
 def test_mujoco_config_builds_the_scene():
     config = load(MUJOCO)
     assert config.output_names == ("theta", "x")
@@ -659,6 +664,7 @@ def test_mujoco_config_builds_the_scene():
     assert out["theta"][0, 0] == 0.5  # the fixed initial state from init
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("old", "new", "path", "marker", "fragment"),
     [
@@ -687,6 +693,7 @@ def test_broken_mujoco_config(old, new, path, marker, fragment):
 # --------------------------------------------------------------------------- command line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("old", "new", "path", "marker", "fragment"),
     [case[1:] for case in BROKEN],
@@ -782,6 +789,7 @@ FUZZ = settings(
 )
 
 
+@pytest.mark.slow
 @FUZZ
 @given(
     path=st.sampled_from(BASE_PATHS),
@@ -803,12 +811,14 @@ def test_fuzz_mutated_config(path, action, value, key):
     check_outcome(yaml.safe_dump(data, allow_unicode=True))
 
 
+@pytest.mark.slow
 @FUZZ
 @given(document=values)
 def test_fuzz_random_documents(document):
     check_outcome(yaml.safe_dump(document, allow_unicode=True))
 
 
+@pytest.mark.slow
 @FUZZ
 @given(
     position=st.integers(0, len(BASE)),

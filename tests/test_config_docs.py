@@ -195,6 +195,7 @@ def test_undescribed_keys_are_key_paths_of_the_page(page):
         assert f"| `{path}` |" in page
 
 
+@pytest.mark.slow
 def test_the_module_prints_the_page_and_is_not_loaded_by_the_command_line(page):
     done = subprocess.run(
         [sys.executable, "-m", "pcmb.config.reference"], capture_output=True, check=True

@@ -283,6 +283,7 @@ def test_the_verdict_is_the_first_time_above_the_tolerance():
     assert np.isnan(verdict([0.0, 1.0], [0.05, 0.0], 0.05))
 
 
+@pytest.mark.slow
 def test_diagnostics_outputs_leaves_a_round_off_residual_unjudged(tmp_path, capsys):
     from pcmb.cli import main
 

@@ -224,6 +224,7 @@ def test_check_output_creates_the_folder_only_when_asked(tmp_path):
 # --------------------------------------------------------------------------- during a run
 
 
+@pytest.mark.slow
 def test_disk_full_before_the_result_file_keeps_the_journal_for_resume(
     tmp_path, tmpfs, monkeypatch, capsys
 ):
@@ -255,6 +256,7 @@ def test_disk_full_before_the_result_file_keeps_the_journal_for_resume(
     np.testing.assert_allclose(result.mean("y"), 2 * result.times + 1, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_journal_moved_to_another_disk_resumes_there(tmp_path, tmpfs, monkeypatch, capsys):
     folder = tmpfs("1m")
     config = write_config(tmp_path, folder / "out.h5")
@@ -272,6 +274,7 @@ def test_a_journal_moved_to_another_disk_resumes_there(tmp_path, tmpfs, monkeypa
     assert nodes_run(tmp_path) == N_NODES + 2 * NOMINAL and pcmb.load(other).n_nodes == N_NODES
 
 
+@pytest.mark.slow
 def test_disk_full_during_the_journal_keeps_the_finished_records(
     tmp_path, tmpfs, monkeypatch, capsys
 ):

@@ -152,6 +152,7 @@ def test_python_example_config_as_is(tmp_path):
     assert result.nominal_params == {"k": 4.0, "c": 0.4}  # model.params
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("entry", "node_tolerance"),
     [
@@ -228,6 +229,7 @@ def test_command_script_runs_by_itself():
     assert {name for pair in imports for name in pair if name} <= set(sys.stdlib_module_names)
 
 
+@pytest.mark.slow
 def test_command_config(tmp_path):
     result = run_config(ROOT / "configs" / "command_oscillator.yaml", tmp_path / "out.h5")
     check_oscillator(result)
@@ -238,6 +240,7 @@ def test_command_config(tmp_path):
     assert np.abs(result.values["v"] - v).max() <= 1e-12
 
 
+@pytest.mark.slow
 def test_command_deck_example(tmp_path):
     result = run_config(EXAMPLES / "command_deck.yaml", tmp_path / "out.h5")
     check_oscillator(result)
@@ -301,6 +304,7 @@ def test_ngspice_rlc_config(tmp_path):
 # --------------------------------------------------------------------------- kind: mujoco
 
 
+@pytest.mark.slow
 def test_mujoco_pendulum_config(tmp_path):
     result = run_config(ROOT / "configs" / "mujoco_pendulum.yaml", tmp_path / "out.h5")
     times = result.times
@@ -323,6 +327,7 @@ def test_mujoco_pendulum_config(tmp_path):
     assert np.abs(result.std("theta") - std).max() > 1e-4  # the page says why
 
 
+@pytest.mark.slow
 def test_mujoco_bind_example_from_yaml_and_python(tmp_path):
     result = run_config(EXAMPLES / "mujoco_pendulum_bind.yaml", tmp_path / "out.h5")
     times = result.times

@@ -151,6 +151,7 @@ def test_batch_composition_changes_the_last_bits(oscillator_serial) -> None:
     np.testing.assert_allclose(single.values["x"], oscillator_serial.values["x"], atol=2e-6)
 
 
+@pytest.mark.slow
 def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=2)
@@ -158,6 +159,7 @@ def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
         np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
 
 
+@pytest.mark.slow
 def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(
@@ -339,6 +341,7 @@ def test_base_exceptions_of_the_model_are_failures_of_its_nodes(how: str, messag
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # left as found
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("how", "message"), LEAVINGS[::2])
 def test_base_exceptions_in_workers_are_failures_of_their_nodes(how: str, message: str) -> None:
     params = ramp_params(24)
@@ -351,6 +354,7 @@ def test_base_exceptions_in_workers_are_failures_of_their_nodes(how: str, messag
     assert (result.values["pid"][good][-1] != os.getpid()).all()  # run by workers
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["sigint", "sigint-swallowed", "sigint-exit", "sigint-error"])
 def test_a_sigint_while_the_model_runs_interrupts_the_run(how: str) -> None:
     # Whatever the model makes of the user's Ctrl-C, the run stops with KeyboardInterrupt.
@@ -370,6 +374,7 @@ def test_a_keyboard_interrupt_pcmb_cannot_attribute_stays_the_users() -> None:
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+@pytest.mark.slow
 def test_a_keyboard_interrupt_outside_the_main_thread_is_the_models() -> None:
     # Python delivers SIGINT to the main thread only (dask runs tasks in worker threads).
     params = ramp_params(8)
@@ -515,6 +520,7 @@ def test_bad_arguments_are_all_reported_before_anything_runs() -> None:
     assert em.SIMULATED == []
 
 
+@pytest.mark.slow
 def test_an_output_the_model_lacks_is_rejected_before_running() -> None:
     em.SIMULATED.clear()
     with pytest.raises(UsageError, match=r"outputs: the model has no output \['z'\]"):
@@ -566,6 +572,7 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
     np.testing.assert_array_equal(third.values["y"], ramp_exact(params))
 
 
+@pytest.mark.slow
 def test_a_journal_of_another_shape_is_refused(tmp_path: Path) -> None:
     journal = Journal(tmp_path / "j", "fp", 16, ["y"], TIMES.size)
     with pytest.raises(UsageError, match="delete it or start over with --fresh"):

@@ -97,6 +97,7 @@ def test_quantiles_and_pdf_from_the_surrogate():
         _time_expansion()[0].pdf([0.0])
 
 
+@pytest.mark.slow
 def test_sobol_indices_match_chaospy_oracle():
     """Independent implementation (chaospy, test-only): total-degree projection on Gauss nodes."""
     chaospy = pytest.importorskip("chaospy")

@@ -100,6 +100,7 @@ def test_a_failing_node_of_a_pointwise_batch_runs_once_per_try(tmp_path: Path, r
     np.testing.assert_array_equal(result.values["y"][good], a[good, None] * TIMES)
 
 
+@pytest.mark.slow
 def test_a_failing_pointwise_node_runs_once_in_workers(tmp_path: Path):
     a = np.linspace(1.0, 2.0, 32)
     log = tmp_path / "calls.log"
@@ -147,6 +148,7 @@ def test_nothing_fails_nothing_changes(tmp_path: Path):
 # -- on_failure: abort stops dispatching -------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_stop_on_failure_stops_early_and_names_every_failure_found(tmp_path: Path, jobs: int):
     a = np.linspace(1.0, 2.0, 64)  # 16 chunks of 4
@@ -192,6 +194,7 @@ def model(params, times):
 """
 
 
+@pytest.mark.slow
 def test_abort_keeps_finished_chunks_and_resume_runs_the_rest(tmp_path: Path, capsys):
     (tmp_path / "point_model.py").write_text(MODEL)
     flag, log, out = tmp_path / "fail.flag", tmp_path / "calls.log", tmp_path / "out.h5"

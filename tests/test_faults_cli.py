@@ -101,6 +101,7 @@ def _stamps(folder: Path) -> dict[str, tuple[int, int]]:
     }
 
 
+@pytest.mark.slow
 def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Path) -> None:
     _growth_sweep(tmp_path)
     gate = tmp_path / "gate"
@@ -166,6 +167,7 @@ def _headless(journal: Path) -> None:
     (journal / "record-000000.npz").write_bytes(b"not a zip")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spoil", [_corrupt, _foreign, _headless])
 def test_a_journal_that_cannot_be_continued_has_a_way_out(
     tmp_path, linear_study, capsys, spoil
@@ -231,6 +233,7 @@ def test_fresh_leaves_a_folder_that_is_not_a_journal(tmp_path, linear_study, cap
     assert (journal / "notes.txt").read_text() == "mine"
 
 
+@pytest.mark.slow
 def test_fresh_in_the_python_api(tmp_path, linear_study) -> None:
     study = Study.from_config(load_config(linear_study()))
     out = tmp_path / "api.h5"
@@ -243,6 +246,7 @@ def test_fresh_in_the_python_api(tmp_path, linear_study) -> None:
     np.testing.assert_allclose(result.mean("y"), 2 * result.times + 1, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_sweep_with_an_unreadable_ledger_starts_over_with_fresh(tmp_path, capsys) -> None:
     config = _growth_sweep(tmp_path)
     folder = tmp_path / "out"
@@ -295,6 +299,7 @@ def local_cluster_starts() -> None:
         pytest.skip(f"dask's LocalCluster cannot start here: {error}")
 
 
+@pytest.mark.slow
 def test_quiet_silences_dask_logging(tmp_path, local_cluster_starts) -> None:
     (tmp_path / "dying.py").write_text(DYING)
     (tmp_path / "study.yaml").write_text(

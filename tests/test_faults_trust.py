@@ -148,6 +148,7 @@ def interrupted(tmp_path: Path) -> Path:
     return tmp_path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("edited", "content"),
     [("helper.py", "def slope(a):\n    return 2 * a\n"), ("data/scale.txt", "2.0\n")],
@@ -175,6 +176,7 @@ def test_resume_refuses_an_edited_imported_module_or_listed_file(
     np.testing.assert_array_equal(result.values["y"], result.params[:, [0]] * result.times)
 
 
+@pytest.mark.slow
 def test_a_missing_listed_model_file_is_named_at_its_key(tmp_path: Path) -> None:
     (tmp_path / "model.py").write_text(ENTRY)
     (tmp_path / "helper.py").write_text(HELPER)
@@ -252,6 +254,7 @@ def test_every_adapter_declares_the_files_its_model_reads(
 # --------------------------------------------------------------------------- item 4: aliases
 
 
+@pytest.mark.slow
 def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
     oscillator_fmu: Path, tmp_path: Path
 ) -> None:
@@ -311,6 +314,7 @@ def plant(archive: Path, folder: Path, marker: Path) -> None:
     code.write_text(f"open({str(marker)!r}, 'w').close()\n" + text)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["edited", "linked"])
 def test_a_planted_fmu_cache_entry_never_runs(
     oscillator_fmu: Path, tmp_path: Path, how: str
@@ -355,6 +359,7 @@ def test_a_planted_fmu_cache_entry_never_runs(
     assert (private / "resources" / "DampedOscillator.py").read_bytes() == genuine
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("folder", ["pcmb", "pcmb/fmu"])
 @pytest.mark.parametrize("spoiled", ["owned by uid 65534", "writable by other users"])
 def test_an_fmu_cache_folder_of_another_user_or_open_to_all_is_refused(

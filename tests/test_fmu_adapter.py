@@ -241,6 +241,7 @@ def test_the_fmu_file_is_fingerprinted(fmu_dir):
 # --------------------------------------------------------------------------- checks
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("fmu", "model", "inputs", "expected"),
     [

@@ -150,6 +150,7 @@ def _error(expansion, reference):
     )
 
 
+@pytest.mark.slow
 def test_galerkin_converges_geometrically_to_the_collocation_statistics_of_the_quarter_car():
     # Both methods are spectral in the order for this smooth response: their errors fall
     # geometrically with P towards the same limit. The reference is collocation of order 8,

@@ -56,6 +56,7 @@ def test_linear_quarter_car_with_a_gaussian_amplitude_is_exact():
     np.testing.assert_allclose(std, 0.01 * np.abs(unit), atol=1e-7 * 0.01 * scale)
 
 
+@pytest.mark.slow
 def test_cubic_oscillator_reaches_the_equivalent_linear_root_and_overestimates_chaos():
     # Part II Eq. 17-24: the stationary equivalent stiffness k = 3h E[x²] with E[x²] the linear
     # response to the two forcing lines, E = Σ A_i² / ((3hE - m ω_i²)² + c² ω_i²), one root.

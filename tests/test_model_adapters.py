@@ -417,6 +417,7 @@ def command(tmp_path: Path, output: str = "out.csv", deck: bool = False, **kwarg
     return CommandModel(args, **options)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("output", "fmt"),
     [
@@ -480,6 +481,7 @@ def test_command_failures_are_classified(tmp_path, mode, output, pattern):
         command(tmp_path, output).simulate({"mode": np.array([float(mode)])}, TIMES)
 
 
+@pytest.mark.slow
 def test_command_timeout_kills_the_whole_process_group(tmp_path):
     model = command(tmp_path, timeout=1.5)
     start = time.monotonic()

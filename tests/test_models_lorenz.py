@@ -59,6 +59,7 @@ def test_stable_case_converges_to_3_3_9_at_the_linearized_rate():
     assert np.all((ratio > np.exp(-2.5) / 1.5) & (ratio < np.exp(-2.5) * 1.5))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("case", "horizon"), [(STABLE, 15.0), (CHAOTIC, 5.0)], ids=["stable", "chaotic"]
 )

@@ -137,6 +137,7 @@ def test_mr_damper_over_a_bump_matches_tight_separate_runs():
     assert np.allclose(times[first], start)
 
 
+@pytest.mark.slow
 def test_kl_terrain_batch_matches_tight_separate_runs_and_the_profile():
     germs = np.array(
         [[0.0, 0.0, 0.0, 0.0], [1.0, -0.5, 0.3, 2.0], [-2.3, 1.2, -1.0, 0.0], [0.7, 0.7, 0.7, 0.7]]

@@ -86,6 +86,7 @@ def test_the_held_out_verdict_calls_one_element_failing_and_two_fixed_at_equal_c
     assert found.holdout.statistics.max() < 0.05 and found.holdout.count == 32
 
 
+@pytest.mark.slow
 def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     out = tmp_path / "dw.h5"
     run = _pcmb("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
@@ -186,6 +187,7 @@ def _auto_config(tmp_path: Path, model: str = "DoubleWell") -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_validate_prints_the_first_round_and_the_budget(tmp_path):
     validate = _pcmb("validate", str(_auto_config(tmp_path)), cwd=tmp_path)
     assert validate.returncode == 0, validate.stderr

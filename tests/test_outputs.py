@@ -241,6 +241,7 @@ def test_inspect_lists_the_derived_figures(figures, capsys):
         assert any(line.startswith(f"checked  {name}: reliable (") for line in lines)
 
 
+@pytest.mark.slow
 def test_report_draws_a_scalar_as_pdf_and_sobol_bars(figures, tmp_path):
     pytest.importorskip("matplotlib")
     path, _ = figures
@@ -296,6 +297,7 @@ def test_a_scalar_model_output_is_stored_and_read_back(tmp_path):
     np.testing.assert_array_equal(loaded.nominal["energy"], [0.5 / 1.5])
 
 
+@pytest.mark.slow
 def test_an_axis_output_goes_through_store_inspect_report_and_compare(swept, tmp_path, capsys):
     xarray = pytest.importorskip("xarray")
     path, result = swept
@@ -469,6 +471,7 @@ def test_the_diagnostics_flag_the_chaos_of_a_kinked_maximum():
     assert abs(result.mean("peak")[0] - 0.75) > found.tolerance * exact_std
 
 
+@pytest.mark.slow
 def test_a_sweep_measures_scalar_and_derived_outputs(tmp_path):
     config = tmp_path / "decay.yaml"
     config.write_text(

@@ -24,6 +24,7 @@ def exponential_kl() -> process.RandomProcess:
     )
 
 
+@pytest.mark.slow
 def test_exponential_eigenvalues_match_the_transcendental_equations(exponential_kl):
     kl = exponential_kl
     exact = exponential_kl_eigenvalues(1.0, 1.0, 10.0, kl.terms)
@@ -56,6 +57,7 @@ def test_truncation_error_is_the_neglected_eigenvalue_sum(exponential_kl):
     assert np.all(kl.variance_error > 0)
 
 
+@pytest.mark.slow
 def test_a_line_spectrum_gives_exactly_two_terms_per_line():
     omega = [6 * np.pi / 100, 14 * np.pi / 100]  # 3 and 7 periods on [0, 100]
     kl = process.RandomProcess.karhunen_loeve(
@@ -84,6 +86,7 @@ def test_a_line_spectrum_gives_exactly_two_terms_per_line():
     assert short.terms == 4
 
 
+@pytest.mark.slow
 def test_matern_special_cases_are_closed_forms():
     tau = np.array([0.0, 0.3, 1.0, 4.0])
     half = process.matern(2.0, 1.5, 0.5).function(tau)
@@ -97,6 +100,7 @@ def test_matern_special_cases_are_closed_forms():
     np.testing.assert_allclose(a.eigenvalues, exact, rtol=1e-7)
 
 
+@pytest.mark.slow
 def test_a_tabulated_psd_reproduces_its_covariance_eigenvalues():
     """The PSD (2σ²ℓ/π)/(1 + (ωℓ)²) of σ² exp(-|τ|/ℓ), cut at ω = 2000/ℓ (variance lost
     ~2/(π·2000) = 3e-4 of σ², mostly as a smoothing of the kink at zero lag). Steps of 0.1 in ω
@@ -159,6 +163,7 @@ def _config(tmp_path, **inputs):
     return validate_config(data, base_dir=tmp_path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("setting", "key", "message"),
     [
@@ -228,6 +233,7 @@ def test_study_hands_the_model_the_field_and_stores_the_process(tmp_path):
     np.testing.assert_allclose(loaded.sobol_process("y", "road"), grouped)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "method",
     [

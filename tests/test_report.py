@@ -122,6 +122,7 @@ def test_report_with_a_monte_carlo_comparison(tmp_path, capsys):
     assert "wrote 12 figures" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_of_a_file_without_analysis_in_the_default_folder(tmp_path):
     path = _run(tmp_path, "collocation", analysis=False, outputs="[x]")
     assert pcmb.load(path).analysis is None
@@ -144,6 +145,7 @@ def test_inspect_mentions_the_nominal_run_and_the_analysis(tmp_path, capsys):
     assert "PDFs at t = 0.5, 2; spectra: x" in report
 
 
+@pytest.mark.slow
 def test_a_sampling_result_has_no_sobol_figure(tmp_path):
     result = pcmb.load(_run(tmp_path, "lhs", outputs="[x]"))
     written = write_report(result, tmp_path / "lhs")
@@ -176,6 +178,7 @@ def _edges(path):
         return study.run(path)
 
 
+@pytest.mark.slow
 def test_report_of_a_constant_and_a_huge_output(tmp_path, capsys):
     path = tmp_path / "edges.h5"
     _edges(path)
@@ -196,6 +199,7 @@ def test_report_of_a_constant_and_a_huge_output(tmp_path, capsys):
     _check_png(out / "z_sobol.png", 2)
 
 
+@pytest.mark.slow
 def test_report_and_compare_of_statistics_that_are_not_finite(tmp_path, capsys):
     result = _edges(None)
     expansion = result.expansions["z"]
@@ -239,6 +243,7 @@ def _shaded_share(path):
     return np.mean(np.all(np.abs(rgb - shade) < 3 / 255, axis=-1))
 
 
+@pytest.mark.slow
 def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
     # The double well at order 7: its mean and std fail from t ≈ 3.15 (docs/diagnostics.md);
     # a linear response y = a t is exact at order 1 and never flagged.

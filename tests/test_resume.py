@@ -202,6 +202,7 @@ def python_study(tmp_path: Path) -> Path:
     return tmp_path
 
 
+@pytest.mark.slow
 def test_a_changed_entry_file_is_refused_naming_it_and_restoring_it_resumes(
     python_study: Path,
 ) -> None:
@@ -231,6 +232,7 @@ def test_a_changed_entry_file_is_refused_naming_it_and_restoring_it_resumes(
     np.testing.assert_array_equal(y, params[:, [0]] * times + params[:, [1]] ** 2)
 
 
+@pytest.mark.slow
 def test_config_edits_that_cannot_change_node_values_keep_the_finished_work(
     python_study: Path,
 ) -> None:
@@ -269,6 +271,7 @@ def test_config_edits_that_cannot_change_node_values_keep_the_finished_work(
         assert resumed_values[name].tobytes() == values.tobytes()
 
 
+@pytest.mark.slow
 def test_changed_command_files_are_refused_by_name(tmp_path: Path) -> None:
     folder = tmp_path
     simulator = folder / "sim.py"
@@ -298,6 +301,7 @@ def test_changed_command_files_are_refused_by_name(tmp_path: Path) -> None:
         path.write_text(original)
 
 
+@pytest.mark.slow
 def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
     python_study: Path,
 ) -> None:

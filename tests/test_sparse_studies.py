@@ -141,6 +141,7 @@ def _write_config(tmp_path, method: str):
     return tmp_path / "study.yaml"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("method", "key"),
     [
@@ -172,6 +173,7 @@ def test_unusable_config_settings_are_located_at_their_key_exit_2(tmp_path, meth
     assert found.returncode == 2 and f"{key}:" in found.stderr, found.stderr
 
 
+@pytest.mark.slow
 def test_validate_prints_the_first_round_and_the_budget(tmp_path):
     path = _write_config(tmp_path, ROUNDS_METHOD)
     shown = subprocess.run(

@@ -112,6 +112,7 @@ def swept(tmp_path_factory) -> Path:
     return folder / "out"
 
 
+@pytest.mark.slow
 def test_the_csv_errors_are_those_computed_from_the_result_files(swept):
     rows = _rows(swept)
     assert list(rows[0]) == list(COLUMNS)
@@ -173,6 +174,7 @@ def test_report_of_a_sweep_draws_the_chart_and_the_table(swept, capsys):
     assert (swept / "report" / "sweep.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_a_reference_file_replaces_sweep_reference(tmp_path, swept):
     config = _study(tmp_path, SWEEP.replace("  reference: {kind: collocation, order: 12}\n", ""))
     out = tmp_path / "out"
@@ -307,6 +309,7 @@ def _runs(config, spec) -> int:
     return getattr(design, "budget", design.runs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", CONFIGS, ids=[p.stem for p in CONFIGS])
 def test_every_config_has_a_sweep_of_rising_cost_and_a_finer_reference(path, request):
     text = path.read_text(encoding="utf-8")
@@ -364,6 +367,7 @@ sweep:
 """
 
 
+@pytest.mark.slow
 def test_intrusive_methods_join_a_sweep_without_runs(tmp_path):
     config = _quarter_car(tmp_path, INTRUSIVE)
     assert main(["sweep", str(config), "-o", str(tmp_path / "out"), "--quiet"]) == 0
@@ -390,6 +394,7 @@ def test_an_intrusive_setting_the_model_cannot_take_is_refused_before_anything_r
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_a_plain_run_leaves_the_sweeps_model_checks_to_sweep_and_validate(tmp_path, capsys):
     # pcmb run ignores sweep:, so it does not pay for checking Galerkin's polynomial form in
     # a worker; validate still finds the problem, at its key.
