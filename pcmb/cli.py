@@ -460,6 +460,20 @@ def _inspect(path: str) -> str:
 
 
 def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """Run the parsed command; its exit code. While a command's workers take the cores,
+    this process keeps one native thread (:mod:`pcmb.run.threads`)."""
+    if (
+        args.command in ("run", "validate", "sweep")
+        and getattr(args, "backend", None) != "inprocess"
+    ):
+        from pcmb.run.threads import one_thread_here
+
+        with one_thread_here():
+            return _dispatch(args, argv)
+    return _dispatch(args, argv)
+
+
+def _dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the parsed command; its exit code."""
     if args.command == "run":
         return _run(args, argv)
