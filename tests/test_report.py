@@ -2,6 +2,7 @@
 
 import dataclasses
 import html
+import itertools
 import subprocess
 import sys
 import textwrap
@@ -268,3 +269,56 @@ def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
     # figure: some 10 % of its pixels, fewer where the ±1σ band lies over the shade.
     assert _shaded_share(tmp_path / "flagged" / "x_time.png") > 0.03
     assert _shaded_share(tmp_path / "unflagged" / "x_time.png") < 1e-3
+
+
+# -- what a figure shows must fit it -----------------------------------------------------------
+
+
+def _ink_at_the_edges(path):
+    """Whether any of the outermost 2 pixel columns of a PNG is not white: a legend or a
+    curve cut by the figure's edge."""
+    rgb = imread(path)[..., :3]
+    return bool(np.any(rgb[:, :2] < 0.95) or np.any(rgb[:, -2:] < 0.95))
+
+
+def test_long_comparison_labels_wrap_inside_the_figure(tmp_path):
+    result = pcmb.load(_run(tmp_path, "collocation", analysis=False, outputs="[x]"))
+    twin = pcmb.load(_run(tmp_path, "montecarlo", analysis=False, outputs="[x]"))
+    label = "a Monte Carlo twin of 400 runs drawn with seed 1, stored in decay_montecarlo.h5"
+    written = write_report(result, tmp_path / "long", comparisons=[twin], labels=[label])
+    for path in written[:-1]:
+        assert not _ink_at_the_edges(path), path.name
+
+
+def _tick_labels(axes):
+    """The tick labels drawn on both axes of a drawn figure's panel, as window extents."""
+    boxes = {}
+    for name, axis in (("x", axes.xaxis), ("y", axes.yaxis)):
+        labels = [*axis.get_majorticklabels(), *axis.get_minorticklabels()]
+        boxes[name] = [
+            (label.get_text(), label.get_window_extent())
+            for label in labels
+            if label.get_visible() and label.get_text()
+        ]
+    return boxes
+
+
+@pytest.mark.parametrize("decades", [0.3, 1.2, 1.9, 6.0])
+def test_sweep_log_axes_have_readable_ticks_at_every_span(decades):
+    from pcmb.sweep.chart import sweep_figure
+    from pcmb.sweep.table import SweepRow, SweepTable
+
+    runs = np.round(np.geomspace(20, 20 * 10**decades, 5)).astype(int)
+    errors = np.geomspace(3e-3, 3e-3 / 10**decades, 5)
+    rows = tuple(
+        SweepRow("collocation", f"order={k}", int(n), 0.01 * n, "y", e, e, e, e)
+        for k, (n, e) in enumerate(zip(runs, errors, strict=True))
+    )
+    table = SweepTable(rows, np.zeros(1), np.zeros((5, 1)), np.zeros((5, 1)), "reference.h5")
+    figure = sweep_figure(table)
+    figure.canvas.draw()
+    for axes in figure.axes:
+        for name, boxes in _tick_labels(axes).items():
+            assert len(boxes) >= 2, (name, decades, [text for text, _ in boxes])
+            for (text, box), (other, next_box) in itertools.combinations(boxes, 2):
+                assert not box.overlaps(next_box), (name, decades, text, other)

@@ -219,7 +219,9 @@ def test_a_normal_run_fits_and_shows_its_inputs_runs_and_verdict(browser, charge
     assert "25 design nodes" in text and "8 held-out" in text and "nominal" in text
     assert "reliable" in text and "error up to" in text
     assert "Warnings" not in text  # a zero variance at t = 0 is information, not a warning
-    assert "[V]" in text
+    # Units everywhere: the key numbers in V, the 0.5 ms horizon in ms.
+    assert f"{pcmb.load(charge).std('v').max():.4g} V" in text
+    assert "0 .. 0.5 ms" in text
     # No spectrum of a charging curve unless analysis.psd asks for one.
     assert not any("psd" in i["src"] for i in seen["images"])
 
