@@ -702,14 +702,21 @@ def _inputs_table(result: StudyResult) -> list[str]:
 
 
 def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]:
-    """(CSS class, text) of the diagnostics' verdict on an output, with its numbers."""
+    """(CSS class, text) of the diagnostics' verdict on an output, with its numbers: the
+    estimates of a sound output; the range, the shading and the diagnostics' explanation
+    (which holds the numbers) of an unreliable one."""
     found = result.diagnostics.get(name)
     if found is None:
         return "info", "not checked (no chaos expansion)"
+    tolerance = f"tolerance {found.tolerance:g} of the largest std"
+    if not found.reliable:
+        axis = result.axis(name)
+        where = "" if axis is None else f" from {labels.where(result, name, found.failing_from)}"
+        shaded = f"shaded in {'the time plot' if result.on_time(name) else 'its figures'}"
+        why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
+        return "warn", f"unreliable{where} ({shaded}; {tolerance}): {why}"
     error = float(np.nanmax(found.estimate, initial=0.0))
-    numbers = [
-        f"estimated error up to {error:.2g} of the largest std (tolerance {found.tolerance:g})"
-    ]
+    numbers = [f"error up to {error:.2g} of the largest std ({tolerance})"]
     if found.holdout is None:
         numbers.append("no held-out runs: estimated from the spectral decay")
     else:
@@ -718,15 +725,9 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
             f"{found.holdout.count} held-out runs, surrogate error up to {surrogate:.2g}"
         )
     numbers.append(f"decay up to {float(np.nanmax(found.decay, initial=0.0)):.2g}")
-    if found.reliable:
-        axis = result.axis(name)
-        where = "" if axis is None else f" at every {'time' if result.on_time(name) else axis.name}"
-        return "ok", f"reliable{where}: {'; '.join(numbers)}."
-    start = found.failing_from
-    where = "" if result.axis(name) is None else f" from {labels.where(result, name, start)}"
-    shaded = f" (shaded in {'the time plot' if result.on_time(name) else 'its figures'})"
-    why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
-    return "warn", f"unreliable{where}{shaded}: {'; '.join(numbers)}. {why}".rstrip()
+    axis = result.axis(name)
+    where = "" if axis is None else f" at every {'time' if result.on_time(name) else axis.name}"
+    return "ok", f"reliable{where}, {'; '.join(numbers)}"
 
 
 def _record_lists(result: StudyResult) -> list[str]:
