@@ -24,6 +24,7 @@ from pcmb.analysis.report import (
     figure_pixels,
     write_report,
 )
+from pcmb.analysis.statistics import AnalysisSettings
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.store import write_result
 
@@ -128,8 +129,8 @@ def test_report_of_a_file_without_analysis_in_the_default_folder(tmp_path):
     assert pcmb.load(path).analysis is None
     assert main(["report", str(path)]) == 0
     folder = path.parent / f"{path.stem}_report"
-    # Defaults: PDFs at the final time, spectra of every output, PSD PDF at the peak.
-    kinds = ("time", "pdf", "sobol", "psd", "psd_pdf")
+    # Defaults: PDFs at the final time; no spectrum, which analysis.psd did not ask for.
+    kinds = ("time", "pdf", "sobol")
     assert sorted(p.name for p in folder.iterdir()) == sorted(
         ["index.html", *(f"x_{kind}.png" for kind in kinds)]
     )
@@ -172,7 +173,10 @@ EDGE_TIMES = np.linspace(0.0, 2.0, 9)
 
 def _edges(path):
     inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
-    study = pcmb.Study(edges, inputs, EDGE_TIMES, order=2, params={"a": 2.0, "b": 0.0}, jobs=1)
+    spectra = AnalysisSettings(psd=("huge", "flat", "z"))
+    study = pcmb.Study(
+        edges, inputs, EDGE_TIMES, order=2, params={"a": 2.0, "b": 0.0}, jobs=1, analysis=spectra
+    )
     with pytest.warns(pcmb.PcmbWarning, match=r"\[square-overflow\]"):
         return study.run(path)
 
@@ -263,7 +267,8 @@ def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
     write_report(unflagged, tmp_path / "unflagged")
     page = (tmp_path / "flagged" / "index.html").read_text()
     (message,) = [w.message for w in flagged.warnings if w.code == "chaos-unreliable"]
-    assert f"chaos unreliable from t = {start:.4g}. {html.escape(message)}" in page
+    assert f"unreliable from t = {start:.4g} (shaded in the time plot; tolerance" in page
+    assert page.count(html.escape(message)) == 1  # in the diagnostics, not also a warning
     assert "chaos unreliable" not in (tmp_path / "unflagged" / "index.html").read_text()
     # The shade spans (4 - start) / 4 = 20 % of the axes' width, the axes about half of the
     # figure: some 10 % of its pixels, fewer where the ±1σ band lies over the shade.
