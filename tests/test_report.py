@@ -24,7 +24,7 @@ from pcmb.analysis.report import (
     figure_pixels,
     write_report,
 )
-from pcmb.analysis.statistics import AnalysisSettings
+from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.store import write_result
 
@@ -286,9 +286,12 @@ def _ink_at_the_edges(path):
     return bool(np.any(rgb[:, :2] < 0.95) or np.any(rgb[:, -2:] < 0.95))
 
 
-def test_long_comparison_labels_wrap_inside_the_figure(tmp_path):
-    result = pcmb.load(_run(tmp_path, "collocation", analysis=False, outputs="[x]"))
-    twin = pcmb.load(_run(tmp_path, "montecarlo", analysis=False, outputs="[x]"))
+def test_long_labels_and_titles_stay_inside_the_figure(tmp_path):
+    result = pcmb.load(_run(tmp_path, "collocation", outputs="[x]"))
+    twin = pcmb.load(_run(tmp_path, "montecarlo", outputs="[x]"))
+    # Three panels of PDFs, whose titles and labels must fit a third of the width each.
+    three = AnalysisSettings(psd=("x",), pdf_times=(0.5, 1.0, 2.0), pdf_freqs=(0.5, 1.0, 2.5))
+    result = dataclasses.replace(result, analysis=analyse(result, three))
     label = "a Monte Carlo twin of 400 runs drawn with seed 1, stored in decay_montecarlo.h5"
     written = write_report(result, tmp_path / "long", comparisons=[twin], labels=[label])
     for path in written[:-1]:

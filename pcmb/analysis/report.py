@@ -386,8 +386,9 @@ def _no_density(axes: Any, canvas: _Canvas, what: str) -> None:
 
 
 def _bandwidth_note(density: Density, row: int) -> str:
+    """The KDE's bandwidth on a line of its own (a panel is a third of the figure wide)."""
     h = density.bandwidth[row]
-    return "" if np.isnan(h) else f" (KDE h = {h:.2g})"
+    return "" if np.isnan(h) else f"\n(KDE h = {h:.2g})"
 
 
 def _plot_other_draws(
@@ -606,10 +607,11 @@ def _psd_pdf_figure(
             k = int(np.argmin(np.abs(spec.frequency - at)))
             if np.isfinite(spec.nominal[k]):
                 axes.axvline(spec.nominal[k], color="black", ls="--", lw=1.0, label="nominal")
-        axes.set_xlabel(f"PSD at {at:.4g} {per} [{unit}]")
+        axes.set_xlabel(f"PSD of {name} [{unit}]")
         axes.set_ylabel("probability density")
-        axes.set_title(f"{name}: PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
-        axes.ticklabel_format(axis="both", style="sci", scilimits=(-3, 4))
+        axes.set_title(f"PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
+        axes.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4))
+        axes.xaxis.set_major_formatter("{x:.3g}")  # an offset text would sit on the label
     _legend(figure, panels)
     return canvas.save(figure, f"{name}_psd_pdf.png")
 
