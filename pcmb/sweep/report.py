@@ -31,8 +31,8 @@ def _cell(value: object) -> str:
 
 
 def _breakable(text: str) -> str:
-    """Escaped text that may wrap after ``_ - : = ,`` (a name never breaks on its own)."""
-    return re.sub(r"([_\-:=,])", r"\1<wbr>", html.escape(text, quote=False))
+    """Escaped text that may wrap after ``_ - : ,`` (a name never breaks on its own)."""
+    return re.sub(r"([_\-:,])", r"\1<wbr>", html.escape(text, quote=False))
 
 
 def _reach_table(table: SweepTable) -> str:
