@@ -8,8 +8,11 @@ error. Skipped, saying so, where no Chromium is installed (``.ci/run`` installs 
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
+import os
 import shutil
+import signal
 import subprocess
 import textwrap
 import time
@@ -53,6 +56,8 @@ def _start(profile: Path) -> subprocess.Popen:
             "--headless",
             "--disable-gpu",
             "--no-sandbox",
+            "--disable-crash-reporter",
+            "--no-first-run",
             f"--window-size={WIDTH},{HEIGHT}",
             "--remote-debugging-port=0",
             f"--user-data-dir={profile}",
@@ -60,6 +65,7 @@ def _start(profile: Path) -> subprocess.Popen:
         ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
+        start_new_session=True,  # its own process group, ended with it
     )
 
 
@@ -139,6 +145,8 @@ def browser(tmp_path_factory):
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
+        with contextlib.suppress(ProcessLookupError):  # helpers still shutting down
+            os.killpg(process.pid, signal.SIGKILL)
 
 
 def _fits_and_loads(seen: dict) -> None:
