@@ -2,6 +2,7 @@
 
 import dataclasses
 import html
+import itertools
 import subprocess
 import sys
 import textwrap
@@ -23,6 +24,7 @@ from pcmb.analysis.report import (
     figure_pixels,
     write_report,
 )
+from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.store import write_result
 
@@ -128,8 +130,8 @@ def test_report_of_a_file_without_analysis_in_the_default_folder(tmp_path):
     assert pcmb.load(path).analysis is None
     assert main(["report", str(path)]) == 0
     folder = path.parent / f"{path.stem}_report"
-    # Defaults: PDFs at the final time, spectra of every output, PSD PDF at the peak.
-    kinds = ("time", "pdf", "sobol", "psd", "psd_pdf")
+    # Defaults: PDFs at the final time; no spectrum, which analysis.psd did not ask for.
+    kinds = ("time", "pdf", "sobol")
     assert sorted(p.name for p in folder.iterdir()) == sorted(
         ["index.html", *(f"x_{kind}.png" for kind in kinds)]
     )
@@ -173,7 +175,10 @@ EDGE_TIMES = np.linspace(0.0, 2.0, 9)
 
 def _edges(path):
     inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
-    study = pcmb.Study(edges, inputs, EDGE_TIMES, order=2, params={"a": 2.0, "b": 0.0}, jobs=1)
+    spectra = AnalysisSettings(psd=("huge", "flat", "z"))
+    study = pcmb.Study(
+        edges, inputs, EDGE_TIMES, order=2, params={"a": 2.0, "b": 0.0}, jobs=1, analysis=spectra
+    )
     with pytest.warns(pcmb.PcmbWarning, match=r"\[square-overflow\]"):
         return study.run(path)
 
@@ -267,9 +272,66 @@ def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
     write_report(unflagged, tmp_path / "unflagged")
     page = (tmp_path / "flagged" / "index.html").read_text()
     (message,) = [w.message for w in flagged.warnings if w.code == "chaos-unreliable"]
-    assert f"chaos unreliable from t = {start:.4g}. {html.escape(message)}" in page
+    assert f"unreliable from t = {start:.4g} (shaded in the time plot; tolerance" in page
+    assert page.count(html.escape(message)) == 1  # in the diagnostics, not also a warning
     assert "chaos unreliable" not in (tmp_path / "unflagged" / "index.html").read_text()
     # The shade spans (4 - start) / 4 = 20 % of the axes' width, the axes about half of the
     # figure: some 10 % of its pixels, fewer where the ±1σ band lies over the shade.
     assert _shaded_share(tmp_path / "flagged" / "x_time.png") > 0.03
     assert _shaded_share(tmp_path / "unflagged" / "x_time.png") < 1e-3
+
+
+# -- what a figure shows must fit it -----------------------------------------------------------
+
+
+def _ink_at_the_edges(path):
+    """Whether any of the outermost 2 pixel columns of a PNG is not white: a legend or a
+    curve cut by the figure's edge."""
+    rgb = imread(path)[..., :3]
+    return bool(np.any(rgb[:, :2] < 0.95) or np.any(rgb[:, -2:] < 0.95))
+
+
+def test_long_labels_and_titles_stay_inside_the_figure(tmp_path):
+    result = pcmb.load(_run(tmp_path, "collocation", outputs="[x]"))
+    twin = pcmb.load(_run(tmp_path, "montecarlo", outputs="[x]"))
+    # Three panels of PDFs, whose titles and labels must fit a third of the width each.
+    three = AnalysisSettings(psd=("x",), pdf_times=(0.5, 1.0, 2.0), pdf_freqs=(0.5, 1.0, 2.5))
+    result = dataclasses.replace(result, analysis=analyse(result, three))
+    label = "a Monte Carlo twin of 400 runs drawn with seed 1, stored in decay_montecarlo.h5"
+    written = write_report(result, tmp_path / "long", comparisons=[twin], labels=[label])
+    for path in written[:-1]:
+        assert not _ink_at_the_edges(path), path.name
+
+
+def _tick_labels(axes):
+    """The tick labels drawn on both axes of a drawn figure's panel, as window extents."""
+    boxes = {}
+    for name, axis in (("x", axes.xaxis), ("y", axes.yaxis)):
+        labels = [*axis.get_majorticklabels(), *axis.get_minorticklabels()]
+        boxes[name] = [
+            (label.get_text(), label.get_window_extent())
+            for label in labels
+            if label.get_visible() and label.get_text()
+        ]
+    return boxes
+
+
+@pytest.mark.parametrize("decades", [0.3, 1.2, 1.9, 6.0])
+def test_sweep_log_axes_have_readable_ticks_at_every_span(decades):
+    from pcmb.sweep.chart import sweep_figure
+    from pcmb.sweep.table import SweepRow, SweepTable
+
+    runs = np.round(np.geomspace(20, 20 * 10**decades, 5)).astype(int)
+    errors = np.geomspace(3e-3, 3e-3 / 10**decades, 5)
+    rows = tuple(
+        SweepRow("collocation", f"order={k}", int(n), 0.01 * n, "y", e, e, e, e)
+        for k, (n, e) in enumerate(zip(runs, errors, strict=True))
+    )
+    table = SweepTable(rows, np.zeros(1), np.zeros((5, 1)), np.zeros((5, 1)), "reference.h5")
+    figure = sweep_figure(table)
+    figure.canvas.draw()
+    for axes in figure.axes:
+        for name, boxes in _tick_labels(axes).items():
+            assert len(boxes) >= 2, (name, decades, [text for text, _ in boxes])
+            for (text, box), (other, next_box) in itertools.combinations(boxes, 2):
+                assert not box.overlaps(next_box), (name, decades, text, other)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import html
 import io
 import os
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,8 +38,10 @@ from pcmb.analysis.statistics import (
     spectrum,
 )
 from pcmb.chaos.density import kernel_density
+from pcmb.designs import RECORDED_ONLY
 from pcmb.errors import MissingDependencyError, UsageError
 from pcmb.result import StudyResult
+from pcmb.wording import plural
 
 __all__ = [
     "DPI",
@@ -59,6 +62,8 @@ WIDTH, ROW_HEIGHT, DPI = 10.0, 4.5, 100
 PANELS_PER_ROW = 3
 #: PSD plots show frequencies up to where mean + std falls below this fraction of its peak.
 _PSD_FLOOR = 1e-6
+#: Characters of a legend's line: three columns of them fit the figure's width.
+_LEGEND_CHARACTERS = 44
 #: Histogram bins of sampled comparisons.
 _BINS = 40
 #: The diagnostics' record that explains a shaded time range.
@@ -102,19 +107,63 @@ def _matplotlib() -> tuple[Any, Any]:
     return Figure, FigureCanvasAgg
 
 
+#: Seconds per unit of the time units the report can rescale.
+_SECONDS = {
+    "s": 1.0,
+    "sec": 1.0,
+    "second": 1.0,
+    "seconds": 1.0,
+    "ms": 1e-3,
+    "us": 1e-6,
+    "µs": 1e-6,
+    "min": 60.0,
+    "h": 3600.0,
+}
+#: (longest horizon in seconds, seconds per unit, unit) the report shows times in: the first
+#: whose horizon is above the run's, e.g. a 0.5 ms run in ms and a 3 h run in min.
+_TIME_SCALES = (
+    (1e-4, 1e-6, "µs"),
+    (0.1, 1e-3, "ms"),
+    (600.0, 1.0, "s"),
+    (36_000.0, 60.0, "min"),
+    (np.inf, 3600.0, "h"),
+)
+
+
 @dataclass(frozen=True)
 class _Labels:
-    """Axis texts with units where the analysis settings know them."""
+    """Texts with units where the analysis settings know them, and times in a readable unit
+    (a 0.5 ms horizon in ms, not as 0.0001 s steps)."""
 
     settings: AnalysisSettings
+    horizon: float = 0.0
+
+    @property
+    def _time_scale(self) -> tuple[float, str]:
+        """(divisor, unit) of the times shown: a time t is shown as t / divisor unit."""
+        unit = self.settings.time_unit
+        if unit not in _SECONDS:
+            return 1.0, unit
+        seconds = self.horizon * _SECONDS[unit]
+        _, per, shown = next(scale for scale in _TIME_SCALES if seconds < scale[0])
+        return per / _SECONDS[unit], shown
+
+    def times(self, values: ArrayLike) -> NDArray[np.float64]:
+        """Times in the unit shown."""
+        return np.asarray(values, dtype=float) / self._time_scale[0]
+
+    def at_time(self, value: float) -> str:
+        """``"0.5 ms"``: a time in the unit shown."""
+        divisor, unit = self._time_scale
+        return f"{value / divisor:.4g} {unit}".rstrip()
 
     def time(self) -> str:
-        unit = self.settings.time_unit
+        unit = self._time_scale[1]
         return f"time [{unit}]" if unit else "time"
 
     def frequency_unit(self) -> str:
         unit = self.settings.time_unit
-        if unit in ("s", "sec", "second", "seconds"):
+        if _SECONDS.get(unit) == 1.0:
             return "Hz"
         return f"1/{unit}" if unit else "cycles per unit time"
 
@@ -125,6 +174,10 @@ class _Labels:
         unit = self.settings.units.get(name, "")
         return f"{name} [{unit}]" if unit else name
 
+    def value(self, name: str, value: float, digits: int = 4) -> str:
+        """``"4.965 V"``: a value of an output with its unit."""
+        return f"{value:.{digits}g} {self.settings.units.get(name, '')}".rstrip()
+
     def psd_unit(self, name: str) -> str:
         unit = self.settings.units.get(name, "")
         per = "Hz" if self.frequency_unit() == "Hz" else "frequency unit"
@@ -132,6 +185,19 @@ class _Labels:
 
     def psd(self, name: str) -> str:
         return f"PSD of {name} [{self.psd_unit(name)}]"
+
+    def grid(self, result: StudyResult, name: str) -> NDArray[np.float64]:
+        """The points output ``name`` is drawn on: its times in the unit shown, or its own
+        axis."""
+        grid = result.grid(name)
+        return self.times(grid) if result.on_time(name) else grid
+
+    def where(self, result: StudyResult, name: str, value: float) -> str:
+        """``"t = 0.5 ms"``, ``"frequency = 10 Hz"``: a point of an output's axis."""
+        axis = result.axis(name)
+        if result.on_time(name):
+            return f"{axis.name} = {self.at_time(value)}"
+        return f"{axis.name} = {value:.4g} {axis.unit}".rstrip()
 
 
 class _Canvas:
@@ -200,15 +266,21 @@ def _extent(values: ArrayLike) -> tuple[float, float] | None:
     return (float(finite.min()), float(finite.max())) if finite.size else None
 
 
+def _horizon(result: StudyResult) -> float:
+    """The largest |t| of a result's times (what its time axes must show)."""
+    return float(np.max(np.abs(result.times), initial=0.0))
+
+
 def _legend(figure: Any, panels: Sequence[Any]) -> None:
-    """One legend for the figure, below the panels: it never hides a curve.
+    """One legend for the figure, below the panels: it never hides a curve, and long labels
+    are wrapped so that it fits the figure's width.
 
     Every panel draws the same kinds of curves, so the labels are collected once.
     """
     entries: dict[str, Any] = {}
     for axes in panels:
         for handle, label in zip(*axes.get_legend_handles_labels(), strict=True):
-            entries.setdefault(label, handle)
+            entries.setdefault(textwrap.fill(label, _LEGEND_CHARACTERS), handle)
     if entries:
         figure.legend(
             list(entries.values()),
@@ -230,7 +302,7 @@ def _unreliable(result: StudyResult, name: str) -> float | None:
 def _points_axis(axes: Any, result: StudyResult, name: str, labels: _Labels) -> None:
     """The x axis of an output's points: time, or its own axis (log where it is a frequency
     and positive)."""
-    axis, grid = result.axis(name), result.grid(name)
+    axis, grid = result.axis(name), labels.grid(result, name)
     if result.on_time(name):
         axes.set_xlabel(labels.time())
     else:
@@ -251,7 +323,7 @@ def _time_figure(
     if result.axis(name) is None:
         return None  # a scalar: its PDF figure shows mean ± std
     figure, (axes,) = canvas.figure(1)
-    times, mean, std = result.grid(name), result.mean(name), result.std(name)
+    times, mean, std = labels.grid(result, name), result.mean(name), result.std(name)
     note = _not_finite(canvas, f"{name}: mean or std", mean, std)
     with np.errstate(over="ignore", invalid="ignore"):
         low, high = _gaps(mean - std), _gaps(mean + std)
@@ -278,14 +350,14 @@ def _time_figure(
     unreliable = _unreliable(result, name)
     if unreliable is not None:
         axes.axvspan(
-            unreliable,
+            labels.grid(result, name)[np.searchsorted(result.grid(name), unreliable)],
             times[-1],
             color=UNRELIABLE_COLOR,
             alpha=UNRELIABLE_ALPHA,
             lw=0,
             label="chaos unreliable (see the index page)",
         )
-        note += f"\n(shaded: chaos unreliable from {result.axis(name).name} = {unreliable:.4g})"
+        note += f"\n(shaded: chaos unreliable from {labels.where(result, name, unreliable)})"
     _points_axis(axes, result, name, labels)
     axes.set_ylabel(labels.output(name))
     axes.set_title(f"{name}: mean with error bars{note}")
@@ -314,8 +386,9 @@ def _no_density(axes: Any, canvas: _Canvas, what: str) -> None:
 
 
 def _bandwidth_note(density: Density, row: int) -> str:
+    """The KDE's bandwidth on a line of its own (a panel is a third of the figure wide)."""
     h = density.bandwidth[row]
-    return "" if np.isnan(h) else f" (KDE h = {h:.2g})"
+    return "" if np.isnan(h) else f"\n(KDE h = {h:.2g})"
 
 
 def _plot_other_draws(
@@ -360,7 +433,7 @@ def _pdf_figure(
     source = "surrogate" if not draws_are_runs(result, name) else "runs"
     axis, grid = result.axis(name), result.grid(name)
     for row, (axes, at) in enumerate(zip(panels, pdf.at, strict=True)):
-        where = "" if axis is None else f" at {axis.name} = {at:.4g}"
+        where = "" if axis is None else f" at {labels.where(result, name, at)}"
         if not _plot_density(axes, pdf, row, _COLORS[0], f"{method_label(result)}, {source}"):
             _no_density(axes, canvas, f"{name}: PDF{where}")
         for other in others:
@@ -373,9 +446,9 @@ def _pdf_figure(
             axes.axvline(result.nominal[name][k], color="black", ls="--", lw=1.0, label="nominal")
         if axis is None:  # a scalar: its mean ± std on its PDF
             mean, std = float(result.mean(name)[k]), float(result.std(name)[k])
-            axes.axvline(mean, color=_COLORS[0], lw=1.2, label=f"mean {mean:.4g}")
+            axes.axvline(mean, color=_COLORS[0], lw=1.2, label=f"mean {labels.value(name, mean)}")
             for edge in (mean - std, mean + std):
-                label = f"± 1σ ({std:.3g})" if edge < mean else None
+                label = f"± 1σ ({labels.value(name, std, 3)})" if edge < mean else None
                 axes.axvline(edge, color=_COLORS[0], lw=1.0, ls=":", label=label)
         axes.set_xlabel(labels.output(name))
         axes.set_ylabel("probability density")
@@ -400,7 +473,7 @@ def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labe
         axes.set_title(f"{name}: Sobol' indices (plain: first order, hatched: total)")
         return canvas.save(figure, f"{name}_sobol.png")
     figure, (first_axes, total_axes) = canvas.figure(2)
-    times = result.grid(name)
+    times = labels.grid(result, name)
     # Where the output does not vary the indices are NaN: nothing is stacked there.
     first_axes.stackplot(
         times, np.nan_to_num(first), labels=result.input_names, colors=colors, alpha=0.75
@@ -534,10 +607,11 @@ def _psd_pdf_figure(
             k = int(np.argmin(np.abs(spec.frequency - at)))
             if np.isfinite(spec.nominal[k]):
                 axes.axvline(spec.nominal[k], color="black", ls="--", lw=1.0, label="nominal")
-        axes.set_xlabel(f"PSD at {at:.4g} {per} [{unit}]")
+        axes.set_xlabel(f"PSD of {name} [{unit}]")
         axes.set_ylabel("probability density")
-        axes.set_title(f"{name}: PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
-        axes.ticklabel_format(axis="both", style="sci", scilimits=(-3, 4))
+        axes.set_title(f"PDF of the PSD at {at:.4g} {per}{_bandwidth_note(spec.pdf, row)}")
+        axes.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4))
+        axes.xaxis.set_major_formatter("{x:.3g}")  # an offset text would sit on the label
     _legend(figure, panels)
     return canvas.save(figure, f"{name}_psd_pdf.png")
 
@@ -553,7 +627,7 @@ def _compare_figure(
     if not others or result.axis(name) is None:
         return None  # a scalar's differences are in the index page's table
     figure, (mean_axes, std_axes) = canvas.figure(2)
-    times = result.grid(name)
+    times = labels.grid(result, name)
     own = method_label(result)
     mean_axes.plot(times, _gaps(result.mean(name)), color=_COLORS[0], lw=1.8, label=own)
     std_axes.plot(times, _gaps(result.std(name)), color=_COLORS[0], lw=1.8, label=own)
@@ -568,10 +642,8 @@ def _compare_figure(
     worst = max(
         comparisons, key=lambda c: np.nan_to_num(c.differences[name].mean_max, nan=np.inf)
     ).differences[name]
-    unit = labels.settings.units.get(name, "")
-    unit = f" {unit}" if unit else ""
-    mean_axes.set_title(f"mean of {name} (largest |Δ| {worst.mean_max:.3g}{unit})")
-    std_axes.set_title(f"std of {name} (largest |Δ| {worst.std_max:.3g}{unit})")
+    mean_axes.set_title(f"mean of {name} (largest |Δ| {labels.value(name, worst.mean_max, 3)})")
+    std_axes.set_title(f"std of {name} (largest |Δ| {labels.value(name, worst.std_max, 3)})")
     mean_axes.set_ylabel(labels.output(name))
     std_axes.set_ylabel(labels.output(name))
     for axes in (mean_axes, std_axes):
@@ -580,73 +652,128 @@ def _compare_figure(
     return canvas.save(figure, f"{name}_compare.png")
 
 
-def _index_page(
-    result: StudyResult,
-    source: str,
-    others: Sequence[_Other],
-    comparisons: Sequence[Comparison],
-    figures: dict[str, list[Path]],
-    directory: Path,
-    notes: Sequence[str] = (),
-) -> str:
-    e = html.escape
+#: The page's style: fits a 1,400 px window (figures are 1,000 px wide), tables wrap their
+#: cells rather than overflow, warnings red, information grey, a sound verdict green.
+_STYLE = (
+    "body{font-family:sans-serif;max-width:1040px;margin:auto;padding:0 12px}"
+    "table{border-collapse:collapse;max-width:100%}th,td{border:1px solid #ccc;"
+    "padding:3px 8px;text-align:left;overflow-wrap:anywhere}td.num{text-align:right}"
+    "pre{max-width:100%;overflow-x:auto}img{max-width:100%}.warn{color:#a00}"
+    ".info{color:#555}.ok{color:#060}"
+)
+
+
+def _runs_text(result: StudyResult) -> str:
+    """The runs made: design nodes (by status), held-out runs, the nominal run."""
     status = np.bincount(result.status.astype(int), minlength=3)
-    rows = [
-        f"<tr><th>file</th><td>{e(source)}</td></tr>",
-        f"<tr><th>method</th><td>{e(method_label(result))}</td></tr>",
-        f"<tr><th>runs</th><td>{status[1]} ok, {status[2]} failed, {status[0]} pending</td></tr>",
-        f"<tr><th>wall time of the runs</th><td>{result.seconds:.3g} s</td></tr>",
-        "<tr><th>inputs</th><td>"
-        + ", ".join(
-            e(f"{n} ~ {d.describe()['dist']}")
-            for n, d in zip(result.input_names, result.distributions, strict=True)
-        )
-        + "</td></tr>",
+    held_out = result.held_out
+    parts = [
+        f"{plural(result.n_nodes, 'design node')} ({status[1]} ok, {status[2]} failed, "
+        f"{status[0]} pending)",
+        "no held-out runs"
+        if held_out is None
+        else f"{len(held_out.ok)} held-out ({int(held_out.ok.sum())} ok)",
     ]
-    if result.partition is not None:
-        elements = result.partition.describe(result.input_names)
-        rows.append(f"<tr><th>elements</th><td>{e(elements)}</td></tr>")
     if result.nominal_params:
         nominal = ", ".join(f"{k} = {v:.6g}" for k, v in result.nominal_params.items())
-        rows.append(f"<tr><th>nominal run</th><td>{e(nominal)}</td></tr>")
-    for other in others:
-        rows.append(
-            f"<tr><th>compared with</th><td>{e(other.label)}, "
-            f"{other.result.seconds:.3g} s of runs</td></tr>"
+        parts.append(f"nominal run at {nominal}{'' if result.nominal else ' (failed)'}")
+    return "; ".join(parts)
+
+
+def _inputs_table(result: StudyResult) -> list[str]:
+    """Every input's law with its parameters, range, mean and std."""
+    rows = ["<table>", "<tr><th>input</th><th>law</th><th>range</th><th>mean</th><th>std</th></tr>"]
+    for name, law in zip(result.input_names, result.distributions, strict=True):
+        low, high = (float(x) for x in law.physical.support())
+        cells = (
+            name,
+            law.law,
+            f"{low:.4g} .. {high:.4g}",
+            f"{law.expectation():.4g}",
+            f"{float(law.physical.std()):.4g}",
         )
-    parts = [
-        "<!DOCTYPE html>",
-        '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>pcmb report: {e(result.name)}</title>",
-        "<style>body{font-family:sans-serif;max-width:1040px;margin:auto}"
-        "table{border-collapse:collapse}th,td{border:1px solid #ccc;padding:3px 8px;"
-        "text-align:left}td.num{text-align:right}.warn{color:#a00}img{max-width:100%}</style>",
-        "</head><body>",
-        f"<h1>{e(result.name)}</h1>",
-        "<table>",
-        *rows,
-        "</table>",
-    ]
-    if result.warnings:
-        parts.append("<h2>Warnings</h2><ul>")
-        parts += [f'<li class="warn">{e(str(w))}</li>' for w in result.warnings]
-        parts.append("</ul>")
-    if notes:
-        parts.append("<h2>Not drawn</h2><ul>")
-        parts += [f'<li class="warn">{e(note)}</li>' for note in notes]
-        parts.append("</ul>")
+        rows.append(
+            "<tr>"
+            + "".join(
+                f"<td{' class=num' if i > 1 else ''}>{html.escape(c)}</td>"
+                for i, c in enumerate(cells)
+            )
+            + "</tr>"
+        )
+    return [*rows, "</table>"]
+
+
+def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]:
+    """(CSS class, text) of the diagnostics' verdict on an output, with its numbers: the
+    estimates of a sound output; the range, the shading and the diagnostics' explanation
+    (which holds the numbers) of an unreliable one."""
+    found = result.diagnostics.get(name)
+    if found is None:
+        return "info", "not checked (no chaos expansion)"
+    tolerance = f"tolerance {found.tolerance:g} of the largest std"
+    if not found.reliable:
+        axis = result.axis(name)
+        where = "" if axis is None else f" from {labels.where(result, name, found.failing_from)}"
+        shaded = f"shaded in {'the time plot' if result.on_time(name) else 'its figures'}"
+        why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
+        return "warn", f"unreliable{where} ({shaded}; {tolerance}): {why}"
+    error = float(np.nanmax(found.estimate, initial=0.0))
+    numbers = [f"error up to {error:.2g} of the largest std ({tolerance})"]
+    if found.holdout is None:
+        numbers.append("no held-out runs: estimated from the spectral decay")
+    else:
+        surrogate = float(np.nanmax(found.holdout.error, initial=0.0))
+        numbers.append(
+            f"{found.holdout.count} held-out runs, surrogate error up to {surrogate:.2g}"
+        )
+    numbers.append(f"decay up to {float(np.nanmax(found.decay, initial=0.0)):.2g}")
+    axis = result.axis(name)
+    where = "" if axis is None else f" at every {'time' if result.on_time(name) else axis.name}"
+    return "ok", f"reliable{where}, {'; '.join(numbers)}"
+
+
+def _record_lists(result: StudyResult) -> list[str]:
+    """The warning records by severity: warnings in red, information apart (not red); the
+    diagnostics' verdict is in its own section."""
+    warnings = [w for w in result.warnings if w.code not in RECORDED_ONLY and w.code != _FLAG]
+    information = [w for w in result.warnings if w.code in RECORDED_ONLY]
+    parts: list[str] = []
+    for title, records, kind in (
+        ("Warnings", warnings, "warn"),
+        ("Information", information, "info"),
+    ):
+        if records:
+            parts.append(f"<h2>{title}</h2><ul>")
+            parts += [f'<li class="{kind}">{html.escape(str(w))}</li>' for w in records]
+            parts.append("</ul>")
+    return parts
+
+
+def _key_numbers(
+    result: StudyResult,
+    comparisons: Sequence[Comparison],
+    others: Sequence[_Other],
+    labels: _Labels,
+) -> list[str]:
+    """The table of each output's mean range and largest std (with units), and the
+    differences to each comparison."""
+    e = html.escape
     header = "<tr><th>output</th><th>mean range</th><th>largest std</th>"
     header += "".join(
         f"<th>vs {e(o.label)}: max |Δmean| (rel)</th><th>max |Δstd| (rel)</th>"
         "<th>departs at</th><th>verdict</th>"
         for o in others
     )
-    parts += ["<h2>Key numbers</h2>", "<table>", header + "</tr>"]
+    parts = ["<h2>Key numbers</h2>", "<table>", header + "</tr>"]
     for name in result.outputs:
         mean, std = result.mean(name), result.std(name)
         mean_range, std_range = _extent(mean), _extent(std)
-        mean_text = "not finite" if mean_range is None else "{:.4g} .. {:.4g}".format(*mean_range)
-        std_text = "not finite" if std_range is None else f"{std_range[1]:.4g}"
+        mean_text = (
+            "not finite"
+            if mean_range is None
+            else f"{mean_range[0]:.4g} .. {labels.value(name, mean_range[1])}"
+        )
+        std_text = "not finite" if std_range is None else labels.value(name, std_range[1])
         if mean_range is not None and not np.isfinite(mean).all():
             mean_text += " (not finite at some times)"
         if std_range is not None and not np.isfinite(std).all():
@@ -661,10 +788,13 @@ def _index_page(
             if d is None:
                 cells.append("<td></td><td></td><td></td><td>not in both</td>")
                 continue
+            departs = "" if np.isnan(d.departure) else labels.where(result, name, d.departure)
+            mean_text = f"{labels.value(name, d.mean_max, 3)} ({d.mean_relative:.2g})"
+            std_text = f"{labels.value(name, d.std_max, 3)} ({d.std_relative:.2g})"
             cells += [
-                f'<td class="num">{d.mean_max:.3g} ({d.mean_relative:.2g})</td>',
-                f'<td class="num">{d.std_max:.3g} ({d.std_relative:.2g})</td>',
-                f'<td class="num">{"" if np.isnan(d.departure) else f"{d.departure:.4g}"}</td>',
+                f'<td class="num">{e(mean_text)}</td>',
+                f'<td class="num">{e(std_text)}</td>',
+                f'<td class="num">{e(departs)}</td>',
                 f"<td>{e(d.verdict())}</td>",
             ]
         parts.append("<tr>" + "".join(cells) + "</tr>")
@@ -679,15 +809,73 @@ def _index_page(
             "within it at every time.</p>"
         )
         parts += [f"<pre>{e(c.table())}</pre>" for c in comparisons]
+    return parts
+
+
+def _index_page(
+    result: StudyResult,
+    source: str,
+    others: Sequence[_Other],
+    comparisons: Sequence[Comparison],
+    figures: dict[str, list[Path]],
+    directory: Path,
+    labels: _Labels,
+    notes: Sequence[str] = (),
+) -> str:
+    e = html.escape
+    grid = labels.times(result.times)
+    rows = [
+        ("file", Path(source).name),
+        ("method", method_label(result)),
+        ("runs", _runs_text(result)),
+        ("wall time of the runs", f"{result.seconds:.3g} s"),
+        ("time", f"{grid[0]:.4g} .. {labels.at_time(result.times[-1])}, {grid.size} points"),
+    ]
+    if result.partition is not None:
+        rows.append(("elements", result.partition.describe(result.input_names)))
+    spectra = labels.settings.psd or ()
+    rows.append(("spectra", ", ".join(spectra) or "none asked for (analysis.psd)"))
+    rows += [
+        ("compared with", f"{other.label}, {other.result.seconds:.3g} s of runs")
+        for other in others
+    ]
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>pcmb report: {e(result.name)}</title>",
+        f"<style>{_STYLE}</style>",
+        "</head><body>",
+        f"<h1>{e(result.name)}</h1>",
+        "<table>",
+        *(f"<tr><th>{e(key)}</th><td>{e(value)}</td></tr>" for key, value in rows),
+        "</table>",
+        "<h2>Inputs</h2>",
+        *_inputs_table(result),
+        "<h2>Diagnostics</h2>",
+        "<ul>",
+    ]
+    for name in result.outputs:
+        kind, verdict = _verdict(result, name, labels)
+        parts.append(f'<li class="{kind}"><b>{e(name)}</b>: {e(verdict)}</li>')
+    parts.append("</ul>")
+    parts += _record_lists(result)
+    if notes:
+        parts.append("<h2>Not drawn</h2><ul>")
+        parts += [f'<li class="warn">{e(note)}</li>' for note in notes]
+        parts.append("</ul>")
+    parts += _key_numbers(result, comparisons, others, labels)
     for name, paths in figures.items():
         parts.append(f"<h2>{e(name)}</h2>")
         unreliable = _unreliable(result, name)
         if unreliable is not None:
-            why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
-            axis = result.axis(name)
-            where = "" if axis is None else f" from {axis.name} = {unreliable:.4g}"
-            plot = "the time plot" if result.on_time(name) else "its figures"
-            parts.append(f'<p class="warn">Shaded in {plot}: chaos unreliable{where}. {e(why)}</p>')
+            where = (
+                ""
+                if result.axis(name) is None
+                else f" from {labels.where(result, name, unreliable)}"
+            )
+            parts.append(
+                f'<p class="warn">Shaded: chaos unreliable{e(where)} (see Diagnostics).</p>'
+            )
         for path in paths:
             relative = os.path.relpath(path, directory)
             parts.append(f'<p><img src="{e(relative)}" alt="{e(path.stem)}"></p>')
@@ -753,7 +941,7 @@ def write_comparison_figures(
     for name in reference.outputs:
         shared, matched = _shared(name, others, found)
         if shared:
-            text = _Labels(settings)
+            text = _Labels(settings, _horizon(reference))
             _draw(
                 canvas, name, "comparison", _compare_figure, reference, name, shared, matched, text
             )
@@ -800,22 +988,30 @@ def write_report(
     directory.mkdir(parents=True, exist_ok=True)
     analysis = result.analysis or analyse(result)
     others, found = _others(result, comparisons, labels)
-    text = _Labels(analysis.settings)
+    text = _Labels(analysis.settings, _horizon(result))
     figures: dict[str, list[Path]] = {}
+    spectra = analysis.settings.psd or ()
     for name in result.outputs:
         shared, matched = _shared(name, others, found)
         drawn = [
             _draw(canvas, name, "time", _time_figure, result, name, analysis, shared, text),
             _draw(canvas, name, "PDF", _pdf_figure, result, name, analysis, shared, text),
             _draw(canvas, name, "Sobol'", _sobol_figure, result, name, text),
-            _draw(canvas, name, "PSD", _psd_figure, result, name, analysis, shared, text),
-            _draw(canvas, name, "PSD PDF", _psd_pdf_figure, result, name, analysis, shared, text),
-            _draw(canvas, name, "comparison", _compare_figure, result, name, shared, matched, text),
         ]
+        if name in spectra:  # a spectrum means something only where the study asks for it
+            drawn += [
+                _draw(canvas, name, "PSD", _psd_figure, result, name, analysis, shared, text),
+                _draw(
+                    canvas, name, "PSD PDF", _psd_pdf_figure, result, name, analysis, shared, text
+                ),
+            ]
+        drawn.append(
+            _draw(canvas, name, "comparison", _compare_figure, result, name, shared, matched, text)
+        )
         figures[name] = [path for path in drawn if path is not None]
     index = directory / "index.html"
     index.write_text(
-        _index_page(result, source, others, found, figures, directory, canvas.notes),
+        _index_page(result, source, others, found, figures, directory, text, canvas.notes),
         encoding="utf-8",
     )
     return [*canvas.written, index]

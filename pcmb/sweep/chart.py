@@ -18,7 +18,7 @@ import numpy as np
 from pcmb.errors import MissingDependencyError
 from pcmb.sweep.table import SweepTable
 
-__all__ = ["draw_sweep", "plotting"]
+__all__ = ["draw_sweep", "plotting", "reference_name", "sweep_figure"]
 
 #: Errors below this are drawn at it (exact results on a log axis).
 FLOOR = 1e-16
@@ -133,13 +133,38 @@ def _panel(axes: Any, table: SweepTable, output: str, x: str, methods: list[str]
     axes.set_xscale("log")
     axes.set_yscale("log")
     axes.margins(x=0.12)  # room for the labels at the lines' ends
+    for axis in (axes.xaxis, axes.yaxis):
+        _readable_log_ticks(axis)
     axes.grid(True, which="major", alpha=0.3)
     axes.set_xlabel("model runs" if x == "runs" else "wall seconds of the study")
     axes.set_ylabel(f"{output}: error / largest reference std")
 
 
-def draw_sweep(table: SweepTable, path: str | os.PathLike[str]) -> Path:
-    """Draw ``table`` into the PNG ``path``; returns it.
+def _readable_log_ticks(axis: Any) -> None:
+    """Labels on a log axis that never overlap, at any span: labelled ticks at 1, 2 and 5
+    times the powers of ten (every digit within one decade) and no minor labels, where
+    matplotlib's default labels the minor ticks of a narrow span into each other."""
+    from matplotlib.ticker import LogFormatterSciNotation, LogLocator, NullFormatter
+
+    low, high = sorted(axis.get_view_interval())
+    decades = np.log10(high / low) if low > 0 else np.inf
+    if decades >= 2:
+        return  # labels at powers of ten only: matplotlib's default
+    subs = (1.0, 2.0, 5.0) if decades >= 1 else tuple(range(1, 10))
+    axis.set_major_locator(LogLocator(base=10.0, subs=subs))
+    axis.set_major_formatter(LogFormatterSciNotation(labelOnlyBase=False))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def reference_name(table: SweepTable) -> str:
+    """What the errors are measured against, with the reference's file name only (no
+    machine paths on a page)."""
+    source, bracket, rest = table.reference.partition(" (")
+    return f"{Path(source).name}{bracket}{rest}"
+
+
+def sweep_figure(table: SweepTable) -> Any:
+    """The chart of ``table`` as a matplotlib figure.
 
     Raises
     ------
@@ -153,10 +178,22 @@ def draw_sweep(table: SweepTable, path: str | os.PathLike[str]) -> Path:
         for column, x in enumerate(("runs", "seconds")):
             _panel(axes[row, column], table, output, x, methods)
         axes[row, 0].set_title(
-            f"{output}: std error (solid) and mean error (dotted) against {table.reference}",
+            f"{output}: std error (solid) and mean error (dotted) against {reference_name(table)}",
             fontsize=9,
             loc="left",
         )
+    return figure
+
+
+def draw_sweep(table: SweepTable, path: str | os.PathLike[str]) -> Path:
+    """Draw ``table`` into the PNG ``path``; returns it.
+
+    Raises
+    ------
+    MissingDependencyError
+        If matplotlib is missing (``pcmb[plot]``).
+    """
+    figure = sweep_figure(table)
     from pcmb.analysis.report import save_png
 
     path = Path(path)

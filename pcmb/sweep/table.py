@@ -34,6 +34,7 @@ __all__ = [
     "SweepTable",
     "cheapest",
     "is_sweep_file",
+    "reach_text",
     "read_sweep",
     "summary",
     "write_sweep",
@@ -173,6 +174,12 @@ def cheapest(table: SweepTable, output: str, target: float) -> dict[str, SweepRo
     return found
 
 
+def reach_text(row: SweepRow | None) -> str:
+    """``"6 runs, 0.0287 s"``: the cost of a setting :func:`cheapest` found, or ``"not
+    reached"``."""
+    return "not reached" if row is None else f"{row.runs} runs, {row.seconds:.3g} s"
+
+
 def summary(table: SweepTable) -> str:
     """The text ``pcmb inspect`` prints of a sweep: per output and method, the runs and
     seconds of the cheapest setting reaching each of :data:`TARGETS`."""
@@ -186,10 +193,7 @@ def summary(table: SweepTable) -> str:
         for method in reached[TARGETS[0]]:
             cells = []
             for target in TARGETS:
-                row = reached[target][method]
-                cells.append(
-                    "not reached" if row is None else f"{row.runs} runs, {row.seconds:.3g} s"
-                )
+                cells.append(reach_text(reached[target][method]))
             lines.append(f"  {method:<28}" + "".join(f"{cell:>26}" for cell in cells))
     return "\n".join(lines)
 
