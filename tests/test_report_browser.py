@@ -31,7 +31,10 @@ WIDTH, HEIGHT = 1400, 900
 CHROMIUM = next(
     (found for name in ("chromium", "chromium-browser") if (found := shutil.which(name))), None
 )
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium on PATH to render pages")
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(CHROMIUM is None, reason="no chromium on PATH to render pages"),
+]
 
 #: What a user sees, measured in the page once it has loaded.
 MEASURE = """(() => {
