@@ -192,3 +192,110 @@ def test_a_script_with_a_missing_interpreter_is_named_at_its_key(
     assert "model.command[0]" in done.stderr and named in done.stderr, done.stderr
     assert "No such file or directory" not in done.stderr
     assert not (tmp_path / "out.h5.journal").exists()
+
+
+# -- a result file's temporary, left by a kill -9 during the final write ---------------------
+
+LINEAR = """\
+import numpy as np
+
+import pcmb
+
+
+@pcmb.pointwise(outputs=("y",))
+def linear(params, times):
+    return {"y": params["a"] * times}
+"""
+
+
+def _linear_study(folder: Path) -> Path:
+    (folder / "linear.py").write_text(LINEAR)
+    return _config(
+        folder,
+        """\
+        kind: python
+        entry: linear.py:linear
+        params: {a: 1.0}
+        outputs: [y]
+        """,
+    )
+
+
+#: ``pcmb run`` that is killed (SIGKILL) in its final write, the result's temporary written in
+#: full but not yet renamed into place.
+KILLED_IN_THE_FINAL_WRITE = """\
+import os, signal, sys
+
+import pcmb.run.files
+import pcmb.run.journal  # binds the real replace_durably: the journal's records are written
+from pcmb.cli import main
+
+
+def killed(temporary, path):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+pcmb.run.files.replace_durably = killed
+main(["run", sys.argv[1], "--quiet"])
+"""
+
+
+def test_a_temporary_left_by_a_kill_in_the_final_write_is_removed_by_the_resume(
+    tmp_path: Path,
+) -> None:
+    config = _linear_study(tmp_path)
+    killed = subprocess.run(
+        [sys.executable, "-c", KILLED_IN_THE_FINAL_WRITE, str(config)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    left = {p.name for p in tmp_path.iterdir() if p.name.startswith(".out.h5.")}
+    assert len(left) == 1 and (tmp_path / left.pop()).stat().st_size > 0
+    resumed = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet", "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    assert sorted(p.name for p in tmp_path.iterdir() if "out.h5" in p.name) == ["out.h5"]
+
+
+#: Writes ``sys.argv[1]`` by write_durably, then waits before renaming it into place.
+WRITING = """\
+import signal, sys
+from pathlib import Path
+
+import pcmb.run.files
+
+
+def waiting(temporary, path):
+    print("written", flush=True)
+    signal.pause()
+
+
+pcmb.run.files.replace_durably = waiting
+pcmb.run.files.write_durably(Path(sys.argv[1]), b"x" * 100_000)
+"""
+
+
+def test_only_the_temporaries_of_dead_writers_are_removed(tmp_path: Path) -> None:
+    from pcmb.run.output import check_output
+
+    output = tmp_path / "out.h5"
+    writer = subprocess.Popen(
+        [sys.executable, "-c", WRITING, str(output)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert writer.stdout.readline() == "written\n"
+        (temporary,) = tmp_path.iterdir()
+        check_output(output, create=True)  # what a run checks first
+        assert list(tmp_path.iterdir()) == [temporary]  # its writer is still at work
+    finally:
+        writer.kill()
+        writer.wait()
+        writer.stdout.close()
+    check_output(output, create=True)
+    assert list(tmp_path.iterdir()) == []
