@@ -299,3 +299,71 @@ def test_only_the_temporaries_of_dead_writers_are_removed(tmp_path: Path) -> Non
         writer.stdout.close()
     check_output(output, create=True)
     assert list(tmp_path.iterdir()) == []
+
+
+# -- a time grid too large for memory --------------------------------------------------------
+
+HUGE_POINTS = 10_000_000
+
+WIDE = """\
+import numpy as np
+
+import pcmb
+
+
+@pcmb.batched(outputs=("x", "v"))
+def wide(params, times):
+    zeros = np.zeros((params["a"].size, times.size))
+    return {"x": zeros, "v": zeros}
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("resume", [False, True], ids=["run", "resume"])
+def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
+    tmp_path: Path, resume: bool
+) -> None:
+    (tmp_path / "wide.py").write_text(WIDE)
+    config = _config(
+        tmp_path,
+        """\
+        kind: python
+        entry: wide.py:wide
+        params: {a: 1.0}
+        """,
+    ).read_text()
+    config = config.replace("points: 3", f"points: {HUGE_POINTS}").replace("jobs: 2", "jobs: 1")
+    (tmp_path / "study.yaml").write_text(config)
+    done = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(tmp_path / "study.yaml")]
+        + ["--resume"] * resume,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr
+    message = done.stderr.lower()
+    assert "memory" in message and "available" in message and "time.points" in message
+    assert f"{HUGE_POINTS} times" in done.stderr
+    # Nothing was written: no journal, no result, no temporary.
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["study.yaml", "wide.py"]
+    if not resume:  # pcmb validate checks what a run checks
+        checked = subprocess.run(
+            [sys.executable, "-m", "pcmb.cli", "validate", str(tmp_path / "study.yaml")],
+            capture_output=True,
+            text=True,
+            timeout=300,
+        )
+        assert checked.returncode == 2 and "of memory, more than" in checked.stderr
+
+
+def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
+    from pcmb.config.schema import load_config
+    from pcmb.study import Study
+
+    config = load_config(Path(__file__).parents[1] / "configs" / "quarter_car.yaml")
+    study = Study.from_config(config)
+    estimate = study.memory_estimate(study.node_set().size, config.model.outputs)
+    # (216 nodes + 32 held-out) × 301 times × 2 outputs × 8 bytes, 7 times; 4096 draws, twice.
+    assert estimate.total == 7 * 248 * 301 * 2 * 8 + 2 * 4096 * 301 * 8  # 28 MB
