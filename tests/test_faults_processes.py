@@ -117,10 +117,17 @@ def _config(folder: Path, model: str) -> Path:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 semantics of Linux")
-@pytest.mark.parametrize("study", [_command_study, _python_study], ids=["command", "python"])
-def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(tmp_path: Path, study) -> None:
+@pytest.mark.parametrize(
+    ("study", "backend"),
+    [(_command_study, "loky"), (_python_study, "loky"), (_python_study, "dask")],
+    ids=["command", "python", "python-dask"],
+)
+def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
+    tmp_path: Path, study, backend: str
+) -> None:
     marker = _marker()
     config = study(tmp_path, marker)
+    config.write_text(config.read_text().replace("backend: loky", f"backend: {backend}"))
     pcmb = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
         stdout=subprocess.DEVNULL,

@@ -167,7 +167,11 @@ class DaskPool:
             # killing each): the executor's own isolation then names the node.
             with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
                 self._cluster = distributed.LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",
+                    env=tag(),  # what the workers start ends with this process too
                 )
         try:
             self._client = distributed.Client(address or self._cluster)
