@@ -145,6 +145,8 @@ def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
         # Everything pcmb started (workers, helpers, the programs and their children).
         started = psutil.Process(pcmb.pid).children(recursive=True)
         assert {p.pid for p in _marked(marker)} <= {p.pid for p in started}
+        watchdogs = [p for p in started if "pcmb/run/lifeline.py" in " ".join(p.cmdline())]
+        assert len(watchdogs) == 1  # it must end too, once its work is done
         os.kill(pcmb.pid, signal.SIGKILL)
         pcmb.wait(timeout=10)
         deadline = time.monotonic() + GRACE
