@@ -17,6 +17,7 @@ import time
 import uuid
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 
@@ -376,3 +377,20 @@ def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
     estimate = study.memory_estimate(study.node_set().size, config.model.outputs)
     # (216 nodes + 32 held-out) × 301 times × 2 outputs × 8 bytes, 7 times; 4096 draws, twice.
     assert estimate.total == 7 * 248 * 301 * 2 * 8 + 2 * 4096 * 301 * 8  # 28 MB
+
+
+def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: Path) -> None:
+    from pcmb.adapters.command.model import CommandModel
+    from pcmb.errors import ModelError
+
+    script = tmp_path / "simulate.sh"
+    script.write_text("#!/bin/sh\necho time,y > out.csv\n")
+    script.chmod(0o755)
+    model = CommandModel(
+        [str(script)], params={"a": 1.0}, outputs=["y"], output_file="out.csv", keep="none"
+    )
+    script.write_text("#!/usr/bin/nonexistent-interpreter\n")  # changed after the check
+    with pytest.raises(ModelError) as failed:
+        model.run_point({"a": 1.0}, np.linspace(0.0, 1.0, 3))
+    assert "interpreter '/usr/bin/nonexistent-interpreter'" in str(failed.value)
+    assert "No such file or directory" not in str(failed.value)

@@ -445,7 +445,10 @@ class CommandModel(PointwiseModel):
                     preexec_fn=kernel_kills_orphans,
                 )
             except OSError as exc:
-                raise ModelError(f"cannot start {argv[0]}: {describe_exception(exc)}") from exc
+                # ENOENT of a script that exists: its #! line names what is missing.
+                missing = isinstance(exc, FileNotFoundError) and _missing_interpreter(Path(argv[0]))
+                reason = missing or describe_exception(exc)
+                raise ModelError(f"cannot start {argv[0]}: {reason}") from exc
             try:
                 finished = _wait_unreaped(process.pid, self.timeout)
             finally:
