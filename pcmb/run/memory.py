@@ -3,12 +3,12 @@ peak, checked against the memory available before anything runs (as the disk spa
 :mod:`pcmb.run.output`).
 
 The estimate's model, measured on the pipeline (tracemalloc, N = 64 and 512 nodes, 2 outputs,
-20 000 to 160 000 times): at its peak pcmb's process holds about 6.3 copies of the values
+20 000 to 160 000 times): at its peak pcmb's process holds 5.6 to 6.1 copies of the values
 array of the nodes *and* the held-out runs (the runs, the chaos coefficients, the statistics'
 squares, and, while the result file is written, its HDF5 image in memory and that image's
 bytes), counted here as :data:`COPIES`; besides, the range check of the diagnostics
 (:func:`pcmb.analysis.diagnostics.out_of_range`) evaluates each output's surrogate at a few
-thousand draws at every time at once, about 1.5 times that array, counted as
+thousand draws at every time at once, 1.3 to 1.5 times that array, counted as
 :data:`DRAW_COPIES`. Workers hold at most about three copies of their chunks, all of them
 together fewer nodes than the run, while pcmb's process holds one copy: below its peak.
 """
