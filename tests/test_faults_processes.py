@@ -1,8 +1,11 @@
 """Nothing left running, nothing planted: what pcmb leaves behind when it is killed or refuses.
 
 A ``kill -9`` of pcmb ends every process it started, down to the programs its models start
-(a command's own children, a python model's ``subprocess.run``); the processes are found by
-a unique ``sleep`` duration in their argv.
+(a command's own children, a python model's ``subprocess.run``; the processes are found by
+a unique ``sleep`` duration in their argv), and its watchdog ends too. A command script whose
+``#!`` interpreter is missing is named so. A result temporary left by a kill in the final
+write is removed by the next run, and only when its writer is gone. A time grid too large for
+memory is refused before anything runs or is written.
 """
 
 from __future__ import annotations
