@@ -171,6 +171,7 @@ def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
 # -- a script whose interpreter is missing --------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("shebang", "named"),
     [
@@ -253,6 +254,7 @@ main(["run", sys.argv[1], "--quiet"])
 """
 
 
+@pytest.mark.slow
 def test_a_temporary_left_by_a_kill_in_the_final_write_is_removed_by_the_resume(
     tmp_path: Path,
 ) -> None:
@@ -371,6 +373,7 @@ def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
         assert checked.returncode == 2 and "of memory, more than" in checked.stderr
 
 
+@pytest.mark.slow
 def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
     from pcmb.config.schema import load_config
     from pcmb.study import Study
