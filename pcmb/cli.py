@@ -188,7 +188,21 @@ def _summary(config) -> str:
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
+    lines.append(_memory_line(study, nodes.size, outputs))
     return "\n".join(lines)
+
+
+def _memory_line(study, n_nodes: int, outputs) -> str:
+    """The ``memory`` line of the summary; checks that the run fits (raises UsageError)."""
+    from pcmb.run.memory import check_memory
+    from pcmb.run.output import format_bytes
+
+    estimate = study.memory_estimate(n_nodes, outputs)
+    available = check_memory(estimate)
+    return (
+        f"memory   about {format_bytes(estimate.total)} at most in pcmb's process; "
+        f"{format_bytes(available)} available"
+    )
 
 
 def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:

@@ -23,6 +23,7 @@ from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
     HELD_OUT_SEED,
+    RANGE_DRAWS,
     TOLERANCE,
     VALIDATION,
     HeldOut,
@@ -62,6 +63,7 @@ from pcmb.run.executor import (
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import FRESH, Journal
+from pcmb.run.memory import MemoryEstimate, check_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
@@ -517,6 +519,26 @@ class Study:
         count = len(outputs) + len(self.derived)
         return estimate_size(n_nodes, max(widths, default=1), count, len(self.inputs))
 
+    def memory_estimate(
+        self,
+        n_nodes: int,
+        outputs: Sequence[str],
+        axes: Mapping[str, OutputAxis | None] | None = None,
+    ) -> MemoryEstimate:
+        """Upper estimate of the memory a run needs (:mod:`pcmb.run.memory`): ``n_nodes``
+        nodes (an adaptive design: its budget is counted), the held-out runs and the range
+        check's draws of a method with an expansion, every output (the derived ones too) as
+        wide as the widest."""
+        widths = Layout.of(outputs, self.times, axes or {}).widths
+        chaos = self.design.record().basis is not None
+        return MemoryEstimate(
+            nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
+            held_out=self.validation if chaos else 0,
+            width=max(widths, default=1),
+            outputs=len(outputs) + len(self.derived),
+            draws=RANGE_DRAWS if chaos else 0,
+        )
+
     def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
         """Build the model in a worker, check it against the study, and return the outputs
         to keep.
@@ -642,10 +664,12 @@ class Study:
         if self.analysis is not None:
             on_time = [name for name in outputs if name not in facts.axes]
             self.analysis.check(self.times, [*outputs, *self.derived], on_time)
+        # Before any node runs and before a journal exists: a run that cannot fit in memory and
+        # an output that cannot be written (a folder, a read-only or full file system) are
+        # found now.
+        check_memory(self.memory_estimate(nodes.size, outputs, facts.axes))
         journal_dir = None
         if output is not None:
-            # Before any node runs and before a journal exists: an output that cannot be
-            # written (a folder, a read-only or full file system) is found now.
             estimate = self.size_estimate(nodes.size, outputs, facts.axes)
             check_output(output, estimate, create=True)
             if not force and Path(output).exists():

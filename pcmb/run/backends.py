@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from typing import Any, Protocol, TypeVar
 
 from pcmb.errors import MissingDependencyError
-from pcmb.run.lifeline import die_with_parent
+from pcmb.run.lifeline import die_with_parent, tag
 
 __all__ = [
     "BACKENDS",
@@ -99,7 +99,8 @@ class LokyPool:
             self._executor.shutdown(wait=False, kill_workers=True)
         self._executor = ProcessPoolExecutor(
             max_workers=self.slots,
-            env={name: share for name in _THREAD_LIMITS},
+            # Tagged: what the workers start ends with this process too (see lifeline.tag).
+            env={**dict.fromkeys(_THREAD_LIMITS, share), **tag()},
             # A worker must not go on running a model after pcmb died (kill -9, a crash).
             initializer=die_with_parent,
             initargs=(os.getpid(),),
@@ -166,7 +167,11 @@ class DaskPool:
             # killing each): the executor's own isolation then names the node.
             with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
                 self._cluster = distributed.LocalCluster(
-                    n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",
+                    env=tag(),  # what the workers start ends with this process too
                 )
         try:
             self._client = distributed.Client(address or self._cluster)

@@ -3,17 +3,23 @@
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
+import re
+import stat
 import tempfile
 from pathlib import Path
 
-__all__ = ["replace_durably", "write_durably"]
+__all__ = ["remove_stale_temporaries", "replace_durably", "write_durably"]
 
 
 def write_durably(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a temporary file in its folder (created if needed),
     moved into place by :func:`replace_durably`: ``path`` never holds a partial file. The
     file gets the mode the umask gives a new file (mkstemp's are private).
+
+    The temporary, ``.<name>.<pid>.<random>.tmp``, is ``flock``-ed until it is in place: one
+    left by a writer killed meanwhile is known to be stale (:func:`remove_stale_temporaries`).
 
     Raises
     ------
@@ -23,14 +29,18 @@ def write_durably(path: Path, data: bytes) -> None:
     temporary: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        handle, name = tempfile.mkstemp(
+            prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent
+        )
         temporary = Path(name)
         with os.fdopen(handle, "wb") as file:
+            fcntl.flock(file.fileno(), fcntl.LOCK_EX)
             umask = os.umask(0)
             os.umask(umask)
             os.fchmod(file.fileno(), 0o666 & ~umask)
             file.write(data)
-        replace_durably(temporary, path)
+            file.flush()
+            replace_durably(temporary, path)
     except BaseException:
         if temporary is not None:
             with contextlib.suppress(OSError):
@@ -54,3 +64,50 @@ def replace_durably(temporary: Path, path: Path) -> None:
         os.fsync(directory)
     finally:
         os.close(directory)
+
+
+def remove_stale_temporaries(path: Path) -> None:
+    """Remove the temporaries :func:`write_durably` left beside ``path`` when its writer was
+    killed (``kill -9``, a power loss) before moving them into place.
+
+    Only the provably stale ones go: this user's regular files named like its temporaries
+    whose writer process is gone (the pid in the name is not running) and whose lock nobody
+    holds. Temporaries named without a pid (by earlier versions) go when nobody locks them.
+    """
+    pattern = re.compile(rf"\.{re.escape(path.name)}\.(?:(\d+)\.)?[a-z0-9_]{{8}}\.tmp")
+    try:
+        names = os.listdir(path.parent)
+    except OSError:
+        return
+    for name in names:
+        found = pattern.fullmatch(name)
+        if found is None or (found[1] is not None and _running(int(found[1]))):
+            continue
+        with contextlib.suppress(OSError):
+            _remove_if_unlocked(path.parent / name)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)  # no signal: only whether the process exists
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        pass
+    return True
+
+
+def _remove_if_unlocked(temporary: Path) -> None:
+    """Remove ``temporary`` if it is this user's regular file and nobody holds its lock."""
+    handle = os.open(temporary, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
+    try:
+        status = os.fstat(handle)
+        if not stat.S_ISREG(status.st_mode) or status.st_uid != os.getuid():
+            return
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # its writer is still at work
+            return
+        temporary.unlink()
+    finally:
+        os.close(handle)

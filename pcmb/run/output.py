@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pcmb.errors import ResultFileError
+from pcmb.run.files import remove_stale_temporaries
 
 __all__ = ["SizeEstimate", "check_output", "estimate_size", "format_bytes", "write_error"]
 
@@ -135,7 +136,8 @@ def check_output(
     journal already holds are not asked for again). With ``create`` the folder is created
     and writing is probed by creating and deleting a temporary file in it (``pcmb run``);
     without, nothing is created and writability is asked of the operating system
-    (``os.access``; ``pcmb validate``).
+    (``os.access``; ``pcmb validate``). With ``create`` the temporaries of ``path`` that a
+    killed writer left are removed too (:func:`~pcmb.run.files.remove_stale_temporaries`).
 
     Returns
     -------
@@ -168,6 +170,7 @@ def check_output(
             os.unlink(probe)
         except OSError as error:
             raise write_error(error, path, "output", _fix(error)) from error
+        remove_stale_temporaries(path)  # a killed run's last write: its space counts as free
     elif not os.access(ancestor, os.W_OK | os.X_OK):
         what = "" if ancestor == folder else f" (its folder {folder} would be made in {ancestor})"
         raise ResultFileError(

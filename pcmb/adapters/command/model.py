@@ -68,6 +68,8 @@ _STDERR_FILE = "stderr.txt"
 # The end of a failed run's stderr (else stdout) shown in its message: the lines that say why.
 _TAIL_LINES = 5
 _TAIL_LINE_CHARS = 200
+# The longest #! line the kernel reads (Linux since 5.1).
+_SHEBANG_BYTES = 256
 
 
 def _problem(path: str, message: str) -> ConfigError:
@@ -119,6 +121,43 @@ def _output_tail(workdir: Path) -> str:
             shown = ", ".join(repr(line[-_TAIL_LINE_CHARS:]) for line in lines[-_TAIL_LINES:])
             return f"last lines of {name}: {shown}"
     return f"{_STDERR_FILE} and {_STDOUT_FILE} are empty"
+
+
+def _missing_interpreter(script: Path) -> str | None:
+    """What is missing to run ``script`` when its ``#!`` line names an interpreter that does
+    not exist (the kernel would say "No such file or directory" of the script); else None.
+
+    The line is read as the kernel reads it: the interpreter's path, then at most one argument
+    (the rest of the line), which ``env`` takes as the program to find on PATH (its words
+    after ``-S``).
+    """
+    try:
+        with open(script, "rb") as file:
+            first = file.read(_SHEBANG_BYTES).split(b"\n", 1)[0]
+    except OSError:  # not readable: the kernel will say so itself
+        return None
+    if not first.startswith(b"#!"):
+        return None
+    # Split at spaces and tabs only, as the kernel does (a "\r" of a DOS line ending stays).
+    text = os.fsdecode(first[2:]).strip(" \t").replace("\t", " ")
+    interpreter, _, argument = text.partition(" ")
+    line = first.decode(errors="replace")
+    if not interpreter:
+        return f"its {line!r} line names no interpreter"
+    if not (os.path.isfile(interpreter) and os.access(interpreter, os.X_OK)):
+        return f"its interpreter {interpreter!r} (line {line!r}) is missing or not executable"
+    argument = argument.strip(" ")
+    if os.path.basename(interpreter) != "env" or not argument:
+        return None
+    if argument.startswith("-S"):  # env splits the rest into words
+        names = [w for w in argument[2:].split() if not w.startswith("-") and "=" not in w]
+    elif argument.startswith("-") or "=" in argument:  # other options: not second-guessed
+        names = []
+    else:
+        names = [argument]
+    if names and shutil.which(names[0]) is None:
+        return f"its interpreter {names[0]!r} (line {line!r}) is not found on PATH"
+    return None
 
 
 def _wait_unreaped(pid: int, timeout: float | None) -> bool:
@@ -275,11 +314,15 @@ class CommandModel(PointwiseModel):
                 raise _problem(
                     "model.command[0]", f"program {path} does not exist or is not executable"
                 )
-            return str(path)
-        found = shutil.which(program)
-        if found is None:
-            raise _problem("model.command[0]", f"program {program!r} not found on PATH")
-        return found
+        else:
+            found = shutil.which(program)
+            if found is None:
+                raise _problem("model.command[0]", f"program {program!r} not found on PATH")
+            path = Path(found)
+        missing = _missing_interpreter(path)
+        if missing:
+            raise _problem("model.command[0]", f"program {path} cannot start: {missing}")
+        return str(path)
 
     @staticmethod
     def _resolve_format(output_file: str, output_format: str | None) -> str:
@@ -402,7 +445,10 @@ class CommandModel(PointwiseModel):
                     preexec_fn=kernel_kills_orphans,
                 )
             except OSError as exc:
-                raise ModelError(f"cannot start {argv[0]}: {describe_exception(exc)}") from exc
+                # ENOENT of a script that exists: its #! line names what is missing.
+                missing = isinstance(exc, FileNotFoundError) and _missing_interpreter(Path(argv[0]))
+                reason = missing or describe_exception(exc)
+                raise ModelError(f"cannot start {argv[0]}: {reason}") from exc
             try:
                 finished = _wait_unreaped(process.pid, self.timeout)
             finally:
