@@ -50,3 +50,12 @@ def test_commands_that_start_workers_keep_one_thread(
     monkeypatch.setattr(pcmb.cli, "_dispatch", dispatch)
     assert pcmb.cli.main([command, "some.yaml" if command != "inspect" else "some.h5"]) == 0
     assert (seen["threads"] == 1) == bounded
+
+
+@pytest.mark.parametrize(("backend", "bounded"), [("loky", True), ("inprocess", False)])
+def test_a_study_keeps_one_thread_while_its_pool_is_open(several_threads, backend, bounded):
+    from pcmb.run.backends import open_pool
+
+    with open_pool(backend, 1):
+        assert (_most_threads() == 1) == bounded
+    assert _most_threads() > 1

@@ -16,11 +16,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import Any, Protocol, TypeVar
 
 from pcmb.errors import MissingDependencyError
 from pcmb.run.lifeline import die_with_parent, tag
+from pcmb.run.threads import THREAD_LIMITS, one_thread_here
 
 __all__ = [
     "BACKENDS",
@@ -60,10 +61,6 @@ class Pool(Protocol):
         """Release the workers: after their tasks end, or at once with ``kill``."""
 
 
-#: Environment variables that cap native thread pools in worker processes.
-_THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
 def _warm_up() -> None:
     """Import what tasks need (the executor, and what python models commonly build on: their
     adapter and pcmb's batched integrator), so that the first task does not wait for it."""
@@ -100,7 +97,7 @@ class LokyPool:
         self._executor = ProcessPoolExecutor(
             max_workers=self.slots,
             # Tagged: what the workers start ends with this process too (see lifeline.tag).
-            env={**dict.fromkeys(_THREAD_LIMITS, share), **tag()},
+            env={**dict.fromkeys(THREAD_LIMITS, share), **tag()},
             # A worker must not go on running a model after pcmb died (kill -9, a crash).
             initializer=die_with_parent,
             initargs=(os.getpid(),),
@@ -331,8 +328,9 @@ def open_pool(
     """Workers of ``backend`` for one campaign.
 
     Loky pools are kept warm for the next campaign of this process (and closed at its exit);
-    the others are started and closed here. On an error or an interrupt the workers are
-    killed (a kept pool is dropped), so that none is left running.
+    the others are started and closed here. While the pool is open, this process keeps one
+    native thread (:func:`pcmb.run.threads.one_thread_here`). On an error or an interrupt the
+    workers are killed (a kept pool is dropped), so that none is left running.
 
     Parameters
     ----------
@@ -350,8 +348,11 @@ def open_pool(
         pool: Pool = _KEPT[workers]
     else:
         pool = BACKENDS[backend](jobs, workers, address)
+    # The workers have the cores: this process keeps one native thread meanwhile.
+    bounded = nullcontext() if backend == "inprocess" else one_thread_here()
     try:
-        yield pool
+        with bounded:
+            yield pool
     except BaseException:
         if kept:
             del _KEPT[workers]
