@@ -268,3 +268,15 @@ def test_a_failed_command_keeps_its_stderr_tail_and_has_no_traceback(tmp_path):
     assert done.returncode == 3, done.stderr
     assert "last lines of stderr.txt: 'solver diverged at step 12'" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr, done.stderr
+
+
+def test_a_worker_loads_no_debugger():
+    probe = (
+        "import sys\n"
+        "from pcmb.run.backends import _warm_up\n"
+        "_warm_up()\n"
+        "print(sorted({'pdb', 'bdb', 'cmd'} & set(sys.modules)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
