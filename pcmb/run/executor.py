@@ -631,7 +631,7 @@ def _debug(error: BaseException) -> None:
 
 
 def _run_batch(
-    model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout, full: bool = False
+    model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout, full: bool
 ) -> _Call:
     """One ``simulate`` call; ``full``: keep the whole traceback of an error of the model's
     code, pcmb's frames included (else the model's frames only)."""
@@ -694,7 +694,7 @@ def _execute(
     layout: Layout,
     batched: bool,
     retries: int,
-    caller: int = 0,
+    caller: int,
 ) -> _Outcome:
     """Run one task (in a worker or in-process), narrowing a failed batch down to its nodes.
     ``caller``: the process id of the run; an error of the model's code in that very process
@@ -736,7 +736,7 @@ def _execute(
 @dataclass
 class _Narrowing:
     """Runs the nodes of one task into ``values``, ``messages`` and ``tracebacks`` (see
-    :func:`_execute`)."""
+    :func:`_execute`); ``full``: keep whole tracebacks (see :func:`_run_batch`)."""
 
     model: Model
     params: Mapping[str, NDArray[np.float64]]
