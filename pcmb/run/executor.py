@@ -644,10 +644,10 @@ def _run_batch(
     except ModelDefinitionError as exc:
         return _Call(values, [str(exc)] * n, failed=True, broken=True)
     except Exception as exc:  # the model's own failure, whatever its type, is data here
-        debugger = _DEBUGGER.get()
-        if debugger is not None:
-            debugger(exc)
         found = model_traceback(exc, full)
+        debugger = _DEBUGGER.get()
+        if debugger is not None and found is not None:  # pdb has nothing to show in pcmb's code
+            debugger(exc)
         return _Call(values, [_describe(exc)] * n, failed=True, traceback=found)
     if problem:
         return _Call(values, [problem] * n, failed=True)
