@@ -268,6 +268,10 @@ def test_a_failed_command_keeps_its_stderr_tail_and_has_no_traceback(tmp_path):
     assert done.returncode == 3, done.stderr
     assert "last lines of stderr.txt: 'solver diverged at step 12'" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr, done.stderr
+    # Nor does --pdb open a debugger in pcmb's own code for it.
+    debugged = _pcmb("run", str(config), "--fresh", "--pdb", stdin="q\n")
+    assert debugged.returncode == 3, debugged.stderr
+    assert "(Pdb)" not in debugged.stdout and "Traceback" not in debugged.stderr
 
 
 def test_a_worker_loads_no_debugger():
