@@ -84,6 +84,12 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help=f"exit {EXIT_UNRELIABLE} when the diagnostics call an expansion unreliable",
     )
+    run.add_argument(
+        "--pdb",
+        action="store_true",
+        help="run the model in this process (--backend inprocess) and open pdb at the first "
+        "exception of the model's code",
+    )
 
     validate = commands.add_parser("validate", help="check a config without running anything")
     validate.add_argument("config")
@@ -236,10 +242,19 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     if args.jobs is not None and args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
+    if args.pdb and args.backend not in (None, "inprocess"):
+        raise UsageError(
+            f"--pdb debugs the model in this process: it takes --backend inprocess (or none), "
+            f"not {args.backend}"
+        )
+    if args.pdb:
+        args.backend = "inprocess"
     if args.backend in (None, "loky"):
         warm_up(args.jobs)  # workers start while this process reads the config
 
     from pcmb.config.schema import load_config
+    from pcmb.run.executor import post_mortem
+    from pcmb.run.status import failure_report
     from pcmb.study import Study
 
     config = load_config(args.config, check_sweep=False)  # a run ignores sweep:
@@ -258,14 +273,15 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "config_sha256": config.sha256,
         "command_line": shlex.join(["pcmb", *argv]),
     }
-    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.backend):
+    debugging = post_mortem() if args.pdb else nullcontext()
+    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.backend), debugging:
         warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
         result = study.run(
             output,
             resume=args.resume,
             fresh=args.fresh,
             force=args.force,
-            progress=False if args.quiet else None,
+            progress=False if args.quiet or args.pdb else None,
             provenance=provenance,
         )
     from pcmb.designs import RECORDED_ONLY
@@ -273,6 +289,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     for warning in result.warnings:
         if warning.code not in RECORDED_ONLY:  # shown by inspect and report
             _log(f"pcmb: warning: {warning}")
+    if any(failure.traceback is not None for failure in result.failures):
+        _log("pcmb: the nodes left out, once per cause with the model's traceback:")
+        _log("\n".join(failure_report(result.failures, "  ")))
     _log(f"pcmb: wrote {output} ({plural(result.n_nodes, 'node')}, {result.seconds:.2f} s of runs)")
     unreliable = [name for name, found in result.diagnostics.items() if not found.reliable]
     if args.strict and unreliable:
@@ -384,6 +403,8 @@ def _inspect(path: str) -> str:
 
     import numpy as np
 
+    from pcmb.run.status import failure_report
+
     result = _load(path)
     named_inputs = zip(result.input_names, result.distributions, strict=True)
     status = np.bincount(result.status.astype(int), minlength=3)
@@ -469,7 +490,7 @@ def _inspect(path: str) -> str:
             f"analysis quantile bands, PDFs at t = {times}; spectra: {', '.join(spectra) or 'none'}"
         )
     lines += [f"warning  {w}" for w in result.warnings]
-    lines += [f"failed   {f}" for f in result.failures]
+    lines += failure_report(result.failures, "failed   ")
     return "\n".join(lines)
 
 

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
+from pcmb.run.status import NodeFailure, failure_report
+
 #: Exit codes of the command line, by kind of outcome.
 EXIT_OK, EXIT_UNEXPECTED, EXIT_INVALID, EXIT_MODEL = 0, 1, 2, 3
 #: ``pcmb run --strict``: the result is written, but an expansion is called unreliable.
@@ -135,16 +137,17 @@ class ModelRunError(PcmbError):
     Attributes
     ----------
     failures:
-        The failed nodes (:class:`pcmb.result.NodeFailure`).
+        The failed nodes (:class:`pcmb.result.NodeFailure`), reported in the message once
+        per cause, with the model's traceback (:func:`pcmb.run.status.failure_report`).
     """
 
     exit_code = EXIT_MODEL
     label = "model failure"
 
-    def __init__(self, failures: Sequence[object], message: str | None = None):
+    def __init__(self, failures: Sequence[NodeFailure], message: str | None = None):
         self.failures = tuple(failures)
         lines = [message or f"the model failed at {len(self.failures)} node(s):"]
-        lines += [f"  {f}" for f in self.failures]
+        lines += failure_report(self.failures, "  ")
         super().__init__("\n".join(lines))
 
 

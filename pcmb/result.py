@@ -17,7 +17,7 @@ from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.process import RandomProcess, germ_names
-from pcmb.run.status import NodeFailure, Status
+from pcmb.run.status import ModelTraceback, NodeFailure, Status
 
 if TYPE_CHECKING:
     from pcmb.analysis.diagnostics import HeldOut, OutputDiagnostics
@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 __all__ = [
     "AdaptiveFit",
     "Design",
+    "ModelTraceback",
     "NodeFailure",
     "Refinement",
     "RegressionFit",

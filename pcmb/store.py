@@ -10,7 +10,7 @@ import io
 import json
 import os
 import platform
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ from pcmb.errors import ResultFileError
 from pcmb.result import (
     AdaptiveFit,
     Design,
+    ModelTraceback,
     NodeFailure,
     Refinement,
     RegressionFit,
@@ -178,6 +179,25 @@ def _read_analysis(
     return Analysis(AnalysisSettings.from_description(_text(file.attrs["analysis"])), outputs)
 
 
+def _tracebacks_text(failures: Sequence[NodeFailure]) -> str:
+    """The JSON of the root attribute ``failure_tracebacks``: each distinct traceback once,
+    with the failed nodes it belongs to."""
+    nodes: dict[ModelTraceback, list[int]] = {}
+    for failure in failures:
+        if failure.traceback is not None:
+            nodes.setdefault(failure.traceback, []).append(failure.index)
+    return json.dumps([{"nodes": found, **raised.describe()} for raised, found in nodes.items()])
+
+
+def _read_tracebacks(attrs: h5py.AttributeManager) -> dict[int, ModelTraceback]:
+    """Node index -> its traceback, from ``failure_tracebacks`` (none in older files)."""
+    found = {}
+    for entry in json.loads(_text(attrs.get("failure_tracebacks", "[]"))):
+        raised = ModelTraceback.from_description(entry)
+        found.update(dict.fromkeys(entry["nodes"], raised))
+    return found
+
+
 def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) -> None:
     from pcmb import __version__
 
@@ -193,6 +213,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     attrs["failures"] = json.dumps(
         [{"index": f.index, "params": f.params, "message": f.message} for f in result.failures]
     )
+    attrs["failure_tracebacks"] = _tracebacks_text(result.failures)
     for key in ("config", "config_sha256", "command_line"):
         attrs[key] = provenance.get(key, "")
 
@@ -660,8 +681,9 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
                 nominal[name] = _columns(group["nominal"][()], scalar)
             if (fit := _read_regression(group, scalar)) is not None:
                 regression[name] = fit
+        raised = _read_tracebacks(attrs)
         failures = tuple(
-            NodeFailure(f["index"], f["params"], f["message"])
+            NodeFailure(f["index"], f["params"], f["message"], raised.get(f["index"]))
             for f in json.loads(_text(attrs.get("failures", "[]")))
         )
         warnings = _read_warnings(file)

@@ -7,7 +7,8 @@ worker that dies (a segfault, ``os._exit``) or overruns its timeout costs only i
 the node that killed it is named. See ``docs/architecture.md``.
 
 Whatever the model's code raises while it builds or simulates is a failure of the nodes it was
-running, described by type and message — ``BaseException`` s included: ``sys.exit()`` in a
+running, described by type and message, with the model's part of the traceback
+(:mod:`pcmb.run.tracebacks`) — ``BaseException`` s included: ``sys.exit()`` in a
 model is ``SystemExit: 0`` at its node, never an exit of pcmb. The one exception is the user's
 Ctrl-C: a ``KeyboardInterrupt`` (or anything else) raised while a SIGINT reached the process
 stops the run, as does a SIGINT the model swallowed (see :class:`_SigintWatch`).
@@ -19,14 +20,17 @@ import dataclasses
 import hashlib
 import itertools
 import math
+import os
 import signal
 import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures import TimeoutError as FutureTimeout
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -46,7 +50,8 @@ from pcmb.errors import (
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import FRESH, Journal
 from pcmb.run.progress import Progress
-from pcmb.run.status import NodeFailure, Status
+from pcmb.run.status import ModelTraceback, NodeFailure, Status
+from pcmb.run.tracebacks import model_exception, model_traceback
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
@@ -58,6 +63,7 @@ __all__ = [
     "chunk_bounds",
     "describe_model",
     "join_runs",
+    "post_mortem",
     "run_in_worker",
     "run_nodes",
     "start_run",
@@ -157,12 +163,14 @@ class _Task:
 @dataclass(frozen=True)
 class _Outcome:
     """A finished task: (B, W) values (:class:`Layout`), per-node messages ("" = ok), model
-    seconds, and the nodes where the model broke the protocol (a ``ModelDefinitionError``)."""
+    seconds, the nodes where the model broke the protocol (a ``ModelDefinitionError``), and
+    per node where the model's code raised (``None``: it did not)."""
 
     values: NDArray[np.float64]
     messages: tuple[str, ...]
     seconds: float
     broken: tuple[bool, ...] = ()
+    tracebacks: tuple[ModelTraceback | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -554,14 +562,79 @@ def _wait(
     return None, death
 
 
+@dataclass(frozen=True)
+class _Call:
+    """One ``simulate`` call (:func:`_run_batch`).
+
+    Attributes
+    ----------
+    values:
+        (B, W) values.
+    messages:
+        Per node, why it failed ("" = ok).
+    failed:
+        Whether the call as a whole failed (it raised or returned a wrong result), so that
+        which node made it fail is unknown.
+    broken:
+        Whether that failure is a break of the protocol (a ``ModelDefinitionError``: a
+        failure of the call, which the campaign turns into a model error only if the model
+        broke it at every node it tried).
+    traceback:
+        Where the model's code raised, if it did.
+    """
+
+    values: NDArray[np.float64]
+    messages: list[str]
+    failed: bool = False
+    broken: bool = False
+    traceback: ModelTraceback | None = None
+
+
+# The post-mortem debugger of pcmb run --pdb, while it is active in this context (post_mortem).
+_DEBUGGER: ContextVar[Callable[[BaseException], None] | None] = ContextVar(
+    "pcmb_post_mortem", default=None
+)
+
+
+@contextmanager
+def post_mortem() -> Iterator[None]:
+    """While the block runs, open pdb's post-mortem debugger at the first error the model's
+    code raises in this thread (``pcmb run --pdb``: the in-process backend runs the model
+    here), in the frame that raised it. The run goes on when the debugger is left."""
+    opened = False
+
+    def debug(error: BaseException) -> None:
+        nonlocal opened
+        if not opened:
+            opened = True
+            _debug(model_exception(error))
+
+    token = _DEBUGGER.set(debug)
+    try:
+        yield
+    finally:
+        _DEBUGGER.reset(token)
+
+
+def _debug(error: BaseException) -> None:
+    """pdb's post-mortem of ``error``, with the SIGINT handler of before it afterwards (pdb's
+    ``continue`` installs its own)."""
+    import pdb
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    try:
+        pdb.post_mortem(error.__traceback__)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
 def _run_batch(
-    model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout
-) -> tuple[NDArray[np.float64], list[str], bool, bool]:
-    """One ``simulate`` call: (B, W) values, per-node messages ("" = ok), whether the call
-    as a whole failed (it raised or returned a wrong result), so that which node made it fail
-    is unknown, and whether that failure is a break of the protocol (a
-    ``ModelDefinitionError``: a failure of the call, which the campaign turns into a model
-    error only if the model broke it at every node it tried)."""
+    model: Model, params: Mapping[str, NDArray[np.float64]], layout: Layout, full: bool
+) -> _Call:
+    """One ``simulate`` call; ``full``: keep the whole traceback of an error of the model's
+    code, pcmb's frames included (else the model's frames only)."""
     n = len(next(iter(params.values())))
     values = layout.empty(n)
     try:
@@ -569,11 +642,15 @@ def _run_batch(
         # Reading the result runs the model's code too (a mapping's lookup, an __array__).
         problem = _model_code(_collect, result, layout, values)
     except ModelDefinitionError as exc:
-        return values, [str(exc)] * n, True, True
+        return _Call(values, [str(exc)] * n, failed=True, broken=True)
     except Exception as exc:  # the model's own failure, whatever its type, is data here
-        return values, [_describe(exc)] * n, True, False
+        found = model_traceback(exc, full)
+        debugger = _DEBUGGER.get()
+        if debugger is not None and found is not None:  # pdb has nothing to show in pcmb's code
+            debugger(exc)
+        return _Call(values, [_describe(exc)] * n, failed=True, traceback=found)
     if problem:
-        return values, [problem] * n, True, False
+        return _Call(values, [problem] * n, failed=True)
     messages = []
     columns = [np.isfinite(part) for part in layout.split(values).values()]
     for i in range(n):
@@ -584,7 +661,7 @@ def _run_batch(
             messages.append(f"non-finite output {layout.outputs[k]!r}{layout.where(k, j)}")
         else:
             messages.append("")
-    return values, messages, False, False
+    return _Call(values, messages)
 
 
 def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str:
@@ -617,8 +694,11 @@ def _execute(
     layout: Layout,
     batched: bool,
     retries: int,
+    caller: int,
 ) -> _Outcome:
     """Run one task (in a worker or in-process), narrowing a failed batch down to its nodes.
+    ``caller``: the process id of the run; an error of the model's code in that very process
+    (the in-process backend, for debugging) keeps its whole traceback.
 
     A per-point model (one with ``run_point``, see
     :class:`~pcmb.adapters.protocol.PointwiseModel`) is called node by node: its batch is a
@@ -635,35 +715,48 @@ def _execute(
     n = len(next(iter(params.values())))
     values = layout.empty(n)
     messages = ["not run"] * n
-    narrow = _Narrowing(model, params, layout, retries, values, messages, [False] * n)
+    full = os.getpid() == caller
+    narrow = _Narrowing(
+        model, params, layout, retries, full, values, messages, [False] * n, [None] * n
+    )
     if batched and n > 1 and not callable(getattr(model, "run_point", None)):
         narrow.batch(0, n)
     else:
         for i in range(n):
             narrow.alone(i)
-    return _Outcome(values, tuple(messages), time.perf_counter() - start, tuple(narrow.broken))
+    return _Outcome(
+        values,
+        tuple(messages),
+        time.perf_counter() - start,
+        tuple(narrow.broken),
+        tuple(narrow.tracebacks),
+    )
 
 
 @dataclass
 class _Narrowing:
-    """Runs the nodes of one task into ``values`` and ``messages`` (see :func:`_execute`)."""
+    """Runs the nodes of one task into ``values``, ``messages`` and ``tracebacks`` (see
+    :func:`_execute`); ``full``: keep whole tracebacks (see :func:`_run_batch`)."""
 
     model: Model
     params: Mapping[str, NDArray[np.float64]]
     layout: Layout
     retries: int
+    full: bool
     values: NDArray[np.float64]
     messages: list[str]
     broken: list[bool]
+    tracebacks: list[ModelTraceback | None]
 
     def alone(self, i: int) -> None:
         """Run node ``i`` in a one-node batch, ``1 + retries`` times at most."""
         single = {name: array[i : i + 1] for name, array in self.params.items()}
         for _ in range(1 + self.retries):
-            row, (message,), _, broken = _run_batch(self.model, single, self.layout)
-            if not message:
+            call = _run_batch(self.model, single, self.layout, self.full)
+            if not call.messages[0]:
                 break
-        self.values[i], self.messages[i], self.broken[i] = row[0], message, broken
+        self.values[i], self.messages[i] = call.values[0], call.messages[0]
+        self.broken[i], self.tracebacks[i] = call.broken, call.traceback
 
     def batch(self, start: int, stop: int) -> None:
         """Run nodes ``[start, stop)`` in one batched call; narrow it down if it fails.
@@ -680,14 +773,14 @@ class _Narrowing:
             self.alone(start)
             return
         part = {name: array[start:stop] for name, array in self.params.items()}
-        rows, found, failed, _ = _run_batch(self.model, part, self.layout)
-        if failed:
+        call = _run_batch(self.model, part, self.layout, self.full)
+        if call.failed:
             middle = (start + stop) // 2
             self.batch(start, middle)
             self.batch(middle, stop)
             return
-        self.values[start:stop], self.messages[start:stop] = rows, found
-        for i in [start + k for k, message in enumerate(found) if message]:
+        self.values[start:stop], self.messages[start:stop] = call.values, call.messages
+        for i in [start + k for k, message in enumerate(call.messages) if message]:
             self.alone(i)
 
 
@@ -729,6 +822,7 @@ class _Campaign:
         }
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
+        self.tracebacks: dict[int, ModelTraceback] = {}
         self.broken: set[int] = set()  # the failed nodes where the model broke the protocol
         self.proven = proven
         self.resumed = 0
@@ -763,13 +857,7 @@ class _Campaign:
             params = {name: array[start:stop] for name, array in self.params.items()}
         else:
             params = {name: array[task.indices] for name, array in self.params.items()}
-        return (
-            self.factory,
-            params,
-            self.layout,
-            task.batched,
-            self.retries,
-        )
+        return (self.factory, params, self.layout, task.batched, self.retries, os.getpid())
 
     def accept(
         self,
@@ -777,9 +865,11 @@ class _Campaign:
         values: NDArray[np.float64],
         messages: Sequence[str],
         broken: Sequence[bool] = (),
+        tracebacks: Sequence[ModelTraceback | None] = (),
     ) -> None:
         """Store a finished task, journal it at once and advance the progress line;
-        ``broken``: the nodes whose failure is a break of the protocol."""
+        ``broken``: the nodes whose failure is a break of the protocol; ``tracebacks``: where
+        the model's code raised at each node."""
         failed = np.array([bool(m) for m in messages])
         chunk = {
             name: np.where(failed[:, None], np.nan, part)
@@ -789,18 +879,21 @@ class _Campaign:
             self.values[name][task.indices] = column
         self.status[task.indices] = np.where(failed, Status.FAILED, Status.OK)
         found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
+        raised = {int(i): t for i, t in zip(task.indices, tracebacks, strict=False) if t}
         for i in task.indices:
             self.messages.pop(int(i), None)
+            self.tracebacks.pop(int(i), None)
             self.broken.discard(int(i))
         self.messages.update(found)
+        self.tracebacks.update(raised)
         self.broken.update(int(i) for i, b in zip(task.indices, broken, strict=False) if b)
         if self.journal is not None:
-            self.journal.record(task.indices, chunk, self.status[task.indices], found)
+            self.journal.record(task.indices, chunk, self.status[task.indices], found, raised)
         if self.progress is not None:
             self.progress.advance(task.indices.size)
 
     def accept_outcome(self, task: _Task, outcome: _Outcome) -> None:
-        self.accept(task, outcome.values, outcome.messages, outcome.broken)
+        self.accept(task, outcome.values, outcome.messages, outcome.broken, outcome.tracebacks)
 
     @property
     def broken_everywhere(self) -> bool:
@@ -833,6 +926,7 @@ class _Campaign:
                     for name, array in self.params.items()
                 },
                 message=self.messages[i],
+                traceback=self.tracebacks.get(i),
             )
             for i in sorted(self.messages)
         )

@@ -28,7 +28,7 @@ from pcmb.run.files import replace_durably
 from pcmb.run.fingerprint import Fingerprint, changed_files
 from pcmb.run.lock import FolderLock
 from pcmb.run.output import write_error
-from pcmb.run.status import Status
+from pcmb.run.status import ModelTraceback, Status
 
 __all__ = ["FRESH", "Journal"]
 
@@ -315,6 +315,7 @@ class Journal:
         values: Mapping[str, ArrayLike],
         status: ArrayLike,
         messages: Mapping[int, str] | None = None,
+        tracebacks: Mapping[int, ModelTraceback] | None = None,
     ) -> None:
         """Persist one finished chunk durably and atomically.
 
@@ -329,6 +330,9 @@ class Journal:
             (B,) int, ``Status.OK`` or ``Status.FAILED`` for each node.
         messages:
             Node index -> failure message, for the failed nodes.
+        tracebacks:
+            Node index -> where the model's code raised, for the failed nodes where it did
+            (kept in the record as JSON, :meth:`ModelTraceback.describe`, "" for the others).
 
         Raises
         ------
@@ -362,11 +366,18 @@ class Journal:
         stacked = np.concatenate(arrays, axis=1)
         messages = messages or {}
         text = np.array([messages.get(int(i), "") for i in idx], dtype=np.str_)
+        raised = [(tracebacks or {}).get(int(i)) for i in idx]
+        described = np.array([json.dumps(t.describe()) if t else "" for t in raised], dtype=np.str_)
         path = self.directory / f"record-{self._next_record:06d}.npz"
         self._write_atomically(
             path,
             lambda handle: np.savez(
-                handle, indices=idx, status=codes, values=stacked, messages=text
+                handle,
+                indices=idx,
+                status=codes,
+                values=stacked,
+                messages=text,
+                tracebacks=described,
             ),
         )
         self._next_record += 1

@@ -1,4 +1,4 @@
-"""What became of each node: its status code and, for a failed run, why.
+"""What became of each node: its status code and, for a failed run, why and where.
 
 Kept apart from :mod:`pcmb.result` so that worker processes, which report nodes, need not
 import the chaos machinery the result holds.
@@ -6,10 +6,14 @@ import the chaos machinery the result holds.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
+import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["NodeFailure", "Status"]
+__all__ = ["ModelTraceback", "NodeFailure", "Status", "failure_report"]
 
 
 class Status(enum.IntEnum):
@@ -18,6 +22,45 @@ class Status(enum.IntEnum):
     PENDING = 0
     OK = 1
     FAILED = 2
+
+
+@dataclass(frozen=True)
+class ModelTraceback:
+    """Where the model's code raised: its exception and the frames of the model's own code.
+
+    Attributes
+    ----------
+    error:
+        The exception's type name, ``"KeyError"``.
+    file:
+        The file of the innermost frame of the model's code (absolute, as Python names it).
+    line:
+        Its line number.
+    function:
+        The name of its function.
+    text:
+        The traceback as Python prints it (file, line and code of every frame), trimmed to
+        the model's frames (see :func:`pcmb.run.tracebacks.model_traceback`).
+    """
+
+    error: str
+    file: str
+    line: int
+    function: str
+    text: str
+
+    @property
+    def where(self) -> str:
+        """``helpers.py:12 in rate()``."""
+        return f"{os.path.basename(self.file)}:{self.line} in {self.function}()"
+
+    def describe(self) -> dict[str, Any]:
+        """The record as JSON-ready values (read back by :meth:`from_description`)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_description(cls, description: Mapping[str, Any]) -> ModelTraceback:
+        return cls(**{field.name: description[field.name] for field in dataclasses.fields(cls)})
 
 
 @dataclass(frozen=True)
@@ -33,15 +76,56 @@ class NodeFailure:
     message:
         The model's message (exception type and text), ``"non-finite output 'x1' at t=..."``,
         or ``"worker process died (...)"``.
+    traceback:
+        Where the model's code raised, when it did (``None`` for the other failures, and in
+        files written before pcmb kept tracebacks).
     """
 
     index: int
     params: dict[str, float | tuple[float, ...]]
     message: str
+    traceback: ModelTraceback | None = None
+
+    @property
+    def node(self) -> str:
+        """``node 3 (a=0.5, b=2)``."""
+        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
+        return f"node {self.index} ({values})"
+
+    @property
+    def cause(self) -> tuple[str, ...]:
+        """What the failures of one cause share: the exception's type and the innermost frame
+        of the model's code (file, line), or, without a traceback, the message."""
+        if self.traceback is None:
+            return (self.message,)
+        return (self.traceback.error, self.traceback.file, str(self.traceback.line))
 
     def __str__(self) -> str:
-        values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
-        return f"node {self.index} ({values}): {' '.join(self.message.split())}"
+        where = "" if self.traceback is None else f" at {self.traceback.where}"
+        return f"{self.node}: {' '.join(self.message.split())}{where}"
+
+
+def failure_report(failures: Sequence[NodeFailure], label: str = "") -> list[str]:
+    """Lines that report failed nodes once per cause (:attr:`NodeFailure.cause`): the first
+    failure of each cause with its traceback, then the other nodes of that cause on one line.
+    The lines of a failure start with ``label``, its traceback's are indented below it."""
+    causes: dict[tuple[str, ...], list[NodeFailure]] = {}
+    for failure in failures:
+        causes.setdefault(failure.cause, []).append(failure)
+    indent = " " * len(label) + "  "
+    lines = []
+    for first, *others in causes.values():
+        lines.append(f"{label}{first}")
+        if first.traceback is not None:
+            text = first.traceback.text.rstrip("\n")
+            lines += [indent + line if line else "" for line in text.splitlines()]
+        if others:
+            nodes = "node" if len(others) == 1 else "nodes"
+            lines.append(
+                f"{label}and {len(others)} more {nodes} with the same error: "
+                + ", ".join(other.node for other in others)
+            )
+    return lines
 
 
 def _format_value(value: float | tuple[float, ...]) -> str:

@@ -16,9 +16,7 @@ import importlib.util
 import inspect
 import os
 import re
-import site
 import sys
-import sysconfig
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +36,7 @@ from pcmb.adapters.protocol import (
     float_array,
 )
 from pcmb.errors import ConfigError, ConfigProblem, ModelError, UsageError
+from pcmb.run.tracebacks import installed, installed_folders
 from pcmb.wording import did_you_mean
 
 __all__ = [
@@ -290,29 +289,13 @@ def python_entry_files(entry: str, base_dir: str | Path) -> list[Path]:
     return [] if origin is None else [Path(origin).resolve()]
 
 
-def _environment() -> tuple[Path, ...]:
-    """The folders of the installed environment: the standard library, site-packages and
-    pcmb itself."""
-    paths = sysconfig.get_paths()
-    found = {paths[key] for key in ("stdlib", "platstdlib", "purelib", "platlib") if key in paths}
-    found.update(site.getsitepackages(), [site.getusersitepackages()])
-    found.add(str(Path(__file__).parents[2]))  # the pcmb package
-    return tuple(Path(folder).resolve() for folder in found)
-
-
-def _installed(path: Path, environment: tuple[Path, ...]) -> bool:
-    return any(path.is_relative_to(folder) for folder in environment) or bool(
-        {"site-packages", "dist-packages"} & set(path.parts)
-    )
-
-
 def local_modules(root: Path) -> list[Path]:
     """The files of the loaded modules (``sys.modules``) under the folder ``root``, outside
     the installed environment (the standard library, site-packages, pcmb); none when
     ``root`` itself is installed."""
     root = root.resolve()
-    environment = _environment()
-    if _installed(root, environment):
+    environment = installed_folders()
+    if installed(root, environment):
         return []
     found = set()
     folders: dict[str, Path] = {}  # each folder resolved once: modules share few folders
@@ -323,7 +306,7 @@ def local_modules(root: Path) -> list[Path]:
             if head not in folders:
                 folders[head] = Path(head).resolve()
             path = folders[head] / tail
-            if path.is_relative_to(root) and not _installed(path, environment):
+            if path.is_relative_to(root) and not installed(path, environment):
                 found.add(path)
     return sorted(found)
 
