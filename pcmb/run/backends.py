@@ -171,8 +171,13 @@ def _greet_scheduler(address: str, key: str) -> None:
     """
     import distributed
 
+    # The client's TLS settings of the dask config, as distributed.Client takes them.
+    connection = distributed.Security().get_connection_args("client")
+
     async def identity() -> dict[str, Any]:
-        async with distributed.rpc(address, timeout=CONNECT_SECONDS) as remote:
+        async with distributed.rpc(
+            address, timeout=CONNECT_SECONDS, connection_args=connection
+        ) as remote:
             return await remote.identity()
 
     async def within_deadline() -> dict[str, Any]:
