@@ -318,6 +318,8 @@ def run_sweep(
         message names its PID and command).
     MissingDependencyError
         matplotlib is missing (the chart needs it), before anything runs.
+    ClusterError
+        No dask scheduler answers at the address (``address`` or ``execution.address``).
     ModelRunError
         A setting's nodes failed and its policy does not allow going on; the finished
         settings are kept for ``resume``.
