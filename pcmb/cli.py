@@ -50,7 +50,8 @@ def _address_flag(command: argparse.ArgumentParser) -> None:
         "--address",
         metavar="SCHEDULER",
         help="run on the dask cluster whose scheduler is at this address, e.g. "
-        "tcp://HOST:8786 (implies --backend dask; overrides execution.address)",
+        "tcp://HOST:8786 (implies --backend dask; overrides execution.address; uses every "
+        "thread of the cluster unless --jobs is given)",
     )
 
 
@@ -277,6 +278,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             study.address = None  # a scheduler address only means something to dask
     if args.address is not None:
         study.backend, study.address, study.address_key = "dask", args.address, "--address"
+        study.jobs = args.jobs  # every thread of the cluster, not the config's local jobs
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,

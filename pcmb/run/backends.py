@@ -303,11 +303,12 @@ class DaskPool:
         """Nothing to do: dask's nannies restart dead workers."""
 
     def close(self, kill: bool = False) -> None:
-        """Close what was started here; of a client or cluster given, only this pool's tasks
-        end (cancelled with ``kill``)."""
-        self._executor.shutdown(wait=not kill)
+        """Close what was started here (its tasks end with it); of a client given, only this
+        pool's tasks end (cancelled with ``kill``)."""
         if self._own_client:
             self._client.close()
+        else:
+            self._executor.shutdown(wait=not kill)
         if self._cluster is not None:
             self._cluster.close()
 

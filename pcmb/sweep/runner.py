@@ -305,7 +305,8 @@ def run_sweep(
     jobs, backend:
         Override ``execution.jobs`` and ``execution.backend``.
     address:
-        Overrides ``execution.address`` (``--address``) and implies backend dask.
+        Overrides ``execution.address`` (``--address``) and implies backend dask; the
+        settings then run on every thread of the cluster unless ``jobs`` is given.
     command_line:
         Stored with every result file.
 
@@ -345,7 +346,8 @@ def run_sweep(
         _outputs(plan, given, str(reference))
     if jobs is not None or backend is not None or address is not None:
         changes = {
-            "jobs": jobs or config.execution.jobs,
+            # With an address, every thread of the cluster unless jobs is given.
+            "jobs": jobs if address is not None else jobs or config.execution.jobs,
             "backend": "dask" if address is not None else backend or config.execution.backend,
             "address": address or config.execution.address,
         }
