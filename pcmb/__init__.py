@@ -25,6 +25,7 @@ _EXPORTS = {
     "pcmb.analysis.comparison": ["compare"],
     "pcmb.config": ["StudyConfig", "config_json_schema", "load_config", "validate_config"],
     "pcmb.errors": [
+        "ClusterError",
         "ConfigError",
         "IllPosedError",
         "MissingDependencyError",
@@ -86,6 +87,7 @@ __all__ = [
     "Beta",
     "ChaosExpansion",
     "ChaosSpectrum",
+    "ClusterError",
     "CommandModel",
     "ConfigError",
     "Design",

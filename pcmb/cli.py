@@ -44,6 +44,24 @@ if TYPE_CHECKING:
 _QUIET = "no progress bar, no log of the dask backend"
 
 
+def _address_flag(command: argparse.ArgumentParser) -> None:
+    """``--address``: a dask cluster of the user's (implies the dask backend)."""
+    command.add_argument(
+        "--address",
+        metavar="SCHEDULER",
+        help="run on the dask cluster whose scheduler is at this address, e.g. "
+        "tcp://HOST:8786 (implies --backend dask; overrides execution.address; uses every "
+        "thread of the cluster unless --jobs is given)",
+    )
+
+
+def _check_address(args: argparse.Namespace) -> None:
+    """``--address`` goes with no backend but dask."""
+    backend = getattr(args, "backend", None)
+    if args.address is not None and backend not in (None, "dask"):
+        raise UsageError(f"--address needs --backend dask (it implies it), got --backend {backend}")
+
+
 def _journal_flags(command: argparse.ArgumentParser, what: str) -> None:
     """``--resume`` and ``--fresh``: continue the journals of an interrupted ``what``, or
     discard them and start over (one or the other)."""
@@ -72,6 +90,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("-o", "--output", help="result file (overrides the config's output)")
     run.add_argument("--jobs", type=int, help="worker processes (default: config, else all cores)")
     run.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
+    _address_flag(run)
     _journal_flags(run, "run")
     run.add_argument(
         "--force",
@@ -93,6 +112,7 @@ def _parser() -> argparse.ArgumentParser:
 
     validate = commands.add_parser("validate", help="check a config without running anything")
     validate.add_argument("config")
+    _address_flag(validate)
 
     inspect = commands.add_parser("inspect", help="summarise a result file (or a sweep.h5)")
     inspect.add_argument("result", help="an HDF5 file written by pcmb run or pcmb sweep")
@@ -132,6 +152,7 @@ def _parser() -> argparse.ArgumentParser:
         "--jobs", type=int, help="worker processes (default: config, else all cores)"
     )
     sweep.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
+    _address_flag(sweep)
     _journal_flags(sweep, "sweep")
     sweep.add_argument(
         "--force",
@@ -148,9 +169,11 @@ def _log(message: str) -> None:
     print(message, file=sys.stderr)
 
 
-def _summary(config) -> str:
+def _summary(config, address: str | None = None) -> str:
+    """What ``pcmb validate`` prints; ``address``: ``--address``."""
     from pcmb.study import Study
 
+    cluster = _cluster_line(config, address)  # first: an unreachable cluster is refused fast
     study = Study.from_config(config)
     nodes = study.node_set()
     outputs = study.check_model()
@@ -191,6 +214,7 @@ def _summary(config) -> str:
         f"runs     {nodes.size} model runs{rounds}{checks} "
         f"({config.execution.on_failure} on failure)"
     )
+    lines += [cluster] if cluster else []
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
@@ -209,6 +233,18 @@ def _memory_line(study, n_nodes: int, outputs) -> str:
         f"memory   about {format_bytes(estimate.total)} at most in pcmb's process; "
         f"{format_bytes(available)} available"
     )
+
+
+def _cluster_line(config, address: str | None) -> str | None:
+    """The ``cluster`` line of the summary, for a dask scheduler's address (``--address``,
+    else ``execution.address``): its workers now; raises ClusterError if none answers."""
+    from pcmb.run.backends import describe_cluster
+
+    if address is not None:
+        return f"cluster  {describe_cluster(address, '--address')}"
+    if config.execution.backend == "dask" and config.execution.address is not None:
+        return f"cluster  {describe_cluster(config.execution.address, 'execution.address')}"
+    return None
 
 
 def _space_line(study, n_nodes: int, outputs, output: str | None) -> str:
@@ -249,7 +285,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         )
     if args.pdb:
         args.backend = "inprocess"
-    if args.backend in (None, "loky"):
+    _check_address(args)
+    if args.backend in (None, "loky") and args.address is None:
         warm_up(args.jobs)  # workers start while this process reads the config
 
     from pcmb.config.schema import load_config
@@ -268,6 +305,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         study.backend = args.backend
         if args.backend != "dask":
             study.address = None  # a scheduler address only means something to dask
+    if args.address is not None:
+        study.backend, study.address, study.address_key = "dask", args.address, "--address"
+        study.jobs = args.jobs  # every thread of the cluster, not the config's local jobs
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,
@@ -305,7 +345,8 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     if args.jobs is not None and args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}")
-    if args.backend in (None, "loky"):
+    _check_address(args)
+    if args.backend in (None, "loky") and args.address is None:
         warm_up(args.jobs)
 
     from pcmb.config.schema import load_config
@@ -317,7 +358,7 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
         if config.output is None:
             raise UsageError(f"{args.config}: no output folder: give -o DIR or set 'output:'")
         folder = config.output.removesuffix(".h5") + "_sweep"
-    backend = args.backend or config.execution.backend
+    backend = "dask" if args.address is not None else args.backend or config.execution.backend
     with warnings.catch_warnings(), _quiet_backend(args.quiet, backend):
         warnings.simplefilter("ignore", PcmbWarning)  # stored in each setting's file
         outcome = run_sweep(
@@ -330,6 +371,7 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
             progress=False if args.quiet else None,
             jobs=args.jobs,
             backend=args.backend,
+            address=args.address,
             command_line=shlex.join(["pcmb", *argv]),
         )
     settings = len({(row.method, row.setting) for row in outcome.table.rows})
@@ -515,7 +557,7 @@ def _dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.command == "validate":
         from pcmb.config.schema import load_config
 
-        print(_summary(load_config(args.config)))
+        print(_summary(load_config(args.config), args.address))
     elif args.command == "inspect":
         from pcmb.sweep.table import is_sweep_file, read_sweep, summary
 

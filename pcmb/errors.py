@@ -85,6 +85,14 @@ class UsageError(_Located):
     label = "usage"
 
 
+class ClusterError(_Located):
+    """A dask cluster that cannot be used: nothing answers at its address, or not a dask
+    scheduler (exit 2); the problem's path names the setting that gave the address
+    (``execution.address``, ``--address`` or ``Study``'s ``address``)."""
+
+    label = "cluster"
+
+
 class MissingDependencyError(PcmbError, ImportError):
     """An optional package is needed and not installed (exit 2).
 

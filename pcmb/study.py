@@ -145,8 +145,15 @@ class Study:
         Nominal parameters for a model class or function (ignored for a factory).
     name:
         Free text stored in the result.
-    jobs, backend, address, chunk_size, timeout:
+    jobs, backend, chunk_size, timeout:
         Execution settings (see :func:`pcmb.run.executor.run_nodes`).
+    address:
+        With ``backend="dask"``: the address of a running dask scheduler
+        (``"tcp://host:8786"``; refused with :class:`~pcmb.errors.ClusterError` when none
+        answers within seconds), or a ``distributed.Client`` or ``Cluster`` (e.g.
+        ``LocalCluster``) of your own, which pcmb uses and leaves open; default: a local
+        cluster pcmb starts and closes. ``address_key`` (an attribute) names where the address
+        came from in that error: ``address``, ``execution.address`` or ``--address``.
     nominal_run:
         Whether to make the deterministic run at the nominal parameters (one more model
         run, stored as ``nominal``; ``execution.nominal_run``).
@@ -211,7 +218,7 @@ class Study:
         name: str = "study",
         jobs: int | None = None,
         backend: str = "loky",
-        address: str | None = None,
+        address: Any = None,
         chunk_size: int | None = None,
         timeout: float | None = None,
         nominal_run: bool = True,
@@ -257,6 +264,7 @@ class Study:
         }
         self.name = name
         self.jobs, self.backend, self.address = jobs, backend, address
+        self.address_key = "address"
         self.chunk_size, self.timeout = chunk_size, timeout
         self.nominal_run = nominal_run
         self.on_failure, self.retries = on_failure, retries
@@ -367,6 +375,7 @@ class Study:
             derived=config.derived_outputs,
         )
         study.fingerprint_extra = _run_settings(config)
+        study.address_key = "execution.address"
         return study
 
     def replace(self, **changes: Any) -> Study:
@@ -416,6 +425,8 @@ class Study:
             arguments["nominal"] = {k: v for k, v in self.nominal.items() if k in changes["inputs"]}
         study = Study(self.model_factory, **{**arguments, **changes})
         study.fingerprint_extra = self.fingerprint_extra
+        if "address" not in changes:
+            study.address_key = self.address_key
         return study
 
     # -- nodes --------------------------------------------------------------------------------
@@ -649,7 +660,9 @@ class Study:
         nodes = self.node_set()
         if pool is None:
             tasks = len(chunk_bounds(nodes.size, self.chunk_size)) if nodes.size else 1
-            with open_pool(self.backend, self.jobs, self.address, tasks=tasks) as own:
+            with open_pool(
+                self.backend, self.jobs, self.address, tasks=tasks, key=self.address_key
+            ) as own:
                 return self.run(
                     output,
                     resume=resume,

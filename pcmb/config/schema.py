@@ -397,7 +397,11 @@ class ExecutionSpec(Section):
     backend: Literal[tuple(BACKENDS)] = Field(
         default="loky", description="where workers run (a registered backend)"
     )
-    address: str | None = Field(default=None, description="dask scheduler (backend dask only)")
+    address: str | None = Field(
+        default=None,
+        description="address of a running dask scheduler, e.g. tcp://HOST:8786 (backend dask "
+        "only; docs/clusters.md)",
+    )
     on_failure: Literal["abort", "retry", "regress"] = Field(
         default="abort",
         description="abort; retry failed nodes `retries` times; regress: refit on survivors",

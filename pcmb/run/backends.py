@@ -8,6 +8,7 @@ are started early (:func:`warm_up`) and kept warm between campaigns.
 
 from __future__ import annotations
 
+import asyncio
 import atexit
 import logging
 import os
@@ -15,21 +16,25 @@ import re
 import threading
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
 from typing import Any, Protocol, TypeVar
 
-from pcmb.errors import MissingDependencyError
+from pcmb.errors import ClusterError, ConfigProblem, MissingDependencyError, UsageError
 from pcmb.run.lifeline import die_with_parent, tag
 from pcmb.run.threads import THREAD_LIMITS, one_thread_here
+from pcmb.wording import plural
 
 __all__ = [
     "BACKENDS",
+    "CONNECT_SECONDS",
+    "GREET_SECONDS",
     "DaskPool",
     "InProcessPool",
     "LokyPool",
     "Pool",
     "default_workers",
+    "describe_cluster",
     "open_pool",
     "silenced",
 ]
@@ -40,9 +45,10 @@ _T = TypeVar("_T")
 class Pool(Protocol):
     """Where chunks run: submit callables, report worker deaths, rebuild, close.
 
-    Built as ``Pool(jobs, workers, address)``. ``startup_seconds`` is the estimated time its
-    workers take to start (allowed on top of a task's timeout); ``kills`` says whether
-    :meth:`rebuild` kills the workers running tasks, which a timeout needs.
+    Built as ``Pool(jobs, workers, address, key)``: ``key`` names the setting ``address``
+    came from, for messages (only dask uses an address). ``startup_seconds`` is the estimated
+    time its workers take to start (allowed on top of a task's timeout); ``kills`` says
+    whether :meth:`rebuild` kills the workers running tasks, which a timeout needs.
     """
 
     slots: int
@@ -79,7 +85,9 @@ class LokyPool:
     startup_seconds = 1.0
     kills = True
 
-    def __init__(self, jobs: int | None, workers: int, address: str | None = None) -> None:
+    def __init__(
+        self, jobs: int | None, workers: int, address: Any = None, key: str = "address"
+    ) -> None:
         self.slots = workers
         self._executor: Any = None
         self.rebuild()
@@ -144,13 +152,79 @@ class LokyPool:
         self._executor.shutdown(wait=not kill, kill_workers=kill)
 
 
+#: Seconds pcmb waits for a dask scheduler's address to accept a connection; the scheduler
+#: then has until :data:`GREET_SECONDS` from the start to say it is one.
+CONNECT_SECONDS = 3.0
+GREET_SECONDS = 5.0
+
+
+def _greet_scheduler(address: str, key: str) -> None:
+    """Raise :class:`ClusterError` (its path: ``key``) unless a dask scheduler answers at
+    ``address`` within :data:`GREET_SECONDS`.
+
+    ``distributed.Client(address, timeout=...)`` bounds the connection, not the greeting that
+    follows: a program at that port that is not dask accepts and never answers, and the client
+    waits forever. So the scheduler is asked who it is (distributed's ``rpc``) under a deadline
+    first, in a thread of its own (the caller may be running an event loop).
+    """
+    import distributed
+
+    # The client's TLS settings of the dask config, as distributed.Client takes them.
+    connection = distributed.Security().get_connection_args("client")
+
+    async def identity() -> dict[str, Any]:
+        async with distributed.rpc(
+            address, timeout=CONNECT_SECONDS, connection_args=connection
+        ) as remote:
+            return await remote.identity()
+
+    async def within_deadline() -> dict[str, Any]:
+        return await asyncio.wait_for(identity(), GREET_SECONDS)
+
+    def refused(message: str) -> ClusterError:
+        return ClusterError([ConfigProblem(key, message)])
+
+    with ThreadPoolExecutor(1) as thread:
+        try:
+            found = thread.submit(asyncio.run, within_deadline()).result()
+        except (ValueError, TypeError) as error:
+            raise refused(
+                f"{address!r} is not a dask scheduler address ({error}); "
+                "expected e.g. tcp://HOST:8786"
+            ) from None
+        except TimeoutError:  # connected, but no answer
+            raise refused(
+                f"{address} did not answer as a dask scheduler within {GREET_SECONDS:g} s: "
+                "is this the address the scheduler printed, not another program's?"
+            ) from None
+        except OSError as error:
+            raise refused(
+                f"no dask scheduler answered at {address} ({error}): is the scheduler "
+                "running, and is this the address it printed?"
+            ) from None
+    kind = found.get("type") if isinstance(found, dict) else None
+    if kind != "Scheduler":
+        raise refused(
+            f"{address} is a dask {kind or 'server'}, not a scheduler: give the address "
+            "the scheduler printed (`dask scheduler`)"
+        )
+
+
 class DaskPool:
-    """A dask.distributed cluster: ``address``, or a local cluster that is closed afterwards."""
+    """A dask.distributed cluster: the scheduler at ``address``, a ``distributed.Client`` or
+    ``Cluster`` (e.g. ``LocalCluster``) of the caller's, which is left open, or else a local
+    cluster started here and closed afterwards.
+
+    ``key`` names the setting the address came from in the error raised when no scheduler
+    answers there (:class:`ClusterError`).
+    """
 
     startup_seconds = 3.0
     kills = False
 
-    def __init__(self, jobs: int | None, workers: int, address: str | None = None) -> None:
+    def __init__(
+        self, jobs: int | None, workers: int, address: Any = None, key: str = "address"
+    ) -> None:
         try:
             import dask
             import distributed
@@ -158,27 +232,62 @@ class DaskPool:
             raise MissingDependencyError("distributed", "dask", "backend dask") from error
 
         self._killed = distributed.KilledWorker
-        self._cluster = None
-        if address is None:
-            # Report a task at its first worker death (dask would try it on 3 more workers,
-            # killing each): the executor's own isolation then names the node.
-            with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
-                self._cluster = distributed.LocalCluster(
-                    n_workers=workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=":0",
-                    env=tag(),  # what the workers start ends with this process too
+        self._cluster = None  # the local cluster started here, closed here
+        self._own_client = not isinstance(address, distributed.Client)
+        if not self._own_client:
+            self._client = address
+        else:
+            if address is None:
+                # Report a task at its first worker death (dask would try it on 3 more
+                # workers, killing each): the executor's own isolation then names the node.
+                with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+                    self._cluster = distributed.LocalCluster(
+                        n_workers=workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",
+                        env=tag(),  # what the workers start ends with this process too
+                    )
+            elif isinstance(address, str):
+                _greet_scheduler(address, key)
+            elif not isinstance(address, distributed.deploy.Cluster):
+                raise UsageError(
+                    [
+                        ConfigProblem(
+                            key,
+                            "expected a dask scheduler's address, a distributed.Client or a "
+                            f"Cluster, got {type(address).__name__}",
+                        )
+                    ]
                 )
-        try:
-            self._client = distributed.Client(address or self._cluster)
-        except BaseException:
-            if self._cluster is not None:
-                self._cluster.close()
-            raise
+            try:
+                self._client = distributed.Client(
+                    address or self._cluster, timeout=CONNECT_SECONDS, set_as_default=False
+                )
+            except BaseException as error:
+                if self._cluster is not None:
+                    self._cluster.close()
+                if isinstance(error, OSError):  # the scheduler went away since it answered
+                    message = f"cannot connect to the dask scheduler at {address}: {error}"
+                    raise ClusterError([ConfigProblem(key, message)]) from None
+                raise
         self.slots = jobs or sum(self._client.nthreads().values()) or 1
         # pure=False: a re-run of a task must run again, not come back from dask's cache.
         self._executor = self._client.get_executor(pure=False)
+
+    def describe(self) -> str:
+        """``tcp://127.0.0.1:8786: 2 workers, 2 threads, 4.0 GiB``: the scheduler's address
+        and its workers now, with their threads and memory limits."""
+        info = self._client.scheduler_info()
+        workers = list(info["workers"].values())
+        threads = sum(worker["nthreads"] for worker in workers)
+        limits = [worker.get("memory_limit") or 0 for worker in workers]
+        memory = f"{sum(limits) / 2**30:.1f} GiB" if all(limits) else "memory not limited"
+        wait = "" if workers else " (tasks wait until a worker joins)"
+        return (
+            f"{info['address']}: {plural(len(workers), 'worker')}, "
+            f"{plural(threads, 'thread')}, {memory}{wait}"
+        )
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
         return self._executor.submit(fn, *args)
@@ -193,9 +302,24 @@ class DaskPool:
         """Nothing to do: dask's nannies restart dead workers."""
 
     def close(self, kill: bool = False) -> None:
-        self._client.close()
+        """Close what was started here (its tasks end with it); of a client given, only this
+        pool's tasks end (cancelled with ``kill``)."""
+        if self._own_client:
+            self._client.close()
+        else:
+            self._executor.shutdown(wait=not kill)
         if self._cluster is not None:
             self._cluster.close()
+
+
+def describe_cluster(address: Any, key: str = "address") -> str:
+    """What :meth:`DaskPool.describe` says of the cluster at ``address``, connected for the
+    purpose (:class:`ClusterError` naming ``key`` if nothing answers)."""
+    pool = DaskPool(None, 1, address, key)
+    try:
+        return pool.describe()
+    finally:
+        pool.close()
 
 
 #: The loggers dask.distributed gives a level of their own (the others inherit theirs).
@@ -254,7 +378,9 @@ class InProcessPool:
     startup_seconds = 0.0
     kills = False
 
-    def __init__(self, jobs: int | None = None, workers: int = 1, address: str | None = None):
+    def __init__(
+        self, jobs: int | None = None, workers: int = 1, address: Any = None, key: str = "address"
+    ):
         pass
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
@@ -323,7 +449,11 @@ def checking_backend(backend: str) -> str:
 
 @contextmanager
 def open_pool(
-    backend: str, jobs: int | None = None, address: str | None = None, tasks: int | None = None
+    backend: str,
+    jobs: int | None = None,
+    address: Any = None,
+    tasks: int | None = None,
+    key: str = "address",
 ) -> Iterator[Pool]:
     """Workers of ``backend`` for one campaign.
 
@@ -336,8 +466,13 @@ def open_pool(
     ----------
     jobs:
         Worker processes (default: :func:`default_workers`).
+    address:
+        For dask: a scheduler's address, or a ``distributed.Client`` or ``Cluster`` of the
+        caller's (left open); default: a local cluster started and closed here.
     tasks:
         Most tasks that will run at once, if known: no more workers than that are used.
+    key:
+        The setting ``address`` came from, named when no scheduler answers there.
     """
     workers = _workers(backend, jobs, tasks)
     # Workers die with the thread that started them (see pcmb.run.lifeline): only those of the
@@ -347,7 +482,7 @@ def open_pool(
         warm_up(jobs, tasks)
         pool: Pool = _KEPT[workers]
     else:
-        pool = BACKENDS[backend](jobs, workers, address)
+        pool = BACKENDS[backend](jobs, workers, address, key)
     # The workers have the cores: this process keeps one native thread meanwhile.
     bounded = nullcontext() if backend == "inprocess" else one_thread_here()
     try:

@@ -278,6 +278,7 @@ def run_sweep(
     progress: bool | None = None,
     jobs: int | None = None,
     backend: str | None = None,
+    address: str | None = None,
     command_line: str = "",
 ) -> SweepOutcome:
     """Run every setting of a config's sweep and measure it against the reference.
@@ -303,6 +304,9 @@ def run_sweep(
         One progress line over the settings on stderr (default: when stderr is a terminal).
     jobs, backend:
         Override ``execution.jobs`` and ``execution.backend``.
+    address:
+        Overrides ``execution.address`` (``--address``) and implies backend dask; the
+        settings then run on every thread of the cluster unless ``jobs`` is given.
     command_line:
         Stored with every result file.
 
@@ -315,6 +319,8 @@ def run_sweep(
         message names its PID and command).
     MissingDependencyError
         matplotlib is missing (the chart needs it), before anything runs.
+    ClusterError
+        No dask scheduler answers at the address (``address`` or ``execution.address``).
     ModelRunError
         A setting's nodes failed and its policy does not allow going on; the finished
         settings are kept for ``resume``.
@@ -338,10 +344,12 @@ def run_sweep(
         given = load(reference)
         _check_reference(given, config, str(reference))
         _outputs(plan, given, str(reference))
-    if jobs is not None or backend is not None:
+    if jobs is not None or backend is not None or address is not None:
         changes = {
-            "jobs": jobs or config.execution.jobs,
-            "backend": backend or config.execution.backend,
+            # With an address, every thread of the cluster unless jobs is given.
+            "jobs": jobs if address is not None else jobs or config.execution.jobs,
+            "backend": "dask" if address is not None else backend or config.execution.backend,
+            "address": address or config.execution.address,
         }
         config = config.model_copy(
             update={"execution": config.execution.model_copy(update=changes)}
@@ -360,7 +368,8 @@ def run_sweep(
         bar = Progress(len(todo), 0, sys.stderr if show else None, unit="settings")
         finished: list[_Finished] = []
         execution = config.execution
-        with open_pool(execution.backend, execution.jobs, execution.address) as pool:
+        key = "execution.address" if address is None else "--address"
+        with open_pool(execution.backend, execution.jobs, execution.address, key=key) as pool:
             for setting in todo:
                 finished.append(
                     _run_setting(
