@@ -35,6 +35,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.run.backends import BACKENDS
+from pcmb.run.progress import phase
 from pcmb.wording import plural
 
 if TYPE_CHECKING:
@@ -321,7 +322,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             resume=args.resume,
             fresh=args.fresh,
             force=args.force,
-            progress=False if args.quiet or args.pdb else None,
+            progress=not (args.quiet or args.pdb),
             provenance=provenance,
         )
     from pcmb.designs import RECORDED_ONLY
@@ -368,7 +369,7 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
             resume=args.resume,
             fresh=args.fresh,
             force=args.force,
-            progress=False if args.quiet else None,
+            progress=not args.quiet,
             jobs=args.jobs,
             backend=args.backend,
             address=args.address,
@@ -398,13 +399,15 @@ def _report(args: argparse.Namespace) -> int:
         from pcmb.sweep.table import read_sweep
 
         folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
-        written = write_sweep_report(read_sweep(args.result), folder, source=args.result)
+        with phase("drawing the sweep's figures", sys.stderr):
+            written = write_sweep_report(read_sweep(args.result), folder, source=args.result)
         _log(f"pcmb: wrote {plural(len(written) - 1, 'figure')} and {written[-1]}")
         return EXIT_OK
     result = _load(args.result)
     others = [_load(path) for path in args.compare]
     folder = args.output or str(Path(args.result).with_suffix("")) + "_report"
-    written = write_report(result, folder, source=args.result, comparisons=others)
+    with phase("drawing the report's figures", sys.stderr):
+        written = write_report(result, folder, source=args.result, comparisons=others)
     _log(f"pcmb: wrote {plural(len(written) - 1, 'figure')} and {written[-1]}")
     return EXIT_OK
 
@@ -424,7 +427,8 @@ def _compare(args: argparse.Namespace) -> int:
     if args.output:
         from pcmb.analysis.report import write_comparison_figures
 
-        written = write_comparison_figures(reference, others, args.output, labels=args.others)
+        with phase("drawing the comparison's figures", sys.stderr):
+            written = write_comparison_figures(reference, others, args.output, labels=args.others)
         _log(f"pcmb: wrote {plural(len(written), 'figure')} to {args.output}")
     return EXIT_OK
 

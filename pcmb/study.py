@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import sys
 import time
 import warnings
 from collections.abc import Mapping, Sequence
@@ -65,6 +66,8 @@ from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import FRESH, Journal
 from pcmb.run.memory import MemoryEstimate, check_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
+from pcmb.run.progress import phase
+from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
 
@@ -700,6 +703,7 @@ class Study:
                 )
         early = self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")
+        stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
         try:
             if intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
@@ -727,14 +731,19 @@ class Study:
                 **{name: axis for name, axis in facts.axes.items() if name in outputs},
                 **dict.fromkeys(self.derived),
             }
-            found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
-        result = self._diagnosed(self._with_nominal(found, nominal), held_out, held_out_failed)
+            fitting = f"fitting {plural(len(runs.values), 'output')}"
+            with phase(f"{fitting} ({self.design.record().label})", stream):
+                found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        with phase("diagnostics", stream):
+            result = self._diagnosed(self._with_nominal(found, nominal), held_out, held_out_failed)
         if self.analysis is not None:
-            result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
-            write_result(output, result, provenance=provenance or {})
+            with phase(f"writing {output}", stream):
+                write_result(output, result, provenance=provenance or {})
             if journal is not None:
                 journal.remove()
         for record in result.warnings:
