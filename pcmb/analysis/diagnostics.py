@@ -64,7 +64,13 @@ __all__ = [
 
 #: Codes of the warning records the diagnostics make.
 CODES = frozenset(
-    {"chaos-unreliable", "surrogate-inaccurate", "variance-nonpositive", "surrogate-out-of-range"}
+    {
+        "chaos-unreliable",
+        "surrogate-inaccurate",
+        "variance-nonpositive",
+        "surrogate-out-of-range",
+        "runs-all-equal",
+    }
 )
 #: Default number of held-out runs (``method.validation``).
 VALIDATION = 32
@@ -391,13 +397,9 @@ def range_checks(
     out_of_range_share:
         (T,) :func:`out_of_range` when already computed.
     """
-    values = np.asarray(node_values, dtype=float)
-    values = values[np.isfinite(values).all(axis=1)]
+    values = _finite_rows(node_values)
     times = np.asarray(times, dtype=float)
-    # Ranges, not squares: outputs near 1e200 must not overflow.
-    spread = np.ptp(values, axis=0) if values.shape[0] > 1 else np.zeros(times.shape)
-    size = np.max(np.abs(values), axis=0) if values.size else np.zeros(times.shape)
-    varies = spread > _ROUND_OFF * size
+    varies = _varies(values, times.size)
     records = []
     std = expansion.std()  # overflow-safe, where the variance of 1e200 would not be
     empty = varies & ~(np.isfinite(std) & (std > 0))
@@ -426,6 +428,20 @@ def range_checks(
     return records
 
 
+def _finite_rows(values: ArrayLike) -> NDArray[np.float64]:
+    """The (N, T) runs without the rows holding a value that is not finite (failed runs)."""
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    return values[np.isfinite(values).all(axis=1)]
+
+
+def _varies(values: NDArray[np.float64], points: int) -> NDArray[np.bool_]:
+    """(T,) where (N, T) finite runs differ by more than round-off (never with one run)."""
+    if values.shape[0] < 2:
+        return np.zeros(points, dtype=bool)
+    # Ranges, not squares: outputs near 1e200 must not overflow.
+    return np.ptp(values, axis=0) > _ROUND_OFF * np.max(np.abs(values), axis=0)
+
+
 def _count(where: NDArray[np.bool_]) -> str:
     return f"{int(where.sum())} of {where.size} times"
 
@@ -436,7 +452,9 @@ def _span(times: NDArray[np.float64], where: NDArray[np.bool_]) -> tuple[float, 
 
 
 def _percent(share: float) -> str:
-    return f"{100 * share:.2g} %"
+    """A share in percent, two significant digits ("5.6 %", "12 %", "110 %")."""
+    percent = 100 * share
+    return f"{percent:.0f} %" if abs(percent) >= 100 else f"{percent:.2g} %"
 
 
 # -- the verdict -------------------------------------------------------------------------------
@@ -532,6 +550,16 @@ def diagnose(
     std = expansion.std()
     finite = std[np.isfinite(std)]
     scale = float(finite.max()) if finite.size else 0.0
+    runs = _finite_rows(node_values)
+    equal = ~_varies(runs, times.size)
+    # Where the design's runs are all equal and the held-out runs are not, the design saw
+    # none of the spread (nodes symmetric about a kink): no expansion can learn it.
+    blind = np.zeros(times.size, dtype=bool)
+    if holdout is not None:
+        observed = _finite_rows(holdout[1])
+        blind = equal & _varies(observed, times.size)
+        if not scale > 0 and blind.any():  # the held-out runs' spread is the only scale
+            scale = float(np.max(np.std(observed, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None:
@@ -541,16 +569,26 @@ def diagnose(
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.estimate(tolerance)
     failing_from = verdict(times, estimate, tolerance)
+    if blind.any():
+        failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
     if checked is not None and np.isnan(failing_from):
         records.extend(_inaccurate(output, checked, times, tolerance))
+    if holdout is None and runs.shape[0] > 1 and equal.all():
+        records.append(_all_equal(output, runs.shape[0], times))
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
+        evidence = _evidence(decay, checked, failing)
+        if blind.any():
+            evidence = (
+                f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
+                f"{checked.count} held-out runs vary there, which no expansion can learn "
+                f"from; {evidence}"
+            )
         message = (
-            f"polynomial chaos unreliable{where} "
-            f"({_evidence(decay, checked, failing)}); consider "
+            f"polynomial chaos unreliable{where} ({evidence}); consider "
             f"{_remedy(expansion, estimate, failing, share)}"
         )
         span = (failing_from, float(times[-1]))
@@ -578,6 +616,19 @@ def _evidence(
     )
     surrogate = f"surrogate error {_percent(np.nanmax(holdout.error[failing]))} of std"
     return ", ".join([judged, surrogate, *found])
+
+
+def _all_equal(output: str, runs: int, times: NDArray[np.float64]) -> WarningRecord:
+    """The ``runs-all-equal`` record of an output whose runs are all equal at every time and
+    that no held-out run checks."""
+    return WarningRecord(
+        "runs-all-equal",
+        f"all {runs} runs of the design are equal at every time: its std 0 says nothing about "
+        f"the spread (nodes placed symmetric about a kink see none), and no held-out run "
+        f"checks it (method.validation is 0)",
+        output,
+        _span(times, np.ones(times.size, dtype=bool)),
+    )
 
 
 def _inaccurate(

@@ -1,0 +1,61 @@
+"""Verdicts that mean what they say: a degenerate design, budget messages that name the limit
+hit, no "reliable" next to "not converged", recorded-only notes kept out of the warnings, and
+remedies that fit the cause."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import pcmb
+
+# -- a degenerate design -----------------------------------------------------------------------
+
+#: The Sobol' G-function's a_i of four inputs.
+G_COEFFICIENTS = np.array([0.0, 1.0, 4.5, 9.0])
+G_INPUTS = {f"x{i}": pcmb.Uniform(0.0, 1.0) for i in range(G_COEFFICIENTS.size)}
+G_TIMES = np.linspace(0.0, 1.0, 3)
+
+
+@pcmb.batched(outputs=("y",))
+def g_function(params, times):
+    """G(x) = Π (|4 x_i - 2| + a_i) / (1 + a_i), the same at every time."""
+    x = np.column_stack([params[name] for name in G_INPUTS])
+    value = np.prod((np.abs(4 * x - 2) + G_COEFFICIENTS) / (1 + G_COEFFICIENTS), axis=1)
+    return {"y": np.repeat(value[:, None], times.size, axis=1)}
+
+
+def _g_study(validation: int) -> pcmb.StudyResult:
+    """Order 1: both Gauss points of every input sit symmetric about the kink at 1/2."""
+    study = pcmb.Study(
+        g_function, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=validation
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        return study.run()
+
+
+def test_a_design_whose_runs_are_all_equal_is_unreliable_when_the_held_out_runs_vary():
+    result = _g_study(validation=32)
+    assert result.n_nodes == 16
+    np.testing.assert_array_equal(result.std("y"), 0.0)
+    found = result.diagnostics["y"]
+    assert not found.reliable
+    assert found.failing_from == 0.0
+    (record,) = [w for w in result.warnings if w.code == "chaos-unreliable"]
+    assert "16 runs" in record.message and "all equal" in record.message
+    assert "32 held-out runs vary" in record.message
+    # The true mean is 1; the expansion's is 1.3: the estimate sees a large error.
+    assert found.estimate.max() > 0.2
+
+
+def test_without_held_out_runs_a_record_says_the_runs_were_all_equal():
+    result = _g_study(validation=0)
+    (record,) = [w for w in result.warnings if w.code == "runs-all-equal"]
+    assert record.output == "y"
+    assert "16 runs" in record.message and "nothing about the spread" in record.message
+    assert "method.validation" in record.message
+    with pytest.warns(pcmb.PcmbWarning, match="runs-all-equal"):
+        pcmb.Study(g_function, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=0).run()
