@@ -59,3 +59,69 @@ def test_without_held_out_runs_a_record_says_the_runs_were_all_equal():
     assert "method.validation" in record.message
     with pytest.warns(pcmb.PcmbWarning, match="runs-all-equal"):
         pcmb.Study(g_function, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=0).run()
+
+
+# -- budget messages name the limit hit --------------------------------------------------------
+
+KINK_INPUTS = {"x": pcmb.Uniform(-1.0, 1.0)}
+
+
+@pcmb.batched(outputs=("y",))
+def kink(params, times):
+    """|x - 0.3|: a kink that no order resolves to round-off."""
+    return {"y": np.abs(params["x"] - 0.3)[:, None] + 0 * times}
+
+
+def _budget_record(code: str, **settings) -> tuple[pcmb.StudyResult, str]:
+    """A study of the kink with ``settings``, and the message of its ``code`` record."""
+    study = pcmb.Study(kink, KINK_INPUTS, G_TIMES, backend="inprocess", validation=0, **settings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        result = study.run()
+    (record,) = [w for w in result.warnings if w.code == code]
+    return result, record.message
+
+
+def test_order_auto_at_its_highest_order_names_that_limit_not_max_runs():
+    from pcmb.designs.refine import MAX_ORDER
+
+    result, message = _budget_record("order-budget", order="auto", diagnostics_tolerance=1e-9)
+    assert result.refinement.orders.max() == MAX_ORDER
+    assert f"order {MAX_ORDER} is the highest order" in message
+    assert f"{result.n_nodes} of 1000 runs" in message
+    assert "raise method.max_runs" not in message.lower()
+
+
+def test_order_auto_stopped_by_max_runs_says_raise_max_runs():
+    result, message = _budget_record(
+        "order-budget", order="auto", diagnostics_tolerance=1e-9, max_runs=6
+    )
+    assert result.n_nodes == 5  # orders 1 and 2; order 3 would take 4 more
+    assert "5 of 6 runs" in message and "raise method.max_runs" in message.lower()
+
+
+def test_elements_auto_stopped_by_max_elements_names_it_with_the_numbers():
+    result, message = _budget_record("element-budget", order=2, elements="auto", max_elements=2)
+    assert result.partition.size == 2
+    assert "2 of 2 elements" in message and "method.max_elements" in message
+    assert f"{result.n_nodes} runs" in message
+
+
+def test_adaptive_stopped_by_max_runs_names_it_with_the_numbers():
+    result, message = _budget_record(
+        "adaptive-budget", method="adaptive", tolerance=1e-9, max_runs=12
+    )
+    assert f"{result.n_nodes} of 12 runs" in message and "raise method.max_runs" in message
+
+
+def test_regression_stopped_by_max_samples_names_it_with_the_numbers():
+    result, message = _budget_record(
+        "regression-budget",
+        method="regression",
+        order=4,
+        samples=8,
+        tolerance=1e-9,
+        max_samples=16,
+    )
+    assert result.n_nodes == 16
+    assert "16 of 16 runs" in message and "raise method.max_samples" in message

@@ -273,9 +273,11 @@ class MultiElementCollocation:
             warnings.append(
                 WarningRecord(
                     "element-budget",
-                    f"elements: auto stopped at max_elements = {self.max_elements} with "
-                    "elements still above the decay threshold: a larger max_elements or a "
-                    "higher order may help, unless an output is chaotic in its inputs",
+                    f"elements: auto stopped at {self.partition.size} of {self.max_elements} "
+                    f"elements (method.max_elements) after {nodes.size} runs, with elements "
+                    "still above the decay threshold: splitting them would pass "
+                    "method.max_elements; raise it or the order, unless an output is chaotic in "
+                    "its inputs",
                 )
             )
         warnings += self._decay_warnings(expansions)

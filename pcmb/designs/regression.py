@@ -217,10 +217,10 @@ class SparseRegression:
             records += (
                 WarningRecord(
                     "regression-budget",
-                    f"the budget of {self.max_samples} runs (method.max_samples) ended before "
-                    f"the tolerance was met: worst corrected leave-one-out error {worst:.3g} > "
-                    f"{self.tolerance:g} after {nodes.size} runs; raise max_samples, or lower "
-                    "the order",
+                    f"the rounds ended after {nodes.size} of {self.max_samples} runs "
+                    f"(method.max_samples) before the tolerance was met: worst corrected "
+                    f"leave-one-out error {worst:.3g} > {self.tolerance:g}; raise "
+                    "method.max_samples, or lower the order",
                 ),
             )
         regression = {
