@@ -177,8 +177,7 @@ class AdaptiveCollocation:
             if added is None:
                 step = "probing blind axes" if converged else "the next refinement"
                 self._stopped = (
-                    f"{step} would pass method.max_runs: raise method.max_runs, or the "
-                    "tolerance"
+                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
                 )
                 return None
             if added:
