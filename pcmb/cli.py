@@ -254,11 +254,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             progress=False if args.quiet else None,
             provenance=provenance,
         )
-    from pcmb.designs import RECORDED_ONLY
-
-    for warning in result.warnings:
-        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
-            _log(f"pcmb: warning: {warning}")
+    for warning in result.alerts:  # the notes are listed by inspect and the report
+        _log(f"pcmb: warning: {warning}")
     _log(f"pcmb: wrote {output} ({plural(result.n_nodes, 'node')}, {result.seconds:.2f} s of runs)")
     unreliable = [name for name, found in result.diagnostics.items() if not found.reliable]
     if args.strict and unreliable:
@@ -454,7 +451,7 @@ def _inspect(path: str) -> str:
         lines.append(
             f"analysis quantile bands, PDFs at t = {times}; spectra: {', '.join(spectra) or 'none'}"
         )
-    lines += [f"warning  {w}" for w in result.warnings]
+    lines += [f"{'note' if result.is_note(w) else 'warning':<9}{w}" for w in result.warnings]
     lines += [f"failed   {f}" for f in result.failures]
     return "\n".join(lines)
 

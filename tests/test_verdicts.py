@@ -4,10 +4,14 @@ remedies that fit the cause."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 import pcmb
 
@@ -125,3 +129,66 @@ def test_regression_stopped_by_max_samples_names_it_with_the_numbers():
     )
     assert result.n_nodes == 16
     assert "16 of 16 runs" in message and "raise method.max_samples" in message
+
+
+# -- no "reliable" next to "not converged" ------------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _pcmb(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", *args], cwd=cwd, capture_output=True, text=True
+    )
+
+
+def _small_double_well(tmp_path: Path) -> Path:
+    """configs/double_well_elements.yaml on 41 times, in process."""
+    config = yaml.safe_load((ROOT / "configs" / "double_well_elements.yaml").read_text())
+    config["model"]["entry"] = str(ROOT / "models" / "double_well.py") + ":DoubleWell"
+    config["time"]["points"] = 41
+    config["execution"] = {"jobs": 1, "backend": "inprocess", "on_failure": "abort"}
+    config["output"] = "dw.h5"
+    path = tmp_path / "dw.yaml"
+    path.write_text(yaml.safe_dump(config))
+    return path
+
+
+def test_a_reliable_multi_element_result_is_never_called_not_converged(tmp_path):
+    run = _pcmb("run", str(_small_double_well(tmp_path)), "--quiet", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    inspect = _pcmb("inspect", "dw.h5", cwd=tmp_path)
+    assert inspect.returncode == 0, inspect.stderr
+    assert "checked  x: reliable at every time" in inspect.stdout
+    said = run.stderr + inspect.stdout
+    assert "not converged" not in said
+    # The elements' decay indicator is kept, as information, worded as an indicator.
+    (note,) = [line for line in inspect.stdout.splitlines() if "[element-decay]" in line]
+    assert note.startswith("note") and "indicator" in note
+    assert "element-decay" in {w.code for w in pcmb.load(tmp_path / "dw.h5").warnings}
+
+
+# -- a zero variance at the initial time is a note ---------------------------------------------
+
+
+def test_a_zero_variance_at_a_fixed_initial_state_is_recorded_not_warned(tmp_path):
+    # The quarter car starts at rest whatever the terrain's amplitude: std 0 at t = 0.
+    config = yaml.safe_load((ROOT / "configs" / "quarter_car.yaml").read_text())
+    config["model"]["entry"] = str(ROOT / "models" / "quarter_car.py") + ":QuarterCar"
+    config["time"]["points"] = 31
+    config["inputs"] = {"A": config["inputs"]["A"]}
+    config["method"] = {"kind": "collocation", "order": 2, "validation": 0}
+    config["execution"] = {"jobs": 1, "backend": "inprocess", "on_failure": "abort"}
+    config["output"] = "qc.h5"
+    for section in ("analysis", "sweep"):
+        config.pop(section, None)
+    (tmp_path / "qc.yaml").write_text(yaml.safe_dump(config))
+    run = _pcmb("run", "qc.yaml", "--quiet", cwd=tmp_path)
+    assert run.returncode == 0, run.stderr
+    assert "sobol-undefined" not in run.stderr
+    inspect = _pcmb("inspect", "qc.h5", cwd=tmp_path)
+    listed = [line for line in inspect.stdout.splitlines() if "[sobol-undefined]" in line]
+    assert listed and all(line.startswith("note ") for line in listed)
+    assert "t in [0, 0]" in listed[0]
+    kept = [w for w in pcmb.load(tmp_path / "qc.h5").warnings if w.code == "sobol-undefined"]
+    assert kept and kept[0].time_range == (0.0, 0.0)

@@ -247,7 +247,8 @@ class SparseRegression:
             f"corrected leave-one-out error up to {float(np.nanmax(loo)):.3g} (> {limit:.3g}) at "
             f"{large.size} of {loo.size} times, with {fit.multi_index.shape[0]} of "
             f"{self.candidates.size} candidate terms selected ({self.selection}) from {runs} "
-            "runs: the expansion may be inaccurate; use more samples or another order",
+            "runs: an indicator of the surrogate's pointwise error, not a verdict (the "
+            "held-out check judges the mean and std); more samples or another order lower it",
             name,
             span,
         )
