@@ -192,3 +192,56 @@ def test_a_zero_variance_at_a_fixed_initial_state_is_recorded_not_warned(tmp_pat
     assert "t in [0, 0]" in listed[0]
     kept = [w for w in pcmb.load(tmp_path / "qc.h5").warnings if w.code == "sobol-undefined"]
     assert kept and kept[0].time_range == (0.0, 0.0)
+
+
+# -- remedies that fit the cause ---------------------------------------------------------------
+
+
+def _remedy(result: pcmb.StudyResult) -> str:
+    (record,) = [w for w in result.warnings if w.code == "chaos-unreliable"]
+    return record.message.partition("; consider ")[2]
+
+
+def test_a_jump_in_an_initial_condition_is_told_to_use_elements():
+    from model_loading import model_class
+
+    double_well = model_class("double_well", "DoubleWell")
+    study = pcmb.Study(
+        double_well,
+        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        np.linspace(0.0, 4.0, 81),
+        order=5,
+        backend="inprocess",
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
+        remedy = _remedy(study.run())
+    assert remedy.startswith("multi-element chaos (method.elements)")
+    assert "along x0 fall algebraically" in remedy and "jump or a kink" in remedy
+
+
+@pcmb.pointwise(outputs=("x",))
+def van_der_pol(params, times):
+    """x'' = μ (1 - x²) x' - x from x = 2 at rest: analytic in μ, its phase drifts."""
+    from scipy.integrate import solve_ivp
+
+    def field(_, state):
+        x, v = state
+        return [v, params["mu"] * (1 - x**2) * v - x]
+
+    span = (times[0], times[-1])
+    solved = solve_ivp(field, span, [2.0, 0.0], t_eval=times, rtol=1e-9, atol=1e-9)
+    return {"x": solved.y[0]}
+
+
+def test_an_analytic_response_is_told_to_raise_the_order():
+    study = pcmb.Study(
+        van_der_pol,
+        {"mu": pcmb.Uniform(0.5, 3.0)},
+        np.linspace(0.0, 30.0, 201),
+        order=4,
+        backend="inprocess",
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
+        remedy = _remedy(study.run())
+    assert remedy.startswith("raising the order of mu (method.order)")
+    assert "along mu fall geometrically" in remedy and "smooth" in remedy

@@ -103,6 +103,8 @@ _GROWTH = 2.0
 #: A tail holding between this share and all of the energy of the two layers before it
 #: decays algebraically, as the spectrum of a jump: the response is steep there.
 _FLAT = 0.5
+#: The fewest degrees after the peak of an input's spectrum that tell its decay's shape.
+_SHAPE_LAYERS = 3
 
 
 # -- spectral decay ----------------------------------------------------------------------------
@@ -652,6 +654,39 @@ def _inaccurate(
     ]
 
 
+def _decay_shape(
+    energy: NDArray[np.float64], multi_index: NDArray[np.int64], k: int
+) -> tuple[str, float, int, int] | None:
+    """How the chaos coefficients' energy along input k falls with its degree p, from the
+    spectrum's peak to the top degree: ``("algebraic", s, first, top)`` with energy ~ p^-s (a
+    jump: s ≈ 2, a kink: s ≈ 4; a higher order resolves it slowly), or ``("geometric", r,
+    first, top)`` with energy ~ r^p (an analytic response: a higher order resolves it);
+    ``None`` when fewer than ``_SHAPE_LAYERS`` degrees follow the peak.
+
+    The energy of degree p is that of the terms of degree p in k, averaged with degree p + 1:
+    a response even or odd about the centre has every other coefficient zero. Of two straight
+    lines through its logarithm, against p and against log p, the closer one names the shape.
+    """
+    degrees = multi_index[:, k]
+    by_degree = np.bincount(degrees, weights=energy, minlength=degrees.max() + 1)[1:]
+    pairs = (by_degree[:-1] + by_degree[1:]) / 2
+    if pairs.size == 0 or not np.all(pairs > 0):
+        return None
+    peak = int(np.argmax(pairs))
+    centres = np.arange(peak, pairs.size) + 1.5
+    logs = np.log(pairs[peak:])
+    if centres.size < _SHAPE_LAYERS:
+        return None
+    fits = {}
+    for shape, x in (("geometric", centres), ("algebraic", np.log(centres))):
+        slope, intercept = np.polyfit(x, logs, 1)
+        fits[shape] = (float(np.sum((slope * x + intercept - logs) ** 2)), slope)
+    shape = min(fits, key=lambda name: fits[name][0])
+    slope = fits[shape][1]
+    rate = float(-slope) if shape == "algebraic" else float(np.exp(slope))
+    return shape, rate, peak + 1, int(degrees.max())
+
+
 def _remedy(
     expansion: Expansion,
     estimate: NDArray[np.float64],
@@ -663,12 +698,13 @@ def _remedy(
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
       order fixes — sampling;
-    - energy in one input whose spectrum decays slowly (the outer two layers hold between
-      half and all of the energy of the two before them, as the coefficients of a jump
-      do; or, below order 4, the surrogate overshoots the runs): steep or discontinuous
-      there — multi-element chaos;
-    - otherwise (a spectrum still rising: an oscillation not yet resolved; or decaying
-      geometrically but too slowly): a higher order, for the input that holds the tail.
+    - else, for the input that holds the tail, the decay of the coefficients along it
+      (:func:`_decay_shape`): algebraic, as those of a jump or kink — multi-element chaos;
+      geometric, as those of an analytic response — a higher order;
+    - too few degrees to tell: steep or discontinuous when the spectrum decays slowly (the
+      outer two layers hold between half and all of the energy of the two before them) or,
+      below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
+      higher order. The message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
@@ -687,22 +723,40 @@ def _remedy(
             "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
             "order does not fix"
         )
-    previous = energy[before].sum()
-    if previous > 0:
-        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-    else:  # an order below 4: too few layers to see a decay, the overshoot tells
-        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-    if steep and isinstance(expansion, PiecewiseExpansion):
-        return (
-            f"more elements along {name} (finer method.elements cuts, or auto): the response "
-            f"is still steep or discontinuous within an element"
+    shape = _decay_shape(energy, index, top)
+    if shape is not None:
+        kind, rate, first, last = shape
+        if kind == "geometric":
+            return (
+                f"raising the order of {name} (method.order): the chaos coefficients along "
+                f"{name} fall geometrically (energy × {rate:.2g} per degree, degrees {first} "
+                f"to {last}), as those of a smooth response, which a higher order resolves"
+            )
+        cause = (
+            f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
+            f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
+            "resolves only slowly"
         )
-    if steep:
-        return (
-            f"multi-element chaos (method.elements): the response is steep or discontinuous "
-            f"in {name}"
+        steep = True
+    else:
+        previous = energy[before].sum()
+        if previous > 0:
+            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+        else:  # an order below 4: too few layers to see a decay, the overshoot tells
+            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+        order = int(index[:, top].max())
+        unknown = (
+            f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
+            "to tell a jump or kink from a slowly converging smooth response"
         )
-    return f"raising the order of {name} (method.order): its spectrum decays slowly"
+        cause = f"the response is steep or discontinuous in {name}{unknown}"
+        if not steep:
+            return (
+                f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
+            )
+    if isinstance(expansion, PiecewiseExpansion):
+        return f"more elements along {name} (finer method.elements cuts, or auto): {cause}"
+    return f"multi-element chaos (method.elements): {cause}"
 
 
 @dataclass(frozen=True)
