@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from model_loading import model_class
+from scipy.integrate import solve_ivp
 
 import pcmb
 
@@ -203,8 +205,6 @@ def _remedy(result: pcmb.StudyResult) -> str:
 
 
 def test_a_jump_in_an_initial_condition_is_told_to_use_elements():
-    from model_loading import model_class
-
     double_well = model_class("double_well", "DoubleWell")
     study = pcmb.Study(
         double_well,
@@ -222,7 +222,6 @@ def test_a_jump_in_an_initial_condition_is_told_to_use_elements():
 @pcmb.pointwise(outputs=("x",))
 def van_der_pol(params, times):
     """x'' = μ (1 - x²) x' - x from x = 2 at rest: analytic in μ, its phase drifts."""
-    from scipy.integrate import solve_ivp
 
     def field(_, state):
         x, v = state
