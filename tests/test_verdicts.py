@@ -57,6 +57,30 @@ def test_a_design_whose_runs_are_all_equal_is_unreliable_when_the_held_out_runs_
     assert found.estimate.max() > 0.2
 
 
+def test_runs_all_equal_at_one_time_while_the_held_out_runs_vary_fail_the_verdict_there():
+    from pcmb.analysis.diagnostics import diagnose
+    from pcmb.chaos.nodes import TensorGrid, random_nodes
+    from pcmb.chaos.recovery import project_tensor
+
+    def response(xi):
+        """ξ (t - 1/2) + |ξ| / 100: at t = 1/2 even, so order 1's two nodes agree there."""
+        return np.outer(xi[:, 0], G_TIMES - 0.5) + np.abs(xi) / 100
+
+    grid = TensorGrid((pcmb.Uniform(-1.0, 1.0),), (1,))
+    values = response(grid.nodes)
+    expansion = pcmb.ChaosExpansion(
+        project_tensor(grid, values, grid.multi_index), grid.multi_index, grid.distributions
+    )
+    germ = random_nodes(grid.distributions, 32, "lhs", 1).nodes
+    held_out = (expansion.evaluate_germ(germ), response(germ))
+    found = diagnose("y", expansion, values, G_TIMES, held_out)
+    # The error there is a small share of the largest std, but the design saw nothing.
+    assert found.estimate[1] < found.tolerance
+    assert found.failing_from == 0.5
+    (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
+    assert "2 runs are all equal at 1 of 3 times" in record.message
+
+
 def test_without_held_out_runs_a_record_says_the_runs_were_all_equal():
     result = _g_study(validation=0)
     (record,) = [w for w in result.warnings if w.code == "runs-all-equal"]
