@@ -262,9 +262,12 @@ class WarningRecord:
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
 #: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
-#: less accurate pointwise than its statistics): kept in the result and its file, listed as
+#: less accurate pointwise than its statistics; an output whose runs and nominal run are all
+#: equal): kept in the result and its file, listed as
 #: notes by ``pcmb inspect``, never a warning.
-RECORDED_ONLY = frozenset({"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate"})
+RECORDED_ONLY = frozenset(
+    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "output-constant"}
+)
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
 #: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their
 #: output reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there is

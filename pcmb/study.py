@@ -940,6 +940,7 @@ class Study:
             held_out,
             self.diagnostics_tolerance,
             axes=result.axes,
+            nominal=result.nominal,
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

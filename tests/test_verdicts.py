@@ -86,6 +86,7 @@ def test_without_held_out_runs_a_record_says_the_runs_were_all_equal():
     (record,) = [w for w in result.warnings if w.code == "runs-all-equal"]
     assert record.output == "y"
     assert "16 runs" in record.message and "nothing about the spread" in record.message
+    assert "the nominal run differs" in record.message  # G(1/2, ...) = 0
     assert "method.validation" in record.message
     with pytest.warns(pcmb.PcmbWarning, match="runs-all-equal"):
         pcmb.Study(g_function, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=0).run()
@@ -268,3 +269,17 @@ def test_an_analytic_response_is_told_to_raise_the_order():
         remedy = _remedy(study.run())
     assert remedy.startswith("raising the order of mu (method.order)")
     assert "along mu fall geometrically" in remedy and "smooth" in remedy
+
+
+@pcmb.batched(outputs=("y",))
+def constant(params, times):
+    """1 at every time, whatever the inputs."""
+    return {"y": np.ones((params["x0"].size, times.size))}
+
+
+def test_runs_and_a_nominal_run_all_equal_without_held_out_runs_are_a_note():
+    study = pcmb.Study(constant, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=0)
+    result = study.run()  # no warning: the suite turns warnings into errors
+    (record,) = [w for w in result.warnings if w.code == "output-constant"]
+    assert result.is_note(record) and "looks constant" in record.message
+    assert "runs-all-equal" not in {w.code for w in result.warnings}

@@ -70,6 +70,7 @@ CODES = frozenset(
         "variance-nonpositive",
         "surrogate-out-of-range",
         "runs-all-equal",
+        "output-constant",
     }
 )
 #: Default number of held-out runs (``method.validation``).
@@ -522,6 +523,7 @@ def diagnose(
     tolerance: float = TOLERANCE,
     node_germ: ArrayLike | None = None,
     axis: str = "t",
+    nominal: ArrayLike | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -547,6 +549,11 @@ def diagnose(
         Name of the axis ``times`` are points of, for the message (``"t"``; ``""`` for a
         scalar output, whose ``times`` is ``[0.]``: ``failing_from`` is then 0 when it fails,
         NaN when it passes).
+    nominal:
+        (T,) the run at the nominal parameters, or ``None``: without held-out runs, whether
+        it differs from design runs that are all equal tells a design that missed the spread
+        (``runs-all-equal``, a warning) from an output that looks constant
+        (``output-constant``, a note).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -578,7 +585,7 @@ def diagnose(
     if checked is not None and np.isnan(failing_from):
         records.extend(_inaccurate(output, checked, times, tolerance))
     if holdout is None and runs.shape[0] > 1 and equal.all():
-        records.append(_all_equal(output, runs.shape[0], times))
+        records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
@@ -620,16 +627,37 @@ def _evidence(
     return ", ".join([judged, surrogate, *found])
 
 
-def _all_equal(output: str, runs: int, times: NDArray[np.float64]) -> WarningRecord:
-    """The ``runs-all-equal`` record of an output whose runs are all equal at every time and
-    that no held-out run checks."""
+def _all_equal(
+    output: str,
+    runs: NDArray[np.float64],
+    times: NDArray[np.float64],
+    nominal: ArrayLike | None,
+) -> WarningRecord:
+    """The record of an output whose (N, T) runs are all equal at every time and that no
+    held-out run checks: ``output-constant`` when the nominal run equals them too, else
+    ``runs-all-equal``."""
+    span = _span(times, np.ones(times.size, dtype=bool))
+    unchecked = "no held-out run checks it (method.validation is 0)"
+    if nominal is not None and np.size(nominal) == runs.shape[1]:
+        with_nominal = np.vstack([runs, np.reshape(nominal, (1, -1))])
+        if np.all(np.isfinite(with_nominal)) and not _varies(with_nominal, times.size).any():
+            return WarningRecord(
+                "output-constant",
+                f"all {runs.shape[0]} runs of the design and the nominal run are equal at "
+                f"every time: the output looks constant, and {unchecked}",
+                output,
+                span,
+            )
+        seen = "the nominal run differs, so the design missed the spread"
+    else:
+        seen = "nothing else was run to compare"
     return WarningRecord(
         "runs-all-equal",
-        f"all {runs} runs of the design are equal at every time: its std 0 says nothing about "
-        f"the spread (nodes placed symmetric about a kink see none), and no held-out run "
-        f"checks it (method.validation is 0)",
+        f"all {runs.shape[0]} runs of the design are equal at every time: its std 0 says "
+        f"nothing about the spread (nodes placed symmetric about a kink see none); {seen}, "
+        f"and {unchecked}",
         output,
-        _span(times, np.ones(times.size, dtype=bool)),
+        span,
     )
 
 
@@ -791,13 +819,15 @@ def diagnose_all(
     held_out: HeldOut | None,
     tolerance: float = TOLERANCE,
     axes: Mapping[str, OutputAxis | None] | None = None,
+    nominal: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
     of its axis or ``[0.]`` for a scalar.
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
-    nodes that succeeded; the held-out check uses the successful held-out runs.
+    nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
+    holds the run at the nominal parameters (output name -> (T,)), when one succeeded.
     """
     found = {}
     for name, expansion in expansions.items():
@@ -812,6 +842,14 @@ def diagnose_all(
             axis = axes[name]
             grid, label = (np.zeros(1), "") if axis is None else (axis.values, axis.name)
         found[name] = diagnose(
-            name, expansion, values[name][ok], grid, holdout, tolerance, germ[ok], label
+            name,
+            expansion,
+            values[name][ok],
+            grid,
+            holdout,
+            tolerance,
+            germ[ok],
+            label,
+            None if nominal is None else nominal.get(name),
         )
     return found
