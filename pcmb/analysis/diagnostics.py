@@ -19,6 +19,10 @@ raises false alarms.
   (:func:`statistics_error`), which are what the error bars show.
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
+- **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
+  the design saw none of the spread (nodes symmetric about a kink) and the verdict fails
+  there; without held-out runs, runs all equal at every time are reported
+  (``runs-all-equal``, or ``output-constant`` when the nominal run equals them too).
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
@@ -491,8 +495,8 @@ class OutputDiagnostics:
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
-        :func:`verdict` of the estimate: the first time it exceeds the tolerance, NaN if
-        never.
+        :func:`verdict` of the estimate: the first time it exceeds the tolerance, or where
+        the design's runs are all equal while the held-out runs vary; NaN if never.
     warnings:
         ``chaos-unreliable`` (when ``failing_from`` is a time) and the range checks'
         records (:func:`range_checks`).
@@ -568,7 +572,8 @@ def diagnose(
         observed = _finite_rows(holdout[1])
         blind = equal & _varies(observed, times.size)
         if not scale > 0 and blind.any():  # the held-out runs' spread is the only scale
-            scale = float(np.max(np.std(observed, axis=0)))
+            size = float(np.max(np.abs(observed)))  # scaled before squaring: outputs near 1e200
+            scale = size * float(np.max(np.std(observed / size, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None:
