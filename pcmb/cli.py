@@ -325,11 +325,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             progress=not (args.quiet or args.pdb),
             provenance=provenance,
         )
-    from pcmb.designs import RECORDED_ONLY
-
-    for warning in result.warnings:
-        if warning.code not in RECORDED_ONLY:  # shown by inspect and report
-            _log(f"pcmb: warning: {warning}")
+    for warning in result.alerts:  # the notes are listed by inspect and the report
+        _log(f"pcmb: warning: {warning}")
     if any(failure.traceback is not None for failure in result.failures):
         _log("pcmb: the nodes left out, once per cause with the model's traceback:")
         _log("\n".join(failure_report(result.failures, "  ")))
@@ -535,7 +532,7 @@ def _inspect(path: str) -> str:
         lines.append(
             f"analysis quantile bands, PDFs at t = {times}; spectra: {', '.join(spectra) or 'none'}"
         )
-    lines += [f"warning  {w}" for w in result.warnings]
+    lines += [f"{'note' if result.is_note(w) else 'warning':<9}{w}" for w in result.warnings]
     lines += failure_report(result.failures, "failed   ")
     return "\n".join(lines)
 

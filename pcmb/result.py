@@ -260,6 +260,22 @@ class WarningRecord:
         return f"{where}{self.message} [{self.code}]"
 
 
+#: Codes of warning records that explain a result without questioning it (a Sobol' index that
+#: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
+#: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
+#: less accurate pointwise than its statistics; an output whose runs and nominal run are all
+#: equal): kept in the result and its file, listed as
+#: notes by ``pcmb inspect``, never a warning.
+RECORDED_ONLY = frozenset(
+    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "output-constant"}
+)
+#: Codes of a method's own convergence indicators (an element's decay, a regression's
+#: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their
+#: output reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there is
+#: none, they are warnings that support it.
+INDICATORS = frozenset({"element-decay", "regression-loo"})
+
+
 @dataclass(frozen=True, repr=False)
 class StudyResult:
     """Everything a study produced (and everything a result file holds).
@@ -474,6 +490,20 @@ class StudyResult:
         if not isinstance(expansion, ChaosExpansion):
             raise ValueError("sobol_process needs one global chaos expansion (not multi-element)")
         return expansion.sobol_total_group(group)
+
+    def is_note(self, record: WarningRecord) -> bool:
+        """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
+        record about an output the diagnostics call reliable): kept in the result and its
+        file, not issued as a warning."""
+        if record.code in RECORDED_ONLY:
+            return True
+        judged = self.diagnostics.get(record.output) if record.output is not None else None
+        return record.code in INDICATORS and judged is not None and judged.reliable
+
+    @property
+    def alerts(self) -> tuple[WarningRecord, ...]:
+        """The records worth a warning: :attr:`warnings` without the notes (:meth:`is_note`)."""
+        return tuple(w for w in self.warnings if not self.is_note(w))
 
     def warnings_for(self, output: str | None) -> tuple[WarningRecord, ...]:
         """The warnings about one output (``None``: those about the whole study)."""

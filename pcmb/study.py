@@ -35,7 +35,7 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
-from pcmb.designs import METHOD_KINDS, RECORDED_ONLY, MethodSettings, NodeDesign, make_design
+from pcmb.designs import METHOD_KINDS, MethodSettings, NodeDesign, make_design
 from pcmb.designs.base import Recovery
 from pcmb.errors import (
     ConfigError,
@@ -642,9 +642,10 @@ class Study:
         -----
         PcmbWarning
             One per :class:`~pcmb.result.WarningRecord` of the result (also in
-            ``result.warnings`` and in the file), except the records that only explain a
-            result (:data:`pcmb.designs.RECORDED_ONLY`: Sobol' indices undefined where an
-            output does not vary), which are kept in ``result.warnings`` and the file only.
+            ``result.warnings`` and in the file), except the notes
+            (:meth:`~pcmb.result.StudyResult.is_note`: Sobol' indices undefined where an
+            output does not vary; a method's own indicator about an output the diagnostics
+            call reliable), which are kept in ``result.warnings`` and the file only.
 
         Raises
         ------
@@ -746,9 +747,8 @@ class Study:
                 write_result(output, result, provenance=provenance or {})
             if journal is not None:
                 journal.remove()
-        for record in result.warnings:
-            if record.code not in RECORDED_ONLY:  # e.g. Sobol' undefined at a fixed state
-                warnings.warn(str(record), PcmbWarning, stacklevel=2)
+        for record in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
+            warnings.warn(str(record), PcmbWarning, stacklevel=2)
         return result
 
     def _recover_by_axis(
@@ -986,6 +986,7 @@ class Study:
             held_out,
             self.diagnostics_tolerance,
             axes=result.axes,
+            nominal=result.nominal,
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -133,7 +133,8 @@ def test_max_runs_ends_the_rounds():
         result = study.run()
     assert result.n_nodes == 29 and result.design.orders == (3, 3)  # order 4 needs 24 more
     (record,) = [w for w in result.warnings if w.code == "order-budget"]
-    assert "past the budget of 40 (method.max_runs)" in record.message
+    assert "29 of 40 runs (method.max_runs)" in record.message
+    assert "raise method.max_runs" in record.message
 
 
 @pytest.mark.parametrize(

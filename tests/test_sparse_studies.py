@@ -98,7 +98,7 @@ def test_a_budget_that_ends_before_the_tolerance_is_reported():
     assert result.n_nodes == 100 == result.design.samples
     codes = {w.code for w in result.warnings}
     assert {"regression-budget", "regression-loo"} <= codes
-    assert any("budget of 100 runs (method.max_samples) ended" in str(w.message) for w in caught)
+    assert any("after 100 of 100 runs (method.max_samples)" in str(w.message) for w in caught)
 
 
 def test_design_records_of_older_files_load_without_the_new_fields():

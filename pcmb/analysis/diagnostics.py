@@ -19,6 +19,10 @@ raises false alarms.
   (:func:`statistics_error`), which are what the error bars show.
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
+- **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
+  the design saw none of the spread (nodes symmetric about a kink) and the verdict fails
+  there; without held-out runs, runs all equal at every time are reported
+  (``runs-all-equal``, or ``output-constant`` when the nominal run equals them too).
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
@@ -64,7 +68,14 @@ __all__ = [
 
 #: Codes of the warning records the diagnostics make.
 CODES = frozenset(
-    {"chaos-unreliable", "surrogate-inaccurate", "variance-nonpositive", "surrogate-out-of-range"}
+    {
+        "chaos-unreliable",
+        "surrogate-inaccurate",
+        "variance-nonpositive",
+        "surrogate-out-of-range",
+        "runs-all-equal",
+        "output-constant",
+    }
 )
 #: Default number of held-out runs (``method.validation``).
 VALIDATION = 32
@@ -97,6 +108,8 @@ _GROWTH = 2.0
 #: A tail holding between this share and all of the energy of the two layers before it
 #: decays algebraically, as the spectrum of a jump: the response is steep there.
 _FLAT = 0.5
+#: The fewest degrees after the peak of an input's spectrum that tell its decay's shape.
+_SHAPE_LAYERS = 3
 
 
 # -- spectral decay ----------------------------------------------------------------------------
@@ -391,13 +404,9 @@ def range_checks(
     out_of_range_share:
         (T,) :func:`out_of_range` when already computed.
     """
-    values = np.asarray(node_values, dtype=float)
-    values = values[np.isfinite(values).all(axis=1)]
+    values = _finite_rows(node_values)
     times = np.asarray(times, dtype=float)
-    # Ranges, not squares: outputs near 1e200 must not overflow.
-    spread = np.ptp(values, axis=0) if values.shape[0] > 1 else np.zeros(times.shape)
-    size = np.max(np.abs(values), axis=0) if values.size else np.zeros(times.shape)
-    varies = spread > _ROUND_OFF * size
+    varies = _varies(values, times.size)
     records = []
     std = expansion.std()  # overflow-safe, where the variance of 1e200 would not be
     empty = varies & ~(np.isfinite(std) & (std > 0))
@@ -426,6 +435,20 @@ def range_checks(
     return records
 
 
+def _finite_rows(values: ArrayLike) -> NDArray[np.float64]:
+    """The (N, T) runs without the rows holding a value that is not finite (failed runs)."""
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    return values[np.isfinite(values).all(axis=1)]
+
+
+def _varies(values: NDArray[np.float64], points: int) -> NDArray[np.bool_]:
+    """(T,) where (N, T) finite runs differ by more than round-off (never with one run)."""
+    if values.shape[0] < 2:
+        return np.zeros(points, dtype=bool)
+    # Ranges, not squares: outputs near 1e200 must not overflow.
+    return np.ptp(values, axis=0) > _ROUND_OFF * np.max(np.abs(values), axis=0)
+
+
 def _count(where: NDArray[np.bool_]) -> str:
     return f"{int(where.sum())} of {where.size} times"
 
@@ -436,7 +459,9 @@ def _span(times: NDArray[np.float64], where: NDArray[np.bool_]) -> tuple[float, 
 
 
 def _percent(share: float) -> str:
-    return f"{100 * share:.2g} %"
+    """A share in percent, two significant digits ("5.6 %", "12 %", "110 %")."""
+    percent = 100 * share
+    return f"{percent:.0f} %" if abs(percent) >= 100 else f"{percent:.2g} %"
 
 
 # -- the verdict -------------------------------------------------------------------------------
@@ -470,8 +495,8 @@ class OutputDiagnostics:
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
-        :func:`verdict` of the estimate: the first time it exceeds the tolerance, NaN if
-        never.
+        :func:`verdict` of the estimate: the first time it exceeds the tolerance, or where
+        the design's runs are all equal while the held-out runs vary; NaN if never.
     warnings:
         ``chaos-unreliable`` (when ``failing_from`` is a time) and the range checks'
         records (:func:`range_checks`).
@@ -502,6 +527,7 @@ def diagnose(
     tolerance: float = TOLERANCE,
     node_germ: ArrayLike | None = None,
     axis: str = "t",
+    nominal: ArrayLike | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -527,11 +553,27 @@ def diagnose(
         Name of the axis ``times`` are points of, for the message (``"t"``; ``""`` for a
         scalar output, whose ``times`` is ``[0.]``: ``failing_from`` is then 0 when it fails,
         NaN when it passes).
+    nominal:
+        (T,) the run at the nominal parameters, or ``None``: without held-out runs, whether
+        it differs from design runs that are all equal tells a design that missed the spread
+        (``runs-all-equal``, a warning) from an output that looks constant
+        (``output-constant``, a note).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
     finite = std[np.isfinite(std)]
     scale = float(finite.max()) if finite.size else 0.0
+    runs = _finite_rows(node_values)
+    equal = ~_varies(runs, times.size)
+    # Where the design's runs are all equal and the held-out runs are not, the design saw
+    # none of the spread (nodes symmetric about a kink): no expansion can learn it.
+    blind = np.zeros(times.size, dtype=bool)
+    if holdout is not None:
+        observed = _finite_rows(holdout[1])
+        blind = equal & _varies(observed, times.size)
+        if not scale > 0 and blind.any():  # the held-out runs' spread is the only scale
+            size = float(np.max(np.abs(observed)))  # scaled before squaring: outputs near 1e200
+            scale = size * float(np.max(np.std(observed / size, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None:
@@ -541,16 +583,26 @@ def diagnose(
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.estimate(tolerance)
     failing_from = verdict(times, estimate, tolerance)
+    if blind.any():
+        failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
     if checked is not None and np.isnan(failing_from):
         records.extend(_inaccurate(output, checked, times, tolerance))
+    if holdout is None and runs.shape[0] > 1 and equal.all():
+        records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
+        evidence = _evidence(decay, checked, failing)
+        if blind.any():
+            evidence = (
+                f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
+                f"{checked.count} held-out runs vary there, which no expansion can learn "
+                f"from; {evidence}"
+            )
         message = (
-            f"polynomial chaos unreliable{where} "
-            f"({_evidence(decay, checked, failing)}); consider "
+            f"polynomial chaos unreliable{where} ({evidence}); consider "
             f"{_remedy(expansion, estimate, failing, share)}"
         )
         span = (failing_from, float(times[-1]))
@@ -580,6 +632,40 @@ def _evidence(
     return ", ".join([judged, surrogate, *found])
 
 
+def _all_equal(
+    output: str,
+    runs: NDArray[np.float64],
+    times: NDArray[np.float64],
+    nominal: ArrayLike | None,
+) -> WarningRecord:
+    """The record of an output whose (N, T) runs are all equal at every time and that no
+    held-out run checks: ``output-constant`` when the nominal run equals them too, else
+    ``runs-all-equal``."""
+    span = _span(times, np.ones(times.size, dtype=bool))
+    unchecked = "no held-out run checks it (method.validation is 0)"
+    if nominal is not None and np.size(nominal) == runs.shape[1]:
+        with_nominal = np.vstack([runs, np.reshape(nominal, (1, -1))])
+        if np.all(np.isfinite(with_nominal)) and not _varies(with_nominal, times.size).any():
+            return WarningRecord(
+                "output-constant",
+                f"all {runs.shape[0]} runs of the design and the nominal run are equal at "
+                f"every time: the output looks constant, and {unchecked}",
+                output,
+                span,
+            )
+        seen = "the nominal run differs, so the design missed the spread"
+    else:
+        seen = "nothing else was run to compare"
+    return WarningRecord(
+        "runs-all-equal",
+        f"all {runs.shape[0]} runs of the design are equal at every time: its std 0 says "
+        f"nothing about the spread (nodes placed symmetric about a kink see none); {seen}, "
+        f"and {unchecked}",
+        output,
+        span,
+    )
+
+
 def _inaccurate(
     output: str, holdout: Holdout, times: NDArray[np.float64], tolerance: float
 ) -> list[WarningRecord]:
@@ -601,6 +687,39 @@ def _inaccurate(
     ]
 
 
+def _decay_shape(
+    energy: NDArray[np.float64], multi_index: NDArray[np.int64], k: int
+) -> tuple[str, float, int, int] | None:
+    """How the chaos coefficients' energy along input k falls with its degree p, from the
+    spectrum's peak to the top degree: ``("algebraic", s, first, top)`` with energy ~ p^-s (a
+    jump: s ≈ 2, a kink: s ≈ 4; a higher order resolves it slowly), or ``("geometric", r,
+    first, top)`` with energy ~ r^p (an analytic response: a higher order resolves it);
+    ``None`` when fewer than ``_SHAPE_LAYERS`` degrees follow the peak.
+
+    The energy of degree p is that of the terms of degree p in k, averaged with degree p + 1:
+    a response even or odd about the centre has every other coefficient zero. Of two straight
+    lines through its logarithm, against p and against log p, the closer one names the shape.
+    """
+    degrees = multi_index[:, k]
+    by_degree = np.bincount(degrees, weights=energy, minlength=degrees.max() + 1)[1:]
+    pairs = (by_degree[:-1] + by_degree[1:]) / 2
+    if pairs.size == 0 or not np.all(pairs > 0):
+        return None
+    peak = int(np.argmax(pairs))
+    centres = np.arange(peak, pairs.size) + 1.5
+    logs = np.log(pairs[peak:])
+    if centres.size < _SHAPE_LAYERS:
+        return None
+    fits = {}
+    for shape, x in (("geometric", centres), ("algebraic", np.log(centres))):
+        slope, intercept = np.polyfit(x, logs, 1)
+        fits[shape] = (float(np.sum((slope * x + intercept - logs) ** 2)), slope)
+    shape = min(fits, key=lambda name: fits[name][0])
+    slope = fits[shape][1]
+    rate = float(-slope) if shape == "algebraic" else float(np.exp(slope))
+    return shape, rate, peak + 1, int(degrees.max())
+
+
 def _remedy(
     expansion: Expansion,
     estimate: NDArray[np.float64],
@@ -612,12 +731,13 @@ def _remedy(
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
       order fixes — sampling;
-    - energy in one input whose spectrum decays slowly (the outer two layers hold between
-      half and all of the energy of the two before them, as the coefficients of a jump
-      do; or, below order 4, the surrogate overshoots the runs): steep or discontinuous
-      there — multi-element chaos;
-    - otherwise (a spectrum still rising: an oscillation not yet resolved; or decaying
-      geometrically but too slowly): a higher order, for the input that holds the tail.
+    - else, for the input that holds the tail, the decay of the coefficients along it
+      (:func:`_decay_shape`): algebraic, as those of a jump or kink — multi-element chaos;
+      geometric, as those of an analytic response — a higher order;
+    - too few degrees to tell: steep or discontinuous when the spectrum decays slowly (the
+      outer two layers hold between half and all of the energy of the two before them) or,
+      below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
+      higher order. The message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
@@ -636,22 +756,40 @@ def _remedy(
             "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
             "order does not fix"
         )
-    previous = energy[before].sum()
-    if previous > 0:
-        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-    else:  # an order below 4: too few layers to see a decay, the overshoot tells
-        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-    if steep and isinstance(expansion, PiecewiseExpansion):
-        return (
-            f"more elements along {name} (finer method.elements cuts, or auto): the response "
-            f"is still steep or discontinuous within an element"
+    shape = _decay_shape(energy, index, top)
+    if shape is not None:
+        kind, rate, first, last = shape
+        if kind == "geometric":
+            return (
+                f"raising the order of {name} (method.order): the chaos coefficients along "
+                f"{name} fall geometrically (energy × {rate:.2g} per degree, degrees {first} "
+                f"to {last}), as those of a smooth response, which a higher order resolves"
+            )
+        cause = (
+            f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
+            f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
+            "resolves only slowly"
         )
-    if steep:
-        return (
-            f"multi-element chaos (method.elements): the response is steep or discontinuous "
-            f"in {name}"
+        steep = True
+    else:
+        previous = energy[before].sum()
+        if previous > 0:
+            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+        else:  # an order below 4: too few layers to see a decay, the overshoot tells
+            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+        order = int(index[:, top].max())
+        unknown = (
+            f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
+            "to tell a jump or kink from a slowly converging smooth response"
         )
-    return f"raising the order of {name} (method.order): its spectrum decays slowly"
+        cause = f"the response is steep or discontinuous in {name}{unknown}"
+        if not steep:
+            return (
+                f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
+            )
+    if isinstance(expansion, PiecewiseExpansion):
+        return f"more elements along {name} (finer method.elements cuts, or auto): {cause}"
+    return f"multi-element chaos (method.elements): {cause}"
 
 
 @dataclass(frozen=True)
@@ -686,13 +824,15 @@ def diagnose_all(
     held_out: HeldOut | None,
     tolerance: float = TOLERANCE,
     axes: Mapping[str, OutputAxis | None] | None = None,
+    nominal: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
     of its axis or ``[0.]`` for a scalar.
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
-    nodes that succeeded; the held-out check uses the successful held-out runs.
+    nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
+    holds the run at the nominal parameters (output name -> (T,)), when one succeeded.
     """
     found = {}
     for name, expansion in expansions.items():
@@ -707,6 +847,14 @@ def diagnose_all(
             axis = axes[name]
             grid, label = (np.zeros(1), "") if axis is None else (axis.values, axis.name)
         found[name] = diagnose(
-            name, expansion, values[name][ok], grid, holdout, tolerance, germ[ok], label
+            name,
+            expansion,
+            values[name][ok],
+            grid,
+            holdout,
+            tolerance,
+            germ[ok],
+            label,
+            None if nominal is None else nominal.get(name),
         )
     return found

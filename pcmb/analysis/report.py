@@ -38,7 +38,6 @@ from pcmb.analysis.statistics import (
     spectrum,
 )
 from pcmb.chaos.density import kernel_density
-from pcmb.designs import RECORDED_ONLY
 from pcmb.errors import MissingDependencyError, UsageError
 from pcmb.result import StudyResult
 from pcmb.wording import plural
@@ -735,8 +734,8 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
 def _record_lists(result: StudyResult) -> list[str]:
     """The warning records by severity: warnings in red, information apart (not red); the
     diagnostics' verdict is in its own section."""
-    warnings = [w for w in result.warnings if w.code not in RECORDED_ONLY and w.code != _FLAG]
-    information = [w for w in result.warnings if w.code in RECORDED_ONLY]
+    warnings = [w for w in result.alerts if w.code != _FLAG]
+    information = [w for w in result.warnings if result.is_note(w)]
     parts: list[str] = []
     for title, records, kind in (
         ("Warnings", warnings, "warn"),

@@ -177,8 +177,7 @@ class AdaptiveCollocation:
             if added is None:
                 step = "probing blind axes" if converged else "the next refinement"
                 self._stopped = (
-                    f"{step} would pass the budget of {self.max_runs} runs (method.max_runs): "
-                    "raise it, or the tolerance"
+                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
                 )
                 return None
             if added:
@@ -311,8 +310,9 @@ class AdaptiveCollocation:
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {self._grid.size} runs (estimated error "
-                    f"{reached}, tolerance {self.tolerance:g}): {self._stopped}",
+                    f"the refinement ended early, after {self._grid.size} of {self.max_runs} "
+                    f"runs (method.max_runs; estimated error {reached}, tolerance "
+                    f"{self.tolerance:g}): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, adaptive=fit)

@@ -89,8 +89,8 @@ class AnisotropicTensor(AdaptiveCollocation):
             box = _box(levels)
             if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
                 self._stopped = (
-                    f"raising {self.names[k]} would pass the budget of {self.max_runs} runs "
-                    "(method.max_runs): raise it, or the tolerance"
+                    f"raising {self.names[k]} would pass method.max_runs: raise "
+                    "method.max_runs, or the tolerance"
                 )
                 return None
             present = set(self._index)

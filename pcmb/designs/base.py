@@ -13,7 +13,14 @@ from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
-from pcmb.result import AdaptiveFit, Design, Refinement, RegressionFit, WarningRecord
+from pcmb.result import (
+    RECORDED_ONLY,
+    AdaptiveFit,
+    Design,
+    Refinement,
+    RegressionFit,
+    WarningRecord,
+)
 
 __all__ = [
     "RECORDED_ONLY",
@@ -26,15 +33,6 @@ __all__ = [
     "statistics_warnings",
 ]
 
-#: Codes of warning records that explain a result without questioning it (a Sobol' index that
-#: cannot exist where an output does not vary; surrogate values beyond the runs' range, which
-#: the verdict of the diagnostics already weighs; a surrogate less accurate pointwise than its
-#: statistics; an element's decay indicator, which the held-out verdict judges): kept in the
-#: result, its file, ``pcmb inspect`` and the report, and not worth a Python warning at every
-#: run.
-RECORDED_ONLY = frozenset(
-    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "element-decay"}
-)
 #: Magnitudes whose squares exceed the largest float.
 _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 

@@ -273,9 +273,11 @@ class MultiElementCollocation:
             warnings.append(
                 WarningRecord(
                     "element-budget",
-                    f"elements: auto stopped at max_elements = {self.max_elements} with "
-                    "elements still above the decay threshold: a larger max_elements or a "
-                    "higher order may help, unless an output is chaotic in its inputs",
+                    f"elements: auto stopped at {self.partition.size} of {self.max_elements} "
+                    f"elements (method.max_elements) after {nodes.size} runs, with elements "
+                    "still above the decay threshold: splitting them would pass "
+                    "method.max_elements; raise it or the order, unless an output is chaotic in "
+                    "its inputs",
                 )
             )
         warnings += self._decay_warnings(expansions)
@@ -294,11 +296,12 @@ class MultiElementCollocation:
                 records.append(
                     WarningRecord(
                         "element-decay",
-                        f"the chaos has not converged in {above.size} of {scores.size} "
-                        f"element(s): P_e·η_e up to {scores[worst]:.3g} (element {worst}) "
-                        f"against the threshold {THRESHOLD:g}; more elements or a higher "
-                        "order may help, unless the output is chaotic in its inputs, which no "
-                        "partition fixes",
+                        f"the elements' decay indicator is above its threshold "
+                        f"{THRESHOLD:g} in {above.size} of {scores.size} element(s): "
+                        f"P_e·η_e up to {scores[worst]:.3g} (element {worst}), the share of "
+                        "an element's variance in its top two degrees, which elements: auto "
+                        "splits on; an indicator, not a verdict: the held-out check judges the "
+                        "mean and std",
                         name,
                     )
                 )

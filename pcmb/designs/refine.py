@@ -136,7 +136,10 @@ class OrderRefinement:
             self._reset()
         order = self._grid.orders[0]
         if not ok[self._rows].all():
-            self._stopped = f"{int(np.sum(~ok[self._rows]))} node(s) of order {order} failed"
+            self._stopped = (
+                f"{int(np.sum(~ok[self._rows]))} node(s) of order {order} failed, and a round "
+                "needs every node: see the failures"
+            )
             return None
         on_grid = {name: y[self._rows] for name, y in values.items()}
         found = self._collocation(order).recover(self._grid, on_grid, ok[self._rows])
@@ -149,15 +152,21 @@ class OrderRefinement:
         if indicator < self.tolerance:
             return None
         if order == MAX_ORDER:
-            self._stopped = f"order {MAX_ORDER} is the highest order auto tries"
+            self._stopped = (
+                f"order {MAX_ORDER} is the highest order auto tries "
+                f"(pcmb.designs.refine.MAX_ORDER), so more runs would not help: order alone "
+                "may not converge (a steep, discontinuous or chaotic response), follow the "
+                "diagnostics' remedy"
+            )
             return None
         grid = TensorGrid(self.distributions, (order + 1,) * len(self.distributions))
         rows = np.array([self._known.get(row.tobytes(), -1) for row in grid.nodes])
         new = rows < 0
         if nodes.size + int(new.sum()) > self.max_runs:
             self._stopped = (
-                f"order {order + 1} would take {int(new.sum())} more runs, past the budget of "
-                f"{self.max_runs} (method.max_runs)"
+                f"order {order + 1} would take {int(new.sum())} more runs, past the budget: "
+                "raise method.max_runs, or follow the diagnostics' remedy (order alone may not "
+                "converge for a steep, discontinuous or chaotic response)"
             )
             return None
         rows[new] = nodes.size + np.arange(int(new.sum()))
@@ -194,10 +203,9 @@ class OrderRefinement:
                 WarningRecord(
                     "order-budget",
                     f"order refinement ended at order {self._grid.orders[0]} after "
-                    f"{nodes.size} runs, the last indicator {reached} above the tolerance "
-                    f"{self.tolerance:g} (diagnostics.tolerance): {self._stopped}. Raise "
-                    "method.max_runs, or follow the diagnostics' remedy: order alone may not "
-                    "converge (steep, discontinuous or chaotic responses)",
+                    f"{nodes.size} of {self.max_runs} runs (method.max_runs), the last "
+                    f"indicator {reached} above the tolerance {self.tolerance:g} "
+                    f"(diagnostics.tolerance): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, refinement=refinement)

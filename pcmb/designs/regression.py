@@ -217,10 +217,10 @@ class SparseRegression:
             records += (
                 WarningRecord(
                     "regression-budget",
-                    f"the budget of {self.max_samples} runs (method.max_samples) ended before "
-                    f"the tolerance was met: worst corrected leave-one-out error {worst:.3g} > "
-                    f"{self.tolerance:g} after {nodes.size} runs; raise max_samples, or lower "
-                    "the order",
+                    f"the rounds ended after {nodes.size} of {self.max_samples} runs "
+                    f"(method.max_samples) before the tolerance was met: worst corrected "
+                    f"leave-one-out error {worst:.3g} > {self.tolerance:g}; raise "
+                    "method.max_samples, or lower the order",
                 ),
             )
         regression = {
@@ -247,7 +247,8 @@ class SparseRegression:
             f"corrected leave-one-out error up to {float(np.nanmax(loo)):.3g} (> {limit:.3g}) at "
             f"{large.size} of {loo.size} times, with {fit.multi_index.shape[0]} of "
             f"{self.candidates.size} candidate terms selected ({self.selection}) from {runs} "
-            "runs: the expansion may be inaccurate; use more samples or another order",
+            "runs: an indicator of the surrogate's pointwise error, not a verdict (the "
+            "held-out check judges the mean and std); more samples or another order lower it",
             name,
             span,
         )
