@@ -1,4 +1,4 @@
-"""Progress where long work happens: a line per tenth of the nodes in a log, the phases
+"""Progress where long work happens: a line per 5 % of the nodes in a log, the phases
 between the runs with their seconds, and the runs a resume reused."""
 
 from __future__ import annotations
@@ -14,14 +14,14 @@ from test_resume import PYTHON_CONFIG, PYTHON_MODEL, run_and_kill
 from pcmb.run.progress import Progress, phase
 
 
-def test_a_log_gets_a_line_per_tenth_of_the_total():
+def test_a_log_gets_a_line_per_5_percent_of_the_total():
     stream = io.StringIO()
     progress = Progress(100, 0, stream)
     for _ in range(100):
         progress.advance(1)
     progress.close()
     lines = stream.getvalue().splitlines()
-    assert [line.split()[1] for line in lines] == [f"{k}/100" for k in range(10, 101, 10)]
+    assert [line.split()[1] for line in lines] == [f"{k}/100" for k in range(5, 101, 5)]
     assert "\r" not in stream.getvalue()
 
 
@@ -48,7 +48,7 @@ def test_work_found_done_is_said_first():
         progress.advance(1)
     lines = stream.getvalue().splitlines()
     assert lines[0] == "pcmb: 30 of 100 nodes reused from the journal"
-    assert [line.split()[1] for line in lines[1:]] == [f"{k}/100" for k in range(40, 101, 10)]
+    assert [line.split()[1] for line in lines[1:]] == [f"{k}/100" for k in range(35, 101, 5)]
 
 
 def test_a_phase_says_what_and_how_long():

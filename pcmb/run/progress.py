@@ -1,7 +1,7 @@
 """Progress on stderr: nodes done / total, rate, ETA; and the phases of work between them.
 
 On a terminal the line is rewritten in place; elsewhere (a log file, a CI job, a pipe) a new
-line is written each tenth of the total (:data:`LOG_LINES`): progress in a log, not a flood.
+line is written each 5 % of the total (:data:`LOG_LINES`): progress in a log, not a flood.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ __all__ = ["LOG_LINES", "Progress", "phase"]
 
 #: Smallest interval between two redraws on a terminal, seconds.
 _PROGRESS_INTERVAL = 0.1
-#: Lines written over the whole work where the stream is not a terminal (one per tenth).
-LOG_LINES = 10
+#: Lines written over the whole work where the stream is not a terminal (one per 5 %).
+LOG_LINES = 20
 
 
 def _is_terminal(stream: TextIO) -> bool:
@@ -27,7 +27,7 @@ def _is_terminal(stream: TextIO) -> bool:
 
 class Progress:
     """Nodes (or another ``unit``) done / total, rate, ETA: one line rewritten in place on a
-    terminal, a line per tenth of the total elsewhere (:data:`LOG_LINES`). Work found done already
+    terminal, a line per 5 % of the total elsewhere (:data:`LOG_LINES`). Work found done already
     (``done``, e.g. runs reused from a journal) is said at once."""
 
     def __init__(self, total: int, done: int, stream: TextIO | None, unit: str = "nodes") -> None:
@@ -42,7 +42,7 @@ class Progress:
             stream.flush()
 
     def _step(self, done: int) -> int:
-        """Which tenth of the total ``done`` has reached."""
+        """Which step of :data:`LOG_LINES` ``done`` has reached."""
         return done * LOG_LINES // self._total if self._total else LOG_LINES
 
     def advance(self, count: int) -> None:
