@@ -89,16 +89,7 @@ def _parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run a study and write its HDF5 result")
     run.add_argument("config", help="YAML study configuration")
     run.add_argument("-o", "--output", help="result file (overrides the config's output)")
-    run.add_argument("--jobs", type=int, help="worker processes (default: config, else all cores)")
-    run.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
-    _address_flag(run)
-    _journal_flags(run, "run")
-    run.add_argument(
-        "--force",
-        action="store_true",
-        help="overwrite a file at the output that is not a pcmb result",
-    )
-    run.add_argument("--quiet", action="store_true", help=_QUIET)
+    _campaign_flags(run, "run", "a file at the output that is not a pcmb result")
     run.add_argument(
         "--strict",
         action="store_true",
@@ -149,21 +140,22 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument(
         "--reference", metavar="REF.h5", help="result to measure against (not sweep.reference)"
     )
-    sweep.add_argument(
-        "--jobs", type=int, help="worker processes (default: config, else all cores)"
-    )
-    sweep.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
-    _address_flag(sweep)
-    _journal_flags(sweep, "sweep")
-    sweep.add_argument(
-        "--force",
-        action="store_true",
-        help="overwrite files at the settings' result paths that are not pcmb results",
-    )
-    sweep.add_argument("--quiet", action="store_true", help=_QUIET)
+    _campaign_flags(sweep, "sweep", "files at the settings' result paths that are not pcmb results")
 
     commands.add_parser("schema", help="print the config JSON Schema (for editors)")
     return parser
+
+
+def _campaign_flags(command: argparse.ArgumentParser, name: str, foreign: str) -> None:
+    """The flags of a command that runs nodes (``run``, ``sweep``): workers, journal, output."""
+    command.add_argument(
+        "--jobs", type=int, help="worker processes (default: config, else all cores)"
+    )
+    command.add_argument("--backend", choices=list(BACKENDS), help="parallel backend")
+    _address_flag(command)
+    _journal_flags(command, name)
+    command.add_argument("--force", action="store_true", help=f"overwrite {foreign}")
+    command.add_argument("--quiet", action="store_true", help=_QUIET)
 
 
 def _log(message: str) -> None:
