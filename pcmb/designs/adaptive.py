@@ -14,6 +14,7 @@ the budget of runs.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 
 import numpy as np
@@ -104,6 +105,7 @@ class AdaptiveCollocation:
         self._norms: dict[tuple[int, ...], NDArray[np.float64]] = {}
         self._indicators = np.full(len(self._index), np.nan)
         self._history: list[tuple[int, float]] = []
+        self._changes: list[float] = []
         self._stopped: str | None = None
 
     @property
@@ -209,12 +211,24 @@ class AdaptiveCollocation:
             if level not in self._norms:
                 surplus = self._grid.surplus(level, values)
                 self._norms[level] = np.sqrt(np.sum(surplus**2, axis=0)).max(axis=-1)
-        coefficients = self._grid.project(values)
-        std = ChaosExpansion(coefficients, self._grid.multi_index, self.distributions).std()
+        mean, std = self._statistics(self._grid, values)
         spread = std.max(axis=-1)
         norms = np.array([self._norms[level] for level in self._index])
         relative = np.divide(norms, spread, out=np.zeros_like(norms), where=spread > 0)
         self._indicators = relative.max(axis=1)
+        old = SparseGrid(self.distributions, np.array(self._index)[~self._active()], self.rules)
+        old_mean, old_std = self._statistics(old, values[find_rows(self._grid.node_ids, old.node_ids)])
+        change = np.maximum(np.abs(mean - old_mean), np.abs(std - old_std)).max(axis=-1)
+        self._changes.append(
+            float(np.divide(change, spread, out=np.zeros_like(change), where=spread > 0).max())
+        )
+
+    def _statistics(
+        self, grid: SparseGrid, values: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(outputs, times) the mean and std of the projection on ``grid``."""
+        expansion = ChaosExpansion(grid.project(values), grid.multi_index, self.distributions)
+        return expansion.mean(), expansion.std()
 
     def _blind(self) -> list[int]:
         """Active indices on an axis whose surplus vanishes (below :data:`BLIND`) while they
@@ -241,7 +255,14 @@ class AdaptiveCollocation:
         return np.array([level not in self._refined for level in self._index])
 
     def _estimate(self) -> float:
-        return float(self._indicators[self._active()].sum())
+        """The estimated error of the mean and std after the last round (see the module)."""
+        changes = self._changes
+        guarded = [max(d, np.sqrt(d * before)) for before, d in itertools.pairwise(changes)]
+        guarded = changes[:1] + guarded
+        rate = 1.0
+        if len(guarded) > 2 and guarded[-3] > 0:
+            rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
+        return float(guarded[-1] * rate)
 
     def _forward(self, level: tuple[int, ...], room: bool = False) -> list[tuple[int, ...]]:
         """Forward neighbours of ``level`` within the rules' levels and not in the set: all of
