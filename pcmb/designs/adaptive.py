@@ -217,7 +217,9 @@ class AdaptiveCollocation:
         relative = np.divide(norms, spread, out=np.zeros_like(norms), where=spread > 0)
         self._indicators = relative.max(axis=1)
         old = SparseGrid(self.distributions, np.array(self._index)[~self._active()], self.rules)
-        old_mean, old_std = self._statistics(old, values[find_rows(self._grid.node_ids, old.node_ids)])
+        old_mean, old_std = self._statistics(
+            old, values[find_rows(self._grid.node_ids, old.node_ids)]
+        )
         change = np.maximum(np.abs(mean - old_mean), np.abs(std - old_std)).max(axis=-1)
         self._changes.append(
             float(np.divide(change, spread, out=np.zeros_like(change), where=spread > 0).max())
