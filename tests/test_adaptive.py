@@ -109,6 +109,22 @@ def test_the_estimate_is_within_ten_times_the_true_error_of_mean_and_std(toleran
     assert error / 10 <= estimate <= 10 * error
     # The tolerance means the error: within 10x above it, and not 100x below.
     assert tolerance / 100 <= error <= 10 * tolerance
+    assert not [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
+
+
+def test_a_kink_is_reported_as_a_response_the_estimate_cannot_see():
+    """|a - 0.3| + e^b: the surpluses along a fall like a power of the degree, not
+    geometrically, so the estimate (which assumes a smooth response) is not to be trusted."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    with pytest.warns(pcmb.PcmbWarning, match="adaptive-nonsmooth"):
+        result = _adaptive(
+            lambda x: np.abs(x[:, 0] - 0.3) + np.exp(x[:, 1]),
+            inputs,
+            method="adaptive",
+            tolerance=1e-3,
+        )
+    (record,) = [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
+    assert "along a " in record.message and "assumes a smooth response" in record.message
 
 
 def test_ishigami_finds_the_interaction_its_axes_hide():

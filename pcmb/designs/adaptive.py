@@ -35,6 +35,8 @@ __all__ = ["AdaptiveCollocation"]
 BULK = 0.5
 #: Indicator below which a surplus is zero to round-off (relative to the std).
 BLIND = 1e-12
+#: Indicator below which a surplus is too near round-off to tell how it decays.
+ROUND_OFF = 1e-10
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 
@@ -266,6 +268,28 @@ class AdaptiveCollocation:
             rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
         return float(guarded[-1] * rate)
 
+    def _nonsmooth(self) -> list[tuple[str, float]]:
+        """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
+        spectrum) rather than geometrically (like e^-cp, an analytic response's), with a: over
+        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c."""
+        position = {level: k for k, level in enumerate(self._index)}
+        found = []
+        for k, (name, rule) in enumerate(zip(self.names, self.rules, strict=True)):
+            axis = [tuple(at * (j == k) for j in range(len(self.names))) for at in range(1, 99)]
+            points = [
+                (rule.projection_degree(at), self._indicators[position[level]])
+                for at, level in enumerate(itertools.takewhile(position.__contains__, axis), 1)
+            ]
+            points = [(p, g) for p, g in points if g > ROUND_OFF][-3:]
+            if len(points) < 3:
+                continue
+            degree, norm = np.log(np.array(points, dtype=float)).T
+            algebraic = -np.diff(norm) / np.diff(degree)
+            geometric = -np.diff(norm) / np.diff(np.exp(degree))
+            if np.all(algebraic > 0) and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric)):
+                found.append((name, float(algebraic[-1])))
+        return found
+
     def _forward(self, level: tuple[int, ...], room: bool = False) -> list[tuple[int, ...]]:
         """Forward neighbours of ``level`` within the rules' levels and not in the set: all of
         them (``room``), or those whose backward neighbours are all refined."""
@@ -328,7 +352,15 @@ class AdaptiveCollocation:
             history=np.array(self._history, dtype=float).reshape(-1, 2),
             orders=self._grid.multi_index.max(axis=0),
         )
-        warnings = recovery.warnings
+        warnings = recovery.warnings + tuple(
+            WarningRecord(
+                "adaptive-nonsmooth",
+                f"the surpluses along {name} fall like degree^-{exponent:.2g} over its levels, "
+                "not geometrically: the response is not smooth in it (a kink or jump), and the "
+                "estimated error, which assumes a smooth response, may be far too small",
+            )
+            for name, exponent in self._nonsmooth()
+        )
         if self._stopped is not None:
             reached = f"{self._history[-1][1]:.3g}" if self._history else "unknown"
             warnings += (
