@@ -19,9 +19,9 @@ the error of the coarser grid. A lucky small change is not believed beyond the r
 g_k = max(d_k, √(d_k d_{k-1})), and the whole grid is a round ahead of the refined one, so
 the estimate is g_k ρ_k with ρ_k = min(1, √(g_k / g_{k-2})) the observed reduction per round.
 Measured by ``scripts/calibrate_adaptive.py`` (chosen on exp8 and genz_oscillatory), it lies
-within 10x of the true error on smooth functions. It assumes a smooth response: where an
-input's axis surpluses fall like a power of the degree (a kink) an ``adaptive-nonsmooth``
-warning names it.
+within 10x of the true error on smooth functions. It assumes a smooth, resolved response:
+where an input's axis surpluses fall like a power of the degree (a kink, or a peak not yet
+resolved) an ``adaptive-nonsmooth`` warning names it.
 """
 
 from __future__ import annotations
@@ -372,8 +372,9 @@ class AdaptiveCollocation:
             WarningRecord(
                 "adaptive-nonsmooth",
                 f"the surpluses along {name} fall like degree^-{exponent:.2g} over its levels, "
-                "not geometrically: the response is not smooth in it (a kink or jump), and the "
-                "estimated error, which assumes a smooth response, may be far too small",
+                "not geometrically: the response is not smooth in it (a kink or jump) or not "
+                "resolved yet, and the estimated error, which assumes a smooth, resolved "
+                "response, may be far too small",
             )
             for name, exponent in self._nonsmooth()
         )
