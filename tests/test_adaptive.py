@@ -124,7 +124,7 @@ def test_a_kink_is_reported_as_a_response_the_estimate_cannot_see():
             tolerance=1e-3,
         )
     (record,) = [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
-    assert "along a " in record.message and "assumes a smooth response" in record.message
+    assert "along a " in record.message and "assumes a smooth, resolved response" in record.message
 
 
 def test_ishigami_finds_the_interaction_its_axes_hide():
