@@ -196,9 +196,10 @@ class AdaptiveFit:
         coefficients its tensor difference adds, relative to the output's largest std (NaN
         where not computed, as after failed nodes).
     active:
-        (K,) the indices not refined yet, whose indicators sum to the estimated error.
+        (K,) the indices not refined yet: the indicators mark which to refine.
     history:
-        (R, 2) runs so far and estimated error after each round.
+        (R, 2) runs so far and estimated error of the mean and std after each round (see
+        :mod:`pcmb.designs.adaptive`).
     orders:
         (n,) highest degree per input of the recovered terms.
     """
@@ -211,8 +212,8 @@ class AdaptiveFit:
 
     @property
     def estimate(self) -> float:
-        """The estimated error: the sum of the active indices' indicators."""
-        return float(self.indicators[self.active].sum())
+        """The estimated error of the mean and std after the last round (NaN if none)."""
+        return float(self.history[-1, 1]) if self.history.shape[0] else float("nan")
 
     @property
     def levels(self) -> NDArray[np.int64]:

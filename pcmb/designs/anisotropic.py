@@ -4,10 +4,11 @@ The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set 
 box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
 (3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the indicator of input
 k is the sum of the surplus indicators on the box's top face in k (the indices at level L_k
-there): what the last level of k added. Their sum over the faces estimates the error of the
-statistics. While it exceeds the tolerance, the input with the largest face indicator is
-raised by one level — one input direction at a time — within the budget of runs. The nested
-rules reuse every run; the result is the tensor projection on the box reached.
+there): what the last level of k added. The estimated error is the adaptive driver's: the
+change of the mean and std the top faces make. While it exceeds the tolerance, the input with
+the largest face indicator is raised by one level — one input direction at a time — within the
+budget of runs. The nested rules reuse every run; the result is the tensor projection on the
+box reached.
 """
 
 from __future__ import annotations
