@@ -433,6 +433,19 @@ def _placement(axis: OutputAxis | None, on_time: bool) -> str:
     return f"  on {axis.name}{unit}, {axis.values.size} points"
 
 
+def _runs_made(result) -> str:
+    """Every model run a result holds: the design's, the held-out check's, the nominal one."""
+    held_out = result.held_out
+    checked = (
+        "no held-out runs"
+        if held_out is None
+        else f"{len(held_out.ok)} held-out ({int(held_out.ok.sum())} ok)"
+    )
+    nominal = "1 nominal" if result.nominal else "no nominal run"
+    total = result.n_nodes + (0 if held_out is None else len(held_out.ok)) + bool(result.nominal)
+    return f"{total} in all: {result.n_nodes} of the design, {checked}, {nominal}"
+
+
 def _inspect(path: str) -> str:
     import dataclasses
 
@@ -448,8 +461,9 @@ def _inspect(path: str) -> str:
         f"name     {result.name}",
         f"method   {result.design.label}, {result.n_nodes} nodes: {status[1]} ok, "
         f"{status[2]} failed, {status[0]} pending; {result.seconds:.2f} s of runs",
+        f"runs     {_runs_made(result)}",
         f"time     {result.times[0]} .. {result.times[-1]}, {result.times.size} points",
-        "inputs   " + ", ".join(f"{n}: {d.describe()['dist']}" for n, d in named_inputs),
+        "inputs   " + ", ".join(f"{n} ~ {d.law}" for n, d in named_inputs),
     ]
     design = dataclasses.asdict(result.design)
     lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))

@@ -37,6 +37,13 @@ def test_output_from_the_config_and_inspect(tmp_path, linear_study, capsys):
     report = capsys.readouterr().out
     assert "16 ok, 0 failed" in report and "y" in report and "16 terms" in report
     assert "design   kind collocation, grid tensor-gauss, basis tensor, orders (3, 3)" in report
+    # Every run made is counted, and every input is shown with its law.
+    held_out = len(pcmb.load(tmp_path / "out.h5").held_out.ok)
+    assert (
+        f"runs     {16 + held_out + 1} in all: 16 of the design, {held_out} held-out "
+        f"({held_out} ok), 1 nominal"
+    ) in report
+    assert "inputs   a ~ uniform(low=1, high=3), b ~ normal(mean=0, std=1)" in report
 
 
 def test_validate_prints_a_summary_and_runs_nothing(tmp_path, linear_study, capsys):
