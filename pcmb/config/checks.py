@@ -136,13 +136,12 @@ def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
     check the inputs, the analysis and the time grid against what it says of itself; with
     ``check_sweep``, also the sweep's intrusive settings against the model's polynomial form."""
-    from pcmb.run.backends import checking_backend, open_pool
+    from pcmb.run.backends import checking_pool
     from pcmb.run.executor import describe_model, run_in_worker
 
     # A model is only ever built in a worker process, here too: its crash is not pcmb's.
-    backend = checking_backend(config.execution.backend)
     try:
-        with open_pool(backend, config.execution.jobs) as pool:
+        with checking_pool(config.execution.backend, config.execution.jobs) as pool:
             factory = config.model_factory()
             facts = describe_model(factory, pool, config.times, tuple(config.inputs))
             # An intrusive method checks the model's polynomial form where the model lives.
