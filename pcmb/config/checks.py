@@ -65,7 +65,9 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                 f"{runs * config.time.points:.3g} values per output, more than {MAX_VALUES:.0e}"
             ),
         )
-    else:  # a design of a size to run: its nodes are made now, as the run will make them
+    elif not all(d.finite_at_nodes for d in config.distributions):
+        # A design of a size to run, with inputs whose values only its nodes tell: the nodes
+        # are made now, as the run will make them.
         for name, message in overflowing_inputs(design.nodes(), config.input_names):
             yield f"inputs.{name}", message
 
