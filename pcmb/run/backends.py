@@ -177,8 +177,12 @@ def _serve(connection: Any, parent: int, environment: dict[str, str]) -> None:
     or its exception, until the pool closes the connection."""
     os.environ.update(environment)  # before any native library loads
     die_with_parent(parent)
-    _warm_up()
     import pickle
+
+    _warm_up()
+    # The designs whose checks run here too (Galerkin's polynomial form), while the caller
+    # reads the config.
+    import pcmb.designs  # noqa: F401
 
     while True:
         try:
@@ -253,9 +257,10 @@ class OneProcessPool:
         return _died(iter([] if error.exitcode is None else [error.exitcode]))
 
     def close(self, kill: bool = False) -> None:
-        self._connection.close()  # the worker's cue to end
-        if kill:
-            self._process.kill()
+        """End the worker at once, ``kill`` or not: :meth:`submit` waits for each task, so
+        it is idle now, with nothing to finish."""
+        self._connection.close()
+        self._process.kill()
         self._process.join()
 
 
