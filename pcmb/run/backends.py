@@ -18,7 +18,7 @@ import re
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
 from contextvars import ContextVar
@@ -147,7 +147,7 @@ class LokyPool:
             return None
         # loky reports e.g. "The exit codes of the workers are {SIGSEGV(-11)}" or "{EXIT(7)}".
         codes = re.findall(r"[A-Z]+\((-?\d+)\)", str(error).partition("exit codes")[2])
-        return _died(int(code) for code in codes)
+        return _died([int(code) for code in codes])
 
     def close(self, kill: bool = False) -> None:
         if kill:
@@ -155,7 +155,7 @@ class LokyPool:
         self._executor.shutdown(wait=not kill, kill_workers=kill)
 
 
-def _died(codes: Iterator[int]) -> str:
+def _died(codes: Iterable[int]) -> str:
     """The message of a worker death, from exit codes (negative: the signal that killed it)."""
     causes = [
         f"signal {-code}, {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
@@ -164,7 +164,7 @@ def _died(codes: Iterator[int]) -> str:
     return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
 
 
-class WorkerDied(Exception):
+class _WorkerDied(Exception):
     """The worker process of a :class:`OneProcessPool` ended while it ran a task."""
 
     def __init__(self, exitcode: int | None) -> None:
@@ -243,7 +243,7 @@ class OneProcessPool:
             ok, value = self._connection.recv()
         except (EOFError, OSError):  # the process ended before it replied
             self._process.join()
-            future.set_exception(WorkerDied(self._process.exitcode))
+            future.set_exception(_WorkerDied(self._process.exitcode))
             return future
         if ok:
             future.set_result(value)
@@ -252,9 +252,9 @@ class OneProcessPool:
         return future
 
     def death(self, error: BaseException) -> str | None:
-        if not isinstance(error, WorkerDied):
+        if not isinstance(error, _WorkerDied):
             return None
-        return _died(iter([] if error.exitcode is None else [error.exitcode]))
+        return _died([] if error.exitcode is None else [error.exitcode])
 
     def close(self, kill: bool = False) -> None:
         """End the worker at once, ``kill`` or not: :meth:`submit` waits for each task, so
@@ -566,12 +566,9 @@ def checking_process() -> Iterator[None]:
     token = _CHECKER.set(pool)
     try:
         yield
-    except BaseException:
-        pool.close(kill=True)
-        raise
     finally:
         _CHECKER.reset(token)
-    pool.close()
+        pool.close()
 
 
 @contextmanager
