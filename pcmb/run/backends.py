@@ -10,7 +10,6 @@ validate``), one short-lived worker process (:class:`OneProcessPool`).
 
 from __future__ import annotations
 
-import asyncio
 import atexit
 import logging
 import os
@@ -279,6 +278,8 @@ def _greet_scheduler(address: str, key: str) -> None:
     waits forever. So the scheduler is asked who it is (distributed's ``rpc``) under a deadline
     first, in a thread of its own (the caller may be running an event loop).
     """
+    import asyncio  # here: 30 ms of import that only a scheduler address needs
+
     import distributed
 
     # The client's TLS settings of the dask config, as distributed.Client takes them.
