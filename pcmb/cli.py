@@ -562,9 +562,14 @@ def _dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.command == "run":
         return _run(args, argv)
     if args.command == "validate":
-        from pcmb.config.schema import load_config
+        from pcmb.run.backends import checking_process
 
-        print(_summary(load_config(args.config), args.address))
+        # One worker process builds and checks the model (started first: it starts while
+        # this process reads the config); no pool, since nothing runs.
+        with checking_process():
+            from pcmb.config.schema import load_config
+
+            print(_summary(load_config(args.config), args.address))
     elif args.command == "inspect":
         from pcmb.sweep.table import is_sweep_file, read_sweep, summary
 

@@ -49,7 +49,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.result import Status, StudyResult, WarningRecord
-from pcmb.run.backends import BACKENDS, Pool, checking_backend, open_pool
+from pcmb.run.backends import BACKENDS, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     Layout,
     ModelFacts,
@@ -560,8 +560,8 @@ class Study:
         Parameters
         ----------
         pool:
-            Workers to build it in (default: the kept workers that check a config, see
-            :func:`pcmb.run.backends.checking_backend`).
+            Workers to build it in (default: the workers that check a config, see
+            :func:`pcmb.run.backends.checking_pool`).
 
         Raises
         ------
@@ -573,7 +573,7 @@ class Study:
         """
         if pool is None:
             # The workers that checked the config build it (or have it built already).
-            with open_pool(checking_backend(self.backend), self.jobs) as own:
+            with checking_pool(self.backend, self.jobs) as own:
                 return self.check_model(own)
         return self._outputs(describe_model(self.model_factory, pool))
 

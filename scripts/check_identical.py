@@ -4,6 +4,7 @@ Usage::
 
     python scripts/check_identical.py save BASELINE_DIR     # run all configs, keep the files
     python scripts/check_identical.py check BASELINE_DIR    # run again, compare bit for bit
+    python scripts/check_identical.py check BASELINE_DIR quarter_car   # only these configs
 
 Only the public command line is used (``pcmb run CONFIG -o FILE``), so the script checks
 the whole path a user takes. Every numeric dataset under ``/`` is compared byte for byte;
@@ -26,10 +27,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def run_all(folder: Path) -> dict[str, Path]:
+def run_all(folder: Path, names: list[str]) -> dict[str, Path]:
+    """Run the configs of ``configs/`` named in ``names`` (every one when empty) into ``folder``."""
     folder.mkdir(parents=True, exist_ok=True)
     written = {}
-    for config in sorted((ROOT / "configs").glob("*.yaml")):
+    configs = sorted((ROOT / "configs").glob("*.yaml"))
+    unknown = set(names) - {config.stem for config in configs}
+    if unknown:
+        sys.exit(f"no such config in configs/: {', '.join(sorted(unknown))}")
+    for config in configs:
+        if names and config.stem not in names:
+            continue
         target = folder / f"{config.stem}.h5"
         command = ["pcmb", "run", str(config), "-o", str(target), "--quiet"]
         done = subprocess.run(command, capture_output=True, text=True, check=False)
@@ -69,14 +77,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("action", choices=["save", "check"])
     parser.add_argument("baseline", type=Path)
+    parser.add_argument("configs", nargs="*", help="config names (file stems); default: all")
     args = parser.parse_args()
     if args.action == "save":
-        for stem, path in run_all(args.baseline).items():
+        for stem, path in run_all(args.baseline, args.configs).items():
             print(f"saved {stem}: {len(datasets(path))} datasets")
         return 0
     failed = 0
     with tempfile.TemporaryDirectory() as scratch:
-        for stem, path in run_all(Path(scratch)).items():
+        for stem, path in run_all(Path(scratch), args.configs).items():
             baseline = args.baseline / f"{stem}.h5"
             count = len(datasets(path))
             if not baseline.is_file():

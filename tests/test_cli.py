@@ -56,6 +56,54 @@ def test_validate_prints_a_summary_and_runs_nothing(tmp_path, linear_study, caps
     assert not (tmp_path / "out.h5").exists()
 
 
+BUILD_MARKER_MODEL = """
+import os
+
+import numpy as np
+
+
+class Marked:
+    outputs = ("y",)
+
+    def __init__(self, a=1.0, marker=""):
+        self.parameters = {"a": a}
+        with open(marker, "a") as file:
+            file.write(f"{os.getpid()}\\n")
+
+    def simulate(self, params, times):
+        return {"y": np.asarray(params["a"], float)[:, None] * times}
+"""
+
+
+def test_validate_builds_the_model_once_in_one_worker_process_without_a_pool(tmp_path):
+    """pcmb validate checks the config and the study in one short-lived worker process, where
+    the model is built once; pcmb's own process starts no loky pool (never imports joblib)."""
+    (tmp_path / "marked.py").write_text(BUILD_MARKER_MODEL)
+    marker = tmp_path / "built"
+    config = tmp_path / "marked.yaml"
+    config.write_text(
+        "name: marked\n"
+        "model: {kind: python, entry: marked.py:Marked, params: {a: 1.0, marker: MARKER}}\n"
+        "time: {start: 0.0, stop: 1.0, points: 3}\n"
+        "inputs: {a: {dist: uniform, low: 1.0, high: 2.0}}\n"
+        "method: {kind: collocation, order: 2}\n"
+        "execution: {jobs: 2, backend: loky}\n".replace("MARKER", f"'{marker}'")
+    )
+    code = (
+        "import os, sys\n"
+        "from pcmb.cli import main\n"
+        f"assert main(['validate', {str(config)!r}]) == 0\n"
+        "print(os.getpid(), 'joblib' in sys.modules)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    pid, joblib = done.stdout.split()[-2:]
+    built = marker.read_text().split()
+    assert len(built) == 1 and built[0] != pid, built
+    assert joblib == "False"
+
+
 def test_schema_is_json(capsys):
     assert main(["schema"]) == 0
     schema = json.loads(capsys.readouterr().out)

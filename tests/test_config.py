@@ -436,6 +436,25 @@ def test_broken_config_names_file_line_and_key(old, new, path, marker, fragment)
     assert any(entry.startswith(prefix) and fragment in entry for entry in lines), lines
 
 
+@pytest.mark.parametrize(
+    ("old", "new", "path"),
+    [
+        # uniform: the range fits a float but its midpoint does not
+        ("k: {dist: uniform, low: 1.5, high: 2.5}", "k: {dist: uniform, low: 1.0e+308, "
+         "high: 1.5e+308}", "inputs.k"),
+        # normal: the nodes of order 3 fit, those of a swept order 8 (out to 4.5 std) do not
+        ("std: 1e-1}", "std: 5.0e+307}\nsweep: {methods: [{kind: collocation, order: [2, 8]}]}",
+         "sweep.methods[0].inputs.y0"),
+    ],
+    ids=["uniform-midpoint", "swept-normal"],
+)  # fmt: skip
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # numpy's, on the way
+def test_inputs_whose_values_overflow_at_some_node_are_refused(old, new, path):
+    with pytest.raises(ConfigError) as exc:
+        load(BASE.replace(old, new))
+    assert f": {path}: " in str(exc.value) and "not a finite number" in str(exc.value)
+
+
 def test_every_problem_is_reported_at_once():
     text = BASE.replace("jobs: 2", "jobs: 0").replace("low: 1.5", "low: x")
     text = text.replace("decay.h5", "decay.nc")

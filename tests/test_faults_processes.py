@@ -168,6 +168,53 @@ def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
         pcmb.stderr.close()
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 semantics of Linux")
+def test_kill_9_of_pcmb_validate_leaves_nothing_of_the_model_running(tmp_path: Path) -> None:
+    """pcmb validate builds the model in one worker process of its own: killed while the
+    model's constructor waits for a program, pcmb leaves neither that process nor the
+    program running."""
+    marker = _marker()
+    (tmp_path / "slow_build.py").write_text(
+        "import subprocess\n\n\nclass SlowBuild:\n    outputs = ('y',)\n\n"
+        "    def __init__(self, a=1.0):\n"
+        f"        subprocess.run(['sleep', '{marker}'], check=True)\n\n"
+        "    def simulate(self, params, times):\n        raise NotImplementedError\n"
+    )
+    config = _config(tmp_path, "kind: python\nentry: slow_build.py:SlowBuild\nparams: {a: 1.0}\n")
+    pcmb = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "validate", str(config)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    started: list[psutil.Process] = []
+    try:
+        deadline = time.monotonic() + 120
+        while not _marked(marker):  # the model's constructor is in its program
+            assert pcmb.poll() is None, pcmb.stderr.read()
+            assert time.monotonic() < deadline, "the model's program did not start in time"
+            time.sleep(0.05)
+        started = psutil.Process(pcmb.pid).children(recursive=True)
+        assert {p.pid for p in _marked(marker)} <= {p.pid for p in started}
+        os.kill(pcmb.pid, signal.SIGKILL)
+        pcmb.wait(timeout=10)
+        deadline = time.monotonic() + GRACE
+        while (left := _alive(started + _marked(marker))) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        described = [(p.pid, " ".join(p.cmdline())) for p in left if p.is_running()]
+        assert left == [], f"still alive {GRACE:g} s after pcmb was killed: {described}"
+    finally:
+        for process in _alive(started + _marked(marker)):
+            with contextlib.suppress(psutil.NoSuchProcess):
+                process.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(pcmb.pid, signal.SIGKILL)
+        pcmb.wait()
+        pcmb.stderr.close()
+
+
 # -- a script whose interpreter is missing --------------------------------------------------
 
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -111,6 +111,12 @@ class Distribution(ABC):
         )
         return f"{name}({', '.join(shown)})"
 
+    @property
+    def finite_at_nodes(self) -> bool:
+        """Whether θ = T(ξ) is a finite number at every node of any rule, known without the
+        nodes; False when that is not known (then only the nodes tell)."""
+        return False
+
     def expectation(self) -> float:
         """E[θ]."""
         return float(self.physical.mean())
@@ -131,9 +137,22 @@ class Distribution(ABC):
 class _Affine(Distribution):
     """θ = shift + scale · ξ."""
 
+    #: The largest |ξ| of the germ's support, when it is bounded.
+    _germ_reach: ClassVar[float | None] = None
+
     @property
     @abstractmethod
     def _shift_scale(self) -> tuple[float, float]: ...
+
+    @property
+    def finite_at_nodes(self) -> bool:
+        """On a bounded germ, every node lies within twice its reach (within it, but for
+        rounding): twice that again keeps |shift| + |scale ξ| and its rounding clear of
+        overflow."""
+        if self._germ_reach is None:
+            return False
+        shift, scale = self._shift_scale
+        return bool(np.isfinite(abs(shift) + 4.0 * self._germ_reach * abs(scale)))
 
     def to_physical(self, xi: ArrayLike) -> NDArray[np.float64]:
         shift, scale = self._shift_scale
@@ -153,6 +172,7 @@ class _Affine(Distribution):
 class Uniform(_Affine):
     """θ ~ U[low, high]; germ U[-1, 1], Legendre chaos."""
 
+    _germ_reach: ClassVar[float | None] = 1.0
     low: float
     high: float
 
@@ -185,6 +205,7 @@ class Beta(_Affine):
     ``Beta(alpha=b + 1, beta=a + 1)``; a = b = 0 is the uniform case.
     """
 
+    _germ_reach: ClassVar[float | None] = 1.0
     alpha: float
     beta: float
     low: float

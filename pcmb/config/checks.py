@@ -65,7 +65,9 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
                 f"{runs * config.time.points:.3g} values per output, more than {MAX_VALUES:.0e}"
             ),
         )
-    else:  # a design of a size to run: its nodes are made now, as the run will make them
+    elif not all(d.finite_at_nodes for d in config.distributions):
+        # A design of a size to run, with inputs whose values only its nodes tell: the nodes
+        # are made now, as the run will make them.
         for name, message in overflowing_inputs(design.nodes(), config.input_names):
             yield f"inputs.{name}", message
 
@@ -136,13 +138,12 @@ def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
     check the inputs, the analysis and the time grid against what it says of itself; with
     ``check_sweep``, also the sweep's intrusive settings against the model's polynomial form."""
-    from pcmb.run.backends import checking_backend, open_pool
+    from pcmb.run.backends import checking_pool
     from pcmb.run.executor import describe_model, run_in_worker
 
     # A model is only ever built in a worker process, here too: its crash is not pcmb's.
-    backend = checking_backend(config.execution.backend)
     try:
-        with open_pool(backend, config.execution.jobs) as pool:
+        with checking_pool(config.execution.backend, config.execution.jobs) as pool:
             factory = config.model_factory()
             facts = describe_model(factory, pool, config.times, tuple(config.inputs))
             # An intrusive method checks the model's polynomial form where the model lives.

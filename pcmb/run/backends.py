@@ -3,21 +3,24 @@
 
 :data:`BACKENDS` maps ``execution.backend`` to its pool class; the config schema and the
 command line take their choices from it. :func:`open_pool` hands one to a campaign; loky pools
-are started early (:func:`warm_up`) and kept warm between campaigns.
+are started early (:func:`warm_up`) and kept warm between campaigns. A model is checked in
+:func:`checking_pool`: the kept loky workers, or, within :func:`checking_process` (``pcmb
+validate``), one short-lived worker process (:class:`OneProcessPool`).
 """
 
 from __future__ import annotations
 
-import asyncio
 import atexit
 import logging
 import os
 import re
+import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, nullcontext
+from contextvars import ContextVar
 from typing import Any, Protocol, TypeVar
 
 from pcmb.errors import ClusterError, ConfigProblem, MissingDependencyError, UsageError
@@ -32,7 +35,10 @@ __all__ = [
     "DaskPool",
     "InProcessPool",
     "LokyPool",
+    "OneProcessPool",
     "Pool",
+    "checking_pool",
+    "checking_process",
     "default_workers",
     "describe_cluster",
     "open_pool",
@@ -139,17 +145,122 @@ class LokyPool:
         if not isinstance(error, TerminatedWorkerError):
             return None
         # loky reports e.g. "The exit codes of the workers are {SIGSEGV(-11)}" or "{EXIT(7)}".
-        codes = re.findall(r"([A-Z]+)\((-?\d+)\)", str(error).partition("exit codes")[2])
-        causes = [
-            f"signal {-int(code)}, {name}" if int(code) < 0 else f"exit code {code}"
-            for name, code in codes
-        ]
-        return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
+        codes = re.findall(r"[A-Z]+\((-?\d+)\)", str(error).partition("exit codes")[2])
+        return _died([int(code) for code in codes])
 
     def close(self, kill: bool = False) -> None:
         if kill:
             self._settle()
         self._executor.shutdown(wait=not kill, kill_workers=kill)
+
+
+def _died(codes: Iterable[int]) -> str:
+    """The message of a worker death, from exit codes (negative: the signal that killed it)."""
+    causes = [
+        f"signal {-code}, {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+        for code in codes
+    ]
+    return f"worker process died ({'; '.join(causes) or 'cause unknown'})"
+
+
+class _WorkerDied(Exception):
+    """The worker process of a :class:`OneProcessPool` ended while it ran a task."""
+
+    def __init__(self, exitcode: int | None) -> None:
+        super().__init__(exitcode)
+        self.exitcode = exitcode
+
+
+def _serve(connection: Any, parent: int, environment: dict[str, str]) -> None:
+    """The worker of a :class:`OneProcessPool`: run each task received, send back its result
+    or its exception, until the pool closes the connection."""
+    os.environ.update(environment)  # before any native library loads
+    die_with_parent(parent)
+    import pickle
+
+    _warm_up()
+    # The designs whose checks run here too (Galerkin's polynomial form), while the caller
+    # reads the config.
+    import pcmb.designs  # noqa: F401
+
+    while True:
+        try:
+            fn, args = pickle.loads(connection.recv_bytes())
+        except (EOFError, KeyboardInterrupt):  # closed, or the user's Ctrl-C while idle
+            return
+        try:
+            reply: tuple[bool, Any] = (True, fn(*args))
+        except BaseException as error:  # the caller's to raise, as a loky worker does
+            reply = (False, error)
+        try:
+            connection.send(reply)
+        except Exception as error:  # an unpicklable result or exception
+            connection.send((False, TypeError(f"cannot send the task's result back: {error}")))
+
+
+class OneProcessPool:
+    """One worker process, started at once, that runs its tasks one at a time: what checking a
+    model needs, without the import and the workers of a loky pool.
+
+    The process is a fresh interpreter (multiprocessing's ``spawn``), tagged and dying with
+    this process as loky's workers do (:mod:`pcmb.run.lifeline`). :meth:`submit` waits for
+    the task, so an interrupt meanwhile reaches the caller at once.
+    """
+
+    slots = 1
+    startup_seconds = 1.0
+    kills = True
+
+    def __init__(self) -> None:
+        self._process: Any = None
+        self.rebuild()
+
+    def rebuild(self) -> None:
+        import multiprocessing
+
+        if self._process is not None:
+            self.close(kill=True)
+        context = multiprocessing.get_context("spawn")
+        self._connection, theirs = context.Pipe()
+        environment = {**dict.fromkeys(THREAD_LIMITS, str(os.cpu_count() or 1)), **tag()}
+        self._process = context.Process(
+            target=_serve, args=(theirs, os.getpid(), environment), name="pcmb-worker"
+        )
+        self._process.start()
+        theirs.close()
+
+    def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
+        from multiprocessing.connection import wait
+
+        import cloudpickle
+
+        future: Future[_T] = Future()
+        try:
+            self._connection.send_bytes(cloudpickle.dumps((fn, args)))
+            # The reply, or the end of the process: whichever comes first.
+            wait([self._connection, self._process.sentinel])
+            ok, value = self._connection.recv()
+        except (EOFError, OSError):  # the process ended before it replied
+            self._process.join()
+            future.set_exception(_WorkerDied(self._process.exitcode))
+            return future
+        if ok:
+            future.set_result(value)
+        else:
+            future.set_exception(value)
+        return future
+
+    def death(self, error: BaseException) -> str | None:
+        if not isinstance(error, _WorkerDied):
+            return None
+        return _died([] if error.exitcode is None else [error.exitcode])
+
+    def close(self, kill: bool = False) -> None:
+        """End the worker at once, ``kill`` or not: :meth:`submit` waits for each task, so
+        it is idle now, with nothing to finish."""
+        self._connection.close()
+        self._process.kill()
+        self._process.join()
 
 
 #: Seconds pcmb waits for a dask scheduler's address to accept a connection; the scheduler
@@ -167,6 +278,8 @@ def _greet_scheduler(address: str, key: str) -> None:
     waits forever. So the scheduler is asked who it is (distributed's ``rpc``) under a deadline
     first, in a thread of its own (the caller may be running an event loop).
     """
+    import asyncio  # here: 30 ms of import that only a scheduler address needs
+
     import distributed
 
     # The client's TLS settings of the dask config, as distributed.Client takes them.
@@ -441,10 +554,35 @@ def warm_up(jobs: int | None = None, tasks: int | None = None) -> None:
         _KEPT[workers] = LokyPool(jobs, workers)
 
 
-def checking_backend(backend: str) -> str:
-    """The backend that builds a model to check it: this process for ``inprocess``, else the
-    kept loky workers (the ones a loky run then uses; no dask cluster is started for a check)."""
-    return "inprocess" if backend == "inprocess" else "loky"
+#: The worker process of the innermost :func:`checking_process`, if one is open.
+_CHECKER: ContextVar[OneProcessPool | None] = ContextVar("pcmb_checker", default=None)
+
+
+@contextmanager
+def checking_process() -> Iterator[None]:
+    """While open, :func:`checking_pool` builds models in one worker process, started now (so
+    that it starts while the caller reads the config) and ended on exit: for a command that
+    checks a model and then runs nothing, ``pcmb validate``."""
+    pool = OneProcessPool()
+    token = _CHECKER.set(pool)
+    try:
+        yield
+    finally:
+        _CHECKER.reset(token)
+        pool.close()
+
+
+@contextmanager
+def checking_pool(backend: str, jobs: int | None = None) -> Iterator[Pool]:
+    """Where a model of a study on ``backend`` is built to check it: this process for
+    ``inprocess``; else the worker of :func:`checking_process` when one is open, or the kept
+    loky workers (the ones a loky run then uses; no dask cluster is started for a check)."""
+    checker = _CHECKER.get()
+    if backend != "inprocess" and checker is not None:
+        yield checker
+        return
+    with open_pool("inprocess" if backend == "inprocess" else "loky", jobs) as pool:
+        yield pool
 
 
 @contextmanager
