@@ -62,6 +62,7 @@ def _per_node_psd(values, window):
     return psd
 
 
+@pytest.mark.slow
 def test_spectrum_matches_quadrature_of_per_node_psds(stored):
     result, loaded, window = stored
     per_node = _per_node_psd(result.values["x"], window)

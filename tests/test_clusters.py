@@ -117,6 +117,7 @@ def _same_result(a: Path | pcmb.StudyResult, b: Path | pcmb.StudyResult) -> None
             ), (name, statistic)
 
 
+@pytest.mark.slow
 def test_run_on_the_cluster_matches_the_run_in_process(scheduler, linear_study, tmp_path, capsys):
     config = linear_study(order=2)
     on_cluster, here = tmp_path / "cluster.h5", tmp_path / "here.h5"
@@ -153,6 +154,7 @@ def _refused(argv: list[str], capsys) -> str:
     return err
 
 
+@pytest.mark.slow
 def test_nothing_listening_at_the_address_exits_2(linear_study, capsys):
     config = linear_study(order=2)
     address = f"tcp://127.0.0.1:{_free_port()}"
@@ -162,6 +164,7 @@ def test_nothing_listening_at_the_address_exits_2(linear_study, capsys):
     assert not (config.parent / "out.h5.journal").exists()
 
 
+@pytest.mark.slow
 def test_a_port_that_is_not_dask_is_refused_by_validate(linear_study, capsys):
     with socket.socket() as silent:  # accepts connections, never says a word
         silent.bind(("127.0.0.1", 0))

@@ -328,6 +328,7 @@ def _foreign_h5(path: Path) -> bytes:
     return path.read_bytes()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("make", [_foreign_h5, lambda p: (p.write_bytes(b"notes"), b"notes")[1]])
 def test_a_foreign_file_at_the_output_is_not_overwritten(
     tmp_path, linear_study, capsys, make

@@ -57,6 +57,7 @@ def _pcmb(*args: str) -> tuple[int, str]:
     return process.returncode, process.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["validate", "run"])
 def test_uniform_bounds_whose_range_overflows_are_refused_at_the_input(
     tmp_path: Path, command: str
@@ -69,6 +70,7 @@ def test_uniform_bounds_whose_range_overflows_are_refused_at_the_input(
     assert not (tmp_path / "result.h5.journal").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["validate", "run"])
 def test_an_input_whose_nodes_overflow_is_refused_at_the_input(
     tmp_path: Path, command: str
@@ -81,6 +83,7 @@ def test_an_input_whose_nodes_overflow_is_refused_at_the_input(
     assert not (tmp_path / "result.h5.journal").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "covariance",
     [
@@ -104,6 +107,7 @@ def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
     assert "Traceback" not in stderr and "zero-size array" not in stderr, stderr
 
 
+@pytest.mark.slow
 def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
     tmp_path: Path,
 ) -> None:
@@ -118,6 +122,7 @@ def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
     assert "more than the 11 points of the grid" in stderr and "runs" not in stderr, stderr
 
 
+@pytest.mark.slow
 def test_a_run_count_beyond_the_floats_is_reported_not_a_crash(tmp_path: Path) -> None:
     process = (
         "r: {process: kl, covariance: {kind: exponential, sigma: 1.0, length: 1.0}, "

@@ -103,6 +103,7 @@ def _calls(folder: Path) -> list[float]:
     return [float(line) for line in (folder / "calls.log").read_text().split()]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["scalar", "empty", "none", "row"])
 def test_a_protocol_break_at_one_node_aborts_keeping_the_finished_nodes(
     tmp_path: Path, how: str
@@ -128,6 +129,7 @@ def test_a_protocol_break_at_one_node_aborts_keeping_the_finished_nodes(
     np.testing.assert_allclose(result.mean("y"), 0.5 * np.linspace(0.0, 1.0, 5), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_protocol_break_at_one_node_is_regressed_over(tmp_path: Path) -> None:
     code, stderr = _run(_study(tmp_path, "scalar", "regress"))
     assert code == 0, stderr
@@ -136,6 +138,7 @@ def test_a_protocol_break_at_one_node_is_regressed_over(tmp_path: Path) -> None:
     assert result.status[ORDER] == Status.FAILED
 
 
+@pytest.mark.slow
 def test_a_protocol_break_at_every_node_is_a_model_error(tmp_path: Path) -> None:
     code, stderr = _run(_study(tmp_path, "scalar", "regress", cut=-1.0))
     assert code == 3, stderr
@@ -176,6 +179,7 @@ def point(params, times):
 '''
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("entry", ["Batch", "point"])
 def test_a_complex_output_is_a_failed_node_not_its_real_part(tmp_path: Path, entry: str) -> None:
     (tmp_path / "complex_model.py").write_text(COMPLEX_MODEL)
@@ -229,6 +233,7 @@ TWICE = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("file", sorted(TWICE))
 def test_an_output_named_twice_in_its_file_is_a_failed_run(tmp_path: Path, file: str) -> None:
     (tmp_path / "writer.py").write_text(DUPLICATE_WRITER)

@@ -72,6 +72,7 @@ def test_the_chaos_core_imports_no_heavy_library_and_no_pipeline():
         assert not outside, f"{name} imports {outside}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("library", "owners"),
     [

@@ -257,6 +257,7 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     assert a.partition.size > 2 and not (tmp_path / "cut.h5.journal").exists()
 
 
+@pytest.mark.slow
 def test_the_chaotic_lorenz_case_is_not_reported_as_fixed(tmp_path):
     # configs/lorenz_chaotic.yaml with elements: auto (order 2, a coarser grid and looser
     # tolerances to keep it fast): the ensemble spreads over the attractor, splitting only

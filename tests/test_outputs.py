@@ -350,6 +350,7 @@ with open("out.csv", "w") as file:
 """
 
 
+@pytest.mark.slow
 def test_the_command_adapter_reads_its_axis_from_a_column(tmp_path):
     script = tmp_path / "sweep.py"
     script.write_text(SWEEP)

@@ -291,6 +291,7 @@ def _ink_at_the_edges(path):
     return bool(np.any(rgb[:, :2] < 0.95) or np.any(rgb[:, -2:] < 0.95))
 
 
+@pytest.mark.slow
 def test_long_labels_and_titles_stay_inside_the_figure(tmp_path):
     result = pcmb.load(_run(tmp_path, "collocation", outputs="[x]"))
     twin = pcmb.load(_run(tmp_path, "montecarlo", outputs="[x]"))
@@ -316,6 +317,7 @@ def _tick_labels(axes):
     return boxes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("decades", [0.3, 1.2, 1.9, 6.0])
 def test_sweep_log_axes_have_readable_ticks_at_every_span(decades):
     from pcmb.sweep.chart import sweep_figure

@@ -213,6 +213,7 @@ def test_a_reference_on_another_grid_is_refused(tmp_path, swept, capsys):
     assert "another time grid" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("sweep", "key", "words"),
     [

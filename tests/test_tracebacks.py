@@ -101,6 +101,7 @@ def _frame(folder: Path) -> str:
     return f'File "{folder / "helpers.py"}", line {LINE}, in rate'
 
 
+@pytest.mark.slow
 def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
     done = _pcmb("run", str(config), "--quiet")
@@ -123,6 +124,7 @@ def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(t
     assert sum(_frame(tmp_path) in found["text"] for found in kept) == 6, kept
 
 
+@pytest.mark.slow
 def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
     done = _pcmb("run", str(config), "--quiet")
@@ -145,6 +147,7 @@ def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path)
     assert "failed   and 1 more node with the same error: node 7" in inspected.stdout
 
 
+@pytest.mark.slow
 def test_a_file_without_tracebacks_still_loads(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
     assert _pcmb("run", str(config), "--quiet").returncode == 0
@@ -236,6 +239,7 @@ def test_run_nodes_keeps_the_models_frames_only(tmp_path, monkeypatch, wrapped):
     assert found.failures[1].traceback == first.traceback
 
 
+@pytest.mark.slow
 def test_a_failed_command_keeps_its_stderr_tail_and_has_no_traceback(tmp_path):
     program = tmp_path / "simulator.py"
     program.write_text(

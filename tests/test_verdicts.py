@@ -181,6 +181,7 @@ def _small_double_well(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_reliable_multi_element_result_is_never_called_not_converged(tmp_path):
     run = _pcmb("run", str(_small_double_well(tmp_path)), "--quiet", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
@@ -198,6 +199,7 @@ def test_a_reliable_multi_element_result_is_never_called_not_converged(tmp_path)
 # -- a zero variance at the initial time is a note ---------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_zero_variance_at_a_fixed_initial_state_is_recorded_not_warned(tmp_path):
     # The quarter car starts at rest whatever the terrain's amplitude: std 0 at t = 0.
     config = yaml.safe_load((ROOT / "configs" / "quarter_car.yaml").read_text())
@@ -257,6 +259,7 @@ def van_der_pol(params, times):
     return {"x": solved.y[0]}
 
 
+@pytest.mark.slow
 def test_an_analytic_response_is_told_to_raise_the_order():
     study = pcmb.Study(
         van_der_pol,
