@@ -119,21 +119,11 @@ def _config(folder: Path, model: str) -> Path:
     return config
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 semantics of Linux")
-@pytest.mark.parametrize(
-    ("study", "backend"),
-    [(_command_study, "loky"), (_python_study, "loky"), (_python_study, "dask")],
-    ids=["command", "python", "python-dask"],
-)
-def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
-    tmp_path: Path, study, backend: str
-) -> None:
-    marker = _marker()
-    config = study(tmp_path, marker)
-    config.write_text(config.read_text().replace("backend: loky", f"backend: {backend}"))
+def _kill_9_leaves_nothing(arguments: list[str], marker: str, programs: int) -> None:
+    """Start ``pcmb ARGUMENTS``, wait until ``programs`` of the model's marked programs run,
+    SIGKILL pcmb: nothing it started, its one watchdog included, is alive after GRACE."""
     pcmb = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        [sys.executable, "-m", "pcmb.cli", *arguments],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
@@ -142,7 +132,7 @@ def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
     started: list[psutil.Process] = []
     try:
         deadline = time.monotonic() + 120
-        while len(_marked(marker)) < 2:  # both workers are in their models' programs
+        while len(_marked(marker)) < programs:  # the model's programs are running
             assert pcmb.poll() is None, pcmb.stderr.read()
             assert time.monotonic() < deadline, "the models' programs did not start in time"
             time.sleep(0.05)
@@ -170,6 +160,22 @@ def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
 
 @pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 semantics of Linux")
+@pytest.mark.parametrize(
+    ("study", "backend"),
+    [(_command_study, "loky"), (_python_study, "loky"), (_python_study, "dask")],
+    ids=["command", "python", "python-dask"],
+)
+def test_kill_9_of_pcmb_leaves_no_program_of_a_model_running(
+    tmp_path: Path, study, backend: str
+) -> None:
+    marker = _marker()
+    config = study(tmp_path, marker)
+    config.write_text(config.read_text().replace("backend: loky", f"backend: {backend}"))
+    _kill_9_leaves_nothing(["run", str(config), "--quiet"], marker, programs=2)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="kill -9 semantics of Linux")
 def test_kill_9_of_pcmb_validate_leaves_nothing_of_the_model_running(tmp_path: Path) -> None:
     """pcmb validate builds the model in one worker process of its own: killed while the
     model's constructor waits for a program, pcmb leaves neither that process nor the
@@ -182,37 +188,7 @@ def test_kill_9_of_pcmb_validate_leaves_nothing_of_the_model_running(tmp_path: P
         "    def simulate(self, params, times):\n        raise NotImplementedError\n"
     )
     config = _config(tmp_path, "kind: python\nentry: slow_build.py:SlowBuild\nparams: {a: 1.0}\n")
-    pcmb = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "validate", str(config)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    started: list[psutil.Process] = []
-    try:
-        deadline = time.monotonic() + 120
-        while not _marked(marker):  # the model's constructor is in its program
-            assert pcmb.poll() is None, pcmb.stderr.read()
-            assert time.monotonic() < deadline, "the model's program did not start in time"
-            time.sleep(0.05)
-        started = psutil.Process(pcmb.pid).children(recursive=True)
-        assert {p.pid for p in _marked(marker)} <= {p.pid for p in started}
-        os.kill(pcmb.pid, signal.SIGKILL)
-        pcmb.wait(timeout=10)
-        deadline = time.monotonic() + GRACE
-        while (left := _alive(started + _marked(marker))) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        described = [(p.pid, " ".join(p.cmdline())) for p in left if p.is_running()]
-        assert left == [], f"still alive {GRACE:g} s after pcmb was killed: {described}"
-    finally:
-        for process in _alive(started + _marked(marker)):
-            with contextlib.suppress(psutil.NoSuchProcess):
-                process.kill()
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(pcmb.pid, signal.SIGKILL)
-        pcmb.wait()
-        pcmb.stderr.close()
+    _kill_9_leaves_nothing(["validate", str(config)], marker, programs=1)
 
 
 # -- a script whose interpreter is missing --------------------------------------------------
