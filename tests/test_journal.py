@@ -5,6 +5,7 @@ Whole runs killed, edited and resumed are in ``tests/test_resume.py``."""
 
 from __future__ import annotations
 
+import importlib
 import os
 import signal
 import subprocess
@@ -355,14 +356,27 @@ def test_a_command_model_brings_its_program_templates_files_and_absolute_argumen
     assert command_files(["python3", "sim.py"], [], [], tmp_path) == []  # found on PATH
 
 
-def test_a_python_entry_brings_its_file_or_its_module_file(tmp_path: Path) -> None:
+def test_a_python_entry_brings_its_file_or_its_module_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     (tmp_path / "models" / "pkg").mkdir(parents=True)
-    (tmp_path / "models" / "pkg" / "__init__.py").write_text("")
+    # A package's own code must not run in pcmb's process to find a module's file.
+    (tmp_path / "models" / "pkg" / "__init__.py").write_text("RAN = True\n")
     (tmp_path / "models" / "pkg" / "deep_module_for_fingerprints.py").write_text("")
+    entry = "pkg.deep_module_for_fingerprints:Model"
     assert python_entry_files("sim/m.py:Model", tmp_path) == [tmp_path / "sim" / "m.py"]
-    assert python_entry_files("pkg.deep_module_for_fingerprints:Model", tmp_path / "models") == [
-        tmp_path / "models" / "pkg" / "deep_module_for_fingerprints.py"
-    ]
+    monkeypatch.syspath_prepend(str(tmp_path / "models"))
+    assert python_entry_files(entry, tmp_path / "models") == []
+    assert "pkg" not in sys.modules
+    # Once imported (as in the worker that built the model), its file is known.
+    importlib.import_module("pkg.deep_module_for_fingerprints")
+    try:
+        assert python_entry_files(entry, tmp_path / "models") == [
+            tmp_path / "models" / "pkg" / "deep_module_for_fingerprints.py"
+        ]
+    finally:
+        for name in ("pkg.deep_module_for_fingerprints", "pkg"):
+            sys.modules.pop(name, None)
     assert python_entry_files("no_such_module_anywhere:Model", tmp_path) == []
     assert python_entry_files("sys:Model", tmp_path) == []  # built in: no file
 

@@ -268,24 +268,14 @@ def load_entry(entry: str, base_dir: Path) -> object:
 
 def python_entry_files(entry: str, base_dir: str | Path) -> list[Path]:
     """The file of a python entry: ``file.py:Name`` -> that file; ``pkg.mod:Name`` -> the
-    module's file (found as :func:`load_entry` imports it: ``base_dir`` first on ``sys.path``).
-
-    A module that cannot be found or has no file (built-in, namespace package) gives none.
-    """
+    module's file once it is imported (in the worker that built the model), else none:
+    finding it would import its packages, whose code must not run in pcmb's process."""
     target = entry.rpartition(":")[0]
     if not target:
         return []
     if target.endswith(".py"):
         return [(Path(base_dir) / target).resolve()]
-    module = sys.modules.get(target)
-    origin = getattr(module, "__file__", None) if module is not None else None
-    if origin is None:
-        try:
-            with _on_sys_path(Path(base_dir).resolve()):
-                spec = importlib.util.find_spec(target)
-        except (ImportError, ValueError):
-            spec = None
-        origin = spec.origin if spec is not None and spec.has_location else None
+    origin = getattr(sys.modules.get(target), "__file__", None)
     return [] if origin is None else [Path(origin).resolve()]
 
 
