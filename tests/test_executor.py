@@ -633,3 +633,12 @@ def test_a_run_killed_with_sigkill_resumes_to_identical_results(
     assert (resumed.status == Status.OK).all()
     for name in ("x", "v"):
         np.testing.assert_array_equal(resumed.values[name], oscillator_serial.values[name])
+
+
+def test_a_death_by_a_signal_python_has_no_name_for_is_still_reported() -> None:
+    from pcmb.run.backends import _died
+
+    assert _died([-11, -(signal.SIGRTMIN + 1), 3]) == (
+        f"worker process died (signal 11, SIGSEGV; signal {signal.SIGRTMIN + 1}, "
+        f"SIGRT{signal.SIGRTMIN + 1}; exit code 3)"
+    )

@@ -154,10 +154,18 @@ class LokyPool:
         self._executor.shutdown(wait=not kill, kill_workers=kill)
 
 
+def _signal_name(number: int) -> str:
+    """``SIGSEGV`` for 11; ``SIGRT35`` and the like for a signal Python has no name for."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"SIGRT{number}" if signal.SIGRTMIN <= number <= signal.SIGRTMAX else "unnamed"
+
+
 def _died(codes: Iterable[int]) -> str:
     """The message of a worker death, from exit codes (negative: the signal that killed it)."""
     causes = [
-        f"signal {-code}, {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+        f"signal {-code}, {_signal_name(-code)}" if code < 0 else f"exit code {code}"
         for code in codes
     ]
     return f"worker process died ({'; '.join(causes) or 'cause unknown'})"

@@ -38,14 +38,15 @@ import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.adapters.protocol import float_array
 from pcmb.axes import OutputAxis, axis_problems
 from pcmb.errors import (
     ConfigError,
     ConfigProblem,
     ModelDefinitionError,
+    ModelError,
     PcmbError,
     UsageError,
-    complex_output,
 )
 from pcmb.run.backends import BACKENDS, Pool, open_pool
 from pcmb.run.journal import FRESH, Journal
@@ -673,15 +674,9 @@ def _collect(result: object, layout: Layout, values: NDArray[np.float64]) -> str
         if name not in result:
             return f"the model returned no output {name!r}"
         try:
-            given = np.asarray(result[name])
-            if np.iscomplexobj(given):  # nothing may be lost but imaginary zeros
-                imaginary = np.abs(given.imag)
-                if imaginary.any():
-                    return str(complex_output(f"output {name!r}", float(np.max(imaginary))))
-                given = given.real
-            array = np.asarray(given, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            return f"output {name!r} is not a float array ({exc})"
+            array = float_array(result[name], f"output {name!r}")
+        except ModelError as error:  # not numeric, or complex: nothing may be lost
+            return str(error)
         if array.shape != (n, *shape):
             return f"output {name!r} has shape {array.shape}, expected {(n, *shape)}"
         values[:, a:b] = array.reshape(n, b - a)
@@ -753,7 +748,7 @@ class _Narrowing:
         single = {name: array[i : i + 1] for name, array in self.params.items()}
         for _ in range(1 + self.retries):
             call = _run_batch(self.model, single, self.layout, self.full)
-            if not call.messages[0]:
+            if not call.messages[0] or call.broken:  # a break of the protocol is no accident
                 break
         self.values[i], self.messages[i] = call.values[0], call.messages[0]
         self.broken[i], self.tracebacks[i] = call.broken, call.traceback
