@@ -282,12 +282,11 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.backend in (None, "loky") and args.address is None:
         warm_up(args.jobs)  # workers start while this process reads the config
 
-    from pcmb.config.schema import load_config
     from pcmb.run.executor import post_mortem
     from pcmb.run.status import failure_report
     from pcmb.study import Study
 
-    config = load_config(args.config, check_sweep=False)  # a run ignores sweep:
+    config = _load_config(args.config, check_sweep=False)  # a run ignores sweep:
     output = args.output or config.output
     if output is None:
         raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
@@ -339,10 +338,9 @@ def _sweep(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.backend in (None, "loky") and args.address is None:
         warm_up(args.jobs)
 
-    from pcmb.config.schema import load_config
     from pcmb.sweep.runner import run_sweep
 
-    config = load_config(args.config)
+    config = _load_config(args.config)
     folder = args.output
     if folder is None:
         if config.output is None:
@@ -543,21 +541,18 @@ def _inspect(path: str) -> str:
     return "\n".join(lines)
 
 
+def _load_config(path: str, **options: bool):
+    """The config at ``path`` (:func:`pcmb.config.schema.load_config`), read with one native
+    thread (:mod:`pcmb.run.threads`): workers start meanwhile, and a random process's
+    eigen-solve would otherwise spin a BLAS thread on every core they need."""
+    from pcmb.config.schema import load_config
+    from pcmb.run.threads import one_thread_here
+
+    with one_thread_here():
+        return load_config(path, **options)
+
+
 def _command(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """Run the parsed command; its exit code. While a command's workers take the cores,
-    this process keeps one native thread (:mod:`pcmb.run.threads`)."""
-    if (
-        args.command in ("run", "validate", "sweep")
-        and getattr(args, "backend", None) != "inprocess"
-    ):
-        from pcmb.run.threads import one_thread_here
-
-        with one_thread_here():
-            return _dispatch(args, argv)
-    return _dispatch(args, argv)
-
-
-def _dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the parsed command; its exit code."""
     if args.command == "run":
         return _run(args, argv)
@@ -567,9 +562,7 @@ def _dispatch(args: argparse.Namespace, argv: Sequence[str]) -> int:
         # One worker process builds and checks the model (started first: it starts while
         # this process reads the config); no pool, since nothing runs.
         with checking_process():
-            from pcmb.config.schema import load_config
-
-            print(_summary(load_config(args.config), args.address))
+            print(_summary(_load_config(args.config), args.address))
     elif args.command == "inspect":
         from pcmb.sweep.table import is_sweep_file, read_sweep, summary
 

@@ -9,6 +9,7 @@ import pytest
 from threadpoolctl import threadpool_info
 
 import pcmb.cli
+from pcmb.errors import UsageError
 from pcmb.run.threads import THREAD_LIMITS, one_thread_here
 
 
@@ -35,21 +36,21 @@ def test_one_thread_while_inside_and_everything_restored_after(several_threads, 
     assert os.environ["MKL_NUM_THREADS"] == "3" and "OPENBLAS_NUM_THREADS" not in os.environ
 
 
-@pytest.mark.parametrize(
-    ("command", "bounded"), [("run", True), ("validate", True), ("sweep", True), ("inspect", False)]
-)
-def test_commands_that_start_workers_keep_one_thread(
-    several_threads, monkeypatch, command, bounded
-):
+@pytest.mark.parametrize("command", ["run", "validate", "sweep"])
+def test_commands_read_their_config_with_one_thread(several_threads, monkeypatch, command):
     seen = {}
 
-    def dispatch(args, argv):
+    def load_config(path, **options):
         seen["threads"] = _most_threads()
-        return 0
+        raise UsageError("stop here")
 
-    monkeypatch.setattr(pcmb.cli, "_dispatch", dispatch)
-    assert pcmb.cli.main([command, "some.yaml" if command != "inspect" else "some.h5"]) == 0
-    assert (seen["threads"] == 1) == bounded
+    monkeypatch.setattr("pcmb.config.schema.load_config", load_config)
+    assert (
+        pcmb.cli.main([command, "some.yaml", *(["--backend", "inprocess"] * (command == "run"))])
+        == 2
+    )
+    assert seen["threads"] == 1
+    assert _most_threads() > 1  # and the whole process again afterwards
 
 
 @pytest.mark.parametrize(("backend", "bounded"), [("loky", True), ("inprocess", False)])
