@@ -74,14 +74,15 @@ def test_anisotropic_function_refines_the_inputs_that_matter(tolerance):
     assert result.design.label == f"adaptive sparse grid to {tolerance:g}, {result.n_nodes} runs"
     assert fit.estimate <= tolerance and fit.history[-1, 0] == result.n_nodes
     assert not [w for w in result.warnings if w.code == "adaptive-budget"]
-    # Honest: the error of the mean and std (relative to the std) is what the tolerance asks
-    # for, neither 10x above it nor 100x below, and the estimate is never 10x over-confident.
+    # Honest: the estimate is never 10x over-confident (so, as it meets the tolerance, the
+    # error is at most 10x above it), and the error is not 100x below what was asked.
     std = np.sqrt(EXACT_VARIANCE)
     true = max(abs(result.mean("y")[0] - EXACT_MEAN), abs(result.std("y")[0] - std)) / std
-    assert tolerance / 100 <= true <= 10 * tolerance and true <= 10 * fit.estimate
+    assert tolerance / 100 <= true <= 10 * fit.estimate
     error = abs(result.std("y")[0] ** 2 / EXACT_VARIANCE - 1)
-    # The important input is refined most; the one that does not matter adds nothing (its
-    # axis is probed, as a vanishing surplus may hide interactions, but never matters).
+    # The important input is refined most and matters most; the one with rate 0 matters not
+    # at all (its axis is probed, as a vanishing surplus may hide interactions: its level
+    # says nothing, its importance does).
     assert fit.levels[0] == fit.levels.max() > fit.levels.min()
     assert np.argmax(fit.importance) == 0 and fit.importance[-1] < 1e-12
     # Fewer runs than the isotropic grid of equal accuracy.
@@ -107,8 +108,8 @@ def test_the_estimate_is_within_ten_times_the_true_error_of_mean_and_std(toleran
     estimate = result.adaptive.estimate
     assert estimate == result.adaptive.history[-1, 1] <= tolerance
     assert error / 10 <= estimate <= 10 * error
-    # The tolerance means the error: within 10x above it, and not 100x below.
-    assert tolerance / 100 <= error <= 10 * tolerance
+    # So the error is at most 10x the tolerance; and it is not 100x below what was asked.
+    assert tolerance / 100 <= error
     assert not [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
 
 
