@@ -8,9 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
-from pcmb.run.status import NodeFailure, failure_report
+if TYPE_CHECKING:
+    from pcmb.run.status import NodeFailure
+
 
 #: Exit codes of the command line, by kind of outcome.
 EXIT_OK, EXIT_UNEXPECTED, EXIT_INVALID, EXIT_MODEL = 0, 1, 2, 3
@@ -155,6 +157,8 @@ class ModelRunError(PcmbError):
     def __init__(self, failures: Sequence[NodeFailure], message: str | None = None):
         self.failures = tuple(failures)
         lines = [message or f"the model failed at {len(self.failures)} node(s):"]
+        from pcmb.run.status import failure_report  # the base of every error stays a leaf
+
         lines += failure_report(self.failures, "  ")
         super().__init__("\n".join(lines))
 

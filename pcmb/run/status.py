@@ -13,6 +13,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from pcmb.wording import plural
+
 __all__ = ["ModelTraceback", "NodeFailure", "Status", "failure_report"]
 
 
@@ -120,9 +122,8 @@ def failure_report(failures: Sequence[NodeFailure], label: str = "") -> list[str
             text = first.traceback.text.rstrip("\n")
             lines += [indent + line if line else "" for line in text.splitlines()]
         if others:
-            nodes = "node" if len(others) == 1 else "nodes"
             lines.append(
-                f"{label}and {len(others)} more {nodes} with the same error: "
+                f"{label}and {plural(len(others), 'more node', 'more nodes')} with the same error: "
                 + ", ".join(other.node for other in others)
             )
     return lines
