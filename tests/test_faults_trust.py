@@ -55,20 +55,10 @@ def pcmb_cli(folder: Path, *args: str, env: dict[str, str] | None = None):
     )
 
 
-@pytest.fixture(scope="module")
-def oscillator_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """DampedOscillator.fmu, built by pythonfmu (skips without a binary for this platform)."""
-    pytest.importorskip("fmpy", reason="the FMU tests need fmpy")
-    pythonfmu = pytest.importorskip("pythonfmu", reason="the test FMUs are built by pythonfmu")
-    from fmpy import platform, supported_platforms
-
-    dest = tmp_path_factory.mktemp("fmu")
-    built = Path(
-        pythonfmu.FmuBuilder.build_FMU(ROOT / "models" / "fmu" / "DampedOscillator.py", dest=dest)
-    )
-    if platform not in supported_platforms(str(built)):
-        pytest.skip(f"pythonfmu ships no FMU binary for this platform ({platform})")
-    return built
+@pytest.fixture
+def oscillator_fmu(fmu_dir: Path) -> Path:
+    """DampedOscillator.fmu of the session's FMUs (``fmu_dir`` in conftest.py)."""
+    return fmu_dir / "DampedOscillator.fmu"
 
 
 def edited_fmu(source: Path, dest: Path, edit: dict[str, object]) -> Path:
