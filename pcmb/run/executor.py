@@ -359,33 +359,37 @@ class _Factory:
     payload: bytes
     path: tuple[str, ...]
 
-    def build(self) -> tuple[Model, tuple[str, ...]]:
-        """The model, and the files it loaded while built (its factory's ``loaded_files``)."""
+    def build(self) -> tuple[Model, Any]:
+        """The model, and the factory that built it."""
         missing = [entry for entry in self.path if entry not in sys.path]
         sys.path.extend(missing)
         factory = cloudpickle.loads(self.payload)
-        model = factory()
-        loaded = getattr(factory, "loaded_files", None)
-        return model, tuple(str(path) for path in loaded()) if callable(loaded) else ()
+        return factory(), factory
 
 
-def _cached_model(factory: _Factory) -> tuple[Model, float, tuple[str, ...]]:
-    """The model built by ``factory`` in this thread, the seconds spent building it now, and
-    the files it loaded while built."""
+def _cached_model(factory: _Factory) -> tuple[Model, float]:
+    """The model built by ``factory`` in this thread, and the seconds spent building it now."""
     token = factory.token
     held = getattr(_MODEL_CACHE, "held", None)
     if held is not None and held[0] == token:
-        return held[1], 0.0, held[2]
+        return held[1], 0.0
     _MODEL_CACHE.held = None  # release the previous model before building the next one
     start = time.perf_counter()
     try:
-        model, loaded = _model_code(factory.build)
+        model, maker = _model_code(factory.build)
     except PcmbError:
         raise
     except Exception as exc:
         raise ModelDefinitionError(f"could not build the model: {_describe(exc)}") from exc
-    _MODEL_CACHE.held = (token, model, loaded)
-    return model, time.perf_counter() - start, loaded
+    _MODEL_CACHE.held = (token, model, maker)
+    return model, time.perf_counter() - start
+
+
+def _loaded_files() -> tuple[str, ...]:
+    """The files the model this thread holds loaded while it was built (its factory's
+    ``loaded_files``): asked when the model is described, not at every build."""
+    loaded = getattr(_MODEL_CACHE.held[2], "loaded_files", None)
+    return tuple(str(path) for path in loaded()) if callable(loaded) else ()
 
 
 @dataclass(frozen=True)
@@ -449,7 +453,7 @@ def _model_facts(
     factory: _Factory, times: NDArray[np.float64] | None, inputs: tuple[str, ...]
 ) -> ModelFacts:
     """Build (or reuse) the model in this process and describe it."""
-    model, seconds, loaded = _cached_model(factory)
+    model, seconds = _cached_model(factory)
     time_problems = () if times is None else _problems(model, "check_times", times, "time")
     input_problems = _problems(model, "check_inputs", inputs, "inputs") if inputs else ()
     offered = getattr(model, "outputs", None)
@@ -473,7 +477,7 @@ def _model_facts(
         time_problems=time_problems,
         axes=axes,
         input_problems=input_problems,
-        loaded_files=loaded,
+        loaded_files=_loaded_files(),
     )
 
 
@@ -540,7 +544,7 @@ def run_in_worker(
 
 
 def _with_model(factory: _Factory, task: Callable[..., _T], args: tuple[Any, ...]) -> _T:
-    model, _, _ = _cached_model(factory)
+    model, _ = _cached_model(factory)
     return _model_code(task, model, *args)
 
 
@@ -701,7 +705,7 @@ def _execute(
     batch would only return a NaN row, so each node runs once (``1 + retries`` times if it
     fails) and its failure keeps its message.
     """
-    model, _, _ = _cached_model(factory)
+    model, _ = _cached_model(factory)
     # Read-only views: a model that writes into its inputs fails the same way in-process and in
     # a worker, instead of corrupting the caller's arrays only when run in-process.
     params = {name: _read_only(array) for name, array in params.items()}
