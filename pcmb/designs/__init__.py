@@ -7,7 +7,11 @@ its tests.
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Mapping
+from typing import Annotated, Any
+
+from pydantic import Field, TypeAdapter
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.designs.adaptive import AdaptiveCollocation
@@ -15,12 +19,13 @@ from pcmb.designs.anisotropic import AnisotropicTensor
 from pcmb.designs.base import (
     RECORDED_ONLY,
     IntrusiveDesign,
+    MethodSection,
     MethodSettings,
     NodeDesign,
     Recovery,
     statistics_warnings,
 )
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.collocation import GRIDS, TensorCollocation
 from pcmb.designs.galerkin import Galerkin
 from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import MultiElementCollocation
@@ -35,11 +40,15 @@ __all__ = [
     "METHOD_KINDS",
     "RECORDED_ONLY",
     "IntrusiveDesign",
+    "MethodSection",
     "MethodSettings",
+    "MethodSpec",
     "NodeDesign",
     "Recovery",
     "design_key",
     "make_design",
+    "method_section",
+    "section_key",
     "statistics_warnings",
 ]
 
@@ -66,17 +75,30 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
-#: Collocation keys chosen by other keys than ``method.grid``.
-_NOT_GRIDS = ("collocation:elements", "collocation:refine")
-#: ``method.grid`` values of collocation.
-GRIDS = (
-    "tensor",
-    *(
-        key.partition(":")[2]
-        for key in DESIGNS
-        if key.startswith("collocation:") and key not in _NOT_GRIDS
-    ),
-)
+#: The ``method:`` section: one member per design family (each design's ``Settings``), tagged
+#: by ``kind``, each with only its own keys.
+MethodSpec = Annotated[
+    typing.Union[tuple(dict.fromkeys(design.Settings for design in DESIGNS.values()))],  # noqa: UP007
+    Field(discriminator="kind"),
+]
+_METHOD = TypeAdapter(MethodSpec)
+
+
+def method_section(data: Mapping[str, Any] | MethodSection) -> MethodSection:
+    """The ``method:`` section of this data (a section is returned as it is).
+
+    Raises
+    ------
+    pydantic.ValidationError
+        Data no section takes (:func:`pcmb.config.messages.schema_problems` locates it).
+    """
+    return data if isinstance(data, MethodSection) else _METHOD.validate_python(data)
+
+
+def section_key(section: MethodSection) -> str:
+    """The :data:`DESIGNS` key of a ``method:`` section, e.g. ``collocation:smolyak``."""
+    order = getattr(section, "order", None)
+    return design_key(section.settings("auto" if order == "auto" else None))
 
 
 def design_key(settings: MethodSettings) -> str:

@@ -28,20 +28,23 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import RULES, nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, find_rows
-from pcmb.designs.base import MethodSettings, Recovery
+from pcmb.config.types import PositiveInt, PositiveReal
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import AdaptiveFit, Design, WarningRecord
 
-__all__ = ["AdaptiveCollocation"]
+__all__ = ["AdaptiveCollocation", "AdaptiveSettings"]
 
 #: Share of the refinable indicators' sum a round refines (bulk marking).
 BULK = 0.5
@@ -51,6 +54,31 @@ BLIND = 1e-12
 ROUND_OFF = 1e-10
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
+
+
+class AdaptiveSettings(MethodSection):
+    """``method: {kind: adaptive, tolerance, max_runs, rule, basis}``."""
+
+    kind: Literal["adaptive"] = Field(description="how nodes are made (a registered design)")
+    tolerance: PositiveReal | None = Field(
+        default=None, description="refine until the estimated error meets it"
+    )
+    max_runs: PositiveInt | None = Field(
+        default=None, description="most runs in all (default 1000)"
+    )
+    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of every input")
+    basis: Literal["tensor"] | None = Field(
+        default=None,
+        description="tensor: raise a tensor grid one input at a time (default: a sparse grid)",
+    )
+
+    @property
+    def size_key(self) -> str:
+        return self.budget_key
+
+    @property
+    def cost_key(self) -> str:
+        return "tolerance"
 
 
 class AdaptiveCollocation:
@@ -64,6 +92,8 @@ class AdaptiveCollocation:
     and std, relative to each output's largest std; ``max_runs`` (default
     :data:`DEFAULT_MAX_RUNS`) the runs.
     """
+
+    Settings = AdaptiveSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         tolerance, max_runs, rule = settings.tolerance, settings.max_runs, settings.rule

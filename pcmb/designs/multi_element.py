@@ -41,7 +41,7 @@ from pcmb.designs.base import (
     least_squares_recovery,
     statistics_warnings,
 )
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.collocation import CollocationSettings, TensorCollocation
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["MultiElementCollocation", "decay_scores"]
@@ -78,6 +78,8 @@ class MultiElementCollocation:
     ValueError
         ``method.<key>: ...`` for settings the design cannot use.
     """
+
+    Settings = CollocationSettings
 
     def __init__(
         self,

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
 from pcmb.chaos.expansion import ChaosExpansion
@@ -18,16 +20,59 @@ from pcmb.chaos.sparse_regression import (
     minimum_samples,
     next_batch,
 )
-from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
+from pcmb.config.types import NonNegativeInt, OrderSpec, PositiveInt, PositiveReal
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRegression"]
+__all__ = ["RegressionSettings", "SparseRegression"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
 BASES = ("total", "hyperbolic")
 #: ``method.selection`` -> the ``fit`` recorded in :class:`pcmb.result.Design`.
 FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
+
+
+class RegressionSettings(MethodSection):
+    """``method: {kind: regression, samples, sampling, selection, basis, q, order, seed,
+    tolerance, max_samples}``."""
+
+    budget_key: ClassVar[str] = "max_samples"
+
+    kind: Literal["regression"] = Field(description="how nodes are made (a registered design)")
+    order: OrderSpec | None = Field(
+        default=None, description="highest order of the candidate terms (int or input -> int)"
+    )
+    basis: Literal[BASES] | None = Field(
+        default=None, description="candidate terms: hyperbolic (default) or total degree"
+    )
+    samples: PositiveInt | None = Field(default=None, description="runs of the first round")
+    seed: NonNegativeInt = Field(default=0, description="seed of the samples")
+    selection: Literal[tuple(SELECTIONS)] = Field(
+        default="lars", description="term selection of kind regression"
+    )
+    sampling: Literal[tuple(SAMPLINGS)] = Field(
+        default="sobol", description="how kind regression samples its nodes"
+    )
+    q: Annotated[float, Field(gt=0, le=1)] = Field(
+        default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
+    )
+    tolerance: PositiveReal | None = Field(
+        default=None, description="add samples until the corrected LOO error meets it"
+    )
+    max_samples: PositiveInt | None = Field(
+        default=None, description="with tolerance: most samples in all"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return self.budget_key if self.tolerance is not None else "samples"
+
+    @property
+    def cost_key(self) -> str:
+        return "samples"
+
+
 #: Worst corrected LOO error reported as a warning when no tolerance is set.
 LOO_WARNING = 1e-2
 #: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
@@ -52,6 +97,8 @@ class SparseRegression:
     after each round :meth:`more` adds samples until the worst corrected LOO error meets it or
     the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
+
+    Settings = RegressionSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         selection = getattr(settings, "selection", "lars")

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, random_nodes
+from pcmb.config.types import NonNegativeInt, OrderSpec, PositiveInt
 from pcmb.designs.base import (
+    MethodSection,
     MethodSettings,
     Recovery,
     least_squares_recovery,
@@ -17,9 +21,33 @@ from pcmb.designs.base import (
 )
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["Sampling"]
+__all__ = ["Sampling", "SamplingSettings"]
 
 FITS = ("none", "regression")
+
+
+class SamplingSettings(MethodSection):
+    """``method: {kind: montecarlo | lhs | sobol, samples, seed, fit, order}``."""
+
+    kind: Literal["montecarlo", "lhs", "sobol"] = Field(
+        description="how nodes are made (a registered design)"
+    )
+    samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
+    seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
+    fit: Literal[FITS] = Field(
+        default="none", description="regression: least-squares chaos fit on sampled nodes"
+    )
+    order: OrderSpec | None = Field(
+        default=None, description="total order of fit: regression (int or input -> int)"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return "samples"
+
+    @property
+    def cost_key(self) -> str:
+        return "samples"
 
 
 class Sampling:
@@ -28,6 +56,8 @@ class Sampling:
     Statistics are sample statistics; ``fit: regression`` adds a least-squares chaos fit of
     total order ``order`` (the largest stable one).
     """
+
+    Settings = SamplingSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.samples is None:

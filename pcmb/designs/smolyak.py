@@ -20,6 +20,7 @@ from pcmb.designs.base import (
     least_squares_recovery,
     statistics_warnings,
 )
+from pcmb.designs.collocation import CollocationSettings
 from pcmb.result import Design
 
 __all__ = ["SparseCollocation", "sparse_recovery"]
@@ -39,6 +40,8 @@ class SparseCollocation:
     of tensor rules. A grid with failed nodes is no quadrature rule: its survivors are
     refitted by (unweighted) least squares.
     """
+
+    Settings = CollocationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         level = getattr(settings, "level", None)
