@@ -32,7 +32,7 @@ from terrain_process import (
 )
 
 from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
 

@@ -31,7 +31,7 @@ from terrain_process import (
 )
 
 from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
 Law = Callable[[NDArray[np.float64], Params], NDArray[np.float64]]
@@ -158,7 +158,7 @@ class QuarterCar(StackedODEModel):
     m/s², from the equations of motion at the output times), ``z`` (terrain under the tire, m).
 
     Accuracy: rtol = 1e-10, atol = 1e-13 by default, per node whatever the batch size (see
-    :func:`pcmb.adapters.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
+    :func:`pcmb.integrate.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
     agrees with a tight separate run (DOP853, rtol = 1e-11) to within 1e-6 of each state's
     largest magnitude over the run (tests/test_models_quarter_car.py). The tolerances are
     tighter than that 1e-6 suggests because outputs come from DOP853's dense output, whose

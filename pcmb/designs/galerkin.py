@@ -98,7 +98,7 @@ class GalerkinSystem:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(d, S, T) state coefficients at ``times`` (one stacked solve of d·S unknowns)."""
-        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+        from pcmb.integrate.stacked_ode import solve_stacked  # scipy.integrate: when solving
 
         shape = (self.d, self.size)
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))

@@ -152,7 +152,7 @@ class GaussianMoments:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(R, 2, T) mean and std of every output at ``times``."""
-        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+        from pcmb.integrate.stacked_ode import solve_stacked  # scipy.integrate: when solving
 
         y0 = self.initial_state()
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))
