@@ -14,7 +14,7 @@ paper). Loaded by pcmb as ``entry: ../models/quarter_car.py:QuarterCar``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +30,10 @@ from terrain_process import (
     random_profile_form,
 )
 
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
 from pcmb.integrate.stacked_ode import StackedODEModel
+
+if TYPE_CHECKING:
+    from pcmb.designs.polynomial_form import PolynomialForm
 
 Params = Mapping[str, NDArray[np.float64]]
 Law = Callable[[NDArray[np.float64], Params], NDArray[np.float64]]
@@ -222,6 +224,9 @@ class QuarterCar(StackedODEModel):
             The MR damper (tanh), the bump terrain (a jump in time), or an uncertain input
             the dynamics are not polynomial in.
         """
+        # Imported here: pcmb.designs loads scipy, which the workers running nodes do without.
+        from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
+
         if self.damper != "linear":
             raise ValueError(f"the {self.damper} damper's force law is not polynomial")
         fixed = ["Ms", "Mu"]

@@ -14,7 +14,7 @@ from typing import Any
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
     "pcmb.integrate.stacked_ode": ["StackedODEModel", "solve_projected", "solve_stacked"],
-    "pcmb.adapters.polynomial": ["Polynomial", "PolynomialForm", "PolynomialSpace"],
+    "pcmb.designs.polynomial_form": ["Polynomial", "PolynomialForm", "PolynomialSpace"],
     "pcmb.analysis.statistics": ["AnalysisSettings", "analyse"],
     "pcmb.chaos.basis": [
         "PolynomialBasis",

@@ -20,11 +20,11 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.inputs import Distribution, Normal
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
+from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["GaussianMoments", "Linearization"]
