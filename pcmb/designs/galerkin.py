@@ -22,7 +22,6 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 
-from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.basis import PolynomialBasis, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
@@ -30,6 +29,7 @@ from pcmb.chaos.nodes import TensorGrid
 from pcmb.config.types import OrderSpec
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
+from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design
 
 __all__ = ["Galerkin", "GalerkinSettings", "GalerkinSystem"]
@@ -101,7 +101,7 @@ class GalerkinSystem:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(d, S, T) state coefficients at ``times`` (one stacked solve of d·S unknowns)."""
-        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+        from pcmb.integrate.stacked_ode import solve_stacked  # scipy.integrate: when solving
 
         shape = (self.d, self.size)
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
+from pcmb.config.checks import config_design, cross_check
 from pcmb.designs import MethodSection, MethodSpec, NodeDesign, method_section, section_key
 
 if TYPE_CHECKING:
@@ -29,6 +30,7 @@ __all__ = [
     "default_sweep",
     "plan_sweep",
     "sweep_problems",
+    "swept_methods",
 ]
 
 #: Keys a sweep entry always sets unless it gives them: held-out runs and the nominal run are
@@ -152,8 +154,6 @@ def _first(entry: Mapping[str, Any], index: int) -> tuple[str, int, dict[str, An
 
 def _design(config: StudyConfig, spec: MethodSection) -> NodeDesign:
     """The design of a method block on the config's inputs."""
-    from pcmb.config.checks import config_design
-
     return config_design(config.model_copy(update={"method": spec}))
 
 
@@ -258,11 +258,23 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
     return SweepPlan(settings, reference, None if outputs is None else tuple(outputs))
 
 
+def swept_methods(config: StudyConfig) -> Iterator[tuple[str, MethodSection]]:
+    """(key path, method) of every setting of the sweep and of its reference, when the sweep
+    itself is valid (:func:`sweep_problems` reports it otherwise); none without ``sweep:``."""
+    if config.sweep is None:
+        return
+    try:
+        plan = plan_sweep(config)
+    except ValueError:  # a bad sweep: sweep_problems reports it
+        return
+    for setting in (*plan.settings, *([plan.reference] if plan.reference else [])):
+        where = f"sweep.methods[{setting.entry}]" if setting.entry >= 0 else "sweep.reference"
+        yield where, setting.spec
+
+
 def _design_problems(
     config: StudyConfig, spec: MethodSection, prefix: str, swept: str | None, index: int
 ) -> Iterator[tuple[str, str]]:
-    from pcmb.config.checks import cross_check
-
     for path, message in cross_check(config.model_copy(update={"method": spec})):
         key = path.removeprefix("method").lstrip(".")
         head = key.split(".")[0].split("[")[0]
