@@ -464,7 +464,8 @@ def _inspect(path: str) -> str:
         "inputs   " + ", ".join(f"{n} ~ {d.law}" for n, d in named_inputs),
     ]
     design = dataclasses.asdict(result.design)
-    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
+    shown = {k: v for k, v in design.items() if v is not None and k != "label"}  # label: above
+    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in shown.items()))
     for name, found in result.processes.items():
         lines.append(
             f"process  {name}: {found.covariance.description['kind']} covariance, "

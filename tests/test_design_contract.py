@@ -61,6 +61,7 @@ def test_the_record_says_how_the_nodes_were_made_and_round_trips(design):
     record = design.record()
     nodes = design.nodes()
     assert isinstance(record, Design) and record.kind in METHOD_KINDS
+    assert record.label  # the design labels itself: nothing downstream branches on its kind
     assert Design.from_description(record.describe()) == record
     if record.samples is not None:
         assert record.samples == nodes.size

@@ -191,6 +191,7 @@ class AdaptiveCollocation:
             samples=self._grid.size,
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"adaptive sparse grid to {self.tolerance:g}, {self._grid.size} runs",
         )
 
     # -- the rounds --------------------------------------------------------------------------

@@ -34,6 +34,7 @@ __all__ = [
     "NodeDesign",
     "Recovery",
     "least_squares_recovery",
+    "order_words",
     "statistics_warnings",
 ]
 
@@ -225,6 +226,15 @@ class IntrusiveDesign(Protocol):
             The integration failed.
         """
         ...
+
+
+def order_words(orders: Sequence[int], basis: str | None) -> str:
+    """The chaos order in words: ``order 5``, ``orders 3x5`` (tensor), ``total order 4``."""
+    if basis != "tensor":
+        return f"total order {max(orders)}"
+    if len(set(orders)) == 1:
+        return f"order {orders[0]}"
+    return "orders " + "x".join(map(str, orders))
 
 
 def least_squares_recovery(

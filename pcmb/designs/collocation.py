@@ -22,6 +22,7 @@ from pcmb.designs.base import (
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
@@ -113,6 +114,7 @@ class TensorCollocation:
             basis=self.basis,
             orders=self.orders,
             fit="projection",
+            label=f"chaos {order_words(self.orders, self.basis)}",
         )
 
     def _index(self, grid: TensorGrid) -> NDArray[np.int64]:

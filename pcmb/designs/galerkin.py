@@ -27,7 +27,13 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.config.types import OrderSpec
-from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
+from pcmb.designs.base import (
+    MethodSection,
+    MethodSettings,
+    Recovery,
+    order_words,
+    statistics_warnings,
+)
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design
@@ -181,7 +187,12 @@ class Galerkin(WithoutNodes):
 
     def record(self) -> Design:
         return Design(
-            kind="galerkin", grid="none", basis=self.basis, orders=self.orders, fit="galerkin"
+            kind="galerkin",
+            grid="none",
+            basis=self.basis,
+            orders=self.orders,
+            fit="galerkin",
+            label=f"Galerkin, {order_words(self.orders, self.basis)}",
         )
 
     def index(self) -> NDArray[np.int64]:

@@ -209,7 +209,7 @@ class Linearization(WithoutNodes):
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
 
     def record(self) -> Design:
-        return Design(kind="linearization", grid="none")
+        return Design(kind="linearization", grid="none", label="linearization")
 
     def check(self, model: object, outputs: Sequence[str] | None) -> list[tuple[str, str]]:
         return form_problems(model, self.names, outputs, "linearization")

@@ -39,6 +39,7 @@ from pcmb.designs.base import (
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
 from pcmb.designs.collocation import CollocationSettings, TensorCollocation
@@ -223,6 +224,7 @@ class MultiElementCollocation:
             orders=self.orders,
             elements=self.partition.size,
             fit="projection",
+            label=f"chaos {order_words(self.orders, self.basis)}",
         )
 
     # -- recovery ---------------------------------------------------------------------------

@@ -119,11 +119,13 @@ class OrderRefinement:
         return weights
 
     def record(self) -> Design:
+        found = self._collocation(self._grid.orders[0]).record()
         return dataclasses.replace(
-            self._collocation(self._grid.orders[0]).record(),
+            found,
             samples=len(self._known),
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"{found.label} (order auto to {self.tolerance:g}, {len(self._known)} runs)",
         )
 
     def more(

@@ -180,7 +180,19 @@ class SparseRegression:
             q=self.q,
             tolerance=self.tolerance,
             max_samples=None if self.tolerance is None else self.max_samples,
+            label=self._label(),
         )
+
+    def _label(self) -> str:
+        """``LARS on hyperbolic order 5, q=0.75, 256 samples (to LOO 0.05, at most 2048)``."""
+        shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
+        label = (
+            f"{FITS[self.selection].upper()} on {self.basis} order {max(self.orders)}{shape}, "
+            f"{self._made} samples"
+        )
+        if self.tolerance is not None:
+            label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
+        return label
 
     def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
         """The next batch of nodes while the tolerance is not met, else ``None``.

@@ -17,6 +17,7 @@ from pcmb.designs.base import (
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
@@ -96,6 +97,9 @@ class Sampling:
             samples=self.samples,
             seed=self.seed,
             fit=self.fit,
+            label=self.kind
+            if self.orders is None
+            else f"{self.kind} + chaos fit, {order_words(self.orders, 'total')}",
         )
 
     def recover(

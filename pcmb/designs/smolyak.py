@@ -95,6 +95,7 @@ class SparseCollocation:
         return tuple(int(p) for p in self.grid.multi_index.max(axis=0))
 
     def record(self) -> Design:
+        rule = ", ".join(dict.fromkeys(rule.name for rule in self.grid.rules))
         return Design(
             kind=self.kind,
             grid="smolyak",
@@ -102,7 +103,8 @@ class SparseCollocation:
             orders=self.orders,
             level=self.level,
             fit="projection",
-            rule=", ".join(dict.fromkeys(rule.name for rule in self.grid.rules)),
+            rule=rule,
+            label=f"Smolyak level {self.level}, rule {rule}",
         )
 
     def recover(
