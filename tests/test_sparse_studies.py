@@ -114,8 +114,8 @@ def test_design_records_of_older_files_load_without_the_new_fields():
 @pytest.mark.parametrize(
     ("method", "key", "message"),
     [
-        ({"grid": "smolyak", "level": -1}, "level", "expected an integer >= 0"),
-        ({"method": "regression", "samples": 8, "tolerance": 0.0}, "tolerance", "must be > 0"),
+        ({"grid": "smolyak", "level": -1}, "level", "expected a value >= 0"),
+        ({"method": "regression", "samples": 8, "tolerance": 0.0}, "tolerance", "a value > 0"),
         (
             {"method": "regression", "samples": 64, "tolerance": 1e-3, "max_samples": 64},
             "max_samples",
