@@ -19,6 +19,7 @@ EXAMPLES = {
     "montecarlo": MethodSettings("montecarlo", samples=64, seed=3),
     "lhs": MethodSettings("lhs", samples=64, seed=3, fit="regression", orders=(2, 2)),
     "sobol": MethodSettings("sobol", samples=64, seed=3),
+    "halton": MethodSettings("halton", samples=50, seed=3, fit="regression", orders=(2, 2)),
     "collocation:smolyak": MethodSettings("collocation", grid="smolyak", level=2),
     "collocation:elements": MethodSettings("collocation", orders=(2, 2), elements={"a": [2.0]}),
     "regression": MethodSettings(

@@ -27,6 +27,7 @@ from pcmb.designs.base import (
 )
 from pcmb.designs.collocation import GRIDS, TensorCollocation
 from pcmb.designs.galerkin import Galerkin
+from pcmb.designs.halton import HaltonSampling
 from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import MultiElementCollocation
 from pcmb.designs.refine import OrderRefinement
@@ -65,6 +66,7 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     "montecarlo": Sampling,
     "lhs": Sampling,
     "sobol": Sampling,
+    "halton": HaltonSampling,
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
     "adaptive:tensor": AnisotropicTensor,
