@@ -279,6 +279,8 @@ class Study:
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
             raise _usage("times", "must be a non-empty increasing 1-D grid")
         self.method: MethodSection = _section("method", MethodSpec, method or DEFAULT_METHOD)
+        if isinstance(address, str):  # an address is an execution setting, checked there
+            execution, address = {**_dump(execution), "address": address}, None
         self.execution: ExecutionSpec = _section("execution", ExecutionSpec, execution or {})
         self.diagnostics: DiagnosticsSpec = _section(
             "diagnostics", DiagnosticsSpec, diagnostics or {}
@@ -862,12 +864,10 @@ class Study:
                 model_params(self.model_inputs, nodes.params),
                 self.times,
                 outputs,
-                jobs=self.execution.jobs,
-                backend=self.execution.backend,
+                execution=self.execution,
                 address=self.address,
-                chunk_size=chunk_size or self.execution.chunk_size,
+                chunk_size=chunk_size,
                 retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
-                timeout=self.execution.timeout,
                 journal=journal,
                 progress=progress,
                 stop_on_failure=self.execution.on_failure == "abort",
@@ -995,8 +995,8 @@ class Study:
             self._nominal_node(),
             self.times,
             outputs,
-            backend=self.execution.backend,
-            timeout=self.execution.timeout,
+            execution=self.execution,
+            address=self.address,
             progress=False,
             pool=pool,
             facts=facts,

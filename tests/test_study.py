@@ -185,12 +185,9 @@ def test_an_input_naming_no_model_parameter_is_rejected_before_running(tmp_path)
     assert list(tmp_path.iterdir()) == []
 
 
-def test_execution_settings_rejected_by_the_executor_leave_no_journal(tmp_path):
-    study = pcmb.Study(
-        pointwise, INPUTS, TIMES, order=1, params={"a": 2, "b": 0}, address="tcp://x:1"
-    )
-    with pytest.raises(UsageError, match="address"):
-        study.run(tmp_path / "x.h5")
+def test_execution_settings_are_checked_where_declared_before_anything_is_written(tmp_path):
+    with pytest.raises(UsageError, match=r"execution\.address: an address is only used with"):
+        pcmb.Study(pointwise, INPUTS, TIMES, params={"a": 2, "b": 0}, address="tcp://x:1")
     assert list(tmp_path.iterdir()) == []
 
 
