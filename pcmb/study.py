@@ -675,7 +675,12 @@ class Study:
                     provenance=provenance,
                     pool=own,
                 )
-        facts = describe_model(self.model_factory, pool)
+        # What the model finds wrong with the inputs or the time grid (an FMU's aliased
+        # variables, a grid it cannot step): refused before any node, as `pcmb validate` does.
+        facts = describe_model(self.model_factory, pool, self.times, tuple(self.inputs))
+        if facts.input_problems or facts.time_problems:
+            problems = [*facts.input_problems, *facts.time_problems]
+            raise UsageError([ConfigProblem(*problem) for problem in problems], source="Study")
         outputs = self._outputs(facts)
         if self.analysis is not None:
             on_time = [name for name in outputs if name not in facts.axes]
