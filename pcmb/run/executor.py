@@ -64,7 +64,7 @@ MAX_CHUNK_SIZE = 256
 _T = TypeVar("_T")
 
 
-# -- results ---------------------------------------------------------------------------------------
+# -- results ---------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ def join_runs(first: RunResult, second: RunResult) -> RunResult:
     )
 
 
-# -- chunking --------------------------------------------------------------------------------------
+# -- chunking --------------------------------------------------------------------------------
 
 
 def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int, int]]:
@@ -138,7 +138,7 @@ def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int,
     return [(start, min(start + size, n_nodes)) for start in range(0, n_nodes, size)]
 
 
-# -- tasks -----------------------------------------------------------------------------------------
+# -- tasks -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -230,7 +230,7 @@ def _wait(
     return None, death
 
 
-# -- the campaign ----------------------------------------------------------------------------------
+# -- the campaign ----------------------------------------------------------------------------
 
 
 class _Campaign:
@@ -486,7 +486,7 @@ def _run_pooled(
             lost = []
 
 
-# -- argument checks -------------------------------------------------------------------------------
+# -- argument checks -------------------------------------------------------------------------
 
 
 class Execution(Protocol):
@@ -572,7 +572,7 @@ def _check_journal(journal: Journal, n_nodes: int, layout: Layout) -> None:
         )
 
 
-# -- the entry point -------------------------------------------------------------------------------
+# -- the entry point -------------------------------------------------------------------------
 
 
 def run_nodes(
