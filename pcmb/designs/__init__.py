@@ -123,20 +123,9 @@ def make_design(inputs: Mapping[str, Distribution], settings: MethodSettings) ->
     Raises
     ------
     ValueError
-        An unknown kind or grid, or settings the design cannot use (the message starts with
-        the key).
+        Settings the design cannot use on these inputs (the message starts with the key); the
+        keys themselves were checked by their section (:data:`MethodSpec`).
     """
-    if settings.kind not in METHOD_KINDS:
-        raise ValueError(
-            f"method.kind: expected one of {', '.join(METHOD_KINDS)}, got {settings.kind!r}"
-        )
-    if settings.kind == "collocation" and settings.grid not in GRIDS:
-        raise ValueError(f"method.grid: expected one of {', '.join(GRIDS)}, got {settings.grid!r}")
-    if settings.elements is not None and settings.kind != "collocation":
-        raise ValueError(
-            "method.elements: multi-element designs are collocation (kind: collocation), "
-            f"got kind {settings.kind!r}"
-        )
     if settings.elements is not None and settings.grid != "tensor":
         raise ValueError(
             "method.elements: multi-element collocation uses tensor grids (grid: tensor)"

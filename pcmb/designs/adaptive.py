@@ -99,22 +99,6 @@ class AdaptiveCollocation:
         tolerance, max_runs, rule = settings.tolerance, settings.max_runs, settings.rule
         if tolerance is None:
             raise ValueError("method.tolerance: required key is missing (needed by kind adaptive)")
-        if not tolerance > 0:
-            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
-        if settings.orders is not None or settings.level is not None:
-            key = "order" if settings.orders is not None else "level"
-            raise ValueError(f"method.{key}: kind adaptive chooses its levels from the runs")
-        if settings.fit != "none":
-            raise ValueError("method.fit: expected none: kind adaptive recovers by projection")
-        if settings.max_samples is not None:
-            raise ValueError("method.max_samples: kind adaptive is bounded by method.max_runs")
-        if settings.basis is not None:
-            raise ValueError(
-                f"method.basis: kind adaptive takes basis tensor (a tensor grid raised one input "
-                f"at a time) or none (a sparse grid), got {settings.basis!r}"
-            )
-        if rule not in RULES:
-            raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         rules = []
         for name, dist in inputs.items():

@@ -44,7 +44,8 @@ _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 
 @dataclass(frozen=True)
 class MethodSettings:
-    """The ``method:`` settings a design is built from (config keys of the same names).
+    """The ``method:`` settings a design is built from (config keys of the same names), made by
+    :meth:`MethodSection.settings` from a validated section.
 
     ``orders`` is one order per input (germ order), ``"auto"`` for order refinement, ``None``
     when the method has none. :func:`pcmb.designs.design_key` picks the design from ``kind``

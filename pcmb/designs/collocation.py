@@ -86,13 +86,6 @@ class TensorCollocation:
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind collocation)")
-        if (settings.basis or "tensor") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
-        if settings.fit != "none":
-            raise ValueError(
-                "method.fit: expected none: collocation recovers by projection (fit: regression "
-                "is for the sampling methods)"
-            )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.basis = settings.basis or "tensor"

@@ -177,10 +177,6 @@ class Galerkin(WithoutNodes):
             raise ValueError(
                 "method.order: an integer order (or one per input) is required by kind galerkin"
             )
-        if (settings.basis or "tensor") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)} for kind galerkin")
-        if settings.fit != "none":
-            raise ValueError("method.fit: expected none: galerkin solves for the coefficients")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(int(p) for p in settings.orders)
         self.basis = settings.basis or "tensor"

@@ -202,10 +202,6 @@ class Linearization(WithoutNodes):
     Settings = LinearizationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        if settings.orders is not None:
-            raise ValueError("method.order: kind linearization has no chaos order")
-        if settings.basis is not None:
-            raise ValueError("method.basis: kind linearization has no chaos basis")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
 
     def record(self) -> Design:

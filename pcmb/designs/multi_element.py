@@ -94,8 +94,6 @@ class MultiElementCollocation:
         self.orders, self.basis = self._collocation.orders, self._collocation.basis
         self.elements = settings.elements
         self.max_elements = settings.max_elements
-        if self.max_elements < 1:
-            raise ValueError(f"method.max_elements: must be >= 1, got {self.max_elements}")
         if self.elements == "auto" and max(self.orders) < 2:
             raise ValueError(
                 "method.order: elements: auto needs order >= 2 (its decay indicator reads the "

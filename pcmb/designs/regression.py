@@ -101,25 +101,12 @@ class SparseRegression:
     Settings = RegressionSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        selection = getattr(settings, "selection", "lars")
-        sampling = getattr(settings, "sampling", "sobol")
-        q = getattr(settings, "q", 1.0)
-        tolerance = getattr(settings, "tolerance", None)
-        max_samples = getattr(settings, "max_samples", None)
+        selection, sampling, q = settings.selection, settings.sampling, settings.q
+        tolerance, max_samples = settings.tolerance, settings.max_samples
         if settings.samples is None:
             raise ValueError("method.samples: required key is missing (needed by kind regression)")
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind regression)")
-        if selection not in SELECTIONS:
-            raise ValueError(f"method.selection: expected one of {', '.join(SELECTIONS)}")
-        if sampling not in SAMPLINGS:
-            raise ValueError(f"method.sampling: expected one of {', '.join(SAMPLINGS)}")
-        if (settings.basis or "hyperbolic") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
-        if not 0.0 < q <= 1.0:
-            raise ValueError(f"method.q: must be in (0, 1], got {q}")
-        if tolerance is not None and not tolerance > 0:
-            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
         if max_samples is not None and tolerance is None:
             raise ValueError(
                 "method.max_samples: only used with method.tolerance (the budget of the rounds "

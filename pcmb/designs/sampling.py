@@ -69,8 +69,6 @@ class Sampling:
             raise ValueError(
                 f"method.samples: {settings.kind} needs at least 2 samples, got {settings.samples}"
             )
-        if settings.fit not in FITS:
-            raise ValueError(f"method.fit: expected one of {', '.join(FITS)}")
         if settings.fit == "regression" and settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by fit regression)")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import RULES, nested_rule
+from pcmb.chaos.nested import nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid
 from pcmb.designs.base import (
@@ -44,22 +44,12 @@ class SparseCollocation:
     Settings = CollocationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        level = getattr(settings, "level", None)
-        rule = getattr(settings, "rule", "auto")
+        level, rule = settings.level, settings.rule
         kind = settings.kind
         if level is None:
             raise ValueError(f"method.level: required key is missing (needed by kind {kind})")
-        if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
-            raise ValueError(f"method.level: expected an integer >= 0, got {level!r}")
-        if rule not in RULES:
-            raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
         if settings.orders is not None:
             raise ValueError(f"method.order: kind {kind} takes method.level, not an order")
-        if settings.fit != "none":
-            raise ValueError(
-                f"method.fit: expected none: kind {kind} recovers by projection (fit: "
-                "regression is for the sampling methods)"
-            )
         self.kind, self.level, self.rule = kind, int(level), rule
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         n = len(self.distributions)
