@@ -304,7 +304,7 @@ BROKEN = [
         "kind: collocation\n  fit: regression",
         "method.fit",
         "fit:",
-        "not a setting of kind collocation (it belongs to montecarlo, lhs, sobol)",
+        "not a setting of kind collocation (it belongs to montecarlo, lhs, sobol",
     ),
     (
         "fit-needs-order",
