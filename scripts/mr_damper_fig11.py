@@ -113,8 +113,10 @@ def main(argv: list[str] | None = None) -> int:
         distance = ks_2samp(at, truth).statistic
         labels[label] = f"{label}: KS {distance:.3f}"
         print(f"{label}: {result.n_nodes} runs")
-        for name, (mean, std) in errors(result, moments).items():
-            print(f"  {name}: largest error mean {mean:.1e}, std {std:.1e} of the largest std")
+        for name, (mean_error, std_error) in errors(result, moments).items():
+            print(
+                f"  {name}: largest error of the mean {mean_error:.1e}, of the std {std_error:.1e}"
+            )
         print(f"  x1 at {FINAL:g} s: mean {at.mean():.6f}, std {at.std():.6f}, KS {distance:.3f}")
         if k == 0:
             carlo = at
