@@ -58,8 +58,7 @@ def _mr_force(dv: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
 # Damper force Fd(δ'), δ' = v1 - v2.
 _DAMPERS: dict[str, tuple[dict[str, float], Law]] = {
     "linear": ({"c": 1000.0}, lambda dv, p: p["c"] * dv),
-    # Part II Eq. 10: Fd = (701.95·I + 531) v + (4 + 1015·I) tanh(14.3 v), read from its
-    # garbled text (docs/paper_cases.md §3); 800, 2868 and 4936 N at 1.5 m/s for I = 0, 1, 2 A.
+    # Part II Eq. 10 (docs/paper_cases.md §3): 800, 2868 and 4936 N at 1.5 m/s for I = 0, 1, 2 A.
     "mr": (
         {"I": 1.0, "c0": 531.0, "c1": 701.95, "F0": 4.0, "F1": 1015.0, "mr_slope": 14.3},
         _mr_force,
