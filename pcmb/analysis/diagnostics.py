@@ -41,15 +41,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import draw_germs
-from pcmb.result import WarningRecord
+from pcmb.result import StudyResult, WarningRecord
 
 __all__ = [
     "CODES",
     "CONFIDENCE",
+    "SURROGATE_CAUTIONS",
     "TOLERANCE",
     "VALIDATION",
     "HeldOut",
@@ -59,6 +61,7 @@ __all__ = [
     "diagnose_all",
     "holdout_error",
     "out_of_range",
+    "pdf_outside_runs",
     "range_checks",
     "spectral_decay",
     "statistics_error",
@@ -77,6 +80,9 @@ CODES = frozenset(
         "output-constant",
     }
 )
+#: Codes of the records that caution the PDFs, quantiles and Sobol' indices drawn from the
+#: surrogate where its statistics may hold.
+SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
 #: Default number of held-out runs (``method.validation``).
 VALIDATION = 32
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
@@ -99,6 +105,9 @@ RANGE_SHARE = 0.01
 #: Draws of an output that no run ever made negative are also far outside below 0 by more
 #: than this fraction of the range.
 RANGE_BELOW_ZERO = 0.01
+#: A PDF's mass counts as beyond the runs past this fraction of their range
+#: (:func:`pdf_outside_runs`): between the nodes a smooth surrogate may pass them a little.
+PDF_MARGIN = 0.05
 #: Run values whose std is below this fraction of their RMS do not vary (round-off).
 _ROUND_OFF = 1e-12
 #: A tail holding more than this share of its energy in one input is "concentrated".
@@ -344,6 +353,7 @@ def out_of_range(
     draws: int = RANGE_DRAWS,
     seed: int = RANGE_SEED,
     node_germ: ArrayLike | None = None,
+    margin: float = RANGE_MARGIN,
 ) -> NDArray[np.float64]:
     """(T,) share of surrogate draws far outside the range of the run values.
 
@@ -351,7 +361,7 @@ def out_of_range(
     counted: beyond it (the tails of an unbounded input) a smooth response leaves the runs'
     range by itself, which says nothing about the surrogate.
 
-    "Far" is beyond ``RANGE_MARGIN`` times the range (max - min of the runs) past the
+    "Far" is beyond ``margin`` times the range (max - min of the runs) past the
     smallest or largest run value; where the runs or the expansion do not vary beyond
     round-off (:meth:`~pcmb.chaos.expansion.ChaosExpansion.varies`) the share is 0. An
     output that is never negative in any run and at any time (a distance, an energy) is
@@ -360,8 +370,8 @@ def out_of_range(
     """
     values = np.asarray(node_values, dtype=float)
     low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
-    margin = RANGE_MARGIN * (high - low)
-    floor = low - margin
+    reach = margin * (high - low)
+    floor = low - reach
     if np.nanmin(values) >= 0:
         floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
     germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
@@ -371,8 +381,49 @@ def out_of_range(
     if germ.shape[0] == 0:
         return np.zeros(values.shape[1])
     samples = expansion.evaluate_germ(germ)
-    outside = (samples < floor) | (samples > high + margin)
+    outside = (samples < floor) | (samples > high + reach)
     return np.where(expansion.varies() & (high > low), outside.mean(axis=0), 0.0)
+
+
+def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
+    """``pdf-outside-runs`` warnings: a PDF drawn from the surrogate (``analysis.pdf_times``)
+    with more than ``RANGE_SHARE`` of its mass beyond the range of every run made (design,
+    held-out and nominal) by more than ``PDF_MARGIN`` of that range, among the draws inside
+    the box the design's nodes span (:func:`out_of_range`): mass where no run went."""
+    analysis, ok = result.analysis, result.ok
+    if analysis is None or not ok.any():
+        return ()
+    records = []
+    for name, expansion in result.expansions.items():
+        if name not in analysis.outputs or draws_are_runs(result, name):
+            continue
+        runs = [result.values[name][ok]]
+        if result.held_out is not None:
+            runs.append(result.held_out.values[name][result.held_out.ok])
+        if name in result.nominal:
+            runs.append(np.reshape(result.nominal[name], (1, -1)))
+        made = _finite_rows(np.vstack(runs))
+        at = analysis.outputs[name].pdf.at
+        points = nearest_indices(result.grid(name), at)
+        share = out_of_range(expansion, made, node_germ=result.germ[ok], margin=PDF_MARGIN)
+        axis = result.axis(name)
+        where = "" if axis is None else f"{axis.name} = "
+        for t, k in zip(at, points, strict=True):
+            if share[k] <= RANGE_SHARE:
+                continue
+            records.append(
+                WarningRecord(
+                    "pdf-outside-runs",
+                    f"the PDF at {where}{t:g} puts {_percent(share[k])} of its mass beyond "
+                    f"[{np.min(made[:, k]):.4g}, {np.max(made[:, k]):.4g}], the range of all "
+                    f"{made.shape[0]} runs made (design, held-out and nominal), by more than "
+                    f"{_percent(PDF_MARGIN)} of that range: no run went there, the surrogate "
+                    "overshoots (see its held-out error)",
+                    name,
+                    (float(t), float(t)) if result.on_time(name) else None,
+                )
+            )
+    return tuple(records)
 
 
 def range_checks(
@@ -587,8 +638,9 @@ def diagnose(
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
-    if checked is not None and np.isnan(failing_from):
-        records.extend(_inaccurate(output, checked, times, tolerance))
+    if checked is not None:
+        holding = times < failing_from if not np.isnan(failing_from) else np.ones_like(blind)
+        records.extend(_inaccurate(output, checked, times, tolerance, holding))
     if holdout is None and runs.shape[0] > 1 and equal.all():
         records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
@@ -667,20 +719,25 @@ def _all_equal(
 
 
 def _inaccurate(
-    output: str, holdout: Holdout, times: NDArray[np.float64], tolerance: float
+    output: str,
+    holdout: Holdout,
+    times: NDArray[np.float64],
+    tolerance: float,
+    holding: NDArray[np.bool_],
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
-    tolerance while the statistics hold."""
-    above = holdout.error > tolerance
+    tolerance at the times where the statistics hold (``holding``: before the verdict fails)."""
+    above = (holdout.error > tolerance) & holding
     if not above.any():
         return []
     return [
         WarningRecord(
             "surrogate-inaccurate",
-            f"the surrogate is off by up to {_percent(np.nanmax(holdout.error))} of std at "
-            f"{holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
-            f"(estimated error at most {_percent(np.nanmax(holdout.statistics))}): PDFs, "
-            f"quantiles and Sobol' indices drawn from it are less accurate than its error bars",
+            f"the surrogate is off by up to {_percent(np.nanmax(holdout.error[above]))} of std "
+            f"at {holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
+            f"there (estimated error at most {_percent(np.nanmax(holdout.statistics[above]))}): "
+            "PDFs, quantiles and Sobol' indices drawn from it are less accurate than its error "
+            "bars",
             output,
             _span(times, above),
         )
