@@ -264,11 +264,18 @@ class WarningRecord:
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
 #: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
-#: less accurate pointwise than its statistics; an output whose runs and nominal run are all
-#: equal): kept in the result and its file, listed as
+#: less accurate pointwise than its statistics, or a PDF drawn from it with mass where no run
+#: went, which caution what is drawn from the surrogate, not the mean and std; an output whose
+#: runs and nominal run are all equal): kept in the result and its file, listed as
 #: notes by ``pcmb inspect``, never a warning.
 RECORDED_ONLY = frozenset(
-    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "output-constant"}
+    {
+        "sobol-undefined",
+        "surrogate-out-of-range",
+        "surrogate-inaccurate",
+        "pdf-outside-runs",
+        "output-constant",
+    }
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
 #: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their

@@ -991,6 +991,7 @@ class Study:
             self.diagnostics_tolerance,
             axes=result.axes,
             nominal=result.nominal,
+            budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -308,11 +308,11 @@ def test_the_surrogate_cautions_reach_the_file_inspect_and_the_report(tmp_path):
     assert expansion.evaluate_germ(x0)[:, -1].max() > 1.0
     (outside,) = [w for w in result.warnings if w.code == "pdf-outside-runs"]
     assert "PDF at t = 4 " in outside.message and "t = 2 " not in outside.message
-    assert not result.is_note(outside)
+    assert result.is_note(outside)  # cautions what is drawn from the surrogate, not its std
     inspect = _pcmb("inspect", "dw.h5", cwd=tmp_path)
     assert "[surrogate-inaccurate]" in inspect.stdout
     (listed,) = [line for line in inspect.stdout.splitlines() if "[pdf-outside-runs]" in line]
-    assert listed.startswith("warning")
+    assert listed.startswith("note")
     report = _pcmb("report", "dw.h5", "-o", "report", cwd=tmp_path)
     assert report.returncode == 0, report.stderr
     page = (tmp_path / "report" / "index.html").read_text()
@@ -340,3 +340,43 @@ def test_a_converged_surrogate_raises_no_surrogate_caution():
     result = study.run()  # no warning: the suite turns warnings into errors
     codes = {w.code for w in result.warnings}
     assert not codes & {"pdf-outside-runs", "surrogate-inaccurate", "chaos-unreliable"}
+
+
+@pcmb.batched(outputs=("y",))
+def steep_exponential(params, times):
+    """exp(12 x t): analytic in x, steeper with time."""
+    return {"y": np.exp(12 * np.outer(params["x"], times))}
+
+
+def _remedy_of(model, **settings) -> str:
+    study = pcmb.Study(model, KINK_INPUTS, G_TIMES, backend="inprocess", **settings)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        return _remedy(study.run())
+
+
+@pytest.mark.parametrize("order", [3, 4])
+def test_a_slowly_converging_analytic_response_is_told_to_raise_the_order(order):
+    remedy = _remedy_of(steep_exponential, order=order)
+    assert remedy.startswith("raising the order of x (method.order)")
+    assert "steep or discontinuous" not in remedy
+    assert f"tried: order {order}, 1 element" in remedy
+
+
+def test_after_order_auto_ended_the_remedy_says_so_instead_of_raising_the_order():
+    remedy = _remedy_of(steep_exponential, order="auto", diagnostics_tolerance=1e-9)
+    assert "geometrically" in remedy
+    assert "raising the order of x (method.order)" not in remedy
+    assert "order: auto ended at order 12 (order-budget)" in remedy
+
+
+@pcmb.batched(outputs=("y",))
+def jump(params, times):
+    """A step at x = 0.3, the same at every time."""
+    return {"y": (params["x"] > 0.3)[:, None] + 0.0 * times}
+
+
+def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
+    remedy = _remedy_of(jump, order=3, elements="auto", max_elements=2)
+    assert "method.max_elements" in remedy
+    assert "elements: auto ended at 2 elements (element-budget)" in remedy

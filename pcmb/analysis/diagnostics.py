@@ -35,7 +35,7 @@ the PDFs and quantiles drawn from it are less accurate than the error bars.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +47,7 @@ from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import draw_germs
 from pcmb.result import StudyResult, WarningRecord
+from pcmb.wording import plural
 
 __all__ = [
     "CODES",
@@ -117,6 +118,9 @@ _GROWTH = 2.0
 #: A tail holding between this share and all of the energy of the two layers before it
 #: decays algebraically, as the spectrum of a jump: the response is steep there.
 _FLAT = 0.5
+#: A held-out error whose weighted distance from the centre of an input's range
+#: (:func:`_error_at_ends`) is at least this sits at its ends: a smooth response.
+_AT_ENDS = 0.75
 #: The fewest degrees after the peak of an input's spectrum that tell its decay's shape.
 _SHAPE_LAYERS = 3
 
@@ -386,7 +390,7 @@ def out_of_range(
 
 
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
-    """``pdf-outside-runs`` warnings: a PDF drawn from the surrogate (``analysis.pdf_times``)
+    """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate (``analysis.pdf_times``)
     with more than ``RANGE_SHARE`` of its mass beyond the range of every run made (design,
     held-out and nominal) by more than ``PDF_MARGIN`` of that range, among the draws inside
     the box the design's nodes span (:func:`out_of_range`): mass where no run went."""
@@ -579,6 +583,8 @@ def diagnose(
     node_germ: ArrayLike | None = None,
     axis: str = "t",
     nominal: ArrayLike | None = None,
+    budgets: Collection[str] = (),
+    holdout_germ: ArrayLike | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -609,6 +615,12 @@ def diagnose(
         it differs from design runs that are all equal tells a design that missed the spread
         (``runs-all-equal``, a warning) from an output that looks constant
         (``output-constant``, a note).
+    budgets:
+        Codes of the design's budget records (``order-budget``, ``element-budget``): the
+        refinements that ran out, which the remedy does not ask for again.
+    holdout_germ:
+        (K, n) germ of the held-out runs, which tells the remedy where along each input the
+        surrogate's error sits (:func:`_error_at_ends`).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -647,6 +659,12 @@ def diagnose(
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
+        ends = None
+        if holdout is not None and holdout_germ is not None:
+            predicted, observed = (np.atleast_2d(a) for a in holdout)
+            kept = np.isfinite(observed).all(axis=1)
+            residual = observed[kept] - predicted[kept]
+            ends = _error_at_ends(np.asarray(holdout_germ)[kept], residual, failing)
         if blind.any():
             evidence = (
                 f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
@@ -655,7 +673,7 @@ def diagnose(
             )
         message = (
             f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{_remedy(expansion, estimate, failing, share)}"
+            f"{_remedy(expansion, estimate, failing, share, budgets, ends)}"
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
@@ -782,6 +800,59 @@ def _remedy(
     estimate: NDArray[np.float64],
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
+    budgets: Collection[str],
+    ends: NDArray[np.float64] | None = None,
+) -> str:
+    """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
+    out (``budgets``: the codes of the design's budget records), and what was tried: the
+    order, the elements and the refinement's end."""
+    remedy = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
+    orders = expansion.multi_index.max(axis=0)
+    order = int(orders.max())
+    elements = expansion.partition.size if isinstance(expansion, PiecewiseExpansion) else 1
+    shown = f"order {order}" if orders.min() == order else f"orders {'x'.join(map(str, orders))}"
+    tried = [f"{shown}, {plural(elements, 'element')}"]
+    raise_order = remedy.startswith("raising the order")
+    if "order-budget" in budgets:
+        tried.append(f"order: auto ended at order {order} (order-budget)")
+        if raise_order:
+            name, _, cause = remedy.removeprefix("raising the order of ").partition(": ")
+            name = name.removesuffix(" (method.order)")
+            remedy = (
+                f"multi-element chaos along {name} (method.elements) or an order above "
+                f"{order} set by hand (method.order): {cause}"
+            )
+    if "element-budget" in budgets:
+        tried.append(f"elements: auto ended at {elements} elements (element-budget)")
+        if remedy.startswith("more elements"):
+            remedy = remedy.replace(
+                "(finer method.elements cuts, or auto)", "(raise method.max_elements)"
+            )
+    return f"{remedy}; tried: {'; '.join(tried)}"
+
+
+def _error_at_ends(
+    germ: NDArray[np.float64], residual: NDArray[np.float64], failing: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """(n,) where along each input the (K, T) held-out residual sits over the failing times:
+    the mean of |2u - 1|, u the runs' ranks along the input in (0, 1), weighted by the
+    squared residual; 0.5 for an error spread evenly, near 1 for one at the ends of the
+    range (a smooth response converging slowly), lower for one around a point inside it."""
+    ranks = np.argsort(np.argsort(germ, axis=0), axis=0)
+    distance = np.abs(2 * (ranks + 0.5) / germ.shape[0] - 1)
+    size = np.max(np.abs(residual[:, failing]))
+    if not size > 0 or not np.isfinite(size):
+        return np.full(germ.shape[1], 0.5)
+    weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
+    return weight @ distance / weight.sum()
+
+
+def _cause_remedy(
+    expansion: Expansion,
+    estimate: NDArray[np.float64],
+    failing: NDArray[np.bool_],
+    out_of_range_share: NDArray[np.float64],
+    ends: NDArray[np.float64] | None,
 ) -> str:
     """What may help, read from where the tail's energy sits over the failing times.
 
@@ -791,7 +862,9 @@ def _remedy(
     - else, for the input that holds the tail, the decay of the coefficients along it
       (:func:`_decay_shape`): algebraic, as those of a jump or kink — multi-element chaos;
       geometric, as those of an analytic response — a higher order;
-    - too few degrees to tell: steep or discontinuous when the spectrum decays slowly (the
+    - too few degrees to tell: a higher order when the held-out error sits at the ends of
+      the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
+      of a smooth response; else steep or discontinuous when the spectrum decays slowly (the
       outer two layers hold between half and all of the energy of the two before them) or,
       below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
       higher order. The message says that the order was too low to tell.
@@ -840,6 +913,14 @@ def _remedy(
             "to tell a jump or kink from a slowly converging smooth response"
         )
         cause = f"the response is steep or discontinuous in {name}{unknown}"
+        if ends is not None and ends[top] >= _AT_ENDS:
+            return (
+                f"raising the order of {name} (method.order): the surrogate's error at the "
+                f"held-out runs sits at the ends of the range of {name} (mean |2u - 1| of their "
+                f"ranks u, weighted by the squared error: {ends[top]:.2f}; 0.5 if spread "
+                "evenly), as that of a smooth response converging slowly, not inside it, where "
+                f"a jump or kink would hold it{unknown}"
+            )
         if not steep:
             return (
                 f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
@@ -882,6 +963,7 @@ def diagnose_all(
     tolerance: float = TOLERANCE,
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
+    budgets: Collection[str] = (),
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -889,7 +971,8 @@ def diagnose_all(
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
-    holds the run at the nominal parameters (output name -> (T,)), when one succeeded.
+    holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
+    ``budgets`` the codes of the design's budget records (:func:`diagnose`).
     """
     found = {}
     for name, expansion in expansions.items():
@@ -913,5 +996,7 @@ def diagnose_all(
             germ[ok],
             label,
             None if nominal is None else nominal.get(name),
+            budgets,
+            None if holdout is None else held_out.germ[held_out.ok],
         )
     return found
