@@ -246,6 +246,21 @@ def test_a_jump_in_an_initial_condition_is_told_to_use_elements():
     assert "along x0 fall algebraically" in remedy and "jump or a kink" in remedy
 
 
+def test_a_jump_in_an_initial_condition_at_a_low_order_is_told_to_use_elements():
+    double_well = model_class("double_well", "DoubleWell")
+    study = pcmb.Study(
+        double_well,
+        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        np.linspace(0.0, 4.0, 41),
+        order=3,
+        backend="inprocess",
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
+        remedy = _remedy(study.run())
+    assert remedy.startswith("multi-element chaos (method.elements)")
+    assert "sits inside the range of x0" in remedy and "raising the order" not in remedy
+
+
 @pcmb.pointwise(outputs=("x",))
 def van_der_pol(params, times):
     """x'' = μ (1 - x²) x' - x from x = 2 at rest: analytic in μ, its phase drifts."""

@@ -121,6 +121,8 @@ _FLAT = 0.5
 #: A held-out error whose weighted distance from the centre of an input's range
 #: (:func:`_error_at_ends`) is at least this sits at its ends: a smooth response.
 _AT_ENDS = 0.75
+#: ... and where it is at most this, inside it: around a jump, kink or steep front.
+_INSIDE = 0.4
 #: The fewest degrees after the peak of an input's spectrum that tell its decay's shape.
 _SHAPE_LAYERS = 3
 
@@ -864,7 +866,8 @@ def _cause_remedy(
       geometric, as those of an analytic response — a higher order;
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
-      of a smooth response; else steep or discontinuous when the spectrum decays slowly (the
+      of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
+      around a jump or kink; else steep or discontinuous when the spectrum decays slowly (the
       outer two layers hold between half and all of the energy of the two before them) or,
       below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
       higher order. The message says that the order was too low to tell.
@@ -902,25 +905,35 @@ def _cause_remedy(
         )
         steep = True
     else:
-        previous = energy[before].sum()
-        if previous > 0:
-            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-        else:  # an order below 4: too few layers to see a decay, the overshoot tells
-            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
         order = int(index[:, top].max())
         unknown = (
             f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
-            "to tell a jump or kink from a slowly converging smooth response"
+            "to tell a jump or kink from a slowly converging smooth response by it"
         )
         cause = f"the response is steep or discontinuous in {name}{unknown}"
-        if ends is not None and ends[top] >= _AT_ENDS:
+        place = ""
+        if ends is not None:
+            place = (
+                f"the range of {name} (mean |2u - 1| of their ranks u along it, weighted by the "
+                f"squared error: {ends[top]:.2f}; 0.5 if spread evenly)"
+            )
+        previous = energy[before].sum()
+        if place and ends[top] >= _AT_ENDS:
             return (
                 f"raising the order of {name} (method.order): the surrogate's error at the "
-                f"held-out runs sits at the ends of the range of {name} (mean |2u - 1| of their "
-                f"ranks u, weighted by the squared error: {ends[top]:.2f}; 0.5 if spread "
-                "evenly), as that of a smooth response converging slowly, not inside it, where "
-                f"a jump or kink would hold it{unknown}"
+                f"held-out runs sits at the ends of {place}, as that of a smooth response "
+                f"converging slowly{unknown}"
             )
+        if place and ends[top] <= _INSIDE:
+            steep = True
+            cause = (
+                f"the surrogate's error at the held-out runs sits inside {place}, around a "
+                f"jump, kink or steep front there{unknown}"
+            )
+        elif previous > 0:
+            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+        else:  # an order below 4: too few layers to see a decay, the overshoot tells
+            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
         if not steep:
             return (
                 f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
