@@ -278,10 +278,21 @@ RECORDED_ONLY = frozenset(
     }
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
-#: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their
-#: output reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there is
-#: none, they are warnings that support it.
-INDICATORS = frozenset({"element-decay", "regression-loo"})
+#: leave-one-out error) and of the budgets that ended a refinement above its tolerance: the
+#: diagnostics' verdict judges the result, so where it calls their output (for a record of
+#: the whole study: every output it judged) reliable they are notes like
+#: :data:`RECORDED_ONLY`; where it does not, or there is none, they are warnings that
+#: support it.
+INDICATORS = frozenset(
+    {
+        "element-decay",
+        "regression-loo",
+        "element-budget",
+        "order-budget",
+        "adaptive-budget",
+        "regression-budget",
+    }
+)
 
 
 @dataclass(frozen=True, repr=False)
@@ -501,12 +512,18 @@ class StudyResult:
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable): kept in the result and its
-        file, not issued as a warning."""
+        record about an output the diagnostics call reliable, or about the whole study when
+        they call every output reliable): kept in the result and its file, not issued as a
+        warning."""
         if record.code in RECORDED_ONLY:
             return True
-        judged = self.diagnostics.get(record.output) if record.output is not None else None
-        return record.code in INDICATORS and judged is not None and judged.reliable
+        if record.code not in INDICATORS:
+            return False
+        if record.output is None:
+            found = self.diagnostics.values()
+            return bool(found) and all(judged.reliable for judged in found)
+        judged = self.diagnostics.get(record.output)
+        return judged is not None and judged.reliable
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

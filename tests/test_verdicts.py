@@ -395,3 +395,13 @@ def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
     remedy = _remedy_of(jump, order=3, elements="auto", max_elements=2)
     assert "method.max_elements" in remedy
     assert "elements: auto ended at 2 elements (element-budget)" in remedy
+
+
+def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
+    study = pcmb.Study(
+        jump, KINK_INPUTS, G_TIMES, order=3, elements="auto", max_elements=3, backend="inprocess"
+    )
+    result = study.run()  # no warning: the suite turns warnings into errors
+    assert result.diagnostics["y"].reliable
+    (record,) = [w for w in result.warnings if w.code == "element-budget"]
+    assert result.is_note(record) and record not in result.alerts
