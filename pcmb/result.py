@@ -278,21 +278,14 @@ RECORDED_ONLY = frozenset(
     }
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
-#: leave-one-out error) and of the budgets that ended a refinement above its tolerance: the
+#: leave-one-out error) and of the budgets that ended a refinement judged by the same
+#: tolerance as the verdict or by an internal threshold (``order: auto``, ``elements: auto``;
+#: not ``method.tolerance``, which the user asked of ``adaptive`` and regression): the
 #: diagnostics' verdict judges the result, so where it calls their output (for a record of
 #: the whole study: every output it judged) reliable they are notes like
 #: :data:`RECORDED_ONLY`; where it does not, or there is none, they are warnings that
 #: support it.
-INDICATORS = frozenset(
-    {
-        "element-decay",
-        "regression-loo",
-        "element-budget",
-        "order-budget",
-        "adaptive-budget",
-        "regression-budget",
-    }
-)
+INDICATORS = frozenset({"element-decay", "regression-loo", "element-budget", "order-budget"})
 
 
 @dataclass(frozen=True, repr=False)
