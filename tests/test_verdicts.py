@@ -242,7 +242,7 @@ def test_a_jump_in_an_initial_condition_is_told_to_use_elements():
     )
     with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
         remedy = _remedy(study.run())
-    assert remedy.startswith("multi-element chaos (method.elements)")
+    assert remedy.startswith("multi-element chaos along x0 (method.elements)")
     assert "along x0 fall algebraically" in remedy and "jump or a kink" in remedy
 
 
@@ -257,7 +257,7 @@ def test_a_jump_in_an_initial_condition_at_a_low_order_is_told_to_use_elements()
     )
     with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
         remedy = _remedy(study.run())
-    assert remedy.startswith("multi-element chaos (method.elements)")
+    assert remedy.startswith("multi-element chaos along x0 (method.elements)")
     assert "sits inside the range of x0" in remedy and "raising the order" not in remedy
 
 
@@ -405,3 +405,28 @@ def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
     assert result.diagnostics["y"].reliable
     (record,) = [w for w in result.warnings if w.code == "element-budget"]
     assert result.is_note(record) and record not in result.alerts
+
+
+@pcmb.batched(outputs=("y",))
+def jump_and_exponential(params, times):
+    """A step in x0 (all the spread at t = 0) beside exp(6 x1 t) / 40, smooth in x1."""
+    step = 0.3 * (params["x0"] > 0.3)
+    return {"y": step[:, None] + np.exp(6 * np.outer(params["x1"], times)) / 40}
+
+
+def test_the_remedy_follows_the_input_that_holds_the_error_at_every_failing_time():
+    # Summed over time, the tail's energy is x1's (its spread grows as exp(6 t)); at t = 0,
+    # where the verdict fails first, it is x0's alone: each failing time weighs the same.
+    study = pcmb.Study(
+        jump_and_exponential,
+        {"x0": pcmb.Uniform(-1.0, 1.0), "x1": pcmb.Uniform(-1.0, 1.0)},
+        G_TIMES,
+        order=6,
+        diagnostics_tolerance=0.005,
+        backend="inprocess",
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        remedy = _remedy(study.run())
+    assert remedy.startswith("multi-element chaos along x0 (method.elements)")
+    assert "along x0 fall algebraically" in remedy and "order of x1" not in remedy

@@ -118,6 +118,8 @@ _GROWTH = 2.0
 #: A tail holding between this share and all of the energy of the two layers before it
 #: decays algebraically, as the spectrum of a jump: the response is steep there.
 _FLAT = 0.5
+#: The remedy reads the decay along every input holding at least this share of the tail.
+_SHARED = 0.25
 #: A held-out error whose weighted distance from the centre of an input's range
 #: (:func:`_error_at_ends`) is at least this sits at its ends: a smooth response.
 _AT_ENDS = 0.75
@@ -849,6 +851,21 @@ def _error_at_ends(
     return weight @ distance / weight.sum()
 
 
+def _decay_read(name: str, kind: str, rate: float, first: int, last: int) -> str:
+    """The decay of the chaos coefficients along one input (:func:`_decay_shape`) in words."""
+    if kind == "geometric":
+        return (
+            f"the chaos coefficients along {name} fall geometrically (energy × {rate:.2g} per "
+            f"degree, degrees {first} to {last}), as those of a smooth response, which a "
+            "higher order resolves"
+        )
+    return (
+        f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
+        f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
+        "resolves only slowly"
+    )
+
+
 def _cause_remedy(
     expansion: Expansion,
     estimate: NDArray[np.float64],
@@ -861,9 +878,10 @@ def _cause_remedy(
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
       order fixes — sampling;
-    - else, for the input that holds the tail, the decay of the coefficients along it
-      (:func:`_decay_shape`): algebraic, as those of a jump or kink — multi-element chaos;
-      geometric, as those of an analytic response — a higher order;
+    - else, along every input that holds at least ``_SHARED`` of the tail (each failing
+      time weighing the same), the decay of the coefficients (:func:`_decay_shape`):
+      algebraic along any, as those of a jump or kink — multi-element chaos along those;
+      geometric along all, as those of an analytic response — a higher order;
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
@@ -875,7 +893,11 @@ def _cause_remedy(
     index = expansion.multi_index
     tail = tail_terms(index)
     before = tail_terms(index, 4) & ~tail
-    energy = np.nansum(_energies(expansion)[:, failing], axis=1)
+    # Each failing time weighs the same: its energies as shares of its own variance.
+    energies = _energies(expansion)[:, failing]
+    variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
+    varies = np.isfinite(variance) & (variance > 0)
+    energy = np.nansum(energies[:, varies] / variance[varies], axis=1)
     by_input = (index[tail] > 0).T.astype(float) @ energy[tail]
     total = by_input.sum()
     top = int(np.argmax(by_input))
@@ -889,21 +911,16 @@ def _cause_remedy(
             "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
             "order does not fix"
         )
-    shape = _decay_shape(energy, index, top)
-    if shape is not None:
-        kind, rate, first, last = shape
-        if kind == "geometric":
-            return (
-                f"raising the order of {name} (method.order): the chaos coefficients along "
-                f"{name} fall geometrically (energy × {rate:.2g} per degree, degrees {first} "
-                f"to {last}), as those of a smooth response, which a higher order resolves"
-            )
-        cause = (
-            f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
-            f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
-            "resolves only slowly"
-        )
-        steep = True
+    holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
+    shapes = {k: _decay_shape(energy, index, k) for k in holders}
+    read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
+    if top in read:
+        reads = "; ".join(_decay_read(expansion.names[k], *shapes[k]) for k in read)
+        jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
+        if not jumps:
+            smooth = " and ".join(expansion.names[k] for k in read)
+            return f"raising the order of {smooth} (method.order): {reads}"
+        name, cause, steep = " and ".join(jumps), reads, True
     else:
         order = int(index[:, top].max())
         unknown = (
@@ -940,7 +957,7 @@ def _cause_remedy(
             )
     if isinstance(expansion, PiecewiseExpansion):
         return f"more elements along {name} (finer method.elements cuts, or auto): {cause}"
-    return f"multi-element chaos (method.elements): {cause}"
+    return f"multi-element chaos along {name} (method.elements): {cause}"
 
 
 @dataclass(frozen=True)
