@@ -4,6 +4,7 @@ remedies that fit the cause."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import warnings
@@ -395,6 +396,9 @@ def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
     remedy = _remedy_of(jump, order=3, elements="auto", max_elements=2)
     assert "method.max_elements" in remedy
     assert "elements: auto ended at 2 elements (element-budget)" in remedy
+    # The step at 0.3 lies in the element above the cut at 0: its error is there.
+    share = re.search(r"element \d \(x in \[0, 1\]\) holds (\d+) % of the held-out", remedy)
+    assert share is not None and int(share.group(1)) > 50
 
 
 def test_a_budget_record_beside_a_reliable_verdict_is_a_note():

@@ -663,12 +663,15 @@ def diagnose(
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
-        ends = None
+        ends, by_element = None, ""
         if holdout is not None and holdout_germ is not None:
             predicted, observed = (np.atleast_2d(a) for a in holdout)
             kept = np.isfinite(observed).all(axis=1)
             residual = observed[kept] - predicted[kept]
             ends = _error_at_ends(np.asarray(holdout_germ)[kept], residual, failing)
+            if isinstance(expansion, PiecewiseExpansion):
+                germ = np.asarray(holdout_germ)[kept]
+                by_element = _element_errors(expansion, germ, residual, failing)
         if blind.any():
             evidence = (
                 f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
@@ -677,7 +680,7 @@ def diagnose(
             )
         message = (
             f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{_remedy(expansion, estimate, failing, share, budgets, ends)}"
+            f"{_remedy(expansion, estimate, failing, share, budgets, ends, by_element)}"
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
@@ -806,9 +809,11 @@ def _remedy(
     out_of_range_share: NDArray[np.float64],
     budgets: Collection[str],
     ends: NDArray[np.float64] | None = None,
+    by_element: str = "",
 ) -> str:
     """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
-    out (``budgets``: the codes of the design's budget records), and what was tried: the
+    out (``budgets``: the codes of the design's budget records), with where a multi-element
+    surrogate's error sits (``by_element``, :func:`_element_errors`) and what was tried: the
     order, the elements and the refinement's end."""
     remedy = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
     orders = expansion.multi_index.max(axis=0)
@@ -832,6 +837,8 @@ def _remedy(
             remedy = remedy.replace(
                 "(finer method.elements cuts, or auto)", "(raise method.max_elements)"
             )
+    if by_element:
+        remedy = f"{remedy}; {by_element}"
     return f"{remedy}; tried: {'; '.join(tried)}"
 
 
@@ -849,6 +856,41 @@ def _error_at_ends(
         return np.full(germ.shape[1], 0.5)
     weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
     return weight @ distance / weight.sum()
+
+
+def _element_errors(
+    expansion: PiecewiseExpansion,
+    germ: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    failing: NDArray[np.bool_],
+) -> str:
+    """Which element holds the largest share of the (K, T) held-out squared error over the
+    failing times, with its box and probability: an error far above the element's
+    probability sits around a jump or kink there, one in proportion to it is spread."""
+    partition = expansion.partition
+    theta = np.column_stack(
+        [d.to_physical(germ[:, k]) for k, d in enumerate(expansion.distributions)]
+    )
+    where = partition.locate(theta)
+    size = np.max(np.abs(residual[:, failing]))
+    if partition.size < 2 or not size > 0 or not np.isfinite(size):
+        return ""
+    weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
+    inside = where >= 0
+    shares = np.bincount(where[inside], weights=weight[inside], minlength=partition.size)
+    shares = shares / weight.sum()
+    e = int(np.argmax(shares))
+    support = np.array([d.physical.support() for d in expansion.distributions], dtype=float)
+    bounds = zip(expansion.names, partition.bounds[e], support, strict=True)
+    box = ", ".join(
+        f"{name} in [{low:.4g}, {high:.4g}]"
+        for name, (low, high), whole in bounds
+        if low > whole[0] or high < whole[1]
+    )
+    return (
+        f"element {e} ({box}) holds {_percent(shares[e])} of the held-out squared error "
+        f"where the verdict fails, for {_percent(partition.probability[e])} of the probability"
+    )
 
 
 def _decay_read(name: str, kind: str, rate: float, first: int, last: int) -> str:
