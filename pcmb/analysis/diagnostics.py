@@ -815,28 +815,31 @@ def _remedy(
     out (``budgets``: the codes of the design's budget records), with where a multi-element
     surrogate's error sits (``by_element``, :func:`_element_errors`) and what was tried: the
     order, the elements and the refinement's end."""
-    remedy = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
+    action, inputs, cause = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
     orders = expansion.multi_index.max(axis=0)
     order = int(orders.max())
     elements = expansion.partition.size if isinstance(expansion, PiecewiseExpansion) else 1
     shown = f"order {order}" if orders.min() == order else f"orders {'x'.join(map(str, orders))}"
     tried = [f"{shown}, {plural(elements, 'element')}"]
-    raise_order = remedy.startswith("raising the order")
+    along = f" along {inputs}" if inputs else ""
     if "order-budget" in budgets:
         tried.append(f"order: auto ended at order {order} (order-budget)")
-        if raise_order:
-            name, _, cause = remedy.removeprefix("raising the order of ").partition(": ")
-            name = name.removesuffix(" (method.order)")
-            remedy = (
-                f"multi-element chaos along {name} (method.elements) or an order above "
-                f"{order} set by hand (method.order): {cause}"
-            )
     if "element-budget" in budgets:
         tried.append(f"elements: auto ended at {elements} elements (element-budget)")
-        if remedy.startswith("more elements"):
-            remedy = remedy.replace(
-                "(finer method.elements cuts, or auto)", "(raise method.max_elements)"
-            )
+    if action == "sampling":
+        remedy = f"sampling (method.kind: montecarlo, lhs or sobol): {cause}"
+    elif action == "order" and "order-budget" in budgets:
+        remedy = (
+            f"multi-element chaos{along} (method.elements) or an order above {order} set by "
+            f"hand (method.order): {cause}"
+        )
+    elif action == "order":
+        remedy = f"raising the order{' of ' + inputs if inputs else ''} (method.order): {cause}"
+    elif isinstance(expansion, PiecewiseExpansion):
+        more = "raise method.max_elements" if "element-budget" in budgets else "finer cuts, or auto"
+        remedy = f"more elements{along} (method.elements: {more}): {cause}"
+    else:
+        remedy = f"multi-element chaos{along} (method.elements): {cause}"
     if by_element:
         remedy = f"{remedy}; {by_element}"
     return f"{remedy}; tried: {'; '.join(tried)}"
@@ -914,8 +917,10 @@ def _cause_remedy(
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
     ends: NDArray[np.float64] | None,
-) -> str:
-    """What may help, read from where the tail's energy sits over the failing times.
+) -> tuple[str, str, str]:
+    """What may help, read from where the tail's energy sits over the failing times:
+    ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"`` or ``"elements"``
+    along the named inputs (``""``: all), the cause in words.
 
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
@@ -945,13 +950,14 @@ def _cause_remedy(
     top = int(np.argmax(by_input))
     name = expansion.names[top]
     if total <= 0:
-        return "raising the order (method.order)"
+        return "order", "", "no coefficient beyond the linear ones carries energy"
     grows = estimate[-1] > _GROWTH * estimate[np.argmax(failing)]
     if expansion.n > 1 and by_input[top] < _CONCENTRATED * total and grows:
         return (
-            "sampling (method.kind: montecarlo, lhs or sobol): the error grows with time and "
-            "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
-            "order does not fix"
+            "sampling",
+            "",
+            "the error grows with time and spreads over the inputs, as in chaotic or "
+            "long-horizon dynamics, which a higher order does not fix",
         )
     holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
     shapes = {k: _decay_shape(energy, index, k) for k in holders}
@@ -960,8 +966,7 @@ def _cause_remedy(
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k]) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
         if not jumps:
-            smooth = " and ".join(expansion.names[k] for k in read)
-            return f"raising the order of {smooth} (method.order): {reads}"
+            return "order", " and ".join(expansion.names[k] for k in read), reads
         name, cause, steep = " and ".join(jumps), reads, True
     else:
         order = int(index[:, top].max())
@@ -979,9 +984,10 @@ def _cause_remedy(
         previous = energy[before].sum()
         if place and ends[top] >= _AT_ENDS:
             return (
-                f"raising the order of {name} (method.order): the surrogate's error at the "
-                f"held-out runs sits at the ends of {place}, as that of a smooth response "
-                f"converging slowly{unknown}"
+                "order",
+                name,
+                f"the surrogate's error at the held-out runs sits at the ends of {place}, as "
+                f"that of a smooth response converging slowly{unknown}",
             )
         if place and ends[top] <= _INSIDE:
             steep = True
@@ -994,12 +1000,8 @@ def _cause_remedy(
         else:  # an order below 4: too few layers to see a decay, the overshoot tells
             steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
         if not steep:
-            return (
-                f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
-            )
-    if isinstance(expansion, PiecewiseExpansion):
-        return f"more elements along {name} (finer method.elements cuts, or auto): {cause}"
-    return f"multi-element chaos along {name} (method.elements): {cause}"
+            return "order", name, f"its spectrum decays slowly{unknown}"
+    return "elements", name, cause
 
 
 @dataclass(frozen=True)
