@@ -29,7 +29,8 @@ estimated errors of the mean and the std at each time (the decay where there are
 runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance, explained in a
 ``chaos-unreliable`` record with a remedy that fits the failure. A surrogate whose pointwise
 error exceeds the tolerance while its statistics hold gets a ``surrogate-inaccurate`` record:
-the PDFs and quantiles drawn from it are less accurate than the error bars.
+the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the error bars;
+:func:`pdf_outside_runs` flags a PDF with mass beyond every run made.
 """
 
 from __future__ import annotations
@@ -394,10 +395,10 @@ def out_of_range(
 
 
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
-    """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate (``analysis.pdf_times``)
-    with more than ``RANGE_SHARE`` of its mass beyond the range of every run made (design,
-    held-out and nominal) by more than ``PDF_MARGIN`` of that range, among the draws inside
-    the box the design's nodes span (:func:`out_of_range`): mass where no run went."""
+    """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate at one of
+    ``analysis.pdf_times`` with more than ``RANGE_SHARE`` of its mass beyond the range of
+    every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range,
+    among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
     analysis, ok = result.analysis, result.ok
     if analysis is None or not ok.any():
         return ()
@@ -655,7 +656,7 @@ def diagnose(
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
     if checked is not None:
-        holding = times < failing_from if not np.isnan(failing_from) else np.ones_like(blind)
+        holding = ~(times >= failing_from)  # every time where the verdict never fails
         records.extend(_inaccurate(output, checked, times, tolerance, holding))
     if holdout is None and runs.shape[0] > 1 and equal.all():
         records.append(_all_equal(output, runs, times, nominal))
@@ -667,10 +668,9 @@ def diagnose(
         if holdout is not None and holdout_germ is not None:
             predicted, observed = (np.atleast_2d(a) for a in holdout)
             kept = np.isfinite(observed).all(axis=1)
-            residual = observed[kept] - predicted[kept]
-            ends = _error_at_ends(np.asarray(holdout_germ)[kept], residual, failing)
+            germ, residual = np.asarray(holdout_germ)[kept], observed[kept] - predicted[kept]
+            ends = _error_at_ends(germ, residual, failing)
             if isinstance(expansion, PiecewiseExpansion):
-                germ = np.asarray(holdout_germ)[kept]
                 by_element = _element_errors(expansion, germ, residual, failing)
         if blind.any():
             evidence = (
@@ -871,13 +871,13 @@ def _element_errors(
     failing times, with its box and probability: an error far above the element's
     probability sits around a jump or kink there, one in proportion to it is spread."""
     partition = expansion.partition
+    size = np.max(np.abs(residual[:, failing]))
+    if partition.size < 2 or not size > 0 or not np.isfinite(size):
+        return ""
     theta = np.column_stack(
         [d.to_physical(germ[:, k]) for k, d in enumerate(expansion.distributions)]
     )
     where = partition.locate(theta)
-    size = np.max(np.abs(residual[:, failing]))
-    if partition.size < 2 or not size > 0 or not np.isfinite(size):
-        return ""
     weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
     inside = where >= 0
     shares = np.bincount(where[inside], weights=weight[inside], minlength=partition.size)
@@ -950,7 +950,7 @@ def _cause_remedy(
     top = int(np.argmax(by_input))
     name = expansion.names[top]
     if total <= 0:
-        return "order", "", "no coefficient beyond the linear ones carries energy"
+        return "order", "", "the outer two layers of the expansion carry no energy to read"
     grows = estimate[-1] > _GROWTH * estimate[np.argmax(failing)]
     if expansion.n > 1 and by_input[top] < _CONCENTRATED * total and grows:
         return (
