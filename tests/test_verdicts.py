@@ -450,3 +450,12 @@ def test_the_remedy_follows_the_input_that_holds_the_error_at_every_failing_time
         remedy = _remedy(study.run())
     assert remedy.startswith("multi-element chaos along x0 (method.elements)")
     assert "along x0 fall algebraically" in remedy and "order of x1" not in remedy
+
+
+def test_a_kink_whose_few_coefficients_look_geometric_is_told_to_use_elements():
+    # |x - 0.3| to order 7: the first degrees carry the kink's global shape and their
+    # energy falls about geometrically, but the held-out error sits around x = 0.3.
+    remedy = _remedy_of(kink, order=7, diagnostics_tolerance=1e-3)
+    assert "fall geometrically" in remedy  # what the coefficients alone say
+    assert remedy.startswith("multi-element chaos along x (method.elements)")
+    assert "sits inside the range of x" in remedy

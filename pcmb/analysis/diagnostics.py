@@ -928,7 +928,9 @@ def _cause_remedy(
     - else, along every input that holds at least ``_SHARED`` of the tail (each failing
       time weighing the same), the decay of the coefficients (:func:`_decay_shape`):
       algebraic along any, as those of a jump or kink — multi-element chaos along those;
-      geometric along all, as those of an analytic response — a higher order;
+      geometric along all, as those of an analytic response — a higher order, unless the
+      held-out error sits inside the input's range (at most ``_INSIDE``, below), as a
+      kink's does whose first degrees look geometric — multi-element chaos;
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
@@ -962,45 +964,52 @@ def _cause_remedy(
     holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
     shapes = {k: _decay_shape(energy, index, k) for k in holders}
     read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
+    place = ""
+    if ends is not None:
+        place = (
+            f"the range of {name} (mean |2u - 1| of their ranks u along it, weighted by the "
+            f"squared error: {ends[top]:.2f}; 0.5 if spread evenly)"
+        )
     if top in read:
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k]) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
-        if not jumps:
-            return "order", " and ".join(expansion.names[k] for k in read), reads
-        name, cause, steep = " and ".join(jumps), reads, True
-    else:
-        order = int(index[:, top].max())
-        unknown = (
-            f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
-            "to tell a jump or kink from a slowly converging smooth response by it"
-        )
-        cause = f"the response is steep or discontinuous in {name}{unknown}"
-        place = ""
-        if ends is not None:
-            place = (
-                f"the range of {name} (mean |2u - 1| of their ranks u along it, weighted by the "
-                f"squared error: {ends[top]:.2f}; 0.5 if spread evenly)"
-            )
-        previous = energy[before].sum()
-        if place and ends[top] >= _AT_ENDS:
+        if jumps:
+            return "elements", " and ".join(jumps), reads
+        if place and ends[top] <= _INSIDE:  # a kink's first degrees may look geometric
             return (
-                "order",
+                "elements",
                 name,
-                f"the surrogate's error at the held-out runs sits at the ends of {place}, as "
-                f"that of a smooth response converging slowly{unknown}",
+                f"{reads}, but the surrogate's error at the held-out runs sits inside {place}, "
+                "around a kink or steep front there",
             )
-        if place and ends[top] <= _INSIDE:
-            steep = True
-            cause = (
-                f"the surrogate's error at the held-out runs sits inside {place}, around a "
-                f"jump, kink or steep front there{unknown}"
-            )
-        elif previous > 0:
-            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-        else:  # an order below 4: too few layers to see a decay, the overshoot tells
-            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-        if not steep:
-            return "order", name, f"its spectrum decays slowly{unknown}"
+        return "order", " and ".join(expansion.names[k] for k in read), reads
+    order = int(index[:, top].max())
+    unknown = (
+        f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
+        "to tell a jump or kink from a slowly converging smooth response by it"
+    )
+    cause = f"the response is steep or discontinuous in {name}{unknown}"
+    previous = energy[before].sum()
+    if place and ends[top] >= _AT_ENDS:
+        return (
+            "order",
+            name,
+            f"the surrogate's error at the held-out runs sits at the ends of {place}, as "
+            f"that of a smooth response converging slowly{unknown}",
+        )
+    if place and ends[top] <= _INSIDE:
+        return (
+            "elements",
+            name,
+            f"the surrogate's error at the held-out runs sits inside {place}, around a "
+            f"jump, kink or steep front there{unknown}",
+        )
+    if previous > 0:
+        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+    if not steep:
+        return "order", name, f"its spectrum decays slowly{unknown}"
     return "elements", name, cause
 
 
