@@ -158,3 +158,17 @@ def test_a_worker_starts_without_scipy():
     # half a second of import per worker, on the main job's critical path, that only
     # implicit integrators and the chaos machinery of the result need.
     assert _loaded("from pcmb.run.backends import _warm_up\n_warm_up()\n", (*HEAVY, "scipy")) == []
+
+
+def test_running_knows_no_adapter_but_the_protocol():
+    # Adapters declare the files their models read (ModelFactory.model_files, loaded_files):
+    # the resume fingerprint and the workers need no adapter's class. The python adapter is
+    # only imported ahead of the first task (run.backends._warm_up).
+    for name, path in MODULES.items():
+        if not name.startswith("pcmb.run."):
+            continue
+        imported = _imports(path, top_level_only=False, typing_only=False)
+        adapters = {m for m in imported if m.startswith("pcmb.adapters.")}
+        strangers = adapters - {"pcmb.adapters.protocol", "pcmb.adapters.python.model"}
+        strangers = {m for m in strangers if not m.startswith("pcmb.adapters.protocol.")}
+        assert not strangers, f"{name} imports {sorted(strangers)}"

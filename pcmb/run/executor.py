@@ -63,7 +63,7 @@ MAX_CHUNK_SIZE = 256
 _T = TypeVar("_T")
 
 
-# -- results ---------------------------------------------------------------------------------------
+# -- results ---------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ def join_runs(first: RunResult, second: RunResult) -> RunResult:
     )
 
 
-# -- chunking --------------------------------------------------------------------------------------
+# -- chunking --------------------------------------------------------------------------------
 
 
 def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int, int]]:
@@ -137,7 +137,7 @@ def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int,
     return [(start, min(start + size, n_nodes)) for start in range(0, n_nodes, size)]
 
 
-# -- tasks -----------------------------------------------------------------------------------------
+# -- tasks -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -229,7 +229,7 @@ def _wait(
     return None, death
 
 
-# -- the campaign ----------------------------------------------------------------------------------
+# -- the campaign ----------------------------------------------------------------------------
 
 
 class _Campaign:
@@ -485,7 +485,7 @@ def _run_pooled(
             lost = []
 
 
-# -- argument checks -------------------------------------------------------------------------------
+# -- argument checks -------------------------------------------------------------------------
 
 
 def _check_arguments(
@@ -599,7 +599,7 @@ def _check_journal(journal: Journal, n_nodes: int, layout: Layout) -> None:
         )
 
 
-# -- the entry point -------------------------------------------------------------------------------
+# -- the entry point -------------------------------------------------------------------------
 
 
 def run_nodes(

@@ -59,7 +59,7 @@ __all__ = [
 _T = TypeVar("_T")
 
 
-# -- what a task returns, and how its outputs sit --------------------------------------------------
+# -- what a task returns, and how its outputs sit --------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -140,7 +140,7 @@ class Layout:
         return f" at axis point {j}"
 
 
-# -- calls into the model's code -------------------------------------------------------------------
+# -- calls into the model's code -------------------------------------------------------------
 
 
 class _SigintWatch:
