@@ -29,6 +29,7 @@ from pcmb.analysis.diagnostics import (
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
+    pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
@@ -720,6 +721,9 @@ class Study:
         if self.analysis is not None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
+                result = dataclasses.replace(
+                    result, warnings=(*result.warnings, *pdf_outside_runs(result))
+                )
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -965,6 +969,7 @@ class Study:
             self.diagnostics.tolerance,
             axes=result.axes,
             nominal=result.nominal,
+            budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(
