@@ -919,7 +919,7 @@ class Study:
         ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not self.method.validation or self.design.record().basis is None:
             return None, ()
-        seed = getattr(self.method, "seed", 0) + HELD_OUT_SEED
+        seed = self.method.seed + HELD_OUT_SEED
         # A Latin hypercube: each input's range is met evenly, which steadies the estimated
         # errors of the statistics against a few runs missing where the error sits.
         batch = random_nodes(tuple(self.inputs.values()), self.method.validation, "lhs", seed)
