@@ -476,8 +476,6 @@ def _inspect(path: str) -> str:
         )
     if result.multi_index is not None:
         lines.append(f"chaos    {result.multi_index.shape[0]} terms")
-    if result.partition is not None:
-        lines.append(f"elements {result.partition.describe(result.input_names)}")
     lines.append(f"{'output':<12}{'mean min':>12}{'mean max':>12}{'std min':>12}{'std max':>12}")
     for name in result.outputs:
         mean, std = result.mean(name), result.std(name)
@@ -507,28 +505,8 @@ def _inspect(path: str) -> str:
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
         )
-    for name, fit in result.regression.items():
-        lines.append(
-            f"fit      {name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
-            f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}"
-        )
-    fit = result.adaptive
-    if fit is not None:  # per round: runs and estimated error; per input: what it reached
-        rounds = ", ".join(f"{int(runs)}: {error:.2g}" for runs, error in fit.history)
-        reached = zip(result.input_names, fit.levels, fit.orders, fit.importance, strict=True)
-        lines += [
-            f"adaptive {fit.index_set.shape[0]} level indices, estimated error "
-            f"{fit.estimate:.3g}; runs: estimate per round {rounds}",
-            "inputs   "
-            + ", ".join(f"{n} level {lv} order {p} share {sh:.2g}" for n, lv, p, sh in reached),
-        ]
-    history = result.refinement
-    if history is not None:  # order: auto, per round: order and indicator
-        rounds = ", ".join(
-            f"{int(orders.max())}: {error:.2g}"
-            for orders, error in zip(history.orders, history.indicator, strict=True)
-        )
-        lines.append(f"refined  order: indicator per round {rounds}")
+    if result.report is not None:  # what the design concluded, in its own words
+        lines += [f"{label:<9}{text}" for label, text in result.report.summary(result)]
     if result.nominal_params:
         nominal = ", ".join(f"{k}={v:.6g}" for k, v in result.nominal_params.items())
         lines.append(f"nominal  {nominal} ({'stored' if result.nominal else 'failed'})")

@@ -6,8 +6,10 @@ Everything here is plain data (numpy and the chaos core); :mod:`pcmb.store` writ
 from __future__ import annotations
 
 import json
+from abc import ABC, abstractmethod
+from collections.abc import MutableMapping
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, Self
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,10 +28,13 @@ if TYPE_CHECKING:
 __all__ = [
     "AdaptiveFit",
     "Design",
+    "DesignReport",
     "ModelTraceback",
     "NodeFailure",
     "Refinement",
     "RegressionFit",
+    "ReportFile",
+    "ReportedByDesign",
     "Status",
     "StudyResult",
     "WarningRecord",
@@ -199,6 +204,99 @@ class AdaptiveFit:
         return shares / total if total > 0 else np.zeros(self.index_set.shape[1])
 
 
+class ReportFile(Protocol):
+    """The open result file as a :class:`DesignReport` writes and reads it
+    (:mod:`pcmb.store` gives one). Paths are relative to the file's root; a scale is named by
+    its root dataset (``"node"``, ``"input"``), ``None`` leaving that axis without one."""
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The outputs, in the model's order."""
+        ...
+
+    def dataset(self, path: str, data: NDArray[Any], *scales: str | None) -> None:
+        """Write ``data`` at ``path``, its leading axes on ``scales``."""
+        ...
+
+    def points(self, path: str, data: NDArray[Any], output: str, *scales: str) -> None:
+        """Write ``data`` whose last axis is the points of ``output`` (dropped for a scalar)."""
+        ...
+
+    def attrs(self, path: str) -> MutableMapping[str, Any]:
+        """The attributes of the group or dataset at ``path``."""
+        ...
+
+    def read(self, path: str) -> NDArray[Any] | None:
+        """The dataset at ``path`` (``None``: the file has none)."""
+        ...
+
+    def read_points(self, path: str, output: str) -> NDArray[Any] | None:
+        """A dataset written by :meth:`points`, with its last axis back for a scalar output."""
+        ...
+
+
+class DesignReport(ABC):
+    """What a design concluded beyond its expansions (a sparse regression's fits, an adaptive
+    grid's index set, ...), written, read and summarised by the design's own code, so the
+    result file, ``pcmb inspect`` and ``pcmb report`` need not know the design. A study holds
+    one at most; :data:`pcmb.designs.REPORTS` lists them by :attr:`key`."""
+
+    #: The report's name in :data:`pcmb.designs.REPORTS`.
+    key: ClassVar[str]
+
+    @abstractmethod
+    def write(self, file: ReportFile) -> None:
+        """Write the report into a result file (its outputs are written already)."""
+
+    @classmethod
+    @abstractmethod
+    def read(cls, file: ReportFile) -> Self | None:
+        """The report back from a result file (``None``: the file holds none of this kind)."""
+
+    def summary(self, result: StudyResult) -> list[tuple[str, str]]:
+        """``(label, text)`` lines for ``pcmb inspect`` and the report's table."""
+        return []
+
+    def merged(self, other: Self) -> Self:
+        """This report with ``other``'s, of the same design on other outputs (the outputs of
+        another axis); a report of the whole study keeps its own."""
+        return self
+
+
+class ReportedByDesign:
+    """The records of a design report under their names of old (``regression``, ...), read
+    from ``self.report``: empty (or ``None``) when the design reports none of them."""
+
+    report: DesignReport | None
+
+    @property
+    def regression(self) -> dict[str, RegressionFit]:
+        """Output name -> :class:`RegressionFit` of a sparse regression (empty otherwise)."""
+        return getattr(self.report, "regression", {})
+
+    @property
+    def node_elements(self) -> NDArray[np.intp] | None:
+        """(N,) the element of every node of a multi-element study, -1 for the nodes of
+        elements split by ``elements: auto`` (not used by the recovery); ``None`` otherwise."""
+        return getattr(self.report, "node_elements", None)
+
+    @property
+    def adaptive(self) -> AdaptiveFit | None:
+        """What an adaptive sparse grid concluded (``None`` otherwise)."""
+        return getattr(self.report, "adaptive", None)
+
+    @property
+    def refinement(self) -> Refinement | None:
+        """The rounds of ``order: auto`` (``None`` otherwise)."""
+        return getattr(self.report, "refinement", None)
+
+    @property
+    def moments(self) -> dict[str, NDArray[np.float64]]:
+        """Output name -> (2, T) mean and std of a method that computes them without runs or
+        an expansion (statistical linearization); empty otherwise."""
+        return getattr(self.report, "moments", {})
+
+
 @dataclass(frozen=True)
 class WarningRecord:
     """One thing the user must know about the trustworthiness of the numbers.
@@ -256,7 +354,7 @@ INDICATORS = frozenset({"element-decay", "regression-loo", "element-budget", "or
 
 
 @dataclass(frozen=True, repr=False)
-class StudyResult:
+class StudyResult(ReportedByDesign):
     """Everything a study produced (and everything a result file holds).
 
     Attributes
@@ -295,16 +393,10 @@ class StudyResult:
         failed: see ``warnings``).
     analysis:
         Quantile bands, PDFs and spectra (:func:`pcmb.analysis.statistics.analyse`).
-    regression:
-        Output name -> :class:`RegressionFit` (selected terms, leave-one-out error, condition
-        number) of a sparse regression study; empty for other methods.
-    node_elements:
-        (N,) the element of every node of a multi-element study, -1 for the nodes of
-        elements split by ``elements: auto`` (not used by the recovery); ``None`` otherwise.
-    adaptive:
-        What an adaptive sparse grid concluded (:class:`AdaptiveFit`); ``None`` otherwise.
-    refinement:
-        The rounds of ``order: auto`` (:class:`Refinement`); ``None`` otherwise.
+    report:
+        What the design concluded beyond its expansions (:class:`DesignReport`), ``None`` if
+        nothing; read under its old names too (:class:`ReportedByDesign`: ``regression``,
+        ``node_elements``, ``adaptive``, ``refinement``, ``moments``).
     diagnostics:
         Output name -> how far its chaos expansion can be trusted, time by time
         (:class:`pcmb.analysis.diagnostics.OutputDiagnostics`: ``failing_from``, ``decay``,
@@ -318,9 +410,6 @@ class StudyResult:
         Output name -> its own axis (:class:`~pcmb.axes.OutputAxis`), or ``None`` for a
         scalar (a derived figure of merit, a model's scalar output); the outputs not listed
         are on ``times``. Every statistic of an output is per point of its axis.
-    moments:
-        Output name -> (2, T) mean and std of a method that computes them without runs or an
-        expansion (statistical linearization); empty otherwise.
     """
 
     name: str
@@ -340,15 +429,11 @@ class StudyResult:
     nominal_params: dict[str, float] = field(default_factory=dict)
     nominal: dict[str, NDArray[np.float64]] = field(default_factory=dict)
     analysis: Analysis | None = None
-    regression: dict[str, RegressionFit] = field(default_factory=dict)
-    node_elements: NDArray[np.intp] | None = None
-    adaptive: AdaptiveFit | None = None
-    refinement: Refinement | None = None
+    report: DesignReport | None = None
     diagnostics: dict[str, OutputDiagnostics] = field(default_factory=dict)
     held_out: HeldOut | None = None
     processes: dict[str, RandomProcess] = field(default_factory=dict)
     axes: dict[str, OutputAxis | None] = field(default_factory=dict)
-    moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def __repr__(self) -> str:
         """A summary: method, runs, inputs, outputs and warnings (not the arrays)."""

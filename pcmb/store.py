@@ -27,12 +27,10 @@ from pcmb.chaos.inputs import from_description
 from pcmb.chaos.process import RandomProcess, covariance_from_description, germ_names
 from pcmb.errors import ResultFileError
 from pcmb.result import (
-    AdaptiveFit,
     Design,
+    DesignReport,
     ModelTraceback,
     NodeFailure,
-    Refinement,
-    RegressionFit,
     Status,
     StudyResult,
     WarningRecord,
@@ -236,11 +234,7 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
     _attach(nodes.create_dataset("status", data=result.status.astype(np.int8)), node)
     if result.weights is not None:
         _attach(nodes.create_dataset("weights", data=result.weights), node)
-    _write_elements(file, result, node, input_)
-    if result.adaptive is not None:
-        _write_adaptive(file, result.adaptive, input_)
-    if result.refinement is not None:
-        _write_refinement(file, result.refinement, input_)
+    _write_elements(file, result, input_)
     _write_processes(file, result, trails)
 
     index = result.multi_index
@@ -272,37 +266,16 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
             _points(group, "sobol_total", expansion.sobol_total(), (input_,), trail)
         if name in result.nominal:
             _points(group, "nominal", result.nominal[name], (), trail)
-        if name in result.regression:
-            _write_regression(group, result.regression[name], trail, input_)
         if analysis is not None:
             unit = analysis.settings.units.get(name, "")
             _write_analysis(file, group, analysis.outputs[name], trail, unit)
+    if result.report is not None:
+        result.report.write(_ReportFile(file, trails=trails, scalars=set()))
 
 
-def _write_regression(
-    group: h5py.Group, fit: RegressionFit, time_: _Trail, input_: h5py.Dataset
-) -> None:
-    """A sparse regression fit of one output: ``loo`` (T,), ``selected`` (S_k, n), attribute
-    ``condition``."""
-    _points(group, "loo", fit.loo, (), time_)
-    selected = group.create_dataset("selected", data=fit.selected)
-    selected.dims[1].attach_scale(input_)
-    group.attrs["condition"] = fit.condition
-
-
-def _read_regression(group: h5py.Group, scalar: bool) -> RegressionFit | None:
-    if "loo" not in group:
-        return None
-    loo = _columns(group["loo"][()], scalar)
-    return RegressionFit(group["selected"][()], loo, float(group.attrs["condition"]))
-
-
-def _write_elements(
-    file: h5py.File, result: StudyResult, node: h5py.Dataset, input_: h5py.Dataset
-) -> None:
-    """A multi-element study's ``/elements/bounds`` (E, n, 2) in physical units,
-    ``/elements/probability`` (E,) and ``/nodes/element`` (N,), -1 for nodes of split
-    elements; its coefficients are (E, S, T)."""
+def _write_elements(file: h5py.File, result: StudyResult, input_: h5py.Dataset) -> None:
+    """A multi-element study's ``/elements/bounds`` (E, n, 2) in physical units and
+    ``/elements/probability`` (E,); its coefficients are (E, S, T)."""
     partition = result.partition
     if partition is None:
         return
@@ -310,8 +283,6 @@ def _write_elements(
     group = file.create_group("elements")
     _attach(group.create_dataset("bounds", data=partition.bounds), element, input_)
     _attach(group.create_dataset("probability", data=partition.probability), element)
-    if result.node_elements is not None:
-        _attach(file.create_dataset("nodes/element", data=result.node_elements), node)
 
 
 def _write_processes(file: h5py.File, result: StudyResult, trails: dict[str, _Trail]) -> None:
@@ -359,39 +330,47 @@ def _read_processes(file: h5py.File) -> dict[str, RandomProcess]:
     return found
 
 
-def _write_adaptive(file: h5py.File, fit: AdaptiveFit, input_: h5py.Dataset) -> None:
-    """An adaptive sparse grid's ``/adaptive/index_set`` (K, n), ``indicators`` and ``active``
-    (K,), ``history`` (R, 2: runs, estimated error) and ``orders`` (n,)."""
-    group = file.create_group("adaptive")
-    group.create_dataset("index_set", data=fit.index_set).dims[1].attach_scale(input_)
-    group.create_dataset("indicators", data=fit.indicators)
-    group.create_dataset("active", data=fit.active)
-    group.create_dataset("history", data=fit.history)
-    _attach(group.create_dataset("orders", data=fit.orders), input_)
+class _ReportFile:
+    """The open result file as a design report writes and reads it
+    (:class:`pcmb.result.ReportFile`); ``trails``: each output's scale (writing only)."""
+
+    def __init__(
+        self, file: h5py.File, trails: Mapping[str, _Trail] | None, scalars: set[str]
+    ) -> None:
+        self.file, self.trails, self.scalars = file, trails, scalars
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return tuple(json.loads(_text(self.file["outputs"].attrs["names"])))
+
+    def dataset(self, path: str, data: np.ndarray, *scales: str | None) -> None:
+        dataset = self.file.create_dataset(path, data=data)
+        for axis, scale in enumerate(scales):
+            if scale is not None:
+                dataset.dims[axis].attach_scale(self.file[scale])
+
+    def points(self, path: str, data: np.ndarray, output: str, *scales: str) -> None:
+        _points(self.file, path, data, tuple(self.file[s] for s in scales), self.trails[output])
+
+    def attrs(self, path: str) -> h5py.AttributeManager:
+        return self.file[path].attrs
+
+    def read(self, path: str) -> np.ndarray | None:
+        return self.file[path][()] if path in self.file else None
+
+    def read_points(self, path: str, output: str) -> np.ndarray | None:
+        found = self.read(path)
+        return None if found is None else _columns(found, output in self.scalars)
 
 
-def _read_adaptive(file: h5py.File) -> AdaptiveFit | None:
-    if "adaptive" not in file:
-        return None
-    group = file["adaptive"]
-    keys = ("index_set", "indicators", "active", "history", "orders")
-    return AdaptiveFit(**{key: group[key][()] for key in keys})
+def _read_report(file: _ReportFile) -> DesignReport | None:
+    """The design report the file holds, if any (each registered report looks for its own)."""
+    from pcmb.designs import REPORTS
 
-
-def _write_refinement(file: h5py.File, history: Refinement, input_: h5py.Dataset) -> None:
-    """The rounds of ``order: auto``: ``/refinement/orders`` (R, n), ``runs`` and
-    ``indicator`` (R,)."""
-    group = file.create_group("refinement")
-    group.create_dataset("orders", data=history.orders).dims[1].attach_scale(input_)
-    group.create_dataset("runs", data=history.runs)
-    group.create_dataset("indicator", data=history.indicator)
-
-
-def _read_refinement(file: h5py.File) -> Refinement | None:
-    if "refinement" not in file:
-        return None
-    group = file["refinement"]
-    return Refinement(**{key: group[key][()] for key in ("orders", "runs", "indicator")})
+    for report in REPORTS.values():
+        if (found := report.read(file)) is not None:
+            return found
+    return None
 
 
 def _element_scale(file: h5py.File, expansion: ChaosExpansion) -> tuple[h5py.Dataset, ...]:
@@ -666,8 +645,6 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
         values: dict[str, np.ndarray] = {}
         expansions: dict[str, ChaosExpansion] = {}
         nominal: dict[str, np.ndarray] = {}
-        regression: dict[str, RegressionFit] = {}
-        moments: dict[str, np.ndarray] = {}
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
         axes = _read_axes(file, outputs)
         scalars = {name for name, axis in axes.items() if axis is None}
@@ -677,12 +654,8 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             values[name] = _columns(group["values"][()], scalar)
             if "coefficients" in group and index is not None:
                 expansions[name] = _read_expansion(group, index, partition, dists, names, scalar)
-            elif values[name].shape[0] == 0:  # no runs, no expansion: moments alone
-                moments[name] = np.stack([group["mean"][()], group["std"][()]])
             if "nominal" in group:
                 nominal[name] = _columns(group["nominal"][()], scalar)
-            if (fit := _read_regression(group, scalar)) is not None:
-                regression[name] = fit
         raised = _read_tracebacks(attrs)
         failures = tuple(
             NodeFailure(f["index"], f["params"], f["message"], raised.get(f["index"]))
@@ -708,13 +681,9 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
             nominal=nominal,
             analysis=_read_analysis(file, outputs, axes),
-            regression=regression,
-            node_elements=file["nodes/element"][()] if "element" in file["nodes"] else None,
-            adaptive=_read_adaptive(file),
-            refinement=_read_refinement(file),
+            report=_read_report(_ReportFile(file, trails=None, scalars=scalars)),
             diagnostics=diagnostics,
             held_out=held_out,
             processes=_read_processes(file),
             axes=axes,
-            moments=moments,
         )

@@ -6,6 +6,7 @@ The command line and the Python API share this one code path; see ``docs/archite
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import sys
@@ -52,7 +53,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.result import Status, StudyResult, WarningRecord
+from pcmb.result import DesignReport, Status, StudyResult, WarningRecord
 from pcmb.run.backends import Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
@@ -743,7 +744,7 @@ class Study:
         axes: Mapping[str, OutputAxis | None],
     ) -> Recovery:
         """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
-        order; the study-wide records (adaptive, refinement, elements) are the first's."""
+        order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`)."""
         parts = []
         for _, on_time, group in _by_axis(values, axes):
             # Warning records locate times only (time_range): off time they name indices.
@@ -761,7 +762,7 @@ class Study:
                 if name in part.expansions
             },
             warnings=tuple(record for part in parts for record in part.warnings),
-            regression={k: v for part in parts for k, v in part.regression.items()},
+            report=_merged_reports(parts),
         )
 
     def _with_derived(self, runs: _Runs) -> _Runs:
@@ -804,7 +805,7 @@ class Study:
             expansions=recovery.expansions,
             warnings=recovery.warnings,
             seconds=time.perf_counter() - start,
-            moments=recovery.moments,
+            report=recovery.report,
         )
 
     def _run_rounds(
@@ -1065,12 +1066,15 @@ class Study:
             failures=runs.failures,
             warnings=(*warnings, *recovery.warnings),
             seconds=runs.seconds,
-            regression=recovery.regression,
-            node_elements=recovery.node_elements,
-            adaptive=recovery.adaptive,
-            refinement=recovery.refinement,
+            report=recovery.report,
             processes=self.processes,
         )
+
+
+def _merged_reports(parts: list[Recovery]) -> DesignReport | None:
+    """The parts' design reports merged into one, in order (``None``: the design has none)."""
+    reports = [part.report for part in parts if part.report is not None]
+    return functools.reduce(lambda first, other: first.merged(other), reports) if reports else None
 
 
 def _by_axis(

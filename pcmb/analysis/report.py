@@ -845,8 +845,8 @@ def _index_page(
         ("wall time of the runs", f"{result.seconds:.3g} s"),
         ("time", f"{grid[0]:.4g} .. {labels.at_time(result.times[-1])}, {grid.size} points"),
     ]
-    if result.partition is not None:
-        rows.append(("elements", result.partition.describe(result.input_names)))
+    if result.report is not None:
+        rows += result.report.summary(result)
     rows.append(("spectra", ", ".join(spectra) or "none (analysis.psd)"))
     rows += [
         ("compared with", f"{other.label}, {other.result.seconds:.3g} s of runs")

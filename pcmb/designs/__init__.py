@@ -14,7 +14,7 @@ from typing import Annotated, Any
 from pydantic import Field, TypeAdapter
 
 from pcmb.chaos.inputs import Distribution
-from pcmb.designs.adaptive import AdaptiveCollocation
+from pcmb.designs.adaptive import AdaptiveCollocation, AdaptiveReport
 from pcmb.designs.anisotropic import AnisotropicTensor
 from pcmb.designs.base import (
     RECORDED_ONLY,
@@ -28,18 +28,20 @@ from pcmb.designs.base import (
 from pcmb.designs.collocation import GRIDS, TensorCollocation
 from pcmb.designs.galerkin import Galerkin
 from pcmb.designs.halton import HaltonSampling
-from pcmb.designs.linearization import Linearization
-from pcmb.designs.multi_element import MultiElementCollocation
-from pcmb.designs.refine import OrderRefinement
-from pcmb.designs.regression import SparseRegression
+from pcmb.designs.linearization import Linearization, MomentReport
+from pcmb.designs.multi_element import ElementReport, MultiElementCollocation
+from pcmb.designs.refine import OrderRefinement, RefinementReport
+from pcmb.designs.regression import RegressionReport, SparseRegression
 from pcmb.designs.sampling import Sampling
 from pcmb.designs.smolyak import SparseCollocation
+from pcmb.result import DesignReport
 
 __all__ = [
     "DESIGNS",
     "GRIDS",
     "METHOD_KINDS",
     "RECORDED_ONLY",
+    "REPORTS",
     "IntrusiveDesign",
     "MethodSection",
     "MethodSettings",
@@ -74,6 +76,13 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     # model's polynomial form in a worker.
     "galerkin": Galerkin,
     "linearization": Linearization,
+}
+#: Report key -> what a design concludes beyond its expansions (a
+#: :class:`~pcmb.result.DesignReport`), which the result file, ``pcmb inspect`` and the report
+#: leave to it: a design with a report of its own adds it here.
+REPORTS: dict[str, type[DesignReport]] = {
+    report.key: report
+    for report in (RegressionReport, AdaptiveReport, RefinementReport, ElementReport, MomentReport)
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))

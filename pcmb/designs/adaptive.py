@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping
-from typing import Literal
+from dataclasses import dataclass
+from typing import ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,9 +43,9 @@ from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.config.types import PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import sparse_recovery
-from pcmb.result import AdaptiveFit, Design, WarningRecord
+from pcmb.result import AdaptiveFit, Design, DesignReport, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["AdaptiveCollocation", "AdaptiveSettings"]
+__all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings"]
 
 #: Share of the refinable indicators' sum a round refines (bulk marking).
 BULK = 0.5
@@ -402,9 +403,51 @@ class AdaptiveCollocation:
                     f"{self.tolerance:g}): {self._stopped}",
                 ),
             )
-        return Recovery(recovery.expansions, warnings, adaptive=fit)
+        return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
     """The backward neighbours of a level multi-index."""
     return [(*level[:k], at - 1, *level[k + 1 :]) for k, at in enumerate(level) if at > 0]
+
+
+@dataclass(frozen=True)
+class AdaptiveReport(DesignReport):
+    """What a dimension-adaptive grid concluded (:class:`~pcmb.result.AdaptiveFit`), stored
+    as ``/adaptive/index_set`` (K, n), ``indicators`` and ``active`` (K,), ``history`` (R, 2:
+    runs, estimated error) and ``orders`` (n,)."""
+
+    key: ClassVar[str] = "adaptive"
+    _FIELDS: ClassVar[tuple[str, ...]] = ("index_set", "indicators", "active", "history", "orders")
+
+    adaptive: AdaptiveFit
+
+    def write(self, file: ReportFile) -> None:
+        fit = self.adaptive
+        file.dataset("adaptive/index_set", fit.index_set, None, "input")
+        file.dataset("adaptive/indicators", fit.indicators)
+        file.dataset("adaptive/active", fit.active)
+        file.dataset("adaptive/history", fit.history)
+        file.dataset("adaptive/orders", fit.orders, "input")
+
+    @classmethod
+    def read(cls, file: ReportFile) -> AdaptiveReport | None:
+        found = {key: file.read(f"adaptive/{key}") for key in cls._FIELDS}
+        return None if found["index_set"] is None else cls(AdaptiveFit(**found))
+
+    def summary(self, result: StudyResult) -> list[tuple[str, str]]:
+        """Per round: runs and estimated error; per input: what it reached."""
+        fit = self.adaptive
+        rounds = ", ".join(f"{int(runs)}: {error:.2g}" for runs, error in fit.history)
+        reached = zip(result.input_names, fit.levels, fit.orders, fit.importance, strict=True)
+        return [
+            (
+                "adaptive",
+                f"{fit.index_set.shape[0]} level indices, estimated error {fit.estimate:.3g}; "
+                f"runs: estimate per round {rounds}",
+            ),
+            (
+                "inputs",
+                ", ".join(f"{n} level {lv} order {p} share {sh:.2g}" for n, lv, p, sh in reached),
+            ),
+        ]

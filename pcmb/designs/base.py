@@ -16,14 +16,7 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
 from pcmb.config.types import NonNegativeInt, Section
-from pcmb.result import (
-    RECORDED_ONLY,
-    AdaptiveFit,
-    Design,
-    Refinement,
-    RegressionFit,
-    WarningRecord,
-)
+from pcmb.result import RECORDED_ONLY, Design, DesignReport, ReportedByDesign, WarningRecord
 
 __all__ = [
     "RECORDED_ONLY",
@@ -118,21 +111,15 @@ class MethodSection(Section):
 
 
 @dataclass(frozen=True)
-class Recovery:
-    """What a design recovered from the runs: expansions per output, warnings and, for sparse
-    regression, each output's fit (selected terms, leave-one-out error, condition number); for
-    an adaptive sparse grid, what its refinement concluded; for ``order: auto``, its rounds."""
+class Recovery(ReportedByDesign):
+    """What a design recovered from the runs: expansions per output, warnings and what else
+    the design concluded (its :class:`~pcmb.result.DesignReport`: a sparse regression's fits,
+    an adaptive grid's index set, the rounds of ``order: auto``, the elements of the nodes, the
+    moments of statistical linearization), which the result keeps."""
 
     expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
     warnings: tuple[WarningRecord, ...] = ()
-    regression: dict[str, RegressionFit] = field(default_factory=dict)
-    #: Multi-element collocation: (N,) the element of every node (-1: left out).
-    node_elements: NDArray[np.intp] | None = None
-    adaptive: AdaptiveFit | None = None
-    refinement: Refinement | None = None
-    #: Methods that compute statistics without an expansion (statistical linearization):
-    #: output name -> (2, T) mean and std.
-    moments: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    report: DesignReport | None = None
 
 
 class NodeDesign(Protocol):

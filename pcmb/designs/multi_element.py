@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,9 +45,9 @@ from pcmb.designs.base import (
     statistics_warnings,
 )
 from pcmb.designs.collocation import CollocationSettings, TensorCollocation
-from pcmb.result import Design, WarningRecord
+from pcmb.result import Design, DesignReport, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["MultiElementCollocation", "decay_scores"]
+__all__ = ["ElementReport", "MultiElementCollocation", "decay_scores"]
 
 #: Largest weighted decay indicator P_e η_e accepted.
 THRESHOLD = 1e-4
@@ -284,7 +286,7 @@ class MultiElementCollocation:
             )
         warnings += self._decay_warnings(expansions)
         warnings += statistics_warnings(expansions, values, ok, times)
-        return Recovery(expansions, tuple(warnings), node_elements=self.node_elements.copy())
+        return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
 
     def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
         records = []
@@ -365,3 +367,26 @@ def decay_scores(
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         shares = np.where(better[:, None], energy, shares)
     return partition.probability * eta, shares
+
+
+@dataclass(frozen=True)
+class ElementReport(DesignReport):
+    """The element of every node, stored as ``/nodes/element`` (N,): -1 for the nodes of
+    elements split by ``elements: auto`` (run, kept, not used by the recovery). The elements
+    themselves are the expansions' partition (``/elements``)."""
+
+    key: ClassVar[str] = "elements"
+
+    node_elements: NDArray[np.intp]
+
+    def write(self, file: ReportFile) -> None:
+        file.dataset("nodes/element", self.node_elements, "node")
+
+    @classmethod
+    def read(cls, file: ReportFile) -> ElementReport | None:
+        found = file.read("nodes/element")
+        return None if found is None else cls(found)
+
+    def summary(self, result: StudyResult) -> list[tuple[str, str]]:
+        partition = result.partition
+        return [] if partition is None else [("elements", partition.describe(result.input_names))]

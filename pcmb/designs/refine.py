@@ -24,6 +24,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,9 +34,9 @@ from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery
 from pcmb.designs.collocation import CollocationSettings, TensorCollocation
-from pcmb.result import Design, Refinement, WarningRecord
+from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "order_indicator"]
+__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "order_indicator"]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 12
@@ -212,4 +213,33 @@ class OrderRefinement:
                     f"(diagnostics.tolerance): {self._stopped}",
                 ),
             )
-        return Recovery(recovery.expansions, warnings, refinement=refinement)
+        return Recovery(recovery.expansions, warnings, RefinementReport(refinement))
+
+
+@dataclasses.dataclass(frozen=True)
+class RefinementReport(DesignReport):
+    """The rounds of ``order: auto`` (:class:`~pcmb.result.Refinement`), stored as
+    ``/refinement/orders`` (R, n), ``runs`` and ``indicator`` (R,)."""
+
+    key: ClassVar[str] = "refinement"
+
+    refinement: Refinement
+
+    def write(self, file: ReportFile) -> None:
+        rounds = self.refinement
+        file.dataset("refinement/orders", rounds.orders, None, "input")
+        file.dataset("refinement/runs", rounds.runs)
+        file.dataset("refinement/indicator", rounds.indicator)
+
+    @classmethod
+    def read(cls, file: ReportFile) -> RefinementReport | None:
+        found = {key: file.read(f"refinement/{key}") for key in ("orders", "runs", "indicator")}
+        return None if found["orders"] is None else cls(Refinement(**found))
+
+    def summary(self, result: StudyResult) -> list[tuple[str, str]]:
+        """Per round: the order and its indicator."""
+        rounds = ", ".join(
+            f"{int(orders.max())}: {error:.2g}"
+            for orders, error in zip(self.refinement.orders, self.refinement.indicator, strict=True)
+        )
+        return [("refined", f"order: indicator per round {rounds}")]

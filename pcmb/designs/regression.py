@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
@@ -22,9 +23,9 @@ from pcmb.chaos.sparse_regression import (
 )
 from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
-from pcmb.result import Design, RegressionFit, WarningRecord
+from pcmb.result import Design, DesignReport, RegressionFit, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["RegressionSettings", "SparseRegression"]
+__all__ = ["RegressionReport", "RegressionSettings", "SparseRegression"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
@@ -272,9 +273,8 @@ class SparseRegression:
             name: RegressionFit(fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition)
             for name, fit in fits.items()
         }
-        return Recovery(
-            expansions, records + statistics_warnings(expansions, values, ok, times), regression
-        )
+        warnings = records + statistics_warnings(expansions, values, ok, times)
+        return Recovery(expansions, warnings, RegressionReport(regression))
 
     def _loo_warning(
         self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None
@@ -297,3 +297,43 @@ class SparseRegression:
             name,
             span,
         )
+
+
+@dataclass(frozen=True)
+class RegressionReport(DesignReport):
+    """Each output's sparse regression fit (:class:`~pcmb.result.RegressionFit`), stored
+    beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attribute
+    ``condition``."""
+
+    key: ClassVar[str] = "regression"
+
+    regression: dict[str, RegressionFit]
+
+    def write(self, file: ReportFile) -> None:
+        for name, fit in self.regression.items():
+            file.points(f"outputs/{name}/loo", fit.loo, name)
+            file.dataset(f"outputs/{name}/selected", fit.selected, None, "input")
+            file.attrs(f"outputs/{name}").update(condition=fit.condition)
+
+    @classmethod
+    def read(cls, file: ReportFile) -> RegressionReport | None:
+        fits = {}
+        for name in file.outputs:
+            loo = file.read_points(f"outputs/{name}/loo", name)
+            if loo is not None:
+                condition = float(file.attrs(f"outputs/{name}")["condition"])
+                fits[name] = RegressionFit(file.read(f"outputs/{name}/selected"), loo, condition)
+        return cls(fits) if fits else None
+
+    def summary(self, result: StudyResult) -> list[tuple[str, str]]:
+        return [
+            (
+                "fit",
+                f"{name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
+                f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}",
+            )
+            for name, fit in self.regression.items()
+        ]
+
+    def merged(self, other: RegressionReport) -> RegressionReport:
+        return RegressionReport({**self.regression, **other.regression})
