@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from typing import ClassVar
 
 import h5py
 import numpy as np
@@ -9,8 +10,9 @@ import pytest
 
 import pcmb
 from pcmb import store
+from pcmb.designs import REPORTS
 from pcmb.errors import ResultFileError
-from pcmb.result import WarningRecord
+from pcmb.result import DesignReport, WarningRecord
 
 INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Beta(2.0, 3.0, -1.0, 1.0)}
 TIMES = np.linspace(0.0, 1.0, 4)
@@ -153,3 +155,40 @@ def test_the_diagnostics_round_trip_and_older_files_load(written, tmp_path):
     holdout = pcmb.load(old).diagnostics["y"].holdout
     assert np.isnan(holdout.mean_error).all() and np.isnan(holdout.spread).all()
     np.testing.assert_array_equal(holdout.error, result.diagnostics["y"].holdout.error)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Surpluses(DesignReport):
+    """A design report no part of pcmb knows, as a new design would bring its own."""
+
+    key: ClassVar[str] = "surpluses"
+
+    surpluses: np.ndarray
+
+    def write(self, file):
+        file.dataset("surpluses", self.surpluses, "node")
+
+    @classmethod
+    def read(cls, file):
+        found = file.read("surpluses")
+        return None if found is None else cls(found)
+
+    def summary(self, result):
+        return [("surplus", f"largest {self.surpluses.max():g}")]
+
+
+def test_a_registered_design_report_is_written_read_and_inspected(written, tmp_path, monkeypatch):
+    from pcmb.cli import _inspect
+
+    monkeypatch.setitem(REPORTS, _Surpluses.key, _Surpluses)
+    path, result = written
+    assert result.report is None and result.regression == {} and result.adaptive is None
+    reported = dataclasses.replace(result, report=_Surpluses(np.arange(16.0)))
+    store.write_result(tmp_path / "r.h5", reported, provenance={})
+    with h5py.File(tmp_path / "r.h5") as file:
+        assert file["surpluses"].dims[0][0].name == "/node"
+    back = pcmb.load(tmp_path / "r.h5").report
+    assert isinstance(back, _Surpluses)
+    np.testing.assert_array_equal(back.surpluses, np.arange(16.0))
+    assert "surplus  largest 15" in _inspect(str(tmp_path / "r.h5")).splitlines()
+    assert pcmb.load(path).report is None  # a file without it: none
