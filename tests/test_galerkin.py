@@ -259,3 +259,33 @@ def test_validate_refuses_an_uncertain_mass_and_a_model_without_the_protocol():
 def test_validate_accepts_the_quarter_car():
     config = validate_config(_config())
     assert config.method.kind == "galerkin"
+
+
+@pytest.mark.parametrize(
+    ("kind", "grid", "orders", "expected"),
+    [
+        ("galerkin", "none", (2, 3), (2, 3)),  # no nodes: the Gauss grid of its orders
+        ("collocation", "tensor-gauss", (4, 1), (4, 1)),
+        ("collocation", "smolyak", (3, 3), None),
+        ("linearization", "none", None, None),
+    ],
+)
+def test_the_spectrum_grid_of_a_result_follows_its_record(kind, grid, orders, expected):
+    from pcmb.analysis.statistics import tensor_grid_of
+    from pcmb.result import Design, StudyResult
+
+    empty = np.zeros((0, 2))
+    result = StudyResult(
+        "r",
+        Design(kind, grid, "tensor", orders),
+        np.linspace(0, 1, 3),
+        ("a", "b"),
+        (Uniform(0, 1), Normal(0, 1)),
+        empty,
+        empty,
+        None,
+        np.zeros(0, np.int8),
+        {},
+    )
+    found = tensor_grid_of(result)
+    assert (found if found is None else found.orders) == expected

@@ -298,10 +298,10 @@ class Analysis:
 
 
 def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
-    """The tensor Gauss grid a collocation result was computed on, or the one of a Galerkin
-    expansion's orders (``None`` otherwise)."""
+    """The tensor Gauss grid a collocation result was computed on, or, for an expansion made
+    without nodes (``grid`` ``"none"``: Galerkin), the one of its orders (``None`` otherwise)."""
     design = result.design
-    if design.orders is None or (design.grid != "tensor-gauss" and design.kind != "galerkin"):
+    if design.orders is None or design.grid not in ("tensor-gauss", "none"):
         return None
     return TensorGrid(result.distributions, design.orders)
 
