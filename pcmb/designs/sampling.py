@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,9 +22,15 @@ from pcmb.designs.base import (
 )
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["Sampling", "SamplingSettings"]
+__all__ = ["Sampling", "SamplingSettings", "monte_carlo"]
 
 FITS = ("none", "regression")
+
+
+def monte_carlo(samples: int | list[int], seed: int) -> dict[str, Any]:
+    """The ``method:`` keys of plain Monte Carlo of ``samples`` runs (a list: one setting of a
+    sweep each), the comparison every other method can be held against."""
+    return {"kind": "montecarlo", "samples": samples, "seed": seed}
 
 
 class SamplingSettings(MethodSection):

@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from pcmb.config.checks import config_design, cross_check
 from pcmb.designs import MethodSection, MethodSpec, NodeDesign, method_section, section_key
+from pcmb.designs.sampling import monte_carlo
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -206,13 +207,9 @@ def default_sweep(section: MethodSection, runs: int) -> dict[str, Any]:
     method = section.model_dump(exclude_defaults=True)
     key = section.cost_key
     top = max(64, 2 * runs)
-    monte_carlo = {
-        "kind": "montecarlo",
-        "samples": [16 * 4**k for k in range(_DEFAULT_STEPS) if 16 * 4**k <= top],
-        "seed": 1,
-    }
+    comparator = monte_carlo([16 * 4**k for k in range(_DEFAULT_STEPS) if 16 * 4**k <= top], 1)
     if key is None:  # a method without a cost to raise (statistical linearization)
-        return {"methods": [method, monte_carlo], "reference": method}
+        return {"methods": [method, comparator], "reference": method}
     if key == "samples":  # a fixed sample at each cost: adding samples is what is swept
         method = {k: v for k, v in method.items() if k not in ("tolerance", "max_samples")}
     value = method.get(key)
@@ -220,7 +217,7 @@ def default_sweep(section: MethodSection, runs: int) -> dict[str, Any]:
         value = 1000
     methods = [{**method, key: _rising(value, key)}]
     if key != "samples":
-        methods.append(monte_carlo)
+        methods.append(comparator)
     return {"methods": methods, "reference": {**method, key: _finer(value, key)}}
 
 
