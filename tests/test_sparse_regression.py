@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 import pcmb
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
@@ -13,6 +12,8 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import random_nodes
 from pcmb.chaos.recovery import fit_least_squares
 from pcmb.chaos.sparse_regression import fit_sparse, next_batch, selection_path
+from pcmb.designs import method_section
+from pcmb.designs.base import MethodSettings
 from pcmb.designs.regression import SparseRegression
 from pcmb.errors import IllPosedError
 from pcmb.references import damped_oscillator, ishigami, ishigami_moments
@@ -151,7 +152,7 @@ def test_per_time_coefficients_are_least_squares_on_the_selected_terms():
 def _settings(**changes):
     base = dict(kind="regression", orders=(6, 6, 6), basis="hyperbolic", samples=64, seed=0)
     base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None)
-    return SimpleNamespace(**{**base, **changes})
+    return MethodSettings(**{**base, **changes})
 
 
 INPUTS = dict(zip("abc", ISHIGAMI, strict=True))
@@ -170,8 +171,9 @@ def test_too_small_designs_are_refused_before_any_run():
         ("basis", "tensor"),
         ("q", 0.0),
     ]:
-        with pytest.raises(ValueError, match=rf"^method\.{key}:"):
-            SparseRegression(INPUTS, _settings(**{key: value}))
+        with pytest.raises(ValidationError) as refused:  # by its section, where it is declared
+            method_section({"kind": "regression", "samples": 64, "order": 6, key: value})
+        assert [error["loc"] for error in refused.value.errors()] == [("regression", key)]
 
 
 def test_the_design_recovers_every_output_on_the_union_of_their_terms():
