@@ -296,3 +296,23 @@ def test_a_run_killed_between_and_inside_rounds_resumes_to_the_same_result(tmp_p
     assert_same_runs(tmp_path, first, second)
     for name in first.outputs:
         np.testing.assert_array_equal(first.regression[name].loo, second.regression[name].loo)
+
+
+@pcmb.pointwise(outputs=("y",))
+def _ramp(params, times):
+    return {"y": params["a"] * times + params["b"] ** 2}
+
+
+def test_the_fits_of_outputs_on_other_axes_join_one_report(tmp_path):
+    # y on time and its peak, a scalar, are recovered apart; the report holds both fits.
+    inputs = {"a": pcmb.Uniform(1.0, 2.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    method = {"kind": "regression", "samples": 32, "order": 3}
+    derived = {"peak": {"max_abs": "y"}}
+    study = Study(_ramp, inputs, np.linspace(0, 1, 5), method=method, derived=derived)
+    result = study.run(tmp_path / "r.h5", progress=False)
+    assert list(result.regression) == ["y", "peak"]
+    assert result.regression["y"].loo.shape == (5,) and result.regression["peak"].loo.shape == (1,)
+    back = load(tmp_path / "r.h5").regression
+    for name, fit in result.regression.items():
+        np.testing.assert_array_equal(back[name].loo, fit.loo)
+        np.testing.assert_array_equal(back[name].selected, fit.selected)
