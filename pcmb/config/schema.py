@@ -65,6 +65,7 @@ from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.run.memory import DEFAULT_MEMORY, parse_memory
 from pcmb.sweep.plan import sweep_problems
 
 if TYPE_CHECKING:
@@ -390,6 +391,11 @@ class MethodSpec(Section):
     )
 
 
+def _memory(value: int | str) -> int | str:
+    parse_memory(value)
+    return value
+
+
 class ExecutionSpec(Section):
     """Where and how the nodes run."""
 
@@ -419,6 +425,11 @@ class ExecutionSpec(Section):
     timeout: PositiveReal | None = Field(
         default=None,
         description="seconds a node may take before its worker is killed (backend loky)",
+    )
+    memory: Annotated[int | str, AfterValidator(_memory)] = Field(
+        default=DEFAULT_MEMORY,
+        description="memory pcmb's process may use: a size (2GB, 512MiB, bytes) or a share of "
+        "the memory available (80%); a sampling study over it streams its runs to the file",
     )
 
     @field_validator("timeout")
