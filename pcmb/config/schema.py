@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import (
     AfterValidator,
+    BeforeValidator,
     Discriminator,
     Field,
     PrivateAttr,
@@ -426,7 +427,7 @@ class ExecutionSpec(Section):
         default=None,
         description="seconds a node may take before its worker is killed (backend loky)",
     )
-    memory: Annotated[int | str, AfterValidator(_memory)] = Field(
+    memory: Annotated[int | str, BeforeValidator(_memory)] = Field(
         default=DEFAULT_MEMORY,
         description="memory pcmb's process may use: a size (2GB, 512MiB, bytes) or a share of "
         "the memory available (80%); a sampling study over it streams its runs to the file",

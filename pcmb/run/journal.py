@@ -422,23 +422,32 @@ class Journal:
     def chunks(
         self,
     ) -> Iterator[tuple[NDArray[np.int64], dict[str, NDArray[np.float64]], NDArray[np.int8]]]:
-        """Every journaled node once, with its latest values and status, one record at a time
-        in node order (records by their first node), for a pass that never holds them all.
+        """Every journaled node once, with its latest values and status, in increasing node
+        order, a run of consecutive nodes of one record at a time: a pass that never holds
+        more than two records (a chunk, and the nodes re-run alone within it on a resume).
 
         Yields
         ------
         indices, values, status
-            (B,) increasing node indices, output name -> (B, T) values, (B,) statuses.
+            (B,) consecutive node indices, output name -> (B, T) values, (B,) statuses.
         """
         paths, owner, status = self._owners()
-        kept = [np.flatnonzero(owner == k) for k in range(len(paths))]
+        known = np.flatnonzero(owner >= 0)
+        breaks = np.flatnonzero((np.diff(owner[known]) != 0) | (np.diff(known) != 1)) + 1
         ends = np.cumsum([0, *self.widths]).tolist()
-        for k in sorted((k for k in range(len(paths)) if kept[k].size), key=lambda k: kept[k][0]):
-            idx, values = self._read(paths[k], ("indices", "values"))
-            order = np.argsort(idx)
-            rows = values[order[np.isin(idx[order], kept[k])]]
+        held: dict[int, tuple[NDArray[np.int64], NDArray[np.float64]]] = {}
+        for segment in np.split(known, breaks) if known.size else ():
+            k = int(owner[segment[0]])
+            if k not in held:
+                if len(held) == 2:
+                    del held[next(iter(held))]
+                idx, values = self._read(paths[k], ("indices", "values"))
+                order = np.argsort(idx)
+                held[k] = (idx[order], values[order])
+            idx, values = held[k]
+            rows = values[np.searchsorted(idx, segment)]
             bounds = zip(self.outputs, ends, ends[1:], strict=False)
-            yield kept[k], {name: rows[:, a:b] for name, a, b in bounds}, status[kept[k]]
+            yield segment, {name: rows[:, a:b] for name, a, b in bounds}, status[segment]
 
     def _latest(self) -> dict[int, tuple[int, NDArray[np.float64], str]]:
         """Node index -> (status, (W,) values of every output side by side, message), later
