@@ -274,8 +274,8 @@ def _write(
             group.attrs["axis"] = "" if trail is None else result.axes[name].name
         if streamed:
             shape = (n_nodes,) if trail is None else (n_nodes, values.shape[1])
-            # Every row is written from the journal: no fill to write first (16 GB for the
-            # 10⁶-run twin); NaN is what a reader of unwritten space would see.
+            # Every row is written from the journal (every node has a record by then): no
+            # fill is written first (16 GB for the 10⁶-run twin).
             empty = group.create_dataset(
                 "values", shape=shape, dtype=float, fillvalue=np.nan, fill_time="never"
             )
