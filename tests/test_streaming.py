@@ -39,17 +39,18 @@ def wave(params, times):
     return {"x": a * np.sin(b * times) + 3.0, "v": a * b * np.cos(b * times)}
 
 
-def _study(**changes) -> pcmb.Study:
-    settings = {
-        "method": "montecarlo",
-        "samples": SAMPLES,
-        "seed": 1,
-        "jobs": 1,
-        "backend": "inprocess",
-        "analysis": AnalysisSettings(psd=(), quantiles=(0.05, 0.5, 0.95)),
-        **changes,
-    }
-    return pcmb.Study(wave, INPUTS, TIMES, **settings)
+METHOD = {"kind": "montecarlo", "samples": SAMPLES, "seed": 1}
+
+
+def _study(model=wave, method=METHOD, **execution) -> pcmb.Study:
+    return pcmb.Study(
+        model,
+        INPUTS,
+        TIMES,
+        method=method,
+        execution={"jobs": 1, "backend": "inprocess", **execution},
+        analysis=AnalysisSettings(psd=(), quantiles=(0.05, 0.5, 0.95)),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -247,15 +248,11 @@ def test_a_streamed_study_resumes_to_the_same_file(tmp_path: Path) -> None:
     settings = {"memory": ALL_IN_RESERVOIR, "chunk_size": 100, "on_failure": "abort"}
     output = tmp_path / "resumed.h5"
     with pytest.raises(ModelRunError):
-        pcmb.Study(flaky, INPUTS, TIMES, **{**_settings(), **settings}).run(output)
+        _study(flaky, **settings).run(output)
     assert Path(f"{output}.journal").is_dir() and not output.exists()
     flag.unlink()
-    resumed = pcmb.Study(flaky, INPUTS, TIMES, **{**_settings(), **settings}).run(
-        output, resume=True
-    )
-    whole = pcmb.Study(flaky, INPUTS, TIMES, **{**_settings(), **settings}).run(
-        tmp_path / "whole.h5"
-    )
+    resumed = _study(flaky, **settings).run(output, resume=True)
+    whole = _study(flaky, **settings).run(tmp_path / "whole.h5")
     for name in ("x", "v"):
         np.testing.assert_array_equal(resumed.mean(name), whole.mean(name))
         np.testing.assert_array_equal(resumed.std(name), whole.std(name))
@@ -264,27 +261,17 @@ def test_a_streamed_study_resumes_to_the_same_file(tmp_path: Path) -> None:
         )
 
 
-def _settings() -> dict:
-    return {
-        "method": "montecarlo",
-        "samples": SAMPLES,
-        "seed": 1,
-        "jobs": 1,
-        "backend": "inprocess",
-    }
-
-
 @pytest.mark.parametrize(
     ("changes", "reason"),
     [
-        ({"method": "collocation", "order": 3}, "method.kind collocation"),
-        ({"fit": "regression", "order": 2}, "fit: regression"),
+        ({"kind": "collocation", "order": 3}, "method.kind collocation"),
+        ({**METHOD, "fit": "regression", "order": 2}, "fit: regression"),
     ],
 )
 def test_a_study_that_cannot_stream_is_refused_naming_execution_memory(
     tmp_path: Path, changes: dict, reason: str
 ) -> None:
-    study = _study(memory="10kB", **changes)
+    study = _study(method=changes, memory="10kB")
     with pytest.raises(UsageError) as raised:
         study.run(tmp_path / "out.h5")
     message = str(raised.value)
