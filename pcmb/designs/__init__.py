@@ -21,6 +21,7 @@ from pcmb.designs.base import (
     IntrusiveDesign,
     MethodSection,
     MethodSettings,
+    MomentReport,
     NodeDesign,
     Recovery,
     statistics_warnings,
@@ -28,7 +29,7 @@ from pcmb.designs.base import (
 from pcmb.designs.collocation import GRIDS, TensorCollocation
 from pcmb.designs.galerkin import Galerkin
 from pcmb.designs.halton import HaltonSampling
-from pcmb.designs.linearization import Linearization, MomentReport
+from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import ElementReport, MultiElementCollocation
 from pcmb.designs.refine import OrderRefinement, RefinementReport
 from pcmb.designs.regression import RegressionReport, SparseRegression

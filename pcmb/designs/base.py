@@ -16,7 +16,14 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
 from pcmb.config.types import NonNegativeInt, Section
-from pcmb.result import RECORDED_ONLY, Design, DesignReport, ReportedByDesign, WarningRecord
+from pcmb.result import (
+    RECORDED_ONLY,
+    Design,
+    DesignReport,
+    ReportedByDesign,
+    ReportFile,
+    WarningRecord,
+)
 
 __all__ = [
     "RECORDED_ONLY",
@@ -24,6 +31,7 @@ __all__ = [
     "IntrusiveDesign",
     "MethodSection",
     "MethodSettings",
+    "MomentReport",
     "NodeDesign",
     "Recovery",
     "least_squares_recovery",
@@ -120,6 +128,33 @@ class Recovery(ReportedByDesign):
     expansions: dict[str, ChaosExpansion] = field(default_factory=dict)
     warnings: tuple[WarningRecord, ...] = ()
     report: DesignReport | None = None
+
+
+@dataclass(frozen=True)
+class MomentReport(DesignReport):
+    """The mean and std of each output, (2, T), computed without an expansion and without
+    the runs at hand (statistical linearization; a streamed study's running moments): they are
+    the ``mean`` and ``std`` every output stores, so nothing more is written; read back from a
+    file without nodes whose outputs have no coefficients (a streamed file has its runs)."""
+
+    key: ClassVar[str] = "moments"
+
+    moments: dict[str, NDArray[np.float64]]
+
+    def write(self, file: ReportFile) -> None:
+        """Nothing: the result file stores every output's mean and std."""
+
+    @classmethod
+    def read(cls, file: ReportFile) -> MomentReport | None:
+        germ = file.read("nodes/germ")
+        if germ is None or germ.shape[0]:
+            return None
+        moments = {
+            name: np.stack([file.read(f"outputs/{name}/mean"), file.read(f"outputs/{name}/std")])
+            for name in file.outputs
+            if file.read(f"outputs/{name}/coefficients") is None
+        }
+        return cls(moments) if moments else None
 
 
 class NodeDesign(Protocol):

@@ -16,8 +16,7 @@ is Gaussian, and then the method is exact.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,12 +24,12 @@ from pydantic import Field
 
 from pcmb.chaos.inputs import Distribution, Normal
 from pcmb.chaos.nodes import TensorGrid
-from pcmb.designs.base import MethodSection, MethodSettings, Recovery
+from pcmb.designs.base import MethodSection, MethodSettings, MomentReport, Recovery
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
-from pcmb.result import Design, DesignReport, ReportFile, WarningRecord
+from pcmb.result import Design, WarningRecord
 
-__all__ = ["GaussianMoments", "Linearization", "LinearizationSettings", "MomentReport"]
+__all__ = ["GaussianMoments", "Linearization", "LinearizationSettings"]
 
 #: Points of the 1-D rule that gives an input's mean and variance (exact for affine maps).
 _MOMENT_POINTS = 16
@@ -232,29 +231,3 @@ class Linearization(WithoutNodes):
                 ),
             )
         return Recovery(warnings=warnings, report=MomentReport(moments))
-
-
-@dataclass(frozen=True)
-class MomentReport(DesignReport):
-    """The mean and std of each output, (2, T), of a method that computes them without runs
-    or an expansion: they are the ``mean`` and ``std`` every output stores, so nothing more is
-    written; a file without nodes whose outputs have no coefficients holds them."""
-
-    key: ClassVar[str] = "moments"
-
-    moments: dict[str, NDArray[np.float64]]
-
-    def write(self, file: ReportFile) -> None:
-        """Nothing: the result file stores every output's mean and std."""
-
-    @classmethod
-    def read(cls, file: ReportFile) -> MomentReport | None:
-        germ = file.read("nodes/germ")
-        if germ is None or germ.shape[0]:
-            return None
-        moments = {
-            name: np.stack([file.read(f"outputs/{name}/mean"), file.read(f"outputs/{name}/std")])
-            for name in file.outputs
-            if file.read(f"outputs/{name}/coefficients") is None
-        }
-        return cls(moments) if moments else None
