@@ -12,6 +12,7 @@ the commands, so ``pcmb --help`` starts fast.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shlex
@@ -308,9 +309,10 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         changes |= {"backend": "dask", "address": args.address, "jobs": args.jobs}
     if changes:
         execution = study.execution.model_dump(exclude_unset=True) | changes
-        study = study.replace(execution=execution)
-    if args.address is not None:
-        study.address_key = "--address"
+        source = study.source
+        if args.address is not None:
+            source = dataclasses.replace(source, address_key="--address")
+        study = study.replace(execution=execution, source=source)
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,

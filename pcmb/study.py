@@ -184,6 +184,24 @@ def _section(key: str, root: Any, value: Any) -> Any:
         raise UsageError(schema_problems(error, root, prefix=(key,)), source="Study") from None
 
 
+@dataclasses.dataclass(frozen=True)
+class StudySource:
+    """Where a study's settings came from, for what it fingerprints and how it names them.
+
+    Attributes
+    ----------
+    settings:
+        The run-relevant part of its validated config as JSON (:meth:`Study.from_config`),
+        fingerprinted with the nodes; empty for a study built in Python.
+    address_key:
+        Where the dask address was given (``address``, ``execution.address``,
+        ``--address``), named when it cannot be reached.
+    """
+
+    settings: str = ""
+    address_key: str = "address"
+
+
 class Study:
     """A study of a model: its nodes, runs, chaos expansions and statistics.
 
@@ -217,7 +235,6 @@ class Study:
     address:
         With backend dask: a ``distributed.Client`` or ``Cluster`` of your own, which pcmb
         uses and leaves open (or an address; overrides ``execution.address``).
-        ``address_key`` (an attribute) names where the address came from in errors.
     outputs:
         Outputs to keep (default: all the model declares).
     params:
@@ -232,6 +249,9 @@ class Study:
         Figures of merit computed from the time outputs after the runs, each a scalar
         output: name -> :class:`~pcmb.analysis.derived.DerivedOutput`, or a mapping as in
         the config's ``derived:`` (``{"x1_peak": {"max_abs": "x1"}}``).
+    source:
+        Where the settings came from (:class:`StudySource`): set by :meth:`from_config` and
+        the command line; a study built in Python keeps the default.
     **deprecated:
         The keyword arguments of pcmb 0.x (``order=``, ``samples=``, ``jobs=``,
         ``backend=``, ``diagnostics_tolerance=``, ``method="lhs"``, ...; :data:`DEPRECATED`
@@ -261,6 +281,7 @@ class Study:
         name: str = "study",
         nominal: Mapping[str, float] | None = None,
         derived: Mapping[str, DerivedOutput | Mapping[str, Any]] | None = None,
+        source: StudySource = StudySource(),
         **deprecated: Any,
     ):
         if isinstance(method, str) or deprecated:
@@ -292,7 +313,6 @@ class Study:
         )
         self.analysis = analysis
         self.address = self.execution.address if address is None else address
-        self.address_key = "address"
         self.name = name
         self.params = dict(params or {})
         if is_function_model(model):
@@ -311,7 +331,7 @@ class Study:
         self.outputs = _tuple(outputs)
         self.nominal = dict(nominal or {})
         self.derived = _derived(derived or {})
-        self.fingerprint_extra = ""
+        self.source = source
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
             raise _usage("nominal", f"values given for unknown input(s) {unknown}")
@@ -330,7 +350,7 @@ class Study:
     @classmethod
     def from_config(cls, config: StudyConfig) -> Study:
         """The study a validated config describes (same code path as ``pcmb run``)."""
-        study = cls(
+        return cls(
             config.model_factory(),
             config.study_inputs,
             config.times,
@@ -346,10 +366,8 @@ class Study:
                 if name in config.model.params
             },
             derived=config.derived_outputs,
+            source=StudySource(_run_settings(config), "execution.address"),
         )
-        study.fingerprint_extra = _run_settings(config)
-        study.address_key = "execution.address"
-        return study
 
     def replace(self, **changes: Any) -> Study:
         """A copy of this study with some constructor arguments changed, checked again.
@@ -377,6 +395,7 @@ class Study:
             "params": self.params,
             "nominal": self.nominal,
             "derived": self.derived,
+            "source": self.source,
         }
         if self.address is not self.execution.address:
             arguments["address"] = self.address
@@ -397,11 +416,9 @@ class Study:
             )
         if "inputs" in changes and "nominal" not in changes:
             arguments["nominal"] = {k: v for k, v in self.nominal.items() if k in changes["inputs"]}
-        study = Study(self.model_factory, **arguments)
-        study.fingerprint_extra = self.fingerprint_extra
-        if "address" not in changes and "address" not in old:
-            study.address_key = self.address_key
-        return study
+        if "address" in changes or "address" in old:  # given here, under this name
+            arguments["source"] = dataclasses.replace(arguments["source"], address_key="address")
+        return Study(self.model_factory, **arguments)
 
     # -- nodes --------------------------------------------------------------------------------
 
@@ -465,7 +482,7 @@ class Study:
 
         Its ``digest`` hashes the nodes' parameters, the time grid, the settings of every
         random process (what its germs become), the input names (the
-        order of the columns), the outputs, an explicit chunk size, ``fingerprint_extra``
+        order of the columns), the outputs, an explicit chunk size, ``source.settings``
         (for a study built from a config: the run-relevant part of the validated config,
         see :meth:`from_config`) and the pickled model factory (entry, params, or the object
         itself). Its ``files`` table holds the SHA-256 of the content of every file the model
@@ -485,7 +502,7 @@ class Study:
             list(outputs),
             self.execution.chunk_size,
             list(self.input_names),
-            self.fingerprint_extra,
+            self.source.settings,
         ]
         if self.processes:  # by their settings: they make the modes, whose bits vary by BLAS
             settings.append({name: p.describe() for name, p in self.processes.items()})
@@ -645,7 +662,7 @@ class Study:
                 self.execution.jobs,
                 self.address,
                 tasks=tasks,
-                key=self.address_key,
+                key=self.source.address_key,
             ) as own:
                 return self.run(
                     output,

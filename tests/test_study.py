@@ -369,3 +369,21 @@ def test_a_result_prints_as_a_summary_not_its_arrays():
         "  outputs: y (5 times in [0, 2])",
     ]
     assert text.splitlines()[-1].startswith(f"  warnings: {len(result.warnings)}")
+
+
+def test_a_configs_source_is_given_at_construction_and_kept_by_replace():
+    from pathlib import Path
+
+    from pcmb.config.schema import load_config
+    from pcmb.study import StudySource
+
+    config = load_config(Path(__file__).resolve().parents[1] / "configs" / "quarter_car.yaml")
+    study = pcmb.Study.from_config(config)
+    assert study.source.address_key == "execution.address"
+    assert '"method"' in study.source.settings  # the run-relevant config is fingerprinted
+    assert study.replace(execution={"jobs": 1}).source == study.source
+    dask = study.replace(execution={"backend": "dask"})
+    assert dask.replace(address="tcp://h:1").source.address_key == "address"
+    nodes = study.node_set()
+    plain = study.replace(source=StudySource())
+    assert plain.fingerprint(nodes, ["x1"]).digest != study.fingerprint(nodes, ["x1"]).digest
