@@ -201,8 +201,9 @@ def _summary(config, address: str | None = None) -> str:
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    held_out = study.validation if design.basis is not None else 0
-    checks = f" + {held_out} held-out runs that check the expansion" if held_out else ""
+    first, most = study.held_out_runs(nodes.size) if design.basis is not None else (0, 0)
+    upto = f"{first} to {most}" if most > first else f"{most}"
+    checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(
         f"runs     {nodes.size} model runs{rounds}{checks} "
         f"({config.execution.on_failure} on failure)"

@@ -33,7 +33,7 @@ from pydantic import (
 
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
-from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
+from pcmb.analysis.diagnostics import TOLERANCE
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs, process
 from pcmb.chaos.nested import RULES
@@ -384,9 +384,11 @@ class MethodSpec(Section):
         default=None,
         description="kind adaptive, or order auto: most runs in all (default 1000)",
     )
-    validation: NonNegativeInt = Field(
-        default=VALIDATION,
-        description="held-out runs at random inputs that check a chaos expansion (0: none)",
+    validation: NonNegativeInt | None = Field(
+        default=None,
+        description="held-out runs at random inputs that check a chaos expansion (0: none; "
+        "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
+        "batches while the verdict is undecided)",
     )
 
 
