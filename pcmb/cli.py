@@ -492,8 +492,10 @@ def _inspect(path: str) -> str:
             else "no held-out runs"
         )
         axis = result.axis(name)
-        if axis is None:  # a scalar: pass or fail
+        undecided = found.reliable and found.undecided.any()
+        if axis is None:  # a scalar: pass or fail, or too few runs to tell
             verdict = "reliable" if found.reliable else "UNRELIABLE"
+            verdict = "undecided" if undecided else verdict
         else:
             point = "time" if result.on_time(name) else f"{axis.name} point"
             verdict = (
@@ -501,6 +503,9 @@ def _inspect(path: str) -> str:
                 if found.reliable
                 else f"UNRELIABLE from {axis.name} = {found.failing_from:.4g}"
             )
+            if undecided:
+                first = axis.values[np.argmax(found.undecided)]
+                verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
