@@ -494,12 +494,12 @@ class StudyResult:
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable): kept in the result and its
-        file, not issued as a warning."""
+        record about an output the diagnostics vouch for: reliable and nowhere undecided): kept
+        in the result and its file, not issued as a warning."""
         if record.code in RECORDED_ONLY:
             return True
         judged = self.diagnostics.get(record.output) if record.output is not None else None
-        return record.code in INDICATORS and judged is not None and judged.reliable
+        return record.code in INDICATORS and judged is not None and judged.vouched
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

@@ -430,6 +430,7 @@ _DIAGNOSTIC_ARRAYS = {
     "out_of_range": "out_of_range",
     "estimate": "estimate",
     "noise": "noise",
+    "undecided": "undecided",
 }
 #: ... and those of its held-out check: the estimated errors of the mean and the std, the
 #: standard error of the larger, and the mean and std the held-out runs correct with their
@@ -502,10 +503,11 @@ def _read_diagnostics(
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )
-        arrays = {  # older files have no noise: their verdict judged the estimate alone
+        arrays = {  # older files have no noise (nor undecided): their verdict judged the estimate
             field: _columns(group[key if key in group else "decay"][()] * (key in group), scalar)
             for key, field in _DIAGNOSTIC_ARRAYS.items()
         }
+        arrays["undecided"] = arrays["undecided"].astype(bool)
         found[name] = OutputDiagnostics(
             output=name,
             scale=float(attrs["scale"]),

@@ -89,6 +89,9 @@ CODES = frozenset(
 HELD_OUT_FLOOR, HELD_OUT_SHARE = 8, 0.25
 #: ... in a first batch of at most this many, and the rest only where the verdict is undecided.
 FIRST_BATCH = 8
+#: The fewest held-out runs whose standard error is read from neighbouring pairs
+#: (:func:`_standard_error`); fewer are taken as independent draws.
+PAIRED_FROM = 16
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
@@ -290,11 +293,12 @@ def _standard_error(
     K runs pair with their neighbours, and Σ (y_a - y_b)² / (2 K · K/2) estimates the
     variance of a mean stratified along k alone, which bounds the Latin hypercube's (it
     stratifies k and the others); the smallest over the inputs is the estimate, never
-    above sd/√K.
+    above sd/√K. Below ``PAIRED_FROM`` runs the few pairs' estimate is itself too noisy (a
+    bouncing ball at K = 8: three flags on noise in ten seeds), and sd/√K stands.
     """
     count = values.shape[0]
     plain = values.std(axis=0, ddof=1) / np.sqrt(count)
-    if germ is None or count < 4:
+    if germ is None or count < PAIRED_FROM:
         return plain
     even = count // 2 * 2
     found = plain
@@ -640,6 +644,9 @@ class OutputDiagnostics:
     noise:
         (T,) how far the estimate may be off at the held-out check's confidence
         (:attr:`Holdout.noise`; 0 for the decay).
+    undecided:
+        (T,) the times before ``failing_from`` where the estimate lies within its noise of
+        the tolerance: more held-out runs would tell.
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
@@ -658,6 +665,7 @@ class OutputDiagnostics:
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
     noise: NDArray[np.float64]
+    undecided: NDArray[np.bool_]
     tolerance: float
     failing_from: float
     warnings: tuple[WarningRecord, ...]
@@ -669,17 +677,9 @@ class OutputDiagnostics:
         return bool(np.isnan(self.failing_from))
 
     @property
-    def undecided(self) -> NDArray[np.bool_]:
-        """(T,) the times before any flag where the estimate lies within its noise of the
-        tolerance: more held-out runs would tell."""
-        times = np.arange(self.estimate.size)
-        before = times < (np.argmax(self.flagged) if self.flagged.any() else times.size)
-        return before & (self.estimate + self.noise > self.tolerance) & ~self.flagged
-
-    @property
-    def flagged(self) -> NDArray[np.bool_]:
-        """(T,) where the estimate exceeds the tolerance by more than its noise."""
-        return self.estimate - self.noise > self.tolerance
+    def vouched(self) -> bool:
+        """Whether the check vouches for every time: none flagged, none undecided."""
+        return self.reliable and not self.undecided.any()
 
 
 def diagnose(
@@ -784,8 +784,19 @@ def diagnose(
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
+    undecided = (estimate + noise > tolerance) & ~(times >= failing_from)
     found = OutputDiagnostics(
-        output, scale, decay, checked, share, estimate, noise, tolerance, failing_from, ()
+        output,
+        scale,
+        decay,
+        checked,
+        share,
+        estimate,
+        noise,
+        undecided,
+        tolerance,
+        failing_from,
+        (),
     )
     if found.undecided.any():
         records.append(_undecided(found, times, axis))
