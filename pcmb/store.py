@@ -18,7 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pcmb.analysis.diagnostics import CODES, HeldOut, Holdout, OutputDiagnostics
+from pcmb.analysis.diagnostics import CODES, HeldOut, HeldOutCheck, OutputDiagnostics
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
@@ -434,7 +434,7 @@ _DIAGNOSTIC_ARRAYS = {
 }
 #: ... and those of its held-out check: the estimated errors of the mean and the std, the
 #: standard error of the larger, and the mean and std the held-out runs correct with their
-#: standard errors (same names in the file as on Holdout).
+#: standard errors (same names in the file as on HeldOutCheck).
 _HOLDOUT_STATISTICS = (
     "mean_error",
     "std_error",
@@ -493,7 +493,7 @@ def _read_diagnostics(
         holdout = None
         if "holdout_error" in group:
             error = _columns(group["holdout_error"][()], scalar)
-            holdout = Holdout(
+            holdout = HeldOutCheck(
                 error,
                 _columns(group["holdout_upper"][()], scalar),
                 *(  # older files judged the surrogate only

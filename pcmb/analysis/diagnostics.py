@@ -56,7 +56,7 @@ __all__ = [
     "FIRST_BATCH",
     "TOLERANCE",
     "HeldOut",
-    "Holdout",
+    "HeldOutCheck",
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
@@ -228,7 +228,7 @@ def held_out_draws(
 
 
 @dataclass(frozen=True)
-class Holdout:
+class HeldOutCheck:
     """The surrogate against K held-out model runs at random inputs.
 
     Attributes
@@ -406,7 +406,7 @@ def holdout_error(
     confidence: float = CONFIDENCE,
     weights: ArrayLike | None = None,
     germ: ArrayLike | None = None,
-) -> Holdout:
+) -> HeldOutCheck:
     """The surrogate at K held-out runs: its RMS error with an upper confidence bound, the
     estimated errors of its mean and std (:func:`statistics_error`), and the mean and std
     those runs correct.
@@ -437,7 +437,7 @@ def holdout_error(
 
     Returns
     -------
-    Holdout
+    HeldOutCheck
         Zeros if the scale is zero; NaN if no run is finite.
     """
     from scipy.special import gammaincinv
@@ -451,7 +451,7 @@ def holdout_error(
     mean, std = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
-        return Holdout(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
+        return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
     weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
     quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
     if not scale > 0 or not np.isfinite(scale):  # nothing varies: nothing to correct
@@ -470,7 +470,7 @@ def holdout_error(
             np.abs(found.std - std / scale),
             np.fmax(found.mean_se, found.std_se),
         )
-    return Holdout(
+    return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
         *errors,
@@ -635,15 +635,15 @@ class OutputDiagnostics:
     decay:
         (T,) :func:`spectral_decay`, a share of the largest variance.
     holdout:
-        The held-out check (:class:`Holdout`), ``None`` without held-out runs.
+        The held-out check (:class:`HeldOutCheck`), ``None`` without held-out runs.
     out_of_range:
         (T,) :func:`out_of_range`, a share of surrogate draws.
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
-        mean and the std (:attr:`Holdout.statistics`), or the decay without held-out runs.
+        mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
     noise:
         (T,) how far the estimate may be off at the held-out check's confidence
-        (:attr:`Holdout.noise`; 0 for the decay).
+        (:attr:`HeldOutCheck.noise`; 0 for the decay).
     undecided:
         (T,) the times before ``failing_from`` where the estimate lies within its noise of
         the tolerance: more held-out runs would tell.
@@ -661,7 +661,7 @@ class OutputDiagnostics:
     output: str
     scale: float
     decay: NDArray[np.float64]
-    holdout: Holdout | None
+    holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
     noise: NDArray[np.float64]
@@ -841,7 +841,7 @@ def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) 
 
 
 def _evidence(
-    decay: NDArray[np.float64], holdout: Holdout | None, failing: NDArray[np.bool_]
+    decay: NDArray[np.float64], holdout: HeldOutCheck | None, failing: NDArray[np.bool_]
 ) -> str:
     """The indicators where the verdict fails, e.g. "mean off by an estimated 12 % of the
     largest std (± 2 % from 32 held-out runs), surrogate error 25 % of std, decay 5.6 %"."""
@@ -893,7 +893,7 @@ def _all_equal(
 
 
 def _inaccurate(
-    output: str, holdout: Holdout, times: NDArray[np.float64], tolerance: float
+    output: str, holdout: HeldOutCheck, times: NDArray[np.float64], tolerance: float
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
     tolerance while the statistics hold."""
