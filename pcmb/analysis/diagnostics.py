@@ -13,10 +13,12 @@ raises false alarms.
   response even in a symmetric input has exactly zero odd coefficients, so its top shell
   alone can be empty while the expansion is far from converged.
 - **Held-out check** (:func:`holdout_error`): the surrogate against K extra model runs at
-  random inputs (a Latin hypercube of the inputs' distribution): the RMS error of the
-  surrogate and an upper confidence bound on it that fits K; and, with the surrogate as a
-  control variate, the errors of the mean and of the standard deviation themselves
-  (:func:`statistics_error`), which are what the error bars show.
+  random inputs (:func:`held_out_draws`: a Latin hypercube of the inputs' distribution, normal
+  inputs widened into their tails and weighted back; K sized to the design,
+  :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
+  it that fits K; and, with the surrogate as a control variate, the errors of the mean and
+  of the standard deviation themselves (:func:`statistics_error`), which are what the error
+  bars show, and the mean and std those runs correct.
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
@@ -26,8 +28,10 @@ raises false alarms.
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
-runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance, explained in a
-``chaos-unreliable`` record with a remedy that fits the failure. A surrogate whose pointwise
+runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance by more than its
+noise, explained in a ``chaos-unreliable`` record with a remedy that fits the failure; where
+the noise is too large to tell, a ``chaos-undecided`` record says how many more held-out runs
+would (:func:`more_runs`). A surrogate whose pointwise
 error exceeds the tolerance while its statistics hold gets a ``surrogate-inaccurate`` record:
 the PDFs and quantiles drawn from it are less accurate than the error bars.
 """
@@ -367,7 +371,8 @@ def statistics_error(
     r = f - s at the runs, E f = μ + E r and Var f = σ² + E[2 (s - μ) r + r²] - (E r)². The
     weighted sample means of r and of q = 2 (s - μ) r + r² (importance weights w of the
     draws, :func:`held_out_draws`) estimate both without bias, with standard errors
-    sd(w r)/√K and sd(w q)/√K; their noise is that of the residual, not of the output,
+    sd(w r)/√K and sd(w q)/√K (less for a Latin hypercube, :func:`_standard_error`); their
+    noise is that of the residual, not of the output,
     so K = 32 runs resolve errors of a few percent of the std where plain sampling of f
     would need thousands. The surrogate's pointwise error bounds both (|Δ mean|,
     |Δ std| <= RMS r) but is often much larger: collocation statistics are quadratures, exact
