@@ -32,6 +32,7 @@ from pcmb.analysis.diagnostics import (
     held_out_budget,
     held_out_draws,
     more_runs,
+    pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
@@ -757,6 +758,9 @@ class Study:
         if self.analysis is not None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
+                result = dataclasses.replace(
+                    result, warnings=(*result.warnings, *pdf_outside_runs(result))
+                )
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -1022,6 +1026,7 @@ class Study:
             self.diagnostics_tolerance,
             axes=result.axes,
             nominal=result.nominal,
+            budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -220,7 +220,7 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
         times,
         (expansion.evaluate_germ(draws.nodes), observed),
         weights=weights,
-        held_out_germ=draws.nodes,
+        holdout_germ=draws.nodes,
     )
     fine = TensorGrid(expansion.distributions, (399,))
     exact = double_well(times, fine.params[:, 0])
