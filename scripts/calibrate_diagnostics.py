@@ -22,14 +22,13 @@ their difference in percent of the horizon, the outcome (``ok``: both never or b
 
 The cases of issue 23 (``lognormal``, ``jump``, ``ball``, ``drift``, ``smooth4``), closed
 forms the tests do not tune on, run each study with the default held-out check and seeds
-0..S-1 (added to the held-out draws' seed, ``pcmb.study.HELD_OUT_SEED``; the design is the
-same) and print, per
-study: its runs, the check's runs (fewest–most over the seeds), the true crossing, the flags,
-the worst distance of a flag from the truth in percent of the horizon, false alarms (a flag
-where the truth never crosses, or more than 5 % of the horizon before it), misses (no flag,
-or one more than 5 % after it), of those the silent ones (where, from 5 % of the horizon
-after the crossing on, the true error exceeds the tolerance at a time that neither a flag nor
-a ``chaos-undecided`` record covers), and the seeds whose check is
+0..S-1 (``method.seed``: it moves the held-out draws; a collocation design is the same) and
+print, per study: its runs, the check's runs (fewest–most over the seeds), the true
+crossing, the flags, the worst distance of a flag from the truth in percent of the horizon,
+false alarms (a flag where the truth never crosses, or more than 5 % of the horizon before
+it), misses (no flag, or one more than 5 % after it), of those the silent ones (where, from
+5 % of the horizon after the crossing on, the true error exceeds the tolerance at a time
+that neither a flag nor a ``chaos-undecided`` record covers), and the seeds whose check is
 undecided at some time. ``--validation K`` fixes the check's runs instead.
 """
 
@@ -42,9 +41,8 @@ from pathlib import Path
 import numpy as np
 
 import pcmb
-import pcmb.study
 from pcmb import Study
-from pcmb.analysis.diagnostics import HELD_OUT_SEED, TOLERANCE, diagnose, verdict
+from pcmb.analysis.diagnostics import TOLERANCE, diagnose, verdict
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.config import load_config
 from pcmb.references import double_well, double_well_moments
@@ -272,9 +270,7 @@ def calibrate_case(
         alarms = misses = silent = 0
         fixed = {} if validation is None else {"validation": validation}
         for seed in range(seeds):
-            # Collocation has no seed of its own: the held-out draws' seed moves instead.
-            pcmb.study.HELD_OUT_SEED = HELD_OUT_SEED + seed
-            study = Study(model, inputs, times, backend="inprocess", **settings, **fixed)
+            study = Study(model, inputs, times, backend="inprocess", seed=seed, **settings, **fixed)
             result = study.run(progress=False)
             (name,) = result.diagnostics
             found = result.diagnostics[name]
@@ -296,7 +292,6 @@ def calibrate_case(
                 alarms += 1
             if not (np.isnan(flag) or np.isnan(true_from)):
                 worst = max(worst, 100 * abs(flag - true_from) / horizon)
-        pcmb.study.HELD_OUT_SEED = HELD_OUT_SEED
         flagged = [f for f in flags if not np.isnan(f)]
         span = f"{min(flagged):.3g}–{max(flagged):.3g}" if flagged else "never"
         if flagged and len(flagged) < seeds:

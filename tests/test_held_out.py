@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 import pcmb
-import pcmb.study
-from pcmb.analysis.diagnostics import HELD_OUT_SEED, held_out_draws, holdout_error, verdict
+from pcmb.analysis.diagnostics import held_out_draws, holdout_error, verdict
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
 from pcmb.references import double_well
@@ -61,12 +60,9 @@ def ball(params, times):
     return {"h": ball_height(params["h0"], times)}
 
 
-def _run(model, inputs, times, held_out_seed=0, **settings) -> pcmb.StudyResult:
-    """The study's result, its held-out draws moved by ``held_out_seed`` (collocation has no
-    seed of its own: ``method.seed + 7919`` is 7919)."""
-    with warnings.catch_warnings(), pytest.MonkeyPatch.context() as patch:
+def _run(model, inputs, times, **settings) -> pcmb.StudyResult:
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        patch.setattr(pcmb.study, "HELD_OUT_SEED", HELD_OUT_SEED + held_out_seed)
         return pcmb.Study(model, inputs, times, backend="inprocess", **settings).run()
 
 
@@ -184,7 +180,7 @@ def test_a_repaired_result_is_not_flagged_on_noise(model, inputs, stop, truth):
             order=3,
             elements="auto",
             max_elements=4,
-            held_out_seed=seed,
+            seed=seed,
             validation=8,
         )
         # elements: auto repaired it to within 2 % (28 runs)...
@@ -201,7 +197,7 @@ def test_a_failing_expansion_is_still_flagged_near_its_true_crossing():
     mean = fine.weights @ exact
     std = np.sqrt(fine.weights @ (exact - mean) ** 2)
     for seed in range(5):
-        result = _run(well, inputs, times, order=3, held_out_seed=seed, validation=64)
+        result = _run(well, inputs, times, order=3, seed=seed, validation=64)
         crossing = verdict(times, _true_error(result, "x", mean, std), 0.05)
         assert crossing == pytest.approx(2.16, abs=0.02)
         assert abs(result.diagnostics["x"].failing_from - crossing) <= 0.05 * times[-1]
@@ -227,7 +223,7 @@ def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
     times = np.linspace(0.0, 5.0, 201)
     mean, std = lognormal_moments(times)
     for seed in range(10):
-        result = _run(lognormal, {"z": pcmb.Normal(0.0, 1.0)}, times, order=4, held_out_seed=seed)
+        result = _run(lognormal, {"z": pcmb.Normal(0.0, 1.0)}, times, order=4, seed=seed)
         found = result.diagnostics["x"]
         crossing = verdict(times, _true_error(result, "x", mean, std), 0.05)
         assert crossing == pytest.approx(3.6, abs=0.01)

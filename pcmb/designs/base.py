@@ -93,6 +93,9 @@ class MethodSection(Section):
         "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
         "batches while the verdict is undecided)",
     )
+    seed: NonNegativeInt = Field(
+        default=0, description="seed of the design's random nodes and of the held-out runs"
+    )
 
     @property
     def size_key(self) -> str:
