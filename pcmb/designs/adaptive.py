@@ -248,11 +248,16 @@ class AdaptiveCollocation:
         return expansion.mean(), expansion.std()
 
     def _blind(self) -> list[int]:
-        """Active indices on an axis whose surplus vanishes (below :data:`BLIND`) while they
-        block a forward neighbour of a refined index whose indicator exceeds the tolerance: a
-        function that vanishes on the axis through the centre but not off it (Ishigami's
-        0.1 x3⁴ sin x1 at x1 = 0) hides its interactions from every surplus until then."""
+        """Active indices whose surplus vanishes (below :data:`BLIND`) while they block a
+        forward neighbour of a refined index whose indicator exceeds the tolerance, where that
+        hides interactions: an index on an axis (Ishigami's 0.1 x3⁴ sin x1 vanishes on the x3
+        axis through the centre, not off it), or one at level 0 in an input on whose centre
+        plane the whole function vanishes (every index there is blind, as for the G-function's
+        factor |4 x0 - 2|): every interaction with that input hides behind one."""
         position = {level: k for k, level in enumerate(self._index)}
+        blind = self._indicators <= BLIND
+        levels = np.array(self._index)
+        null = [k for k in range(levels.shape[1]) if blind[levels[:, k] == 0].all()]
         found = set()
         for level in self._refined:
             if self._indicators[position[level]] > self.tolerance:
@@ -262,8 +267,11 @@ class AdaptiveCollocation:
                         if (
                             k >= 0
                             and parent not in self._refined
-                            and sum(at > 0 for at in parent) == 1
-                            and self._indicators[k] <= BLIND
+                            and blind[k]
+                            and (
+                                sum(at > 0 for at in parent) == 1
+                                or any(parent[j] == 0 for j in null)
+                            )
                         ):
                             found.add(k)
         return sorted(found)
