@@ -41,7 +41,7 @@ from pcmb.designs.base import MethodSettings, Recovery
 from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import AdaptiveFit, Design, WarningRecord
 
-__all__ = ["AdaptiveCollocation"]
+__all__ = ["AdaptiveCollocation", "estimated_error"]
 
 #: Share of the refinable indicators' sum a round refines (bulk marking).
 BULK = 0.5
@@ -281,13 +281,7 @@ class AdaptiveCollocation:
 
     def _estimate(self) -> float:
         """The estimated error of the mean and std after the last round (see the module)."""
-        changes = self._changes
-        guarded = [max(d, np.sqrt(d * before)) for before, d in itertools.pairwise(changes)]
-        guarded = changes[:1] + guarded
-        rate = 1.0
-        if len(guarded) > 2 and guarded[-3] > 0:
-            rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
-        return float(guarded[-1] * rate)
+        return estimated_error(self._changes)
 
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
@@ -396,6 +390,20 @@ class AdaptiveCollocation:
                 ),
             )
         return Recovery(recovery.expansions, warnings, adaptive=fit)
+
+
+def estimated_error(changes: list[float]) -> float:
+    """The estimated error of the finer grid from the changes of the mean and std each round
+    made (relative to the largest std, the last the finest grid's against its predecessor's):
+    a small change is believed no further than the round before, g_k = max(d_k, √(d_k
+    d_{k-1})), and scaled by the reduction per round over the last two, min(1, √(g_k /
+    g_{k-2}))."""
+    guarded = [max(d, np.sqrt(d * before)) for before, d in itertools.pairwise(changes)]
+    guarded = changes[:1] + guarded
+    rate = 1.0
+    if len(guarded) > 2 and guarded[-3] > 0:
+        rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
+    return float(guarded[-1] * rate)
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
