@@ -8,7 +8,9 @@ the one before: a round runs only the new nodes and no run is discarded. From th
 round on, d_l is the largest difference, over outputs and times, of the mean and std from the
 previous round's, relative to the output's largest std over time (the diagnostics' scale,
 ``docs/diagnostics.md``): the error of the coarser grid. The estimated error of the finer one
-is :func:`pcmb.designs.adaptive.estimated_error` of the d_l, the kind ``adaptive`` estimate.
+is :func:`pcmb.designs.adaptive.estimated_error` of the d_l, the kind ``adaptive`` estimate
+without its median (a round here doubles the points per input, so the changes fall too
+fast for a median of three to follow).
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` or its grid
 ``method.max_runs``, or a node failed.
@@ -175,7 +177,7 @@ class OrderRefinement:
         estimate = math.nan
         if self._statistics is not None:
             self._changes.append(order_indicator(self._statistics, statistics))
-            estimate = estimated_error(self._changes)
+            estimate = estimated_error(self._changes, window=1)
         self._statistics = statistics
         self._history.append((self._orders(self._grid), nodes.size, estimate))
         if estimate < self.tolerance:
