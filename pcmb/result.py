@@ -120,7 +120,7 @@ class Design:
                 f"{self.samples} samples"
             )
             if self.tolerance is not None:
-                label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
+                label += f" (to {self.tolerance:g}, at most {self.max_samples})"
             return label
         if self.orders is None:
             return self.kind

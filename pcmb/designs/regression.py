@@ -21,14 +21,14 @@ from pcmb.chaos.sparse_regression import (
 from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRegression"]
+__all__ = ["SparseRegression", "estimated_error"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
 BASES = ("total", "hyperbolic")
 #: ``method.selection`` -> the ``fit`` recorded in :class:`pcmb.result.Design`.
 FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
-#: Worst corrected LOO error reported as a warning when no tolerance is set.
+#: Corrected LOO error above which a ``regression-loo`` record is made.
 LOO_WARNING = 1e-2
 #: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
 MAX_GROWTH = 16
@@ -37,6 +37,26 @@ MAX_GROWTH = 16
 def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     """The largest corrected LOO error over outputs and times (0 without an output)."""
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
+
+
+def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
+    """The estimated error of the mean and std, relative to each output's largest std, the
+    largest over outputs and times (0 without an output).
+
+    The corrected LOO error ε(t) estimates the surrogate's mean squared error over the
+    variance, so e = √ε σ is its RMS error. The least-squares coefficients then err by about
+    e/√N each (N runs): the mean by e/√N, the std by e/√N (their projection on the
+    coefficients' direction) plus e²/(2σ) (the variance the unselected terms carry).
+    """
+    worst = 0.0
+    for fit in fits.values():
+        std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
+        scale = float(np.max(std))
+        if scale > 0:
+            relative = np.sqrt(np.nan_to_num(fit.loo_error))
+            error = std * relative * (1.0 / np.sqrt(runs) + relative / 2.0)
+            worst = max(worst, float(np.max(error)) / scale)
+    return worst
 
 
 class SparseRegression:
@@ -49,8 +69,9 @@ class SparseRegression:
     expansions hold the union of the selected terms (zero where an output did not select one).
 
     With a ``tolerance`` the design is adaptive (:class:`~pcmb.designs.base.AdaptiveDesign`):
-    after each round :meth:`more` adds samples until the worst corrected LOO error meets it or
-    the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
+    after each round :meth:`more` adds samples until the error of the mean and std estimated
+    from the corrected LOO error (:func:`estimated_error`) meets it or the runs reach
+    ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
@@ -144,7 +165,7 @@ class SparseRegression:
             Nodes made so far (the batch continues them: the Sobol' sequence is extended; LHS
             and random batches are drawn afresh with a seed derived from ``seed`` and ``done``).
         history:
-            (samples, worst corrected LOO error over outputs and times) of every fit so far.
+            (samples, estimated error of the mean and std) of every fit so far.
         """
         if self.tolerance is None:
             return None
@@ -164,13 +185,14 @@ class SparseRegression:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
-        """The next round's nodes while the worst corrected LOO error of a fit on every node so
-        far exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
+        """The next round's nodes while the estimated error of a fit on every node so far
+        exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
         if self.tolerance is None:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        self._history.append((nodes.size, _worst_loo(self._fits(nodes, values, ok))))
+        fits = self._fits(nodes, values, ok)
+        self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
@@ -212,15 +234,16 @@ class SparseRegression:
             for name, fit in fits.items()
             if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        worst = _worst_loo(fits)
-        if self.tolerance is not None and worst > self.tolerance:
+        estimate = estimated_error(fits, runs)
+        if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
                     f"the rounds ended after {nodes.size} of {self.max_samples} runs "
-                    f"(method.max_samples) before the tolerance was met: worst corrected "
-                    f"leave-one-out error {worst:.3g} > {self.tolerance:g}; raise "
-                    "method.max_samples, or lower the order",
+                    f"(method.max_samples) before the tolerance was met: estimated error of the "
+                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
+                    f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
+                    "lower the order",
                 ),
             )
         regression = {
@@ -234,9 +257,9 @@ class SparseRegression:
     def _loo_warning(
         self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None
     ) -> WarningRecord | None:
-        """A ``regression-loo`` record where the corrected LOO error exceeds the tolerance (or
-        :data:`LOO_WARNING`), else ``None``."""
-        limit = self.tolerance or LOO_WARNING
+        """A ``regression-loo`` record where the corrected LOO error exceeds
+        :data:`LOO_WARNING`, else ``None``."""
+        limit = LOO_WARNING
         loo = np.atleast_1d(fit.loo_error)
         large = np.flatnonzero(loo > limit)
         if large.size == 0:
