@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
 from pcmb.chaos.expansion import ChaosExpansion
@@ -21,7 +21,7 @@ from pcmb.chaos.sparse_regression import (
 from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRegression", "estimated_error"]
+__all__ = ["SparseRegression", "estimated_error", "loo_statistics_error"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
@@ -40,23 +40,29 @@ def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
 
 
 def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
-    """The estimated error of the mean and std, relative to each output's largest std, the
-    largest over outputs and times (0 without an output).
-
-    The corrected LOO error ε(t) estimates the surrogate's mean squared error over the
-    variance, so e = √ε σ is its RMS error. The least-squares coefficients then err by about
-    e/√N each (N runs): the mean by e/√N, the std by e/√N (their projection on the
-    coefficients' direction) plus e²/(2σ) (the variance the unselected terms carry).
-    """
+    """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
     worst = 0.0
     for fit in fits.values():
         std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
-        scale = float(np.max(std))
-        if scale > 0:
-            relative = np.sqrt(np.nan_to_num(fit.loo_error))
-            error = std * relative * (1.0 / np.sqrt(runs) + relative / 2.0)
-            worst = max(worst, float(np.max(error)) / scale)
+        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs))
     return worst
+
+
+def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: int) -> float:
+    """The estimated error of the mean and std of a least-squares fit, relative to the largest
+    std, the largest over times, from its corrected LOO error ε and std σ per time.
+
+    ε estimates the surrogate's mean squared error over the variance, so e = √ε σ is its RMS
+    error. The coefficients then err by about e/√N each (N runs): the mean by e/√N, the std by
+    e/√N (their projection on the coefficients' direction) plus e²/(2σ) (the variance the
+    unselected terms carry).
+    """
+    std = np.asarray(std, dtype=float)
+    scale = float(np.max(std, initial=0.0))
+    if scale <= 0:
+        return 0.0
+    relative = np.sqrt(np.nan_to_num(np.asarray(loo, dtype=float)))
+    return float(np.max(std * relative * (1.0 / np.sqrt(runs) + relative / 2.0))) / scale
 
 
 class SparseRegression:
