@@ -16,7 +16,12 @@ The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on exp8 and
 genz_oscillatory; the others validate it (g_function is not smooth: the estimate cannot see
 its kink, the warning must).
 
+``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
+corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
+then ``max_samples``).
+
     python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--max-runs 6000]
+        [--method adaptive|regression]
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ from scipy.special import erf
 import pcmb
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
+from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import ishigami, ishigami_moments
 
 Case = tuple[dict, Callable[[np.ndarray], np.ndarray], float, float]
@@ -186,15 +192,30 @@ CASES = {
         g_function,
     )
 }
+#: Candidate order of the regression's hyperbolic set.
+REGRESSION_ORDER = 6
 #: Most runs of a chaospy Smolyak grid tried.
 CHAOSPY_RUNS = 60000
 
 
-def run(case: str, tolerance: float, max_runs: int) -> tuple[int, float, float, str]:
+def settings(method: str, inputs: dict, tolerance: float, max_runs: int) -> MethodSettings:
+    """``method``'s settings: kind adaptive, or LARS from 32 Sobol' points on the hyperbolic
+    set of order :data:`REGRESSION_ORDER`, q = 0.75."""
+    if method == "adaptive":
+        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs)
+    orders = (REGRESSION_ORDER,) * len(inputs)
+    return MethodSettings(
+        "regression", orders=orders, samples=32, q=0.75, tolerance=tolerance, max_samples=max_runs
+    )
+
+
+def run(
+    case: str, tolerance: float, max_runs: int, method: str = "adaptive"
+) -> tuple[int, float, float, str]:
     """(runs, the design's final estimate, the true error, whether an
-    ``adaptive-nonsmooth`` warning came) of one adaptive study."""
+    ``adaptive-nonsmooth`` warning came) of one study of ``method``."""
     inputs, function, mean, std = CASES[case]()
-    design = make_design(inputs, MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs))
+    design = make_design(inputs, settings(method, inputs, tolerance, max_runs))
     first = design.nodes()
     germ, params = first.nodes, first.params
     values = function(params)[:, None]
@@ -209,7 +230,12 @@ def run(case: str, tolerance: float, max_runs: int) -> tuple[int, float, float, 
     expansion = recovery.expansions["y"]
     error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
     nonsmooth = [w.message for w in recovery.warnings if w.code == "adaptive-nonsmooth"]
-    return len(germ), recovery.adaptive.estimate, float(error), "yes" if nonsmooth else ""
+    if method == "adaptive":
+        estimate = recovery.adaptive.estimate
+    else:
+        fit = recovery.regression["y"]
+        estimate = loo_statistics_error(fit.loo, expansion.std(), len(germ))
+    return len(germ), estimate, float(error), "yes" if nonsmooth else ""
 
 
 def chaospy_errors(case: str) -> list[tuple[int, float]]:
@@ -251,6 +277,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="?", default=",".join(CASES))
     parser.add_argument("--max-runs", type=int, default=6000)
+    parser.add_argument("--method", choices=("adaptive", "regression"), default="adaptive")
     args = parser.parse_args()
     print(
         "| function | tolerance | runs | estimate | true error | estimate/true | true/tolerance |"
@@ -260,7 +287,7 @@ def main() -> None:
     for case in args.cases.split(","):
         peer = chaospy_errors(case)
         for tolerance in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6):
-            runs, estimate, error, nonsmooth = run(case, tolerance, args.max_runs)
+            runs, estimate, error, nonsmooth = run(case, tolerance, args.max_runs, args.method)
             print(
                 f"| {case} | {tolerance:.0e} | {runs} | {estimate:.2e} | {error:.2e} | "
                 f"{estimate / error:.2g} | {error / tolerance:.2g} | {nonsmooth} | "
