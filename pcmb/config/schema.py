@@ -357,7 +357,9 @@ class MethodSpec(Section):
         default="tensor", description="collocation nodes: tensor grid or Smolyak"
     )
     level: NonNegativeInt | None = Field(default=None, description="level of a Smolyak grid")
-    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of a Smolyak grid")
+    rule: Literal[RULES] = Field(
+        default="auto", description="nested 1-D rule of a Smolyak, adaptive or order auto grid"
+    )
     elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
         default=None,
         description="multi-element collocation: input -> split points (physical units), or auto",
@@ -374,8 +376,8 @@ class MethodSpec(Section):
     )
     tolerance: PositiveReal | None = Field(
         default=None,
-        description="regression: add samples until the LOO error meets it; adaptive: refine "
-        "until the estimated error meets it",
+        description="kind regression or adaptive: add runs until the estimated error of the mean "
+        "and std, relative to the largest std, meets it",
     )
     max_samples: PositiveInt | None = Field(
         default=None, description="kind regression with tolerance: most samples in all"
