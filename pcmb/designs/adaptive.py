@@ -393,15 +393,14 @@ class AdaptiveCollocation:
         return Recovery(recovery.expansions, warnings, adaptive=fit)
 
 
-def estimated_error(changes: list[float], window: int = 3) -> float:
+def estimated_error(changes: list[float]) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
     predecessor's): a lucky small change is not believed, g_k = max(d_k, the median of the
-    last ``window`` changes), scaled by the reduction per round over the last two,
+    last three changes), scaled by the reduction per round over the last two,
     min(1, √(g_k / g_{k-2}))."""
     guarded = [
-        max(d, float(np.median(changes[max(0, k + 1 - window) : k + 1])))
-        for k, d in enumerate(changes)
+        max(d, float(np.median(changes[max(0, k - 2) : k + 1]))) for k, d in enumerate(changes)
     ]
     rate = 1.0
     if len(guarded) > 2 and guarded[-3] > 0:

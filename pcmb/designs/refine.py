@@ -6,11 +6,11 @@ Gauss–Patterson for uniform inputs, Genz–Keister for normal ones, Leja other
 grid integrates exactly (its orders). The rules are nested, so each grid holds every node of
 the one before: a round runs only the new nodes and no run is discarded. From the second
 round on, d_l is the largest difference, over outputs and times, of the mean and std from the
-previous round's, relative to the output's largest std over time (the diagnostics' scale,
-``docs/diagnostics.md``): the error of the coarser grid. The estimated error of the finer one
-is :func:`pcmb.designs.adaptive.estimated_error` of the d_l, the kind ``adaptive`` estimate
-without its median (a round here doubles the points per input, so the changes fall too
-fast for a median of three to follow).
+previous round's (the first round's from the centre run's, level 0, std 0), relative to the
+output's largest std over time (the diagnostics' scale, ``docs/diagnostics.md``): the error
+of the coarser grid. A round doubles the points per input, so the finer grid's error is far
+smaller: :func:`extrapolated_error` carries the decay per degree observed over the last two
+changes to the finer grid's degree (the smallest over inputs).
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` or its grid
 ``method.max_runs``, or a node failed.
@@ -27,16 +27,17 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import RULES, nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
-from pcmb.designs.adaptive import DEFAULT_MAX_RUNS, estimated_error
+from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery
 from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import Design, Refinement, WarningRecord
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "order_indicator"]
+__all__ = ["MAX_ORDER", "OrderRefinement", "extrapolated_error", "order_indicator"]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
@@ -54,6 +55,17 @@ def order_indicator(lower: Statistics, higher: Statistics) -> float:
         scale = float(np.max(std))
         worst = max(worst, gap / scale if scale > 0 else (0.0 if gap == 0 else math.inf))
     return worst
+
+
+def extrapolated_error(changes: list[float], degrees: list[int]) -> float:
+    """The estimated error of the last grid from the changes d_1..d_l of the mean and std
+    between successive grids (levels 0..l) of degrees 0 = p_0 < p_1 < ... < p_l: the error
+    falls geometrically in the degree, by ρ = min(1, d_l / d_{l-1})^(1 / (p_{l-1} - p_{l-2}))
+    per degree as observed last, so the last grid's is d_l ρ^(p_l - p_{l-1}) (d_1 alone)."""
+    if len(changes) < 2 or changes[-2] <= 0:
+        return changes[-1]
+    rate = min(1.0, changes[-1] / changes[-2]) ** (1.0 / (degrees[-2] - degrees[-3]))
+    return changes[-1] * rate ** (degrees[-1] - degrees[-2])
 
 
 class OrderRefinement:
@@ -113,6 +125,7 @@ class OrderRefinement:
         self._ids = self._first.node_ids
         self._statistics: Statistics | None = None
         self._changes: list[float] = []
+        self._degrees = [0]
         self._history: list[tuple[tuple[int, ...], int, float]] = []
         self._stopped: str | None = None
 
@@ -172,12 +185,12 @@ class OrderRefinement:
                 "needs every node: see the failures"
             )
             return None
-        found = self._recover(nodes, values, ok)
-        statistics = {name: (e.mean(), e.std()) for name, e in found.expansions.items()}
-        estimate = math.nan
-        if self._statistics is not None:
-            self._changes.append(order_indicator(self._statistics, statistics))
-            estimate = estimated_error(self._changes, window=1)
+        if self._statistics is None:  # level 0: the centre run, in every grid
+            self._statistics = self._statistics_on(self._level(0), nodes, values)
+        statistics = self._statistics_on(self._grid, nodes, values)
+        self._changes.append(order_indicator(self._statistics, statistics))
+        self._degrees.append(min(self._orders(self._grid)))
+        estimate = extrapolated_error(self._changes, self._degrees)
         self._statistics = statistics
         self._history.append((self._orders(self._grid), nodes.size, estimate))
         if estimate < self.tolerance:
@@ -203,6 +216,18 @@ class OrderRefinement:
         new = find_rows(self._ids, grid.node_ids) < 0
         self._ids = np.vstack([self._ids, grid.node_ids[new]])
         return NodeSet(self.distributions, grid.nodes[new], grid.params[new])
+
+    def _statistics_on(
+        self, grid: SparseGrid, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]]
+    ) -> Statistics:
+        """The mean and std of every output on ``grid``, whose nodes have all run."""
+        rows = find_rows(self._ids, grid.node_ids)
+        projected = grid.project(np.stack([y[rows] for y in values.values()], axis=1))
+        statistics = {}
+        for k, name in enumerate(values):
+            expansion = ChaosExpansion(projected[:, k], grid.multi_index, self.distributions)
+            statistics[name] = (expansion.mean(), expansion.std())
+        return statistics
 
     def _recover(
         self,
