@@ -103,7 +103,7 @@ class SparseRegression:
         if max_samples is not None and tolerance is None:
             raise ValueError(
                 "method.max_samples: only used with method.tolerance (the budget of the rounds "
-                "that add samples until the LOO error meets it)"
+                "that add samples until the estimated error meets it)"
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
