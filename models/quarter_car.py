@@ -14,7 +14,7 @@ paper). Loaded by pcmb as ``entry: ../models/quarter_car.py:QuarterCar``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +30,10 @@ from terrain_process import (
     random_profile_form,
 )
 
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
+
+if TYPE_CHECKING:
+    from pcmb.designs.polynomial_form import PolynomialForm
 
 Params = Mapping[str, NDArray[np.float64]]
 Law = Callable[[NDArray[np.float64], Params], NDArray[np.float64]]
@@ -158,7 +160,7 @@ class QuarterCar(StackedODEModel):
     m/s², from the equations of motion at the output times), ``z`` (terrain under the tire, m).
 
     Accuracy: rtol = 1e-10, atol = 1e-13 by default, per node whatever the batch size (see
-    :func:`pcmb.adapters.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
+    :func:`pcmb.integrate.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
     agrees with a tight separate run (DOP853, rtol = 1e-11) to within 1e-6 of each state's
     largest magnitude over the run (tests/test_models_quarter_car.py). The tolerances are
     tighter than that 1e-6 suggests because outputs come from DOP853's dense output, whose
@@ -222,6 +224,9 @@ class QuarterCar(StackedODEModel):
             The MR damper (tanh), the bump terrain (a jump in time), or an uncertain input
             the dynamics are not polynomial in.
         """
+        # Imported here: pcmb.designs loads scipy, which the workers running nodes do without.
+        from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
+
         if self.damper != "linear":
             raise ValueError(f"the {self.damper} damper's force law is not polynomial")
         fixed = ["Ms", "Mu"]

@@ -53,7 +53,7 @@ __all__ = [
     "TOLERANCE",
     "VALIDATION",
     "HeldOut",
-    "Holdout",
+    "HeldOutCheck",
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
@@ -85,7 +85,7 @@ HELD_OUT_SEED = 7919
 #: Default accepted error, relative to the output's largest standard deviation.
 TOLERANCE = 0.05
 #: A standard error of the held-out estimates above this multiple of the tolerance fails the
-#: verdict by itself (:meth:`Holdout.estimate`).
+#: verdict by itself (:meth:`HeldOutCheck.estimate`).
 UNRESOLVED = 2.0
 #: Confidence level of the held-out upper bound.
 CONFIDENCE = 0.9
@@ -175,7 +175,7 @@ def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float
 
 
 @dataclass(frozen=True)
-class Holdout:
+class HeldOutCheck:
     """The surrogate against K held-out model runs at random inputs.
 
     Attributes
@@ -287,7 +287,7 @@ def holdout_error(
     std: ArrayLike,
     scale: float,
     confidence: float = CONFIDENCE,
-) -> Holdout:
+) -> HeldOutCheck:
     """The surrogate at K held-out runs: its RMS error with an upper confidence bound, and
     the estimated errors of its mean and std (:func:`statistics_error`).
 
@@ -311,7 +311,7 @@ def holdout_error(
 
     Returns
     -------
-    Holdout
+    HeldOutCheck
         Zeros if the scale is zero; NaN if no run is finite.
     """
     from scipy.special import gammaincinv
@@ -324,9 +324,9 @@ def holdout_error(
     count = int(kept.sum())
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
-        return Holdout(nan, nan, nan, nan, nan, 0, confidence)
+        return HeldOutCheck(nan, nan, nan, nan, nan, 0, confidence)
     quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
-    return Holdout(
+    return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
         *statistics_error(predicted[kept], observed[kept], mean, std, scale),
@@ -486,12 +486,12 @@ class OutputDiagnostics:
     decay:
         (T,) :func:`spectral_decay`, a share of the largest variance.
     holdout:
-        The held-out check (:class:`Holdout`), ``None`` without held-out runs.
+        The held-out check (:class:`HeldOutCheck`), ``None`` without held-out runs.
     out_of_range:
         (T,) :func:`out_of_range`, a share of surrogate draws.
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
-        mean and the std (:attr:`Holdout.statistics`), or the decay without held-out runs.
+        mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
@@ -505,7 +505,7 @@ class OutputDiagnostics:
     output: str
     scale: float
     decay: NDArray[np.float64]
-    holdout: Holdout | None
+    holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
     tolerance: float
@@ -615,7 +615,7 @@ def diagnose(
 
 
 def _evidence(
-    decay: NDArray[np.float64], holdout: Holdout | None, failing: NDArray[np.bool_]
+    decay: NDArray[np.float64], holdout: HeldOutCheck | None, failing: NDArray[np.bool_]
 ) -> str:
     """The indicators where the verdict fails, e.g. "mean off by an estimated 12 % of the
     largest std (± 2 % from 32 held-out runs), surrogate error 25 % of std, decay 5.6 %"."""
@@ -667,7 +667,7 @@ def _all_equal(
 
 
 def _inaccurate(
-    output: str, holdout: Holdout, times: NDArray[np.float64], tolerance: float
+    output: str, holdout: HeldOutCheck, times: NDArray[np.float64], tolerance: float
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
     tolerance while the statistics hold."""

@@ -819,6 +819,7 @@ def _index_page(
     figures: dict[str, list[Path]],
     directory: Path,
     labels: _Labels,
+    spectra: Sequence[str],
     notes: Sequence[str] = (),
 ) -> str:
     e = html.escape
@@ -832,8 +833,7 @@ def _index_page(
     ]
     if result.partition is not None:
         rows.append(("elements", result.partition.describe(result.input_names)))
-    spectra = labels.settings.psd or ()
-    rows.append(("spectra", ", ".join(spectra) or "none asked for (analysis.psd)"))
+    rows.append(("spectra", ", ".join(spectra) or "none (analysis.psd)"))
     rows += [
         ("compared with", f"{other.label}, {other.result.seconds:.3g} s of runs")
         for other in others
@@ -989,7 +989,7 @@ def write_report(
     others, found = _others(result, comparisons, labels)
     text = _Labels(analysis.settings, _horizon(result))
     figures: dict[str, list[Path]] = {}
-    spectra = analysis.settings.psd or ()
+    spectra = [name for name in result.outputs if analysis.outputs[name].spectrum is not None]
     for name in result.outputs:
         shared, matched = _shared(name, others, found)
         drawn = [
@@ -997,7 +997,7 @@ def write_report(
             _draw(canvas, name, "PDF", _pdf_figure, result, name, analysis, shared, text),
             _draw(canvas, name, "Sobol'", _sobol_figure, result, name, text),
         ]
-        if name in spectra:  # a spectrum means something only where the study asks for it
+        if name in spectra:
             drawn += [
                 _draw(canvas, name, "PSD", _psd_figure, result, name, analysis, shared, text),
                 _draw(
@@ -1010,7 +1010,7 @@ def write_report(
         figures[name] = [path for path in drawn if path is not None]
     index = directory / "index.html"
     index.write_text(
-        _index_page(result, source, others, found, figures, directory, text, canvas.notes),
+        _index_page(result, source, others, found, figures, directory, text, spectra, canvas.notes),
         encoding="utf-8",
     )
     return [*canvas.written, index]
