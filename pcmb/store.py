@@ -540,7 +540,8 @@ def _read_design(file: h5py.File, index: np.ndarray | None) -> Design:
     if kind == "collocation":
         orders = tuple(int(q) - 1 for q in (np.unique(c).size for c in file["nodes/germ"][()].T))
         full = index is not None and index.shape[0] == int(np.prod(np.add(orders, 1)))
-        return Design(kind, "tensor-gauss", "tensor" if full else "total", orders, fit="projection")
+        basis = "tensor" if full else "total"
+        return Design(kind, "tensor-gauss", basis, orders, fit="projection", label=kind)
     orders = None if index is None else tuple(int(p) for p in index.max(axis=0))
     return Design(
         kind,
@@ -549,6 +550,7 @@ def _read_design(file: h5py.File, index: np.ndarray | None) -> Design:
         orders,
         samples=int(file["nodes/germ"].shape[0]),
         fit="none" if index is None else "regression",
+        label=kind,
     )
 
 

@@ -117,7 +117,7 @@ def test_the_double_well_reuses_every_run():
     error = np.maximum(np.abs(result.mean("x") - mean), np.abs(result.std("x") - std))
     error = error.max() / std.max()
     estimate = result.refinement.indicator[-1]
-    assert estimate < study.diagnostics_tolerance and error < study.diagnostics_tolerance
+    assert estimate < study.diagnostics.tolerance and error < study.diagnostics.tolerance
     assert error / 10 <= estimate <= 10 * error
 
 
@@ -160,7 +160,7 @@ def test_a_study_with_an_unknown_order_names_it():
     model, _, _ = _exponential(1.0, 0.2)
     with pytest.raises(UsageError) as caught:
         Study(model, INPUTS, TIMES, order="fine")
-    assert [p.path for p in caught.value.problems] == ["order"]
+    assert [p.path for p in caught.value.problems] == ["method.order"]
 
 
 def _write_config(folder, method: str):

@@ -29,11 +29,12 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import RULES, nested_rule
+from pcmb.chaos.nested import nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
-from pcmb.designs.base import MethodSettings, Recovery
+from pcmb.designs.base import MethodSettings, Recovery, order_words
+from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import Design, Refinement, WarningRecord
 
@@ -73,6 +74,8 @@ class OrderRefinement:
     rules, one level more in every input per round, until the estimated error meets
     ``diagnostics_tolerance`` (see the module); ``max_runs`` (default 1000) bounds the runs."""
 
+    Settings = CollocationSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         for key in ("tolerance", "max_samples", "level"):
             if getattr(settings, key) is not None:
@@ -86,12 +89,6 @@ class OrderRefinement:
             raise ValueError(
                 f"method.basis: order auto projects on the tensor basis of its grid, got "
                 f"{settings.basis!r}"
-            )
-        if settings.fit != "none":
-            raise ValueError("method.fit: expected none: order auto recovers by projection")
-        if settings.rule not in RULES:
-            raise ValueError(
-                f"method.rule: expected one of {', '.join(RULES)}, got {settings.rule!r}"
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         rules = []
@@ -155,16 +152,19 @@ class OrderRefinement:
         return weights
 
     def record(self) -> Design:
+        orders = self._orders(self._grid)
         return Design(
             kind="collocation",
             grid="tensor-nested",
             basis="tensor",
-            orders=self._orders(self._grid),
+            orders=orders,
             fit="projection",
             rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
             samples=self._grid.size,
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"chaos {order_words(orders, 'tensor')} (order auto to {self.tolerance:g}, "
+            f"{self._grid.size} runs)",
         )
 
     def more(

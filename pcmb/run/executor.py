@@ -21,7 +21,7 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import cloudpickle
 import numpy as np
@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigProblem, ModelDefinitionError, UsageError
-from pcmb.run.backends import BACKENDS, Pool, open_pool
+from pcmb.run.backends import Pool, open_pool
 from pcmb.run.journal import FRESH, Journal
 from pcmb.run.progress import Progress
 from pcmb.run.status import ModelTraceback, NodeFailure, Status
@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
 
 __all__ = [
+    "Execution",
     "PendingRun",
     "RunResult",
     "chunk_bounds",
@@ -488,27 +489,23 @@ def _run_pooled(
 # -- argument checks -------------------------------------------------------------------------
 
 
+class Execution(Protocol):
+    """The validated ``execution:`` settings the executor runs by
+    (:class:`pcmb.config.schema.ExecutionSpec`, where each is declared and checked)."""
+
+    jobs: int | None
+    backend: str
+    address: str | None
+    chunk_size: int | None
+    timeout: float | None
+
+
 def _check_arguments(
-    params: Mapping[str, ArrayLike],
-    times: ArrayLike,
-    outputs: Sequence[str],
-    jobs: int | None,
-    backend: str,
-    address: str | None,
-    chunk_size: int | None,
-    retries: int,
-    timeout: float | None = None,
+    params: Mapping[str, ArrayLike], times: ArrayLike, outputs: Sequence[str]
 ) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64], tuple[str, ...]]:
-    """Validate the arguments of :func:`run_nodes` as a whole; return them as arrays."""
+    """Validate the nodes, grid and outputs of :func:`run_nodes` as a whole; return them as
+    arrays (the execution settings come validated, :class:`Execution`)."""
     problems: list[ConfigProblem] = []
-
-    def integer_at_least(value: object, minimum: int) -> bool:
-        return (
-            isinstance(value, int | np.integer)
-            and not isinstance(value, bool)
-            and (value >= minimum)
-        )
-
     arrays: dict[str, NDArray[np.float64]] = {}
     if not isinstance(params, Mapping) or not params:
         problems.append(ConfigProblem("params", "must map at least one input name to an array"))
@@ -547,30 +544,6 @@ def _check_arguments(
         problems.append(
             ConfigProblem("outputs", f"must be a sequence of distinct names, got {outputs!r}")
         )
-    if jobs is not None and not integer_at_least(jobs, 1):
-        problems.append(ConfigProblem("jobs", f"must be a positive integer, got {jobs!r}"))
-    if backend not in BACKENDS:
-        problems.append(
-            ConfigProblem("backend", f"must be one of {', '.join(BACKENDS)}, got {backend!r}")
-        )
-    elif address is not None and backend != "dask":
-        problems.append(ConfigProblem("address", "is only used with backend 'dask'"))
-    if chunk_size is not None and not integer_at_least(chunk_size, 1):
-        problems.append(
-            ConfigProblem("chunk_size", f"must be a positive integer, got {chunk_size!r}")
-        )
-    if not integer_at_least(retries, 0):
-        problems.append(ConfigProblem("retries", f"must be an integer >= 0, got {retries!r}"))
-    if timeout is not None and not (
-        isinstance(timeout, int | float)
-        and not isinstance(timeout, bool)
-        and 0 < timeout < math.inf
-    ):
-        problems.append(ConfigProblem("timeout", f"must be a positive number, got {timeout!r}"))
-    elif timeout is not None and backend in BACKENDS and not BACKENDS[backend].kills:
-        problems.append(
-            ConfigProblem("timeout", f"needs workers pcmb can kill (backend loky), not {backend}")
-        )
     if problems:
         raise UsageError(problems, source="run_nodes")
     return arrays, time_grid, tuple(outputs)
@@ -608,12 +581,10 @@ def run_nodes(
     times: ArrayLike,
     outputs: Sequence[str],
     *,
-    jobs: int | None = None,
-    backend: str = "loky",
-    address: str | None = None,
+    execution: Execution,
+    address: Any = None,
     chunk_size: int | None = None,
     retries: int = 0,
-    timeout: float | None = None,
     journal: Journal | None = None,
     progress: bool | None = None,
     stop_on_failure: bool = False,
@@ -634,24 +605,20 @@ def run_nodes(
         (T,) output time grid, passed to the model.
     outputs:
         Names of the outputs to keep.
-    jobs:
-        Worker processes (slots); default: all cores (for dask with ``address``: all threads
-        of the cluster).
-    backend:
-        ``"loky"`` (child processes), ``"dask"``, or ``"inprocess"`` (this process: no
-        isolation, for debugging).
+    execution:
+        The validated ``execution:`` settings (:class:`Execution`): workers (``jobs``), where
+        they run (``backend``, ``address``), nodes per chunk (``chunk_size``; default ``min(256,
+        max(1, ceil(N / 16)))``; results depend on it, so a journal fingerprint includes an
+        explicit one) and the seconds a node may take (``timeout``: a chunk of B nodes B times
+        that, plus the time a fresh worker takes to start and build the model; a node past it
+        is a failed run and its worker is killed).
     address:
-        Scheduler address of a dask cluster; with ``backend="dask"`` and no address a local
-        cluster of ``jobs`` processes is started and closed.
+        Overrides ``execution.address``: a dask scheduler's address, or a
+        ``distributed.Client`` or ``Cluster`` of the caller's.
     chunk_size:
-        Nodes per chunk; default ``min(256, max(1, ceil(N / 16)))``. Results depend on it
-        (batched integrators), so a journal fingerprint must include an explicit chunk size.
+        Overrides ``execution.chunk_size``.
     retries:
         How many more times a failed node is tried before it is reported.
-    timeout:
-        Seconds a node may take (a chunk of B nodes: B times that, plus the time a fresh
-        worker takes to start and build the model); a node past it is a failed run and its
-        worker is killed. Needs a backend whose workers pcmb can kill (``loky``).
     journal:
         Persists every finished chunk; its successful nodes are taken instead of being run.
     progress:
@@ -689,21 +656,23 @@ def run_nodes(
         failure of each of those nodes, like any other.
     """
     start = time.perf_counter()
-    arrays, time_grid, names = _check_arguments(
-        params, times, outputs, jobs, backend, address, chunk_size, retries, timeout
-    )
+    arrays, time_grid, names = _check_arguments(params, times, outputs)
     n_nodes = len(next(iter(arrays.values())))
     factory = _factory(model_factory)
+    chunk_size = chunk_size or execution.chunk_size
+    timeout = execution.timeout
     if pool is None:
-        with open_pool(backend, jobs, address, tasks=len(chunk_bounds(n_nodes, chunk_size))) as own:
+        tasks = len(chunk_bounds(n_nodes, chunk_size))
+        where = execution.address if address is None else address
+        with open_pool(execution.backend, execution.jobs, where, tasks=tasks) as own:
             return run_nodes(
                 model_factory,
                 arrays,
                 time_grid,
                 names,
+                execution=execution,
                 chunk_size=chunk_size,
                 retries=retries,
-                timeout=timeout,
                 journal=journal,
                 progress=progress,
                 stop_on_failure=stop_on_failure,
@@ -786,9 +755,7 @@ def start_run(
         For invalid arguments, or a model without a requested output.
     """
     started = time.perf_counter()
-    arrays, time_grid, names = _check_arguments(
-        params, times, outputs, jobs=None, backend="loky", address=None, chunk_size=None, retries=0
-    )
+    arrays, time_grid, names = _check_arguments(params, times, outputs)
     _check_outputs(facts, names)
     campaign = _Campaign(
         _factory(model_factory), arrays, time_grid, names, 0, None, facts.axes, proven=True
