@@ -12,9 +12,9 @@ what the tolerance delivered; ``nonsmooth`` whether an ``adaptive-nonsmooth`` wa
 sparse=True)``, nested Clenshaw–Curtis for uniform inputs, Genz–Keister for normal ones; mean
 and std by its quadrature) with a true error as small (``>N``: none of at most N runs is).
 
-The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on exp8 and
-genz_oscillatory; the others validate it (g_function is not smooth: the estimate cannot see
-its kink, the warning must).
+The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on the rounds of exp8,
+genz_oscillatory, otl_circuit, piston, wing_weight and lognormal6; ishigami3 and genz_gaussian
+validate it (g_function is not smooth: the estimate cannot see its kink, the warnings must).
 
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
 corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
