@@ -211,20 +211,29 @@ def _summary(config, address: str | None = None) -> str:
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
-    lines.append(_memory_line(study, nodes.size, outputs))
+    lines.append(_memory_line(study, nodes.size, outputs, config.output))
     return "\n".join(lines)
 
 
-def _memory_line(study, n_nodes: int, outputs) -> str:
-    """The ``memory`` line of the summary; checks that the run fits (raises UsageError)."""
+def _memory_line(study, n_nodes: int, outputs, output: str | None) -> str:
+    """The ``memory`` line of the summary; checks that the run fits or streams (raises
+    UsageError)."""
     from pcmb.run.memory import check_memory
     from pcmb.run.output import format_bytes
 
     estimate = study.memory_estimate(n_nodes, outputs)
-    available = check_memory(estimate)
+    available, plan = check_memory(
+        estimate, study.memory, inputs=len(study.inputs), streams=study.why_not_streamed(output)
+    )
+    streamed = (
+        ""
+        if plan is None
+        else f"; over {study.memory.describe(available)}: the runs stream to the file, "
+        f"quantiles from a reservoir of {plan.reservoir_rows} runs"
+    )
     return (
         f"memory   about {format_bytes(estimate.total)} at most in pcmb's process; "
-        f"{format_bytes(available)} available"
+        f"{format_bytes(available)} available{streamed}"
     )
 
 

@@ -32,6 +32,7 @@ from pcmb.analysis.diagnostics import (
     pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
+from pcmb.analysis.streaming import stream_statistics
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
@@ -52,7 +53,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.result import Status, StudyResult, WarningRecord
+from pcmb.result import NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
@@ -66,7 +67,7 @@ from pcmb.run.executor import (
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import FRESH, Journal
-from pcmb.run.memory import MemoryEstimate, check_memory
+from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
 from pcmb.run.worker import Layout, ModelFacts
@@ -283,6 +284,8 @@ class Study:
         if isinstance(address, str):  # an address is an execution setting, checked there
             execution, address = {**_dump(execution), "address": address}, None
         self.execution: ExecutionSpec = _section("execution", ExecutionSpec, execution or {})
+        #: ``execution.memory`` (:class:`~pcmb.run.memory.MemoryBudget`).
+        self.memory = parse_memory(self.execution.memory)
         self.diagnostics: DiagnosticsSpec = _section(
             "diagnostics", DiagnosticsSpec, diagnostics or {}
         )
@@ -665,7 +668,12 @@ class Study:
         # Before any node runs and before a journal exists: a run that cannot fit in memory and
         # an output that cannot be written (a folder, a read-only or full file system) are
         # found now.
-        check_memory(self.memory_estimate(nodes.size, outputs, facts.axes))
+        _, streaming = check_memory(
+            self.memory_estimate(nodes.size, outputs, facts.axes),
+            self.memory,
+            inputs=len(self.inputs),
+            streams=self.why_not_streamed(output),
+        )
         journal_dir = None
         if output is not None:
             estimate = self.size_estimate(nodes.size, outputs, facts.axes)
@@ -693,7 +701,9 @@ class Study:
                 journal, journal_dir = None, None
                 found = self._solve(nodes, outputs, pool)
             else:
-                runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+                runs, journal = self._run_nodes(
+                    nodes, facts, outputs, pool, journal_dir, progress, keep=streaming is None
+                )
                 nodes, runs = self._run_rounds(
                     nodes, runs, facts, outputs, pool, journal_dir, progress
                 )
@@ -707,6 +717,10 @@ class Study:
         nominal = early.result() if early is not None else None
         if self.execution.nominal_run and nominal is None:
             nominal = self._run_nominal(facts, outputs, pool)
+        if streaming is not None:
+            return self._finish_streamed(
+                nodes, runs, journal, nominal, facts, outputs, streaming, output, provenance, stream
+            )
         if not intrusive:
             runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
             axes = {
@@ -733,6 +747,82 @@ class Study:
                 journal.remove()
         for record in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
             warnings.warn(str(record), PcmbWarning, stacklevel=2)
+        return result
+
+    def why_not_streamed(self, output: str | Path | None) -> str | None:
+        """Why this study cannot stream its runs (``None``: it can): only a sampling design
+        without a fit, writing a file, without derived outputs, has statistics that
+        accumulate run by run."""
+        design = self.design.record()
+        if design.grid != "random" or design.basis is not None:
+            fit = "" if design.grid != "random" else " with fit: regression"
+            return f"method.kind {design.kind}{fit} needs every run at once"
+        if self.derived:
+            return "derived outputs are computed from every run at once"
+        if output is None:
+            return "without an output file its runs are kept in memory"
+        return None
+
+    def _finish_streamed(
+        self,
+        nodes: NodeSet,
+        runs: RunResult,
+        journal: Journal,
+        nominal: RunResult | None,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        plan: StreamPlan,
+        output: str | Path,
+        provenance: Mapping[str, str] | None,
+        stream: Any,
+    ) -> StudyResult:
+        """The end of a streamed study (:meth:`why_not_streamed`): one pass over the journal
+        in node order accumulates every output's mean and std block by block
+        (:class:`~pcmb.analysis.running_moments.RunningMoments`) and a reservoir of runs
+        (:class:`~pcmb.analysis.reservoir.Reservoir`) for the warnings, quantiles, PDFs and
+        spectra; a second pass writes the runs to the file (:func:`pcmb.store.write_streamed`).
+        The result holds the statistics and no runs (``values`` without rows)."""
+        from pcmb.store import write_streamed  # h5py only when a file is written
+
+        layout = Layout.of(outputs, self.times, facts.axes)
+        widths = dict(zip(outputs, layout.widths, strict=True))
+        with phase(f"statistics of {nodes.size} streamed runs", stream):
+            moments, reservoir = stream_statistics(
+                journal.chunks(), widths, plan.block_rows, plan.reservoir_rows, self.method.seed
+            )
+        axes = {name: axis for name, axis in facts.axes.items() if name in outputs}
+        kept = reservoir.index
+        sample_runs = RunResult(
+            values=layout.split(reservoir.rows),
+            status=np.full(kept.size, Status.OK, dtype=np.int8),
+            failures=(),
+            seconds=runs.seconds,
+            resumed=runs.resumed,
+        )
+        sample_nodes = NodeSet(nodes.distributions, nodes.nodes[kept], nodes.params[kept])
+        sample = self._with_nominal(
+            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes), axes=axes),
+            nominal,
+        )
+        result = dataclasses.replace(
+            sample,
+            germ=nodes.nodes,
+            params=nodes.params,
+            status=runs.status,
+            failures=runs.failures,
+            warnings=(*_nodes_failed(runs.failures, nodes.size), *sample.warnings),
+            values={name: np.empty((0, width)) for name, width in widths.items()},
+            moments={name: np.stack([m.mean, m.std()]) for name, m in moments.items()},
+        )
+        if self.analysis is not None:
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                found = analyse(sample, self.analysis)
+            result = dataclasses.replace(result, analysis=found)
+        with phase(f"writing {output}", stream):
+            write_streamed(output, result, journal.chunks(), provenance=provenance or {})
+        journal.remove()
+        for record in result.alerts:
+            warnings.warn(str(record), PcmbWarning, stacklevel=3)
         return result
 
     def _recover_by_axis(
@@ -849,11 +939,13 @@ class Study:
         chunk_size: int | None = None,
         *,
         proven: bool = False,
+        keep: bool = True,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
         be removed once the result is written); raise by the failure policy. ``chunk_size``
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
-        :func:`~pcmb.run.executor.run_nodes`)."""
+        :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the
+        journal only (a streamed study)."""
         self._check_finite(nodes)  # the held-out runs' and later rounds' nodes too
         journal = None
         fresh_journal = False
@@ -878,6 +970,7 @@ class Study:
                 pool=pool,
                 facts=facts,
                 proven=proven,
+                keep_values=keep,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -919,7 +1012,7 @@ class Study:
         ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not self.method.validation or self.design.record().basis is None:
             return None, ()
-        seed = getattr(self.method, "seed", 0) + HELD_OUT_SEED
+        seed = self.method.seed + HELD_OUT_SEED
         # A Latin hypercube: each input's range is met evenly, which steadies the estimated
         # errors of the statistics against a few runs missing where the error sits.
         batch = random_nodes(tuple(self.inputs.values()), self.method.validation, "lhs", seed)
@@ -1036,15 +1129,7 @@ class Study:
         """Expansions of every output: the design recovers the outputs of each axis together
         (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
-        warnings: list[WarningRecord] = []
-        if runs.failures:
-            warnings.append(
-                WarningRecord(
-                    "nodes-failed",
-                    f"{len(runs.failures)} of {nodes.size} node(s) failed and were left out "
-                    f"(on_failure: regress): " + "; ".join(str(f) for f in runs.failures),
-                )
-            )
+        warnings = _nodes_failed(runs.failures, nodes.size)
         try:
             recovery = self._recover_by_axis(nodes, runs.values, ok, axes)
         except IllPosedError as error:
@@ -1073,6 +1158,19 @@ class Study:
         )
 
 
+def _nodes_failed(failures: Sequence[NodeFailure], total: int) -> list[WarningRecord]:
+    """The ``nodes-failed`` record of the nodes left out (none if none failed)."""
+    if not failures:
+        return []
+    return [
+        WarningRecord(
+            "nodes-failed",
+            f"{len(failures)} of {total} node(s) failed and were left out "
+            f"(on_failure: regress): " + "; ".join(str(f) for f in failures),
+        )
+    ]
+
+
 def _by_axis(
     values: Mapping[str, Any], axes: Mapping[str, OutputAxis | None]
 ) -> list[tuple[OutputAxis | None, bool, dict[str, Any]]]:
@@ -1087,7 +1185,7 @@ def _by_axis(
 
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
 _EXECUTION_ONLY = frozenset(
-    {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run"}
+    {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run", "memory"}
 )
 #: Top-level config keys that cannot change a node's values.
 _NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution", "derived"})

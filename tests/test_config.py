@@ -901,6 +901,23 @@ def test_a_key_of_another_method_is_refused_at_its_key_naming_the_methods_that_t
     ]
 
 
+@pytest.mark.parametrize(
+    "method",
+    [
+        "collocation\n  order: 3",
+        "adaptive\n  tolerance: 0.01",
+        "regression\n  order: 2\n  samples: 20",
+    ],
+)
+def test_every_design_takes_the_seed_of_its_held_out_runs(method):
+    """``seed`` seeds the held-out check of every design (the SPEC's example sets it beside
+    ``kind: collocation``), so no design refuses it."""
+    config = load(
+        BASE.replace("kind: collocation\n  order: 3\n  basis: tensor", f"kind: {method}\n  seed: 7")
+    )
+    assert config.method.seed == 7
+
+
 def test_the_schema_shows_method_as_a_union_keyed_by_kind_each_with_its_own_keys():
     schema = config_json_schema()
     method = schema["properties"]["method"]
@@ -912,4 +929,4 @@ def test_the_schema_shows_method_as_a_union_keyed_by_kind_each_with_its_own_keys
     assert set(branches) == set(METHOD_KINDS)
     assert "samples" in branches["lhs"] and "samples" not in branches["collocation"]
     assert "level" in branches["collocation"] and "level" not in branches["regression"]
-    assert set(branches["linearization"]) == {"kind", "validation"}
+    assert set(branches["linearization"]) == {"kind", "validation", "seed"}

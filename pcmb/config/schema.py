@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import (
     AfterValidator,
+    BeforeValidator,
     Field,
     PrivateAttr,
     ValidationError,
@@ -58,6 +59,7 @@ from pcmb.config.types import (
 from pcmb.designs import MethodSpec
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.run.memory import DEFAULT_MEMORY, parse_memory
 from pcmb.sweep.plan import sweep_problems, swept_methods
 
 if TYPE_CHECKING:
@@ -310,6 +312,11 @@ TimeSpec = tagged_by_key(
 )
 
 
+def _memory(value: int | str) -> int | str:
+    parse_memory(value)
+    return value
+
+
 class ExecutionSpec(Section):
     """Where and how the nodes run."""
 
@@ -339,6 +346,11 @@ class ExecutionSpec(Section):
     timeout: PositiveReal | None = Field(
         default=None,
         description="seconds a node may take before its worker is killed (backend loky)",
+    )
+    memory: Annotated[int | str, BeforeValidator(_memory)] = Field(
+        default=DEFAULT_MEMORY,
+        description="memory pcmb's process may use: a size (2GB, 512MiB, bytes) or a share of "
+        "the memory available (80%); a sampling study over it streams its runs to the file",
     )
 
     @field_validator("timeout")

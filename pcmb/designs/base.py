@@ -92,6 +92,9 @@ class MethodSection(Section):
         default=VALIDATION,
         description="held-out runs at random inputs that check a chaos expansion (0: none)",
     )
+    seed: NonNegativeInt = Field(
+        default=0, description="seed of the design's random nodes and of the held-out runs"
+    )
 
     @property
     def size_key(self) -> str:

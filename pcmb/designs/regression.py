@@ -20,7 +20,7 @@ from pcmb.chaos.sparse_regression import (
     minimum_samples,
     next_batch,
 )
-from pcmb.config.types import NonNegativeInt, OrderSpec, PositiveInt, PositiveReal
+from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
@@ -47,7 +47,6 @@ class RegressionSettings(MethodSection):
         default=None, description="candidate terms: hyperbolic (default) or total degree"
     )
     samples: PositiveInt | None = Field(default=None, description="runs of the first round")
-    seed: NonNegativeInt = Field(default=0, description="seed of the samples")
     selection: Literal[tuple(SELECTIONS)] = Field(
         default="lars", description="term selection of kind regression"
     )

@@ -11,7 +11,7 @@ from pydantic import Field
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, random_nodes
-from pcmb.config.types import NonNegativeInt, OrderSpec, PositiveInt
+from pcmb.config.types import OrderSpec, PositiveInt
 from pcmb.designs.base import (
     MethodSection,
     MethodSettings,
@@ -34,7 +34,6 @@ class SamplingSettings(MethodSection):
         description="how nodes are made (a registered design)"
     )
     samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
-    seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
     fit: Literal[FITS] = Field(
         default="none", description="regression: least-squares chaos fit on sampled nodes"
     )

@@ -237,7 +237,8 @@ class _Campaign:
     """The state of one :func:`run_nodes` call: arguments, results so far, journal, progress.
 
     ``proven``: the model is known to work (see :func:`run_nodes`), so that a break of the
-    protocol is never taken for a model error.
+    protocol is never taken for a model error. ``keep_values`` False: the values go to the
+    journal only (a streamed study, :mod:`pcmb.run.memory`), the result's arrays have no rows.
     """
 
     def __init__(
@@ -250,15 +251,17 @@ class _Campaign:
         journal: Journal | None,
         axes: Mapping[str, OutputAxis | None] | None = None,
         proven: bool = False,
+        keep_values: bool = True,
     ) -> None:
         layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
         self.params, self.layout, self.outputs = params, layout, layout.outputs
         self.retries, self.journal = retries, journal
         n_nodes = len(next(iter(params.values())))
+        self.keep_values = keep_values
         self.values = {
             name: np.ascontiguousarray(part)
-            for name, part in layout.split(layout.empty(n_nodes)).items()
+            for name, part in layout.split(layout.empty(n_nodes if keep_values else 0)).items()
         }
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
@@ -270,10 +273,13 @@ class _Campaign:
 
     def resume(self, journal: Journal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
-        indices, values, status = journal.completed()
+        if self.keep_values:
+            indices, values, status = journal.completed()
+            for name in self.outputs:
+                self.values[name][indices[status == Status.OK]] = values[name][status == Status.OK]
+        else:
+            indices, status = journal.statuses()
         ok = indices[status == Status.OK]
-        for name in self.outputs:
-            self.values[name][ok] = values[name][status == Status.OK]
         self.status[ok] = Status.OK
         self.resumed = int(ok.size)
 
@@ -315,8 +321,9 @@ class _Campaign:
             name: np.where(failed[:, None], np.nan, part)
             for name, part in self.layout.split(values).items()
         }
-        for name, column in chunk.items():
-            self.values[name][task.indices] = column
+        if self.keep_values:
+            for name, column in chunk.items():
+                self.values[name][task.indices] = column
         self.status[task.indices] = np.where(failed, Status.FAILED, Status.OK)
         found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
         raised = {int(i): t for i, t in zip(task.indices, tracebacks, strict=False) if t}
@@ -591,6 +598,7 @@ def run_nodes(
     pool: Pool | None = None,
     facts: ModelFacts | None = None,
     proven: bool = False,
+    keep_values: bool = True,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -636,6 +644,9 @@ def run_nodes(
         The model is known to work (it ran at other nodes: a study's later rounds, held-out
         and nominal runs), so that a node where it breaks the protocol is a failed node,
         never a :class:`~pcmb.errors.ModelDefinitionError`.
+    keep_values:
+        False: the values go to the ``journal`` only (a streamed study reads them from it
+        block by block) and the result's arrays have no rows.
 
     Returns
     -------
@@ -678,7 +689,10 @@ def run_nodes(
                 stop_on_failure=stop_on_failure,
                 pool=own,
                 proven=proven,
+                keep_values=keep_values,
             )
+    if keep_values is False and journal is None:
+        raise UsageError("values not kept in memory must go to a journal", source="run_nodes")
     if timeout is not None and not pool.kills:
         raise UsageError(
             [
@@ -694,7 +708,15 @@ def run_nodes(
     if journal is not None:
         _check_journal(journal, n_nodes, Layout.of(names, time_grid, facts.axes))
     campaign = _Campaign(
-        factory, arrays, time_grid, names, retries, journal, facts.axes, proven=proven
+        factory,
+        arrays,
+        time_grid,
+        names,
+        retries,
+        journal,
+        facts.axes,
+        proven=proven,
+        keep_values=keep_values,
     )
     if journal is not None:
         campaign.resume(journal)
