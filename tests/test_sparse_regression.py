@@ -150,7 +150,7 @@ def test_per_time_coefficients_are_least_squares_on_the_selected_terms():
 
 def _settings(**changes):
     base = dict(kind="regression", orders=(6, 6, 6), basis="hyperbolic", samples=64, seed=0)
-    base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None)
+    base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None, max_samples=None)
     return SimpleNamespace(**{**base, **changes})
 
 
