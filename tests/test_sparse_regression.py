@@ -5,6 +5,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pydantic
 import pytest
 
 import pcmb
@@ -13,6 +14,7 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import NodeSet, random_nodes
 from pcmb.chaos.recovery import fit_least_squares
 from pcmb.chaos.sparse_regression import fit_sparse, next_batch, selection_path
+from pcmb.designs import method_section
 from pcmb.designs.regression import SparseRegression
 from pcmb.errors import IllPosedError
 from pcmb.references import damped_oscillator, ishigami, ishigami_moments
@@ -164,14 +166,17 @@ def test_too_small_designs_are_refused_before_any_run():
         SparseRegression(INPUTS, _settings(samples=2))
     with pytest.raises(IllPosedError, match="at least 85 nodes"):
         fit_sparse(_candidates(ISHIGAMI, 6, 1.0), np.zeros((84, 3)), np.zeros(84), "none")
+    # Values outside a key's range are refused by the method: section, at the key.
+    base = {"kind": "regression", "order": 4, "samples": 64}
     for key, value in [
         ("selection", "lasso"),
         ("sampling", "halton"),
         ("basis", "tensor"),
         ("q", 0.0),
     ]:
-        with pytest.raises(ValueError, match=rf"^method\.{key}:"):
-            SparseRegression(INPUTS, _settings(**{key: value}))
+        with pytest.raises(pydantic.ValidationError) as exc:
+            method_section({**base, key: value})
+        assert [error["loc"][-1] for error in exc.value.errors()] == [key]
 
 
 def test_the_design_recovers_every_output_on_the_union_of_their_terms():
