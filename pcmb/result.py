@@ -136,13 +136,13 @@ class Refinement:
     Attributes
     ----------
     orders:
-        (R, n) the orders of each round's grid.
+        (R, n) the orders (projection degrees) of each round's grid.
     runs:
         (R,) runs made by the end of each round.
     indicator:
-        (R,) the estimated error of each round's statistics: the largest difference, over
-        outputs and times, of its mean and std from the previous round's, relative to the
-        output's largest std (NaN in the first round).
+        (R,) the estimated error of each round's statistics, relative to the output's largest
+        std (:func:`pcmb.designs.refine.extrapolated_error`; the first round's is its change
+        from the centre run's, at least 1).
     """
 
     orders: NDArray[np.int64]
