@@ -203,6 +203,7 @@ def test_ishigami_finds_the_interaction_its_axes_hide():
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+@pytest.mark.filterwarnings("ignore:.*chaos-undecided:pcmb.errors.PcmbWarning")
 def test_a_budget_that_ends_before_the_tolerance_is_reported():
     with pytest.warns(pcmb.PcmbWarning, match="adaptive-budget"):
         result = _adaptive(ishigami, ISHIGAMI, method="adaptive", tolerance=1e-8, max_runs=40)
