@@ -441,17 +441,3 @@ def test_pcmb_ends_without_waiting_for_workers_still_starting(tmp_path: Path) ->
         timeout=120,
     )
     assert done.returncode == 2, done.stderr
-
-
-def test_the_checking_process_of_validate_imports_only_what_a_check_needs() -> None:
-    """`pcmb validate`'s one worker imports the python adapter, not every design (about half
-    its start-up): a design it checks is imported when its check arrives."""
-    from pcmb.run.backends import OneProcessPool
-
-    pool = OneProcessPool()
-    try:
-        loaded = pool.submit(eval, "sorted(__import__('sys').modules)").result()
-    finally:
-        pool.close()
-    assert "pcmb.adapters.python.model" in loaded
-    assert "pcmb.designs" not in loaded

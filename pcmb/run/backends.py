@@ -187,9 +187,11 @@ def _serve(connection: Any, parent: int, environment: dict[str, str]) -> None:
     die_with_parent(parent)
     import pickle
 
-    # Not the designs: a design checked here (Galerkin's polynomial form) is imported with
-    # its check; for every other config that import would double this process's start-up.
     _warm_up()
+    # The designs whose checks run here too (Galerkin's polynomial form), while the caller
+    # reads the config.
+    import pcmb.designs  # noqa: F401
+
     while True:
         try:
             fn, args = pickle.loads(connection.recv_bytes())
