@@ -51,17 +51,20 @@ _SPRINGS: dict[str, tuple[dict[str, float], Law]] = {
 
 
 def _mr_force(dv: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
-    # Part II (MR damper): a tanh law in the relative velocity, stronger with the current.
-    return (p["F0"] + p["F1"] * p["I"]) * np.tanh(p["mr_slope"] * dv)
+    # Part II Eq. 10 as reconstructed in docs/paper_cases.md §3: a viscous part and a tanh
+    # (smoothed Coulomb) part in the relative velocity, both growing linearly with the current.
+    viscous = (p["c0"] + p["c1"] * p["I"]) * dv
+    return viscous + (p["F0"] + p["F1"] * p["I"]) * np.tanh(p["mr_slope"] * dv)
 
 
 # Damper force Fd(δ'), δ' = v1 - v2.
 _DAMPERS: dict[str, tuple[dict[str, float], Law]] = {
     "linear": ({"c": 1000.0}, lambda dv, p: p["c"] * dv),
-    # Part II Eq. 10 is unreadable; fitted to the figures Part II quotes: ±1015 N at I = 0 and
-    # ±(1015 + 2·2250) = ±5515 N at I = 2 A, reached within 1 % once |v| > 0.2 m/s
-    # (tanh(14.3·0.2) = 0.994): over most of Part II Fig. 9a's |v| ≤ 1.5 m/s, the plateaus.
-    "mr": ({"I": 1.0, "F0": 1015.0, "F1": 2250.0, "mr_slope": 14.3}, _mr_force),
+    # Part II Eq. 10 (docs/paper_cases.md §3): 800, 2868 and 4936 N at 1.5 m/s for I = 0, 1, 2 A.
+    "mr": (
+        {"I": 1.0, "c0": 531.0, "c1": 701.95, "F0": 4.0, "F1": 1015.0, "mr_slope": 14.3},
+        _mr_force,
+    ),
 }
 
 
@@ -134,8 +137,8 @@ class QuarterCar(StackedODEModel):
         cubic spline (:class:`terrain_process.SampledProfile`); nominal ``road`` 0 is flat.
     damper:
         ``"linear"``: Fd = c·δ' (c in N·s/m). ``"mr"``: magneto-rheological damper
-        Fd = (F0 + F1·I) tanh(mr_slope·δ') with the coil current I (A), F0 (N), F1 (N/A),
-        mr_slope (s/m).
+        (Part II Eq. 10) Fd = (c0 + c1·I)·δ' + (F0 + F1·I) tanh(mr_slope·δ') with the coil
+        current I (A), c0 (N·s/m), c1 (N·s/(m·A)), F0 (N), F1 (N/A), mr_slope (s/m).
     spring:
         ``"cubic"``: Fs = k·δ³ (k in N/m³, the paper's). ``"linear"``: Fs = k·δ (N/m).
     rtol, atol:
@@ -148,7 +151,8 @@ class QuarterCar(StackedODEModel):
         0.25, bump_start = 0.5, bump_duration = 0.5; kl speed = 10, D = 100, A0 = 0.5, A1 =
         0.2, A2 = 0.1, L1 = D/(6π), L2 = D/(14π) for the default D (set them with D), germs 0;
         field speed = 10, D = 100, A0 = 0.5, road = 0, road_start = 0, road_stop = 100;
-        linear damper c = 1000; MR damper I = 1, F0 = 1015, F1 = 2250, mr_slope = 14.3.
+        linear damper c = 1000; MR damper I = 1, c0 = 531, c1 = 701.95, F0 = 4, F1 = 1015,
+        mr_slope = 14.3.
         A parameter that does not belong to the chosen options is rejected.
 
     Notes
@@ -169,7 +173,7 @@ class QuarterCar(StackedODEModel):
     the steps themselves are 100 times more accurate; atol must stay small because the car
     starts at rest and a large atol lets the first steps grow long. ``a1`` is computed from the
     states and inherits their error amplified by the damper's slope: with the MR damper,
-    mr_slope·(F0 + F1·I)/Ms ≈ 300 s⁻¹ times the velocity error.
+    (c0 + c1·I + mr_slope·(F0 + F1·I))/Ms ≈ 120 s⁻¹ (I = 2 A) times the velocity error.
 
     Raises
     ------
@@ -181,7 +185,7 @@ class QuarterCar(StackedODEModel):
     _positive = frozenset(
         {"Ms", "Mu", "kT", "k", "f", "bump_duration", "D", "L1", "L2", "mr_slope"}
     )
-    _nonnegative = frozenset({"c", "I", "F0", "F1", "bump_start"})
+    _nonnegative = frozenset({"c", "c0", "c1", "I", "F0", "F1", "bump_start"})
     _fields = frozenset({"road"})
 
     def __init__(

@@ -201,7 +201,7 @@ def _summary(config, address: str | None = None) -> str:
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    held_out = study.validation if design.basis is not None else 0
+    held_out = study.method.validation if design.basis is not None else 0
     checks = f" + {held_out} held-out runs that check the expansion" if held_out else ""
     lines.append(
         f"runs     {nodes.size} model runs{rounds}{checks} "
@@ -211,20 +211,29 @@ def _summary(config, address: str | None = None) -> str:
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
-    lines.append(_memory_line(study, nodes.size, outputs))
+    lines.append(_memory_line(study, nodes.size, outputs, config.output))
     return "\n".join(lines)
 
 
-def _memory_line(study, n_nodes: int, outputs) -> str:
-    """The ``memory`` line of the summary; checks that the run fits (raises UsageError)."""
+def _memory_line(study, n_nodes: int, outputs, output: str | None) -> str:
+    """The ``memory`` line of the summary; checks that the run fits or streams (raises
+    UsageError)."""
     from pcmb.run.memory import check_memory
     from pcmb.run.output import format_bytes
 
     estimate = study.memory_estimate(n_nodes, outputs)
-    available = check_memory(estimate)
+    available, plan = check_memory(
+        estimate, study.memory, inputs=len(study.inputs), streams=study.why_not_streamed(output)
+    )
+    streamed = (
+        ""
+        if plan is None
+        else f"; over {study.memory.describe(available)}: the runs stream to the file, "
+        f"quantiles from a reservoir of {plan.reservoir_rows} runs"
+    )
     return (
         f"memory   about {format_bytes(estimate.total)} at most in pcmb's process; "
-        f"{format_bytes(available)} available"
+        f"{format_bytes(available)} available{streamed}"
     )
 
 
@@ -291,22 +300,24 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if output is None:
         raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
     study = Study.from_config(config)
-    if args.jobs is not None:
-        study.jobs = args.jobs
+    changes = {} if args.jobs is None else {"jobs": args.jobs}
     if args.backend is not None:
-        study.backend = args.backend
-        if args.backend != "dask":
-            study.address = None  # a scheduler address only means something to dask
+        # A scheduler address only means something to dask.
+        changes |= {"backend": args.backend} | ({} if args.backend == "dask" else {"address": None})
+    if args.address is not None:  # every thread of the cluster, not the config's local jobs
+        changes |= {"backend": "dask", "address": args.address, "jobs": args.jobs}
+    if changes:
+        execution = study.execution.model_dump(exclude_unset=True) | changes
+        study = study.replace(execution=execution)
     if args.address is not None:
-        study.backend, study.address, study.address_key = "dask", args.address, "--address"
-        study.jobs = args.jobs  # every thread of the cluster, not the config's local jobs
+        study.address_key = "--address"
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,
         "command_line": shlex.join(["pcmb", *argv]),
     }
     debugging = post_mortem() if args.pdb else nullcontext()
-    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.backend), debugging:
+    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.execution.backend), debugging:
         warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
         result = study.run(
             output,
@@ -464,7 +475,8 @@ def _inspect(path: str) -> str:
         "inputs   " + ", ".join(f"{n} ~ {d.law}" for n, d in named_inputs),
     ]
     design = dataclasses.asdict(result.design)
-    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
+    shown = {k: v for k, v in design.items() if v is not None and k != "label"}  # label: above
+    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in shown.items()))
     for name, found in result.processes.items():
         lines.append(
             f"process  {name}: {found.covariance.description['kind']} covariance, "

@@ -72,8 +72,11 @@ class Design:
         number of runs made. An adaptive sparse grid refines to ``tolerance`` within
         ``max_runs`` runs (``samples``: the runs made); so does tensor collocation with
         ``order: auto`` (``orders``: the orders reached).
+    label:
+        A short label the design gives itself: ``chaos order 5``, ``chaos orders 3x5``,
+        ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule gauss-patterson``, ...
 
-    Records written before a field existed load with its default.
+    Records written before a field existed load with its default (the label: the kind).
     """
 
     kind: str
@@ -90,6 +93,7 @@ class Design:
     tolerance: float | None = None
     max_samples: int | None = None
     max_runs: int | None = None
+    label: str = ""
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -101,45 +105,8 @@ class Design:
         data = json.loads(text)
         if data.get("orders") is not None:
             data["orders"] = tuple(data["orders"])
+        data.setdefault("label", data["kind"])
         return cls(**data)
-
-    @property
-    def label(self) -> str:
-        """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
-        ``chaos order 4 (order auto to 0.05, 99 runs)``, ``lhs``, ``lhs + chaos fit, total order
-        3``, ``Smolyak level 3, rule gauss-patterson``, ``LARS on hyperbolic order 5, q=0.75,
-        256 samples`` or ``adaptive sparse grid to 0.0001, 97 runs``."""
-        if self.kind == "adaptive":
-            return f"adaptive sparse grid to {self.tolerance:g}, {self.samples} runs"
-        if self.grid == "smolyak":
-            return f"Smolyak level {self.level}, rule {self.rule}"
-        if self.kind == "regression" and self.orders is not None:
-            shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
-            label = (
-                f"{self.fit.upper()} on {self.basis} order {max(self.orders)}{shape}, "
-                f"{self.samples} samples"
-            )
-            if self.tolerance is not None:
-                label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
-            return label
-        if self.orders is None:
-            return self.kind
-        if self.basis == "tensor":
-            highest = set(self.orders)
-            order = (
-                f"order {self.orders[0]}"
-                if len(highest) == 1
-                else "orders " + "x".join(map(str, self.orders))
-            )
-        else:
-            order = f"total order {max(self.orders)}"
-        if self.kind == "galerkin":
-            return f"Galerkin, {order}"
-        if self.fit != "projection":
-            return f"{self.kind} + chaos fit, {order}"
-        if self.tolerance is not None:  # order: auto
-            return f"chaos {order} (order auto to {self.tolerance:g}, {self.samples} runs)"
-        return f"chaos {order}"
 
 
 @dataclass(frozen=True)
@@ -264,17 +231,28 @@ class WarningRecord:
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
 #: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
-#: less accurate pointwise than its statistics; an output whose runs and nominal run are all
-#: equal): kept in the result and its file, listed as
+#: less accurate pointwise than its statistics, or a PDF drawn from it with mass where no run
+#: went, which caution what is drawn from the surrogate, not the mean and std; an output whose
+#: runs and nominal run are all equal): kept in the result and its file, listed as
 #: notes by ``pcmb inspect``, never a warning.
 RECORDED_ONLY = frozenset(
-    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "output-constant"}
+    {
+        "sobol-undefined",
+        "surrogate-out-of-range",
+        "surrogate-inaccurate",
+        "pdf-outside-runs",
+        "output-constant",
+    }
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
-#: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their
-#: output reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there is
-#: none, they are warnings that support it.
-INDICATORS = frozenset({"element-decay", "regression-loo"})
+#: leave-one-out error) and of the budgets that ended a refinement judged by the same
+#: tolerance as the verdict or by an internal threshold (``order: auto``, ``elements: auto``;
+#: not ``method.tolerance``, which the user asked of ``adaptive`` and regression): the
+#: diagnostics' verdict judges the result, so where it calls their output (for a record of
+#: the whole study: every output it judged) reliable they are notes like
+#: :data:`RECORDED_ONLY`; where it does not, or there is none, they are warnings that
+#: support it.
+INDICATORS = frozenset({"element-decay", "regression-loo", "element-budget", "order-budget"})
 
 
 @dataclass(frozen=True, repr=False)
@@ -494,12 +472,18 @@ class StudyResult:
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable): kept in the result and its
-        file, not issued as a warning."""
+        record about an output the diagnostics call reliable, or about the whole study when
+        they call every output reliable): kept in the result and its file, not issued as a
+        warning."""
         if record.code in RECORDED_ONLY:
             return True
-        judged = self.diagnostics.get(record.output) if record.output is not None else None
-        return record.code in INDICATORS and judged is not None and judged.reliable
+        if record.code not in INDICATORS:
+            return False
+        if record.output is None:
+            found = self.diagnostics.values()
+            return bool(found) and all(judged.reliable for judged in found)
+        judged = self.diagnostics.get(record.output)
+        return judged is not None and judged.reliable
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

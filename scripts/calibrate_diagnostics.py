@@ -64,7 +64,9 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
     reference = plain.replace(**REFERENCES[case]).run(progress=False)
     pointwise = plain.replace(method="montecarlo", samples=twin, seed=TWIN_SEED).run(progress=False)
     checks = [
-        plain.replace(method="lhs", samples=base.validation, seed=SEEDS + k).run(progress=False)
+        plain.replace(method="lhs", samples=base.method.validation, seed=SEEDS + k).run(
+            progress=False
+        )
         for k in range(seeds)
     ]
     rows = []

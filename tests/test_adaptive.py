@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 from test_resume import (
     PYTHON_CONFIG,
     PYTHON_MODEL,
@@ -17,8 +18,8 @@ from test_resume import (
 import pcmb
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
-from pcmb.designs import MethodSettings, make_design
-from pcmb.errors import ConfigError
+from pcmb.designs import method_section
+from pcmb.errors import ConfigError, UsageError
 from pcmb.references import ishigami, ishigami_moments
 from pcmb.study import Study
 
@@ -154,15 +155,16 @@ def test_a_budget_that_ends_before_the_tolerance_is_reported():
 @pytest.mark.parametrize(
     ("settings", "key"),
     [
-        ({"tolerance": 0.0}, "method.tolerance"),
+        ({"tolerance": 0.0}, "method.tolerance"),  # refused by its section
         ({}, "method.tolerance"),
         ({"tolerance": 1e-3, "max_runs": 6}, "method.max_runs"),  # one step is 7 runs
-        ({"tolerance": 1e-3, "level": 2}, "method.level"),
+        ({"tolerance": 1e-3, "level": 2}, "method.level"),  # a key of collocation
     ],
 )
 def test_unusable_settings_name_their_key(settings, key):
-    with pytest.raises(ValueError, match=rf"^{key}:"):
-        make_design(ISHIGAMI, MethodSettings("adaptive", **settings))
+    with pytest.raises(UsageError, match=rf"^Study: {key}:"):
+        model = pcmb.pointwise(lambda params, times: {"y": times}, outputs=("y",))
+        pcmb.Study(model, ISHIGAMI, [0.0], method={"kind": "adaptive", **settings})
 
 
 def _write_config(folder, method: str):
@@ -265,5 +267,5 @@ def test_a_tensor_grid_stops_at_its_budget_and_says_so():
 
 
 def test_kind_adaptive_refuses_another_basis():
-    with pytest.raises(ValueError, match=r"method\.basis: kind adaptive takes basis tensor"):
-        make_design(EXPONENTIAL, MethodSettings(kind="adaptive", tolerance=1e-3, basis="total"))
+    with pytest.raises(ValidationError, match=r"adaptive\.basis"):  # its section declares it
+        method_section({"kind": "adaptive", "tolerance": 1e-3, "basis": "total"})

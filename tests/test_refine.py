@@ -117,10 +117,10 @@ def test_the_double_well_runs_out_of_orders_and_says_so():
     assert result.design.orders == (MAX_ORDER,)
     (record,) = [w for w in result.warnings if w.code == "order-budget"]
     assert f"order {MAX_ORDER} is the highest" in record.message
-    assert result.refinement.indicator[-1] > study.diagnostics_tolerance
+    assert result.refinement.indicator[-1] > study.diagnostics.tolerance
     mean, std = double_well_moments(times, low, high)
     gap = np.maximum(np.abs(result.mean("x") - mean), np.abs(result.std("x") - std))
-    assert gap.max() / std.max() > study.diagnostics_tolerance  # the indicator was right
+    assert gap.max() / std.max() > study.diagnostics.tolerance  # the indicator was right
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
@@ -155,7 +155,7 @@ def test_a_study_with_an_unknown_order_names_it():
     model, _, _ = _exponential(1.0, 0.2)
     with pytest.raises(UsageError) as caught:
         Study(model, INPUTS, TIMES, order="fine")
-    assert [p.path for p in caught.value.problems] == ["order"]
+    assert [p.path for p in caught.value.problems] == ["method.order"]
 
 
 def _write_config(folder, method: str):

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 import pcmb
+from pcmb.config.schema import ExecutionSpec
 from pcmb.run.executor import run_nodes
 
 PCMB = Path(pcmb.__file__).resolve().parent
@@ -226,7 +227,9 @@ def test_run_nodes_keeps_the_models_frames_only(tmp_path, monkeypatch, wrapped):
         if wrapped
         else dispatched.Model
     )
-    found = run_nodes(model, {"a": [1.0, 2.0]}, np.linspace(0, 1, 3), ["y"], jobs=1)
+    found = run_nodes(
+        model, {"a": [1.0, 2.0]}, np.linspace(0, 1, 3), ["y"], execution=ExecutionSpec(jobs=1)
+    )
     first = found.failures[0]
     assert first.traceback is not None
     text = first.traceback.text

@@ -28,20 +28,23 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import RULES, nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, find_rows
-from pcmb.designs.base import MethodSettings, Recovery
+from pcmb.config.types import PositiveInt, PositiveReal
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import AdaptiveFit, Design, WarningRecord
 
-__all__ = ["AdaptiveCollocation"]
+__all__ = ["AdaptiveCollocation", "AdaptiveSettings"]
 
 #: Share of the refinable indicators' sum a round refines (bulk marking).
 BULK = 0.5
@@ -51,6 +54,31 @@ BLIND = 1e-12
 ROUND_OFF = 1e-10
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
+
+
+class AdaptiveSettings(MethodSection):
+    """``method: {kind: adaptive, tolerance, max_runs, rule, basis}``."""
+
+    kind: Literal["adaptive"] = Field(description="how nodes are made (a registered design)")
+    tolerance: PositiveReal | None = Field(
+        default=None, description="refine until the estimated error meets it"
+    )
+    max_runs: PositiveInt | None = Field(
+        default=None, description="most runs in all (default 1000)"
+    )
+    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of every input")
+    basis: Literal["tensor"] | None = Field(
+        default=None,
+        description="tensor: raise a tensor grid one input at a time (default: a sparse grid)",
+    )
+
+    @property
+    def size_key(self) -> str:
+        return self.budget_key
+
+    @property
+    def cost_key(self) -> str:
+        return "tolerance"
 
 
 class AdaptiveCollocation:
@@ -65,26 +93,12 @@ class AdaptiveCollocation:
     :data:`DEFAULT_MAX_RUNS`) the runs.
     """
 
+    Settings = AdaptiveSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         tolerance, max_runs, rule = settings.tolerance, settings.max_runs, settings.rule
         if tolerance is None:
             raise ValueError("method.tolerance: required key is missing (needed by kind adaptive)")
-        if not tolerance > 0:
-            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
-        if settings.orders is not None or settings.level is not None:
-            key = "order" if settings.orders is not None else "level"
-            raise ValueError(f"method.{key}: kind adaptive chooses its levels from the runs")
-        if settings.fit != "none":
-            raise ValueError("method.fit: expected none: kind adaptive recovers by projection")
-        if settings.max_samples is not None:
-            raise ValueError("method.max_samples: kind adaptive is bounded by method.max_runs")
-        if settings.basis is not None:
-            raise ValueError(
-                f"method.basis: kind adaptive takes basis tensor (a tensor grid raised one input "
-                f"at a time) or none (a sparse grid), got {settings.basis!r}"
-            )
-        if rule not in RULES:
-            raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         rules = []
         for name, dist in inputs.items():
@@ -161,6 +175,7 @@ class AdaptiveCollocation:
             samples=self._grid.size,
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"adaptive sparse grid to {self.tolerance:g}, {self._grid.size} runs",
         )
 
     # -- the rounds --------------------------------------------------------------------------

@@ -32,7 +32,7 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.collocation import CollocationSettings, TensorCollocation
 from pcmb.result import Design, Refinement, WarningRecord
 
 __all__ = ["MAX_ORDER", "OrderRefinement", "order_indicator"]
@@ -59,6 +59,8 @@ class OrderRefinement:
     """``method: {kind: collocation, order: auto, basis, max_runs}``: tensor Gauss grids of
     orders 1, 2, ... until the order indicator meets ``diagnostics_tolerance`` (see the
     module); ``max_runs`` (default 1000) bounds the runs of all rounds together."""
+
+    Settings = CollocationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         for key in ("tolerance", "max_samples", "level"):
@@ -117,11 +119,13 @@ class OrderRefinement:
         return weights
 
     def record(self) -> Design:
+        found = self._collocation(self._grid.orders[0]).record()
         return dataclasses.replace(
-            self._collocation(self._grid.orders[0]).record(),
+            found,
             samples=len(self._known),
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"{found.label} (order auto to {self.tolerance:g}, {len(self._known)} runs)",
         )
 
     def more(

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
 from pcmb.chaos.expansion import ChaosExpansion
@@ -18,16 +20,58 @@ from pcmb.chaos.sparse_regression import (
     minimum_samples,
     next_batch,
 )
-from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
+from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRegression"]
+__all__ = ["RegressionSettings", "SparseRegression"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
 BASES = ("total", "hyperbolic")
 #: ``method.selection`` -> the ``fit`` recorded in :class:`pcmb.result.Design`.
 FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
+
+
+class RegressionSettings(MethodSection):
+    """``method: {kind: regression, samples, sampling, selection, basis, q, order, seed,
+    tolerance, max_samples}``."""
+
+    budget_key: ClassVar[str] = "max_samples"
+
+    kind: Literal["regression"] = Field(description="how nodes are made (a registered design)")
+    order: OrderSpec | None = Field(
+        default=None, description="highest order of the candidate terms (int or input -> int)"
+    )
+    basis: Literal[BASES] | None = Field(
+        default=None, description="candidate terms: hyperbolic (default) or total degree"
+    )
+    samples: PositiveInt | None = Field(default=None, description="runs of the first round")
+    selection: Literal[tuple(SELECTIONS)] = Field(
+        default="lars", description="term selection of kind regression"
+    )
+    sampling: Literal[tuple(SAMPLINGS)] = Field(
+        default="sobol", description="how kind regression samples its nodes"
+    )
+    q: Annotated[float, Field(gt=0, le=1)] = Field(
+        default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
+    )
+    tolerance: PositiveReal | None = Field(
+        default=None, description="add samples until the corrected LOO error meets it"
+    )
+    max_samples: PositiveInt | None = Field(
+        default=None, description="with tolerance: most samples in all"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return self.budget_key if self.tolerance is not None else "samples"
+
+    @property
+    def cost_key(self) -> str:
+        return "samples"
+
+
 #: Worst corrected LOO error reported as a warning when no tolerance is set.
 LOO_WARNING = 1e-2
 #: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
@@ -53,26 +97,15 @@ class SparseRegression:
     the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
 
+    Settings = RegressionSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        selection = getattr(settings, "selection", "lars")
-        sampling = getattr(settings, "sampling", "sobol")
-        q = getattr(settings, "q", 1.0)
-        tolerance = getattr(settings, "tolerance", None)
-        max_samples = getattr(settings, "max_samples", None)
+        selection, sampling, q = settings.selection, settings.sampling, settings.q
+        tolerance, max_samples = settings.tolerance, settings.max_samples
         if settings.samples is None:
             raise ValueError("method.samples: required key is missing (needed by kind regression)")
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind regression)")
-        if selection not in SELECTIONS:
-            raise ValueError(f"method.selection: expected one of {', '.join(SELECTIONS)}")
-        if sampling not in SAMPLINGS:
-            raise ValueError(f"method.sampling: expected one of {', '.join(SAMPLINGS)}")
-        if (settings.basis or "hyperbolic") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
-        if not 0.0 < q <= 1.0:
-            raise ValueError(f"method.q: must be in (0, 1], got {q}")
-        if tolerance is not None and not tolerance > 0:
-            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
         if max_samples is not None and tolerance is None:
             raise ValueError(
                 "method.max_samples: only used with method.tolerance (the budget of the rounds "
@@ -133,7 +166,19 @@ class SparseRegression:
             q=self.q,
             tolerance=self.tolerance,
             max_samples=None if self.tolerance is None else self.max_samples,
+            label=self._label(),
         )
+
+    def _label(self) -> str:
+        """``LARS on hyperbolic order 5, q=0.75, 256 samples (to LOO 0.05, at most 2048)``."""
+        shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
+        label = (
+            f"{FITS[self.selection].upper()} on {self.basis} order {max(self.orders)}{shape}, "
+            f"{self._made} samples"
+        )
+        if self.tolerance is not None:
+            label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
+        return label
 
     def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
         """The next batch of nodes while the tolerance is not met, else ``None``.
