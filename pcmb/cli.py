@@ -34,7 +34,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.run.backends import BACKENDS
+from pcmb.run.backends import BACKENDS, close_kept
 from pcmb.run.progress import phase
 from pcmb.wording import plural
 
@@ -630,7 +630,12 @@ _RESUME_HINT = "finished nodes are kept in the journal (run the same command wit
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``pcmb`` command; returns the exit code."""
+    """Entry point of the ``pcmb`` command; returns the exit code.
+
+    Called as the command (``argv`` not given) the process ends next: the workers it kept
+    (started before a config error, or idle after the run) are killed on the way out.
+    """
+    as_command = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = _parser().parse_args(argv)
@@ -668,6 +673,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception:
         _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
         return EXIT_UNEXPECTED
+    finally:
+        if as_command:
+            close_kept(kill=True)
 
 
 if __name__ == "__main__":
