@@ -35,7 +35,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.run.backends import BACKENDS
+from pcmb.run.backends import BACKENDS, close_kept
 from pcmb.run.progress import phase
 from pcmb.wording import plural
 
@@ -202,8 +202,9 @@ def _summary(config, address: str | None = None) -> str:
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    held_out = study.method.validation if design.basis is not None else 0
-    checks = f" + {held_out} held-out runs that check the expansion" if held_out else ""
+    first, most = study.held_out_runs(nodes.size) if design.basis is not None else (0, 0)
+    upto = f"{first} to {most}" if most > first else f"{most}"
+    checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(
         f"runs     {nodes.size} model runs{rounds}{checks} "
         f"({config.execution.on_failure} on failure)"
@@ -503,8 +504,10 @@ def _inspect(path: str) -> str:
             else "no held-out runs"
         )
         axis = result.axis(name)
-        if axis is None:  # a scalar: pass or fail
+        undecided = found.reliable and found.undecided.any()
+        if axis is None:  # a scalar: pass or fail, or too few runs to tell
             verdict = "reliable" if found.reliable else "UNRELIABLE"
+            verdict = "undecided" if undecided else verdict
         else:
             point = "time" if result.on_time(name) else f"{axis.name} point"
             verdict = (
@@ -512,6 +515,9 @@ def _inspect(path: str) -> str:
                 if found.reliable
                 else f"UNRELIABLE from {axis.name} = {found.failing_from:.4g}"
             )
+            if undecided:
+                first = axis.values[np.argmax(found.undecided)]
+                verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
@@ -604,7 +610,12 @@ _RESUME_HINT = "finished nodes are kept in the journal (run the same command wit
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``pcmb`` command; returns the exit code."""
+    """Entry point of the ``pcmb`` command; returns the exit code.
+
+    Called as the command (``argv`` not given) the process ends next: the workers it kept
+    (started before a config error, or idle after the run) are killed on the way out.
+    """
+    as_command = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = _parser().parse_args(argv)
@@ -642,6 +653,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception:
         _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
         return EXIT_UNEXPECTED
+    finally:
+        if as_command:
+            close_kept(kill=True)
 
 
 if __name__ == "__main__":

@@ -141,13 +141,13 @@ class Refinement:
     Attributes
     ----------
     orders:
-        (R, n) the orders of each round's grid.
+        (R, n) the orders (projection degrees) of each round's grid.
     runs:
         (R,) runs made by the end of each round.
     indicator:
-        (R,) the estimated error of each round's statistics: the largest difference, over
-        outputs and times, of its mean and std from the previous round's, relative to the
-        output's largest std (NaN in the first round).
+        (R,) the estimated error of each round's statistics, relative to the output's largest
+        std (:func:`pcmb.designs.refine.extrapolated_error`; the first round's is its change
+        from the centre run's, at least 1).
     """
 
     orders: NDArray[np.int64]
@@ -557,18 +557,18 @@ class StudyResult(ReportedByDesign):
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable, or about the whole study when
-        they call every output reliable): kept in the result and its file, not issued as a
-        warning."""
+        record about an output the diagnostics vouch for — reliable and nowhere undecided — or
+        about the whole study when they vouch for every output): kept in the result and its
+        file, not issued as a warning."""
         if record.code in RECORDED_ONLY:
             return True
         if record.code not in INDICATORS:
             return False
         if record.output is None:
             found = self.diagnostics.values()
-            return bool(found) and all(judged.reliable for judged in found)
+            return bool(found) and all(judged.vouched for judged in found)
         judged = self.diagnostics.get(record.output)
-        return judged is not None and judged.reliable
+        return judged is not None and judged.vouched
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

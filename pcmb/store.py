@@ -424,10 +424,25 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
 
 
 #: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
-_DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimate": "estimate"}
-#: ... and those of its held-out check: the estimated errors of the mean and the std, and the
-#: standard error of the larger (same names in the file as on HeldOutCheck).
-_HOLDOUT_STATISTICS = ("mean_error", "std_error", "spread")
+_DIAGNOSTIC_ARRAYS = {
+    "decay": "decay",
+    "out_of_range": "out_of_range",
+    "estimate": "estimate",
+    "noise": "noise",
+    "undecided": "undecided",
+}
+#: ... and those of its held-out check: the estimated errors of the mean and the std, the
+#: standard error of the larger, and the mean and std the held-out runs correct with their
+#: standard errors (same names in the file as on HeldOutCheck).
+_HOLDOUT_STATISTICS = (
+    "mean_error",
+    "std_error",
+    "spread",
+    "corrected_mean",
+    "corrected_std",
+    "corrected_mean_se",
+    "corrected_std_se",
+)
 
 
 def _write_diagnostics(
@@ -460,6 +475,7 @@ def _write_diagnostics(
     _attach(group.create_dataset("params", data=held_out.params), run, input_)
     status = np.where(held_out.ok, Status.OK, Status.FAILED).astype(np.int8)
     _attach(group.create_dataset("status", data=status), run)
+    _attach(group.create_dataset("weights", data=held_out.weights), run)
     for name, values in held_out.values.items():
         _points(group, f"{name}/values", values, (run,), trails[name])
 
@@ -486,9 +502,11 @@ def _read_diagnostics(
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )
-        arrays = {
-            field: _columns(group[key][()], scalar) for key, field in _DIAGNOSTIC_ARRAYS.items()
+        arrays = {  # older files have no noise (nor undecided): their verdict judged the estimate
+            field: _columns(group[key if key in group else "decay"][()] * (key in group), scalar)
+            for key, field in _DIAGNOSTIC_ARRAYS.items()
         }
+        arrays["undecided"] = arrays["undecided"].astype(bool)
         found[name] = OutputDiagnostics(
             output=name,
             scale=float(attrs["scale"]),
@@ -511,6 +529,7 @@ def _read_diagnostics(
             if isinstance(group[name], h5py.Group)
         },
         ok=group["status"][()] == Status.OK,
+        weights=group["weights"][()] if "weights" in group else np.ones(len(group["status"])),
     )
     return found, held_out
 

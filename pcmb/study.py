@@ -26,17 +26,21 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
+    FIRST_BATCH,
     HELD_OUT_SEED,
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
+    held_out_budget,
+    held_out_draws,
+    more_runs,
     pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.analysis.streaming import stream_statistics
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
 from pcmb.config.messages import schema_problems
 from pcmb.config.schema import DiagnosticsSpec, ExecutionSpec
@@ -540,7 +544,7 @@ class Study:
         chaos = self.design.record().basis is not None
         return MemoryEstimate(
             nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.method.validation if chaos else 0,
+            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
             draws=RANGE_DRAWS if chaos else 0,
@@ -725,8 +729,9 @@ class Study:
                 nodes, runs = self._run_rounds(
                     nodes, runs, facts, outputs, pool, journal_dir, progress
                 )
+            first, most = self.held_out_runs(nodes.size)
             held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress
+                facts, outputs, pool, journal_dir, progress, first
             )
         except PcmbError:
             if early is not None:
@@ -749,7 +754,16 @@ class Study:
             with phase(f"{fitting} ({self.design.record().label})", stream):
                 found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
         with phase("diagnostics", stream):
-            result = self._diagnosed(self._with_nominal(found, nominal), held_out, held_out_failed)
+            found = self._with_nominal(found, nominal)
+            result = self._diagnosed(found, held_out, held_out_failed)
+            wanted = max(map(more_runs, result.diagnostics.values()), default=0)
+            if held_out is not None and min(wanted, most - first) > 0:
+                more, more_failed = self._run_held_out(
+                    facts, outputs, pool, journal_dir, progress, min(wanted, most - first), 1
+                )
+                held_out = held_out.joined(self._with_derived(more))
+                held_out_failed = (*held_out_failed, *more_failed)
+                result = self._diagnosed(found, held_out, held_out_failed)
         if self.analysis is not None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
@@ -1017,6 +1031,16 @@ class Study:
             )
         return runs, journal
 
+    def held_out_runs(self, design_runs: int) -> tuple[int, int]:
+        """(first batch, most in all) of the held-out runs that check an expansion of
+        ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
+        at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
+        in all, the rest drawn only where the verdict is undecided."""
+        if self.method.validation is not None:
+            return self.method.validation, self.method.validation
+        most = held_out_budget(design_runs)
+        return min(FIRST_BATCH, most), most
+
     def _run_held_out(
         self,
         facts: ModelFacts,
@@ -1024,32 +1048,40 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
+        count: int,
+        batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
-        """The held-out runs that check a chaos expansion (none for plain sampling), journaled
-        in the journal's ``validation`` folder, under the failure policy; and a
-        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
-        if not self.method.validation or self.design.record().basis is None:
+        """``count`` held-out runs that check a chaos expansion (none for plain sampling),
+        batch ``batch`` of the check (seed ``seed + 7919 + batch``), journaled in the
+        journal's ``validation`` folder (``validation-<batch>`` after the first), under the
+        failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
+        leaves them out)."""
+        if not count or self.design.record().basis is None:
             return None, ()
-        seed = self.method.seed + HELD_OUT_SEED
-        # A Latin hypercube: each input's range is met evenly, which steadies the estimated
-        # errors of the statistics against a few runs missing where the error sits.
-        batch = random_nodes(tuple(self.inputs.values()), self.method.validation, "lhs", seed)
-        folder = None if journal_dir is None else journal_dir / "validation"
+        seed = self.method.seed + HELD_OUT_SEED + batch
+        # A Latin hypercube, normal inputs widened into their tails (weighted back): each
+        # input's range is met evenly, which steadies the estimated errors of the statistics
+        # against a few runs missing where the error sits.
+        draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+        folder = None
+        if journal_dir is not None:
+            folder = journal_dir / ("validation" if batch == 0 else f"validation-{batch}")
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
-        halves = self.execution.chunk_size or -(-self.method.validation // 2)
+        halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            batch, facts, outputs, pool, folder, progress, halves, proven=proven
+            draws, facts, outputs, pool, folder, progress, halves, proven=proven
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
-        held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        ok = found.status == Status.OK
+        held_out = HeldOut(seed, draws.nodes, draws.params, found.values, ok, weights)
         if not found.failures:
             return held_out, ()
         failed = WarningRecord(
             "nodes-failed",
-            f"{len(found.failures)} of {batch.size} held-out run(s) failed and were left out of "
+            f"{len(found.failures)} of {draws.size} held-out run(s) failed and were left out of "
             f"the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
         )
         return held_out, (failed,)

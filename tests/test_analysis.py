@@ -14,9 +14,10 @@ from pcmb.references import damped_oscillator
 
 # Low orders keep these tests fast; the diagnostics rightly call them unreliable, which is
 # tested in tests/test_diagnostics*.py, not here.
-pytestmark = pytest.mark.filterwarnings(
-    "ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"
-)
+pytestmark = [
+    pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"),
+    pytest.mark.filterwarnings("ignore:.*chaos-undecided:pcmb.errors.PcmbWarning"),
+]
 
 # 400 points, step 0.05 (Nyquist 10 Hz); endpoint excluded so the record is periodic-ready.
 TIMES = np.linspace(0.0, 20.0, 400, endpoint=False)

@@ -404,8 +404,9 @@ def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
     config = load_config(Path(__file__).parents[1] / "configs" / "quarter_car.yaml")
     study = Study.from_config(config)
     estimate = study.memory_estimate(study.node_set().size, config.model.outputs)
-    # (216 nodes + 32 held-out) × 301 times × 2 outputs × 8 bytes, 7 times; 4096 draws, twice.
-    assert estimate.total == 7 * 248 * 301 * 2 * 8 + 2 * 4096 * 301 * 8  # 28 MB
+    # (216 nodes + at most 54 held-out, a quarter) × 301 times × 2 outputs × 8 bytes, 7 times;
+    # 4096 draws, twice.
+    assert estimate.total == 7 * 270 * 301 * 2 * 8 + 2 * 4096 * 301 * 8  # 30 MB
 
 
 def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: Path) -> None:
@@ -423,3 +424,21 @@ def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: P
         model.run_point({"a": 1.0}, np.linspace(0.0, 1.0, 3))
     assert "interpreter '/usr/bin/nonexistent-interpreter'" in str(failed.value)
     assert "No such file or directory" not in str(failed.value)
+
+
+def test_pcmb_ends_without_waiting_for_workers_still_starting(tmp_path: Path) -> None:
+    """`pcmb run` starts its workers before it reads the config: on a bad config it exits at
+    once, killing them, instead of waiting for them to finish starting."""
+    (tmp_path / "sitecustomize.py").write_text(  # loky's workers hang while they start
+        "import sys, time\nif 'LokyProcess' in ' '.join(sys.argv): time.sleep(600)\n"
+    )
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}
+    done = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(tmp_path / "missing.yaml"), "-o", "o.h5"],
+        cwd=tmp_path,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2, done.stderr

@@ -10,7 +10,6 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 
-from pcmb.analysis.diagnostics import VALIDATION
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
@@ -89,9 +88,11 @@ class MethodSection(Section):
     budget_key: ClassVar[str] = "max_runs"
 
     kind: str  # each section narrows it to its Literal (kept first in listings)
-    validation: NonNegativeInt = Field(
-        default=VALIDATION,
-        description="held-out runs at random inputs that check a chaos expansion (0: none)",
+    validation: NonNegativeInt | None = Field(
+        default=None,
+        description="held-out runs at random inputs that check a chaos expansion (0: none; "
+        "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
+        "batches while the verdict is undecided)",
     )
     seed: NonNegativeInt = Field(
         default=0, description="seed of the design's random nodes and of the held-out runs"

@@ -42,15 +42,17 @@ class CollocationSettings(MethodSection):
     kind: Literal["collocation"] = Field(description="how nodes are made (a registered design)")
     order: OrderSpec | None = Field(
         default=None,
-        description="int, a mapping input -> int, or auto: tensor collocation raised order by "
-        "order until diagnostics.tolerance is met",
+        description="int, a mapping input -> int, or auto: tensor grids of nested rules raised "
+        "level by level until diagnostics.tolerance is met",
     )
     basis: Literal[BASES] | None = Field(
         default=None, description="chaos terms: tensor (default) or total degree"
     )
     grid: Literal[GRIDS] = Field(default="tensor", description="tensor Gauss grid or Smolyak")
     level: NonNegativeInt | None = Field(default=None, description="level of a Smolyak grid")
-    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of a Smolyak grid")
+    rule: Literal[RULES] = Field(
+        default="auto", description="nested 1-D rule of a Smolyak grid or of order auto"
+    )
     elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
         default=None,
         description="multi-element collocation: input -> split points (physical units), or auto",

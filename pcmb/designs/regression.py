@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from pydantic import Field
 
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
@@ -25,7 +25,13 @@ from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, DesignReport, RegressionFit, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["RegressionReport", "RegressionSettings", "SparseRegression"]
+__all__ = [
+    "RegressionReport",
+    "RegressionSettings",
+    "SparseRegression",
+    "estimated_error",
+    "loo_statistics_error",
+]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
@@ -58,7 +64,9 @@ class RegressionSettings(MethodSection):
         default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
     )
     tolerance: PositiveReal | None = Field(
-        default=None, description="add samples until the corrected LOO error meets it"
+        default=None,
+        description="add samples until the error of the mean and std estimated from the "
+        "corrected LOO error, relative to the largest std, meets it",
     )
     max_samples: PositiveInt | None = Field(
         default=None, description="with tolerance: most samples in all"
@@ -73,7 +81,7 @@ class RegressionSettings(MethodSection):
         return "samples"
 
 
-#: Worst corrected LOO error reported as a warning when no tolerance is set.
+#: Corrected LOO error above which a ``regression-loo`` record is made.
 LOO_WARNING = 1e-2
 #: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
 MAX_GROWTH = 16
@@ -82,6 +90,32 @@ MAX_GROWTH = 16
 def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     """The largest corrected LOO error over outputs and times (0 without an output)."""
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
+
+
+def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
+    """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
+    worst = 0.0
+    for fit in fits.values():
+        std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
+        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs))
+    return worst
+
+
+def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: int) -> float:
+    """The estimated error of the mean and std of a least-squares fit, relative to the largest
+    std, the largest over times, from its corrected LOO error ε and std σ per time.
+
+    ε estimates the surrogate's mean squared error over the variance, so e = √ε σ is its RMS
+    error. The coefficients then err by about e/√N each (N runs): the mean by e/√N, the std by
+    e/√N (their projection on the coefficients' direction) plus e²/(2σ) (the variance the
+    unselected terms carry).
+    """
+    std = np.asarray(std, dtype=float)
+    scale = float(np.max(std, initial=0.0))
+    if scale <= 0:
+        return 0.0
+    relative = np.sqrt(np.nan_to_num(np.asarray(loo, dtype=float)))
+    return float(np.max(std * relative * (1.0 / np.sqrt(runs) + relative / 2.0))) / scale
 
 
 class SparseRegression:
@@ -94,8 +128,9 @@ class SparseRegression:
     expansions hold the union of the selected terms (zero where an output did not select one).
 
     With a ``tolerance`` the design is adaptive (:class:`~pcmb.designs.base.AdaptiveDesign`):
-    after each round :meth:`more` adds samples until the worst corrected LOO error meets it or
-    the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
+    after each round :meth:`more` adds samples until the error of the mean and std estimated
+    from the corrected LOO error (:func:`estimated_error`) meets it or the runs reach
+    ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
 
     Settings = RegressionSettings
@@ -110,7 +145,7 @@ class SparseRegression:
         if max_samples is not None and tolerance is None:
             raise ValueError(
                 "method.max_samples: only used with method.tolerance (the budget of the rounds "
-                "that add samples until the LOO error meets it)"
+                "that add samples until the estimated error meets it)"
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
@@ -171,14 +206,14 @@ class SparseRegression:
         )
 
     def _label(self) -> str:
-        """``LARS on hyperbolic order 5, q=0.75, 256 samples (to LOO 0.05, at most 2048)``."""
+        """``LARS on hyperbolic order 5, q=0.75, 256 samples (to 0.05, at most 2048)``."""
         shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
         label = (
             f"{FITS[self.selection].upper()} on {self.basis} order {max(self.orders)}{shape}, "
             f"{self._made} samples"
         )
         if self.tolerance is not None:
-            label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
+            label += f" (to {self.tolerance:g}, at most {self.max_samples})"
         return label
 
     def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
@@ -190,7 +225,7 @@ class SparseRegression:
             Nodes made so far (the batch continues them: the Sobol' sequence is extended; LHS
             and random batches are drawn afresh with a seed derived from ``seed`` and ``done``).
         history:
-            (samples, worst corrected LOO error over outputs and times) of every fit so far.
+            (samples, estimated error of the mean and std) of every fit so far.
         """
         if self.tolerance is None:
             return None
@@ -210,13 +245,14 @@ class SparseRegression:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
-        """The next round's nodes while the worst corrected LOO error of a fit on every node so
-        far exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
+        """The next round's nodes while the estimated error of a fit on every node so far
+        exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
         if self.tolerance is None:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        self._history.append((nodes.size, _worst_loo(self._fits(nodes, values, ok))))
+        fits = self._fits(nodes, values, ok)
+        self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
@@ -258,15 +294,16 @@ class SparseRegression:
             for name, fit in fits.items()
             if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        worst = _worst_loo(fits)
-        if self.tolerance is not None and worst > self.tolerance:
+        estimate = estimated_error(fits, runs)
+        if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
                     f"the rounds ended after {nodes.size} of {self.max_samples} runs "
-                    f"(method.max_samples) before the tolerance was met: worst corrected "
-                    f"leave-one-out error {worst:.3g} > {self.tolerance:g}; raise "
-                    "method.max_samples, or lower the order",
+                    f"(method.max_samples) before the tolerance was met: estimated error of the "
+                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
+                    f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
+                    "lower the order",
                 ),
             )
         regression = {
@@ -279,9 +316,9 @@ class SparseRegression:
     def _loo_warning(
         self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None
     ) -> WarningRecord | None:
-        """A ``regression-loo`` record where the corrected LOO error exceeds the tolerance (or
-        :data:`LOO_WARNING`), else ``None``."""
-        limit = self.tolerance or LOO_WARNING
+        """A ``regression-loo`` record where the corrected LOO error exceeds
+        :data:`LOO_WARNING`, else ``None``."""
+        limit = LOO_WARNING
         loo = np.atleast_1d(fit.loo_error)
         large = np.flatnonzero(loo > limit)
         if large.size == 0:

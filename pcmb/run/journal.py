@@ -37,8 +37,9 @@ _META = "journal.json"
 _LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
 _TEMP_PREFIX = ".tmp-"
-#: The folders of a journal's later parts (an adaptive design's rounds, the held-out runs).
-_PART = re.compile(r"round-\d+|validation")
+#: The folders of a journal's later parts (an adaptive design's rounds, the held-out runs'
+#: batches).
+_PART = re.compile(r"round-\d+|validation(-\d+)?")
 #: How to start over when a journal cannot be continued (the flag of pcmb run and sweep).
 FRESH = "start over with --fresh"
 
