@@ -54,12 +54,15 @@ def main() -> None:
     args = parser.parse_args()
     config = args.config.resolve()
     trees = {"": ROOT, **({"baseline ": args.baseline.resolve()} if args.baseline else {})}
+    # Each tree runs its own copy of the config (and so of the models it names), as the
+    # models follow the package's own layout.
+    configs = {tree: tree / config.relative_to(ROOT) for tree in trees.values()}
     with tempfile.TemporaryDirectory() as folder:
         work = Path(folder)
         jobs = {"floor": ([sys.executable, "-c", FLOOR], None)}
         for label, tree in trees.items():
             for name in TARGETS:
-                jobs[f"{label}{name}"] = (_command(name, config, work / "out.h5"), tree)
+                jobs[f"{label}{name}"] = (_command(name, configs[tree], work / "out.h5"), tree)
         times: dict[str, list[float]] = {label: [] for label in jobs}
         for round_ in range(args.repeat + 1):  # the first round fills the bytecode caches
             for label, (command, tree) in jobs.items():
