@@ -12,7 +12,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from cli_process import pcmb_cli
+from cli_process import pcmb_here
 
 MODEL = """
 import pcmb
@@ -65,7 +65,7 @@ def test_an_input_too_wide_for_floats_is_refused_at_the_input(
     tmp_path: Path, command: str, law: str, said: str
 ) -> None:
     config = _config(tmp_path, f"a: {law}")
-    done = pcmb_cli(command, str(config))
+    done = pcmb_here(command, str(config))
     stderr = done.stderr
     assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.a: " in stderr and "run_nodes" not in stderr, stderr
@@ -90,7 +90,7 @@ def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
         "energy: 0.9}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    done = pcmb_cli("validate", str(config))
+    done = pcmb_here("validate", str(config))
     stderr = done.stderr
     assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.r.covariance.length: the correlation length 1e-06" in stderr
@@ -107,7 +107,7 @@ def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
         "grid: {start: 0, stop: 10, points: 11}, energy: 0.9}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    done = pcmb_cli("validate", str(config))
+    done = pcmb_here("validate", str(config))
     stderr = done.stderr
     assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.r.covariance.length: the expansion needs " in stderr, stderr
@@ -121,7 +121,7 @@ def test_a_run_count_beyond_the_floats_is_reported_not_a_crash(tmp_path: Path) -
         "grid: {start: 0, stop: 10, points: 801}, terms: 700}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    done = pcmb_cli("validate", str(config))
+    done = pcmb_here("validate", str(config))
     stderr = done.stderr
     assert done.returncode == 2, stderr
     assert "method.order: the design asks for ~10^333 runs" in stderr, stderr
