@@ -61,8 +61,9 @@ def pcmb_here(*args: str, cwd: Path | None = None) -> subprocess.CompletedProces
         warnings.catch_warnings(),
     ):
         warnings.resetwarnings()
-        for quiet in (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning):
+        for quiet in (DeprecationWarning, PendingDeprecationWarning, ImportWarning):
             warnings.simplefilter("ignore", quiet)
+        warnings.simplefilter("ignore", ResourceWarning)
         warnings.showwarning = _show_warning
         code = main(list(args))
     return subprocess.CompletedProcess(list(args), code, stdout.getvalue(), stderr.getvalue())
