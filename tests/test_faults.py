@@ -174,15 +174,17 @@ def test_sys_exit_in_the_model_aborts_with_exit_3(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
     config = _study(tmp_path, index, code, jobs, "abort")
-    returncode, stderr, pid = _run(config)
-    assert returncode == 3, stderr
+    # In this process: a model's sys.exit run here by mistake would fail the test, not end it.
+    done = pcmb_here("run", str(config), "--quiet")
+    stderr = done.stderr
+    assert done.returncode == 3, stderr
     assert "the model failed at 1 of 9 node(s) (on_failure: abort)" in stderr
     assert f"  node {index} (a={NODES[index]:.6g}): SystemExit: {code} at faulty.py:" in stderr
     # The model's traceback is shown, not one of pcmb's own.
     assert "unexpected error" not in stderr and "executor.py" not in stderr, stderr
     # No result, not even half of one: only the journal of the finished nodes is left.
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
-    _check_where_it_ran(tmp_path, pid)
+    _check_where_it_ran(tmp_path, os.getpid())
 
 
 @pytest.mark.slow
@@ -191,8 +193,9 @@ def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
     config = _study(tmp_path, index, code, jobs, "regress")
-    returncode, stderr, pid = _run(config)
-    assert returncode == 0, stderr
+    done = pcmb_here("run", str(config), "--quiet")
+    stderr = done.stderr
+    assert done.returncode == 0, stderr
     assert f"node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
     assert "pcmb: wrote" in stderr
     # A complete file and nothing else: no journal, no temporary file.
@@ -208,7 +211,7 @@ def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     # y = a t with a ~ U[0, 1]: the refit on the 8 surviving nodes is exact.
     np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
     np.testing.assert_allclose(result.std("y"), result.times / np.sqrt(12.0), atol=1e-12)
-    _check_where_it_ran(tmp_path, pid)
+    _check_where_it_ran(tmp_path, os.getpid())
 
 
 # -- crashes and hangs: the worker dies, pcmb goes on ----------------------------------------
