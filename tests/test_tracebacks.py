@@ -19,7 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from cli_process import pcmb_cli
+from cli_process import pcmb_cli, pcmb_here
 
 import pcmb
 from pcmb.result import NodeFailure
@@ -103,7 +103,7 @@ def _frame(folder: Path) -> str:
 @pytest.mark.slow
 def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
-    done = pcmb_cli("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     stderr = done.stderr
     assert done.returncode == 3, stderr
     assert "the model failed at 6 of 6 node(s)" in stderr, stderr
@@ -126,7 +126,7 @@ def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(t
 @pytest.mark.slow
 def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
-    done = pcmb_cli("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     assert done.returncode == 0, done.stderr
     where = f"KeyError: 'omega' at helpers.py:{LINE} in rate()"
     assert where in done.stderr and _frame(tmp_path) in done.stderr, done.stderr
@@ -139,7 +139,7 @@ def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path)
         assert failure.traceback is not None and _frame(tmp_path) in failure.traceback.text
         assert failure.traceback.text.rstrip().endswith("KeyError: 'omega'")
         assert where in str(failure)
-    inspected = pcmb_cli("inspect", str(tmp_path / "out.h5"))
+    inspected = pcmb_here("inspect", str(tmp_path / "out.h5"))
     assert inspected.returncode == 0, inspected.stderr
     assert f"failed   {_node(7, 6)}: {where}" in inspected.stdout, inspected.stdout
     assert _frame(tmp_path) in inspected.stdout and CODE in inspected.stdout
@@ -149,7 +149,7 @@ def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path)
 @pytest.mark.slow
 def test_a_file_without_tracebacks_still_loads(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
-    assert pcmb_cli("run", str(config), "--quiet").returncode == 0
+    assert pcmb_here("run", str(config), "--quiet").returncode == 0
     with h5py.File(tmp_path / "out.h5", "a") as file:  # as a file of before tracebacks
         del file.attrs["failure_tracebacks"]
     result = pcmb.load(tmp_path / "out.h5")
@@ -178,7 +178,7 @@ def test_pdb_opens_the_debugger_at_the_first_model_exception(tmp_path):
 
 def test_pdb_refuses_a_backend_with_workers(tmp_path):
     config = _study(tmp_path, limit=0.0, order=1, on_failure="abort")
-    done = pcmb_cli("run", str(config), "--pdb", "--backend", "loky")
+    done = pcmb_here("run", str(config), "--pdb", "--backend", "loky")
     assert done.returncode == 2, done.stderr
     assert "--pdb" in done.stderr and "inprocess" in done.stderr, done.stderr
     assert not (tmp_path / "out.h5.journal").exists()
@@ -267,7 +267,7 @@ def test_a_failed_command_keeps_its_stderr_tail_and_has_no_traceback(tmp_path):
             """
         )
     )
-    done = pcmb_cli("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     assert done.returncode == 3, done.stderr
     assert "last lines of stderr.txt: 'solver diverged at step 12'" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr, done.stderr
