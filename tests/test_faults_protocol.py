@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_process import pcmb_cli
+from cli_process import pcmb_here
 
 import pcmb
 from pcmb.result import Status
@@ -81,7 +81,7 @@ def _study(folder: Path, how: str, policy: str, cut: float = CUT) -> Path:
 
 
 def _run(config: Path, *extra: str) -> tuple[int, str]:
-    process = pcmb_cli("run", str(config), "--quiet", *extra)
+    process = pcmb_here("run", str(config), "--quiet", *extra)
     return process.returncode, process.stderr
 
 
