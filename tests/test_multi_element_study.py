@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from cli_process import pcmb_cli
+from cli_process import pcmb_here
 from model_loading import GLOBAL_FACTOR, model_class
 from test_multi_element import JUMP_INPUTS, C
 from test_multi_element import _jump as jump
@@ -80,7 +80,7 @@ def test_the_held_out_verdict_calls_one_element_failing_and_two_fixed_at_equal_c
 @pytest.mark.slow
 def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     out = tmp_path / "dw.h5"
-    run = pcmb_cli("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
+    run = pcmb_here("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     result = pcmb.load(out)
     # The pipeline is the design applied to the model: the same numbers as the design on
@@ -107,9 +107,9 @@ def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     # is in the left well (x near -1) and every x0 > 0 in the right one.
     bands = result.analysis.outputs["x"].quantiles
     assert bands[0, -1] == pytest.approx(-1.0, abs=0.02) and bands[-1, -1] > 0.9
-    inspect = pcmb_cli("inspect", str(out), cwd=tmp_path)
+    inspect = pcmb_here("inspect", str(out), cwd=tmp_path)
     assert "elements 2 elements, split at x0 = 0" in inspect.stdout
-    report = pcmb_cli("report", str(out), "-o", str(tmp_path / "report"), cwd=tmp_path)
+    report = pcmb_here("report", str(out), "-o", str(tmp_path / "report"), cwd=tmp_path)
     assert report.returncode == 0, report.stderr
     page = (tmp_path / "report" / "index.html").read_text()
     assert "2 elements, split at x0 = 0" in page
@@ -180,7 +180,7 @@ def _auto_config(tmp_path: Path, model: str = "DoubleWell") -> Path:
 
 @pytest.mark.slow
 def test_validate_prints_the_first_round_and_the_budget(tmp_path):
-    validate = pcmb_cli("validate", str(_auto_config(tmp_path)), cwd=tmp_path)
+    validate = pcmb_here("validate", str(_auto_config(tmp_path)), cwd=tmp_path)
     assert validate.returncode == 0, validate.stderr
     assert "4 model runs in the first round, at most 60 in all" in validate.stdout
 
@@ -268,7 +268,7 @@ def test_the_chaotic_lorenz_case_is_not_reported_as_fixed(tmp_path):
     data.pop("analysis")
     config = tmp_path / "lorenz.yaml"
     config.write_text(yaml.safe_dump(data))
-    run = pcmb_cli("run", str(config), "-o", "lorenz.h5", cwd=tmp_path)
+    run = pcmb_here("run", str(config), "-o", "lorenz.h5", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "[element-budget]" in run.stderr
     result = pcmb.load(tmp_path / "lorenz.h5")
