@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from cli_process import pcmb_here
 
 #: Seconds a process may take to die after pcmb does (the issue's allowance).
 GRACE = 5.0
@@ -372,13 +373,7 @@ def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
     ).read_text()
     config = config.replace("points: 3", f"points: {HUGE_POINTS}").replace("jobs: 2", "jobs: 1")
     (tmp_path / "study.yaml").write_text(config)
-    done = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(tmp_path / "study.yaml")]
-        + ["--resume"] * resume,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    done = pcmb_here("run", str(tmp_path / "study.yaml"), *["--resume"] * resume)
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr
     message = done.stderr.lower()
@@ -387,12 +382,7 @@ def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
     # Nothing was written: no journal, no result, no temporary.
     assert sorted(p.name for p in tmp_path.iterdir()) == ["study.yaml", "wide.py"]
     if not resume:  # pcmb validate checks what a run checks
-        checked = subprocess.run(
-            [sys.executable, "-m", "pcmb.cli", "validate", str(tmp_path / "study.yaml")],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
+        checked = pcmb_here("validate", str(tmp_path / "study.yaml"))
         assert checked.returncode == 2 and "of memory, more than" in checked.stderr
 
 
