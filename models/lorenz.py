@@ -15,7 +15,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
 
 Params = Mapping[str, NDArray[np.float64]]
 

@@ -16,7 +16,7 @@ two-line spectrum of Part II Eq. 22. Loaded by pcmb as
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,8 +31,10 @@ from terrain_process import (
     random_profile_form,
 )
 
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
+
+if TYPE_CHECKING:
+    from pcmb.designs.polynomial_form import PolynomialForm
 
 Params = Mapping[str, NDArray[np.float64]]
 
@@ -118,6 +120,9 @@ class CubicOscillator(StackedODEModel):
         ValueError
             An uncertain m (divided by), speed, L1 or L2 (inside the modes).
         """
+        # Imported here: pcmb.designs loads scipy, which the workers running nodes do without.
+        from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
+
         space = PolynomialSpace(("x", "v"), inputs, MODES)
         p = space.parameters(self.parameters, ("m", "speed", "L1", "L2"))
         x, v = space.states

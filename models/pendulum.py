@@ -13,7 +13,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.adapters.stacked_ode import StackedODEModel, solve_projected
+from pcmb.integrate.stacked_ode import StackedODEModel, solve_projected
 
 Params = Mapping[str, NDArray[np.float64]]
 
@@ -82,7 +82,7 @@ class PendulumDAE(StackedODEModel):
         x'' = -λ x,  y'' = g - λ y,  λ = (u² + v² + g y) / L²,
 
     the multiplier that keeps the twice-differentiated constraint x x'' + y y'' + u² + v² = 0.
-    The integrator (:func:`pcmb.adapters.stacked_ode.solve_projected`, Dormand–Prince 5(4), error
+    The integrator (:func:`pcmb.integrate.stacked_ode.solve_projected`, Dormand–Prince 5(4), error
     controlled per node) takes one step at a time, and after every accepted step projects the
     state onto the position manifold x² + y² = L² (the nearest point: a radial scaling) and
     then the velocity manifold x u + y v = 0 (removing the radial velocity), which solve Part I

@@ -14,7 +14,7 @@ paper). Loaded by pcmb as ``entry: ../models/quarter_car.py:QuarterCar``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,8 +30,10 @@ from terrain_process import (
     random_profile_form,
 )
 
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
-from pcmb.adapters.stacked_ode import StackedODEModel
+from pcmb.integrate.stacked_ode import StackedODEModel
+
+if TYPE_CHECKING:
+    from pcmb.designs.polynomial_form import PolynomialForm
 
 Params = Mapping[str, NDArray[np.float64]]
 Law = Callable[[NDArray[np.float64], Params], NDArray[np.float64]]
@@ -49,17 +51,20 @@ _SPRINGS: dict[str, tuple[dict[str, float], Law]] = {
 
 
 def _mr_force(dv: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
-    # Part II (MR damper): a tanh law in the relative velocity, stronger with the current.
-    return (p["F0"] + p["F1"] * p["I"]) * np.tanh(p["mr_slope"] * dv)
+    # Part II Eq. 10 as reconstructed in docs/paper_cases.md §3: a viscous part and a tanh
+    # (smoothed Coulomb) part in the relative velocity, both growing linearly with the current.
+    viscous = (p["c0"] + p["c1"] * p["I"]) * dv
+    return viscous + (p["F0"] + p["F1"] * p["I"]) * np.tanh(p["mr_slope"] * dv)
 
 
 # Damper force Fd(δ'), δ' = v1 - v2.
 _DAMPERS: dict[str, tuple[dict[str, float], Law]] = {
     "linear": ({"c": 1000.0}, lambda dv, p: p["c"] * dv),
-    # Part II Eq. 10 is unreadable; fitted to the figures Part II quotes: ±1015 N at I = 0 and
-    # ±(1015 + 2·2250) = ±5515 N at I = 2 A, reached within 1 % once |v| > 0.2 m/s
-    # (tanh(14.3·0.2) = 0.994): over most of Part II Fig. 9a's |v| ≤ 1.5 m/s, the plateaus.
-    "mr": ({"I": 1.0, "F0": 1015.0, "F1": 2250.0, "mr_slope": 14.3}, _mr_force),
+    # Part II Eq. 10 (docs/paper_cases.md §3): 800, 2868 and 4936 N at 1.5 m/s for I = 0, 1, 2 A.
+    "mr": (
+        {"I": 1.0, "c0": 531.0, "c1": 701.95, "F0": 4.0, "F1": 1015.0, "mr_slope": 14.3},
+        _mr_force,
+    ),
 }
 
 
@@ -132,8 +137,8 @@ class QuarterCar(StackedODEModel):
         cubic spline (:class:`terrain_process.SampledProfile`); nominal ``road`` 0 is flat.
     damper:
         ``"linear"``: Fd = c·δ' (c in N·s/m). ``"mr"``: magneto-rheological damper
-        Fd = (F0 + F1·I) tanh(mr_slope·δ') with the coil current I (A), F0 (N), F1 (N/A),
-        mr_slope (s/m).
+        (Part II Eq. 10) Fd = (c0 + c1·I)·δ' + (F0 + F1·I) tanh(mr_slope·δ') with the coil
+        current I (A), c0 (N·s/m), c1 (N·s/(m·A)), F0 (N), F1 (N/A), mr_slope (s/m).
     spring:
         ``"cubic"``: Fs = k·δ³ (k in N/m³, the paper's). ``"linear"``: Fs = k·δ (N/m).
     rtol, atol:
@@ -146,7 +151,8 @@ class QuarterCar(StackedODEModel):
         0.25, bump_start = 0.5, bump_duration = 0.5; kl speed = 10, D = 100, A0 = 0.5, A1 =
         0.2, A2 = 0.1, L1 = D/(6π), L2 = D/(14π) for the default D (set them with D), germs 0;
         field speed = 10, D = 100, A0 = 0.5, road = 0, road_start = 0, road_stop = 100;
-        linear damper c = 1000; MR damper I = 1, F0 = 1015, F1 = 2250, mr_slope = 14.3.
+        linear damper c = 1000; MR damper I = 1, c0 = 531, c1 = 701.95, F0 = 4, F1 = 1015,
+        mr_slope = 14.3.
         A parameter that does not belong to the chosen options is rejected.
 
     Notes
@@ -158,7 +164,7 @@ class QuarterCar(StackedODEModel):
     m/s², from the equations of motion at the output times), ``z`` (terrain under the tire, m).
 
     Accuracy: rtol = 1e-10, atol = 1e-13 by default, per node whatever the batch size (see
-    :func:`pcmb.adapters.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
+    :func:`pcmb.integrate.stacked_ode.solve_stacked`). With them every node, in a batch or alone,
     agrees with a tight separate run (DOP853, rtol = 1e-11) to within 1e-6 of each state's
     largest magnitude over the run (tests/test_models_quarter_car.py). The tolerances are
     tighter than that 1e-6 suggests because outputs come from DOP853's dense output, whose
@@ -167,7 +173,7 @@ class QuarterCar(StackedODEModel):
     the steps themselves are 100 times more accurate; atol must stay small because the car
     starts at rest and a large atol lets the first steps grow long. ``a1`` is computed from the
     states and inherits their error amplified by the damper's slope: with the MR damper,
-    mr_slope·(F0 + F1·I)/Ms ≈ 300 s⁻¹ times the velocity error.
+    (c0 + c1·I + mr_slope·(F0 + F1·I))/Ms ≈ 120 s⁻¹ (I = 2 A) times the velocity error.
 
     Raises
     ------
@@ -179,7 +185,7 @@ class QuarterCar(StackedODEModel):
     _positive = frozenset(
         {"Ms", "Mu", "kT", "k", "f", "bump_duration", "D", "L1", "L2", "mr_slope"}
     )
-    _nonnegative = frozenset({"c", "I", "F0", "F1", "bump_start"})
+    _nonnegative = frozenset({"c", "c0", "c1", "I", "F0", "F1", "bump_start"})
     _fields = frozenset({"road"})
 
     def __init__(
@@ -222,6 +228,9 @@ class QuarterCar(StackedODEModel):
             The MR damper (tanh), the bump terrain (a jump in time), or an uncertain input
             the dynamics are not polynomial in.
         """
+        # Imported here: pcmb.designs loads scipy, which the workers running nodes do without.
+        from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
+
         if self.damper != "linear":
             raise ValueError(f"the {self.damper} damper's force law is not polynomial")
         fixed = ["Ms", "Mu"]

@@ -72,7 +72,7 @@ def mode_functions(p: Mapping[str, float]) -> Callable[[float], NDArray[np.float
 
 
 def random_profile_form(p: Mapping[str, Any], modes: Sequence[Any]) -> Any:
-    """The random profile as a polynomial (pcmb.adapters.polynomial) in the amplitudes and germs
+    """The random profile as a polynomial (pcmb.designs.polynomial_form) in the amplitudes and germs
     ``p`` (numbers or polynomial variables) and the four ``modes`` variables (:data:`MODES`)."""
     return p["A1"] * (p["xi11"] * modes[0] + p["xi12"] * modes[1]) + p["A2"] * (
         p["xi21"] * modes[2] + p["xi22"] * modes[3]

@@ -13,8 +13,8 @@ from typing import Any
 #: Public name -> module that defines it. Loaded on first access (PEP 562), so that
 #: ``pcmb --help`` does not pay for scipy.stats, h5py or mujoco.
 _EXPORTS = {
-    "pcmb.adapters.stacked_ode": ["StackedODEModel", "solve_projected", "solve_stacked"],
-    "pcmb.adapters.polynomial": ["Polynomial", "PolynomialForm", "PolynomialSpace"],
+    "pcmb.integrate.stacked_ode": ["StackedODEModel", "solve_projected", "solve_stacked"],
+    "pcmb.designs.polynomial_form": ["Polynomial", "PolynomialForm", "PolynomialSpace"],
     "pcmb.analysis.statistics": ["AnalysisSettings", "analyse"],
     "pcmb.chaos.basis": [
         "PolynomialBasis",

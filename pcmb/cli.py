@@ -282,8 +282,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.backend in (None, "loky") and args.address is None:
         warm_up(args.jobs)  # workers start while this process reads the config
 
-    from pcmb.run.executor import post_mortem
     from pcmb.run.status import failure_report
+    from pcmb.run.worker import post_mortem
     from pcmb.study import Study
 
     config = _load_config(args.config, check_sweep=False)  # a run ignores sweep:

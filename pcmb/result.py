@@ -264,17 +264,28 @@ class WarningRecord:
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
 #: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
-#: less accurate pointwise than its statistics; an output whose runs and nominal run are all
-#: equal): kept in the result and its file, listed as
+#: less accurate pointwise than its statistics, or a PDF drawn from it with mass where no run
+#: went, which caution what is drawn from the surrogate, not the mean and std; an output whose
+#: runs and nominal run are all equal): kept in the result and its file, listed as
 #: notes by ``pcmb inspect``, never a warning.
 RECORDED_ONLY = frozenset(
-    {"sobol-undefined", "surrogate-out-of-range", "surrogate-inaccurate", "output-constant"}
+    {
+        "sobol-undefined",
+        "surrogate-out-of-range",
+        "surrogate-inaccurate",
+        "pdf-outside-runs",
+        "output-constant",
+    }
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
-#: leave-one-out error): the diagnostics' verdict judges the result, so where it calls their
-#: output reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there is
-#: none, they are warnings that support it.
-INDICATORS = frozenset({"element-decay", "regression-loo"})
+#: leave-one-out error) and of the budgets that ended a refinement judged by the same
+#: tolerance as the verdict or by an internal threshold (``order: auto``, ``elements: auto``;
+#: not ``method.tolerance``, which the user asked of ``adaptive`` and regression): the
+#: diagnostics' verdict judges the result, so where it calls their output (for a record of
+#: the whole study: every output it judged) reliable they are notes like
+#: :data:`RECORDED_ONLY`; where it does not, or there is none, they are warnings that
+#: support it.
+INDICATORS = frozenset({"element-decay", "regression-loo", "element-budget", "order-budget"})
 
 
 @dataclass(frozen=True, repr=False)
@@ -494,12 +505,18 @@ class StudyResult:
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable): kept in the result and its
-        file, not issued as a warning."""
+        record about an output the diagnostics call reliable, or about the whole study when
+        they call every output reliable): kept in the result and its file, not issued as a
+        warning."""
         if record.code in RECORDED_ONLY:
             return True
-        judged = self.diagnostics.get(record.output) if record.output is not None else None
-        return record.code in INDICATORS and judged is not None and judged.reliable
+        if record.code not in INDICATORS:
+            return False
+        if record.output is None:
+            found = self.diagnostics.values()
+            return bool(found) and all(judged.reliable for judged in found)
+        judged = self.diagnostics.get(record.output)
+        return judged is not None and judged.reliable
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

@@ -18,7 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pcmb.analysis.diagnostics import CODES, HeldOut, Holdout, OutputDiagnostics
+from pcmb.analysis.diagnostics import CODES, HeldOut, HeldOutCheck, OutputDiagnostics
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
@@ -427,7 +427,7 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
 #: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
 _DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimate": "estimate"}
 #: ... and those of its held-out check: the estimated errors of the mean and the std, and the
-#: standard error of the larger (same names in the file as on Holdout).
+#: standard error of the larger (same names in the file as on HeldOutCheck).
 _HOLDOUT_STATISTICS = ("mean_error", "std_error", "spread")
 
 
@@ -477,7 +477,7 @@ def _read_diagnostics(
         holdout = None
         if "holdout_error" in group:
             error = _columns(group["holdout_error"][()], scalar)
-            holdout = Holdout(
+            holdout = HeldOutCheck(
                 error,
                 _columns(group["holdout_upper"][()], scalar),
                 *(  # older files judged the surrogate only

@@ -29,6 +29,7 @@ from pcmb.analysis.diagnostics import (
     VALIDATION,
     HeldOut,
     diagnose_all,
+    pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
 from pcmb.axes import OutputAxis
@@ -51,8 +52,6 @@ from pcmb.errors import (
 from pcmb.result import Status, StudyResult, WarningRecord
 from pcmb.run.backends import BACKENDS, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
-    Layout,
-    ModelFacts,
     PendingRun,
     RunResult,
     chunk_bounds,
@@ -67,6 +66,7 @@ from pcmb.run.journal import FRESH, Journal
 from pcmb.run.memory import MemoryEstimate, check_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
+from pcmb.run.worker import Layout, ModelFacts
 from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
@@ -502,7 +502,7 @@ class Study:
         naming it: those its factory declares (:func:`pcmb.run.fingerprint.model_files`: the
         python entry file and ``model.files``, a command's program, templates and files, an
         MJCF scene and what it references, an FMU) and ``loaded``, the files the model
-        loaded while built in a worker (:attr:`~pcmb.run.executor.ModelFacts.loaded_files`:
+        loaded while built in a worker (:attr:`~pcmb.run.worker.ModelFacts.loaded_files`:
         a python model's own modules).
         Execution settings that cannot change a node's values (jobs, backend, failure
         policy) and the analysis are left out: changing them keeps the finished work.
@@ -676,7 +676,12 @@ class Study:
                     provenance=provenance,
                     pool=own,
                 )
-        facts = describe_model(self.model_factory, pool)
+        # What the model finds wrong with the inputs or the time grid (an FMU's aliased
+        # variables, a grid it cannot step): refused before any node, as `pcmb validate` does.
+        facts = describe_model(self.model_factory, pool, self.times, tuple(self.inputs))
+        if facts.input_problems or facts.time_problems:
+            problems = [*facts.input_problems, *facts.time_problems]
+            raise UsageError([ConfigProblem(*problem) for problem in problems], source="Study")
         outputs = self._outputs(facts)
         if self.analysis is not None:
             on_time = [name for name in outputs if name not in facts.axes]
@@ -740,6 +745,9 @@ class Study:
         if self.analysis is not None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
+                result = dataclasses.replace(
+                    result, warnings=(*result.warnings, *pdf_outside_runs(result))
+                )
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -987,6 +995,7 @@ class Study:
             self.diagnostics_tolerance,
             axes=result.axes,
             nominal=result.nominal,
+            budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -1,11 +1,12 @@
-"""How messages word counts and suggestions."""
+"""How messages word counts and suggestions, and how docstrings read in generated docs."""
 
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable
 
-__all__ = ["did_you_mean", "plural"]
+__all__ = ["did_you_mean", "markdown", "plural"]
 
 
 def did_you_mean(name: str, choices: Iterable[str]) -> str:
@@ -17,3 +18,14 @@ def did_you_mean(name: str, choices: Iterable[str]) -> str:
 def plural(count: int, noun: str, nouns: str | None = None) -> str:
     """``"1 figure"``, ``"3 figures"``; ``nouns`` for an irregular plural."""
     return f"{count} {noun if count == 1 else nouns or noun + 's'}"
+
+
+def markdown(doc: str | None) -> str:
+    """Docstring or description text as one Markdown line: ``code`` and :role:`target` become
+    code."""
+    if not doc:
+        return ""
+    text = re.sub(r":[a-z]+:`~([^`]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", doc)
+    text = re.sub(r":[a-z]+:`([^`]+)`", r"`\1`", text)
+    text = re.sub(r"``([^`]+)``", r"`\1`", text)
+    return " ".join(text.split())

@@ -1,4 +1,4 @@
-"""Tests of pcmb.adapters.runge_kutta (the explicit pairs) and pcmb.adapters.stacked_ode
+"""Tests of pcmb.integrate.runge_kutta (the explicit pairs) and pcmb.integrate.stacked_ode
 (stacked and projected batch integration, and the model base).
 
 Accuracy bounds: an integrator that keeps every step's local error within rtol (relative to
@@ -17,9 +17,9 @@ import scipy.integrate
 from model_loading import GLOBAL_FACTOR
 from scipy.integrate import solve_ivp
 
-from pcmb.adapters.runge_kutta import DOP853, PAIRS, RK23, RK45, rk_step
-from pcmb.adapters.stacked_ode import StackedODEModel, solve_projected, solve_stacked
 from pcmb.errors import ConfigError, ModelError
+from pcmb.integrate.runge_kutta import DOP853, PAIRS, RK23, RK45, rk_step
+from pcmb.integrate.stacked_ode import StackedODEModel, solve_projected, solve_stacked
 
 
 def oscillators(omega: np.ndarray):

@@ -123,6 +123,30 @@ def test_keep_none_and_all(tmp_path, capsys, keep, kept):
     assert ("work directory kept" in failure.message) == (keep == "all")
 
 
+@pytest.mark.parametrize("mode", [0o777, 0o770], ids=["0777", "0770"])
+def test_a_run_dir_others_can_write_is_refused_before_any_run(tmp_path, capsys, mode):
+    """Another user who can rename entries of ``run_dir`` could swap a node's work directory
+    for a link (and plant its outputs): such a folder is refused at ``model.run_dir``."""
+    run_dir = tmp_path / "shared"
+    run_dir.mkdir()
+    run_dir.chmod(mode)
+    config = write(tmp_path, config_text("", run_dir))
+    assert main(["validate", str(config)]) == 2
+    error = capsys.readouterr().err
+    assert "model.run_dir" in error
+    assert f"writable by other users (mode {mode:04o})" in error
+    assert not list(run_dir.iterdir())
+
+
+def test_a_sticky_shared_run_dir_like_tmp_is_accepted(tmp_path, capsys):
+    run_dir = tmp_path / "sticky"
+    run_dir.mkdir()
+    run_dir.chmod(0o1777)  # others may add entries but not rename or remove this user's
+    config = write(tmp_path, config_text("  keep: none\n", run_dir, on_failure="regress"))
+    assert main(["run", str(config), "-o", str(tmp_path / "out.h5"), "--quiet"]) == 0
+    assert pcmb.load(tmp_path / "out.h5").failures  # node 3 fails as always; the rest ran
+
+
 # --------------------------------------------------------------------------- outputs
 
 

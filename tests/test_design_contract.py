@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
 from pcmb.designs import DESIGNS, METHOD_KINDS, MethodSettings, make_design
+from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
 from pcmb.result import Design
 
 INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.5, 0.2)}

@@ -18,6 +18,8 @@ import pcmb
 from pcmb.analysis.diagnostics import (
     TOLERANCE,
     VALIDATION,
+    HeldOut,
+    HeldOutCheck,
     diagnose,
     holdout_error,
     out_of_range,
@@ -109,6 +111,13 @@ def spreading(xi):
 
 
 # -- the index-set tail ------------------------------------------------------------------------
+
+
+def test_the_held_out_check_is_named_apart_from_the_held_out_runs():
+    # HeldOut holds the runs, HeldOutCheck the surrogate checked against them.
+    check = holdout_error(np.zeros((3, 2)), np.ones((3, 2)), np.zeros(2), np.ones(2), 1.0)
+    assert isinstance(check, HeldOutCheck) and check.count == 3
+    assert HeldOutCheck is not HeldOut
 
 
 def test_the_tail_is_the_outer_two_layers_above_degree_one():

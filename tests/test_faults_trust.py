@@ -254,10 +254,10 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
         assert "Traceback" not in done.stderr
     assert not (tmp_path / "out.h5").exists()
 
-    # From Python, where no validator runs, the first node refuses it.
+    # From Python, where no validator runs, the study refuses it before any node.
     import pcmb
     from pcmb.adapters.fmu.factory import FmuModelFactory
-    from pcmb.errors import ModelDefinitionError
+    from pcmb.errors import UsageError
 
     study = pcmb.Study(
         FmuModelFactory(fmu=aliased, outputs=("x",)),
@@ -267,8 +267,9 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
         jobs=1,
         validation=0,
     )
-    with pytest.raises(ModelDefinitionError, match=r"inputs\.c: 'c' and 'k' \(inputs\.k\)"):
-        study.run()
+    with pytest.raises(UsageError, match=r"inputs\.c: 'c' and 'k' \(inputs\.k\)"):
+        study.run(tmp_path / "python.h5")
+    assert not (tmp_path / "python.h5.journal").exists()
 
 
 # --------------------------------------------------------------------------- item 9: FMU cache

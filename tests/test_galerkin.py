@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.adapters.polynomial import PolynomialForm, PolynomialSpace
 from pcmb.chaos.basis import tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Normal, Uniform
@@ -21,6 +20,7 @@ from pcmb.chaos.nodes import TensorGrid
 from pcmb.chaos.recovery import project_tensor
 from pcmb.config import validate_config
 from pcmb.designs.galerkin import GalerkinSystem
+from pcmb.designs.polynomial_form import PolynomialForm, PolynomialSpace
 from pcmb.errors import ConfigError, PcmbWarning
 
 MODELS = Path(__file__).resolve().parents[1] / "models"

@@ -19,9 +19,10 @@ def _module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _imports(path: Path, *, top_level_only: bool) -> set[str]:
+def _imports(path: Path, *, top_level_only: bool, typing_only: bool = True) -> set[str]:
     """Modules imported by a file: all of them, or only those run at import time (not inside
-    functions and not under ``if TYPE_CHECKING``)."""
+    functions and not under ``if TYPE_CHECKING``); ``typing_only``: with the imports under ``if
+    TYPE_CHECKING``, which never run."""
     tree = ast.parse(path.read_text())
     found: set[str] = set()
     module = _module_name(path)
@@ -31,6 +32,8 @@ def _imports(path: Path, *, top_level_only: bool) -> set[str]:
         for child in ast.iter_child_nodes(node):
             nested = inside or isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef)
             if isinstance(child, ast.If) and "TYPE_CHECKING" in ast.unparse(child.test):
+                if not typing_only:
+                    continue
                 nested = True
             if isinstance(child, ast.Import) and not (top_level_only and inside):
                 found.update(alias.name for alias in child.names)
@@ -117,10 +120,12 @@ def test_the_cycle_finder_finds_cycles():
 
 
 def test_no_import_cycles():
+    # Imports inside functions count: a deferred import that closes a circle only hides it.
+    # Those under TYPE_CHECKING, which never run, do not.
     graph = {
         name: {
             m
-            for m in _imports(path, top_level_only=True)
+            for m in _imports(path, top_level_only=False, typing_only=False)
             if m in MODULES and m != name and not name.startswith(m + ".")
         }
         for name, path in MODULES.items()
@@ -153,3 +158,17 @@ def test_a_worker_starts_without_scipy():
     # half a second of import per worker, on the main job's critical path, that only
     # implicit integrators and the chaos machinery of the result need.
     assert _loaded("from pcmb.run.backends import _warm_up\n_warm_up()\n", (*HEAVY, "scipy")) == []
+
+
+def test_running_knows_no_adapter_but_the_protocol():
+    # Adapters declare the files their models read (ModelFactory.model_files, loaded_files):
+    # the resume fingerprint and the workers need no adapter's class. The python adapter is
+    # only imported ahead of the first task (run.backends._warm_up).
+    for name, path in MODULES.items():
+        if not name.startswith("pcmb.run."):
+            continue
+        imported = _imports(path, top_level_only=False, typing_only=False)
+        adapters = {m for m in imported if m.startswith("pcmb.adapters.")}
+        strangers = adapters - {"pcmb.adapters.protocol", "pcmb.adapters.python.model"}
+        strangers = {m for m in strangers if not m.startswith("pcmb.adapters.protocol.")}
+        assert not strangers, f"{name} imports {sorted(strangers)}"

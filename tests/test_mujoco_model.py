@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 import pcmb.adapters.mujoco.model
+from pcmb.adapters.mujoco.binding import parse_scene_io
 from pcmb.adapters.mujoco.model import MujocoModel, MujocoModelFactory
-from pcmb.adapters.mujoco.spec import parse_scene_io
 from pcmb.cli import main
 from pcmb.errors import ConfigError, ModelError
 
@@ -324,7 +324,7 @@ CONFIG_ERRORS = [
     (bad(outputs={"s": {"sensor": "gyro"}}), "model.outputs.s.sensor", "tip_pos, tip_acc"),
     (bad(outputs={"s": {"qpos": "hinge", "qvel": "hinge"}}), "model.outputs.s", "one of"),
     (bad(outputs={}), "model.outputs", "at least 1 entry"),
-    # the binding language's own checks (pcmb.adapters.mujoco.spec), as in a config
+    # the binding language's own checks (pcmb.adapters.mujoco.binding), as in a config
     (bad(bind={"m": {"field": "body_mass"}}), "model.bind.m", "expected a list"),
     (bad(bind={"m": []}), "model.bind.m", "at least 1 entry"),
     (

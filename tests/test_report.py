@@ -130,8 +130,8 @@ def test_report_of_a_file_without_analysis_in_the_default_folder(tmp_path):
     assert pcmb.load(path).analysis is None
     assert main(["report", str(path)]) == 0
     folder = path.parent / f"{path.stem}_report"
-    # Defaults: PDFs at the final time; no spectrum, which analysis.psd did not ask for.
-    kinds = ("time", "pdf", "sobol")
+    # Defaults: PDFs at the final time; a spectrum of every output (analysis.psd not set).
+    kinds = ("time", "pdf", "sobol", "psd", "psd_pdf")
     assert sorted(p.name for p in folder.iterdir()) == sorted(
         ["index.html", *(f"x_{kind}.png" for kind in kinds)]
     )

@@ -163,7 +163,7 @@ def test_inprocess_shows_the_whole_traceback(tmp_path):
     assert done.returncode == 3, done.stderr
     assert done.stderr.count("Traceback (most recent call last):") == 1, done.stderr
     assert _frame(tmp_path) in done.stderr
-    assert f'File "{PCMB / "run" / "executor.py"}"' in done.stderr, done.stderr
+    assert f'File "{PCMB / "run" / "worker.py"}"' in done.stderr, done.stderr
 
 
 def test_pdb_opens_the_debugger_at_the_first_model_exception(tmp_path):

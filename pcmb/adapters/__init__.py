@@ -1,2 +1,2 @@
 """Model adapters: the model protocol (:mod:`.protocol`) and the doors simulators come in by,
-one per ``model.kind`` (:mod:`.registry`), plus stacked ODE integration for Python models."""
+one per ``model.kind`` (:mod:`.registry`)."""

@@ -29,36 +29,41 @@ estimated errors of the mean and the std at each time (the decay where there are
 runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance, explained in a
 ``chaos-unreliable`` record with a remedy that fits the failure. A surrogate whose pointwise
 error exceeds the tolerance while its statistics hold gets a ``surrogate-inaccurate`` record:
-the PDFs and quantiles drawn from it are less accurate than the error bars.
+the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the error bars;
+:func:`pdf_outside_runs` flags a PDF with mass beyond every run made.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import draw_germs
-from pcmb.result import WarningRecord
+from pcmb.result import StudyResult, WarningRecord
+from pcmb.wording import plural
 
 __all__ = [
     "CODES",
     "CONFIDENCE",
+    "SURROGATE_CAUTIONS",
     "TOLERANCE",
     "VALIDATION",
     "HeldOut",
-    "Holdout",
+    "HeldOutCheck",
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
     "holdout_error",
     "out_of_range",
+    "pdf_outside_runs",
     "range_checks",
     "spectral_decay",
     "statistics_error",
@@ -77,6 +82,9 @@ CODES = frozenset(
         "output-constant",
     }
 )
+#: Codes of the records that caution the PDFs, quantiles and Sobol' indices drawn from the
+#: surrogate where its statistics may hold.
+SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
 #: Default number of held-out runs (``method.validation``).
 VALIDATION = 32
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
@@ -85,7 +93,7 @@ HELD_OUT_SEED = 7919
 #: Default accepted error, relative to the output's largest standard deviation.
 TOLERANCE = 0.05
 #: A standard error of the held-out estimates above this multiple of the tolerance fails the
-#: verdict by itself (:meth:`Holdout.estimate`).
+#: verdict by itself (:meth:`HeldOutCheck.estimate`).
 UNRESOLVED = 2.0
 #: Confidence level of the held-out upper bound.
 CONFIDENCE = 0.9
@@ -99,6 +107,9 @@ RANGE_SHARE = 0.01
 #: Draws of an output that no run ever made negative are also far outside below 0 by more
 #: than this fraction of the range.
 RANGE_BELOW_ZERO = 0.01
+#: A PDF's mass counts as beyond the runs past this fraction of their range
+#: (:func:`pdf_outside_runs`): between the nodes a smooth surrogate may pass them a little.
+PDF_MARGIN = 0.05
 #: Run values whose std is below this fraction of their RMS do not vary (round-off).
 _ROUND_OFF = 1e-12
 #: A tail holding more than this share of its energy in one input is "concentrated".
@@ -108,6 +119,13 @@ _GROWTH = 2.0
 #: A tail holding between this share and all of the energy of the two layers before it
 #: decays algebraically, as the spectrum of a jump: the response is steep there.
 _FLAT = 0.5
+#: The remedy reads the decay along every input holding at least this share of the tail.
+_SHARED = 0.25
+#: A held-out error whose weighted distance from the centre of an input's range
+#: (:func:`_error_at_ends`) is at least this sits at its ends: a smooth response.
+_AT_ENDS = 0.75
+#: ... and where it is at most this, inside it: around a jump, kink or steep front.
+_INSIDE = 0.4
 #: The fewest degrees after the peak of an input's spectrum that tell its decay's shape.
 _SHAPE_LAYERS = 3
 
@@ -175,7 +193,7 @@ def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float
 
 
 @dataclass(frozen=True)
-class Holdout:
+class HeldOutCheck:
     """The surrogate against K held-out model runs at random inputs.
 
     Attributes
@@ -287,7 +305,7 @@ def holdout_error(
     std: ArrayLike,
     scale: float,
     confidence: float = CONFIDENCE,
-) -> Holdout:
+) -> HeldOutCheck:
     """The surrogate at K held-out runs: its RMS error with an upper confidence bound, and
     the estimated errors of its mean and std (:func:`statistics_error`).
 
@@ -311,7 +329,7 @@ def holdout_error(
 
     Returns
     -------
-    Holdout
+    HeldOutCheck
         Zeros if the scale is zero; NaN if no run is finite.
     """
     from scipy.special import gammaincinv
@@ -324,9 +342,9 @@ def holdout_error(
     count = int(kept.sum())
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
-        return Holdout(nan, nan, nan, nan, nan, 0, confidence)
+        return HeldOutCheck(nan, nan, nan, nan, nan, 0, confidence)
     quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
-    return Holdout(
+    return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
         *statistics_error(predicted[kept], observed[kept], mean, std, scale),
@@ -344,6 +362,7 @@ def out_of_range(
     draws: int = RANGE_DRAWS,
     seed: int = RANGE_SEED,
     node_germ: ArrayLike | None = None,
+    margin: float = RANGE_MARGIN,
 ) -> NDArray[np.float64]:
     """(T,) share of surrogate draws far outside the range of the run values.
 
@@ -351,7 +370,7 @@ def out_of_range(
     counted: beyond it (the tails of an unbounded input) a smooth response leaves the runs'
     range by itself, which says nothing about the surrogate.
 
-    "Far" is beyond ``RANGE_MARGIN`` times the range (max - min of the runs) past the
+    "Far" is beyond ``margin`` times the range (max - min of the runs) past the
     smallest or largest run value; where the runs or the expansion do not vary beyond
     round-off (:meth:`~pcmb.chaos.expansion.ChaosExpansion.varies`) the share is 0. An
     output that is never negative in any run and at any time (a distance, an energy) is
@@ -360,8 +379,8 @@ def out_of_range(
     """
     values = np.asarray(node_values, dtype=float)
     low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
-    margin = RANGE_MARGIN * (high - low)
-    floor = low - margin
+    reach = margin * (high - low)
+    floor = low - reach
     if np.nanmin(values) >= 0:
         floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
     germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
@@ -371,8 +390,49 @@ def out_of_range(
     if germ.shape[0] == 0:
         return np.zeros(values.shape[1])
     samples = expansion.evaluate_germ(germ)
-    outside = (samples < floor) | (samples > high + margin)
+    outside = (samples < floor) | (samples > high + reach)
     return np.where(expansion.varies() & (high > low), outside.mean(axis=0), 0.0)
+
+
+def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
+    """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate at one of
+    ``analysis.pdf_times`` with more than ``RANGE_SHARE`` of its mass beyond the range of
+    every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range,
+    among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
+    analysis, ok = result.analysis, result.ok
+    if analysis is None or not ok.any():
+        return ()
+    records = []
+    for name, expansion in result.expansions.items():
+        if name not in analysis.outputs or draws_are_runs(result, name):
+            continue
+        runs = [result.values[name][ok]]
+        if result.held_out is not None:
+            runs.append(result.held_out.values[name][result.held_out.ok])
+        if name in result.nominal:
+            runs.append(np.reshape(result.nominal[name], (1, -1)))
+        made = _finite_rows(np.vstack(runs))
+        at = analysis.outputs[name].pdf.at
+        points = nearest_indices(result.grid(name), at)
+        share = out_of_range(expansion, made, node_germ=result.germ[ok], margin=PDF_MARGIN)
+        axis = result.axis(name)
+        where = "" if axis is None else f"{axis.name} = "
+        for t, k in zip(at, points, strict=True):
+            if share[k] <= RANGE_SHARE:
+                continue
+            records.append(
+                WarningRecord(
+                    "pdf-outside-runs",
+                    f"the PDF at {where}{t:g} puts {_percent(share[k])} of its mass beyond "
+                    f"[{np.min(made[:, k]):.4g}, {np.max(made[:, k]):.4g}], the range of all "
+                    f"{made.shape[0]} runs made (design, held-out and nominal), by more than "
+                    f"{_percent(PDF_MARGIN)} of that range: no run went there, the surrogate "
+                    "overshoots (see its held-out error)",
+                    name,
+                    (float(t), float(t)) if result.on_time(name) else None,
+                )
+            )
+    return tuple(records)
 
 
 def range_checks(
@@ -486,12 +546,12 @@ class OutputDiagnostics:
     decay:
         (T,) :func:`spectral_decay`, a share of the largest variance.
     holdout:
-        The held-out check (:class:`Holdout`), ``None`` without held-out runs.
+        The held-out check (:class:`HeldOutCheck`), ``None`` without held-out runs.
     out_of_range:
         (T,) :func:`out_of_range`, a share of surrogate draws.
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
-        mean and the std (:attr:`Holdout.statistics`), or the decay without held-out runs.
+        mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
@@ -505,7 +565,7 @@ class OutputDiagnostics:
     output: str
     scale: float
     decay: NDArray[np.float64]
-    holdout: Holdout | None
+    holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
     tolerance: float
@@ -528,6 +588,8 @@ def diagnose(
     node_germ: ArrayLike | None = None,
     axis: str = "t",
     nominal: ArrayLike | None = None,
+    budgets: Collection[str] = (),
+    holdout_germ: ArrayLike | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -558,6 +620,12 @@ def diagnose(
         it differs from design runs that are all equal tells a design that missed the spread
         (``runs-all-equal``, a warning) from an output that looks constant
         (``output-constant``, a note).
+    budgets:
+        Codes of the design's budget records (``order-budget``, ``element-budget``): the
+        refinements that ran out, which the remedy does not ask for again.
+    holdout_germ:
+        (K, n) germ of the held-out runs, which tells the remedy where along each input the
+        surrogate's error sits (:func:`_error_at_ends`).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -587,14 +655,23 @@ def diagnose(
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
-    if checked is not None and np.isnan(failing_from):
-        records.extend(_inaccurate(output, checked, times, tolerance))
+    if checked is not None:
+        holding = ~(times >= failing_from)  # every time where the verdict never fails
+        records.extend(_inaccurate(output, checked, times, tolerance, holding))
     if holdout is None and runs.shape[0] > 1 and equal.all():
         records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
+        ends, by_element = None, ""
+        if holdout is not None and holdout_germ is not None:
+            predicted, observed = (np.atleast_2d(a) for a in holdout)
+            kept = np.isfinite(observed).all(axis=1)
+            germ, residual = np.asarray(holdout_germ)[kept], observed[kept] - predicted[kept]
+            ends = _error_at_ends(germ, residual, failing)
+            if isinstance(expansion, PiecewiseExpansion):
+                by_element = _element_errors(expansion, germ, residual, failing)
         if blind.any():
             evidence = (
                 f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
@@ -603,7 +680,7 @@ def diagnose(
             )
         message = (
             f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{_remedy(expansion, estimate, failing, share)}"
+            f"{_remedy(expansion, estimate, failing, share, budgets, ends, by_element)}"
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
@@ -615,7 +692,7 @@ def diagnose(
 
 
 def _evidence(
-    decay: NDArray[np.float64], holdout: Holdout | None, failing: NDArray[np.bool_]
+    decay: NDArray[np.float64], holdout: HeldOutCheck | None, failing: NDArray[np.bool_]
 ) -> str:
     """The indicators where the verdict fails, e.g. "mean off by an estimated 12 % of the
     largest std (± 2 % from 32 held-out runs), surrogate error 25 % of std, decay 5.6 %"."""
@@ -667,20 +744,25 @@ def _all_equal(
 
 
 def _inaccurate(
-    output: str, holdout: Holdout, times: NDArray[np.float64], tolerance: float
+    output: str,
+    holdout: HeldOutCheck,
+    times: NDArray[np.float64],
+    tolerance: float,
+    holding: NDArray[np.bool_],
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
-    tolerance while the statistics hold."""
-    above = holdout.error > tolerance
+    tolerance at the times where the statistics hold (``holding``: before the verdict fails)."""
+    above = (holdout.error > tolerance) & holding
     if not above.any():
         return []
     return [
         WarningRecord(
             "surrogate-inaccurate",
-            f"the surrogate is off by up to {_percent(np.nanmax(holdout.error))} of std at "
-            f"{holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
-            f"(estimated error at most {_percent(np.nanmax(holdout.statistics))}): PDFs, "
-            f"quantiles and Sobol' indices drawn from it are less accurate than its error bars",
+            f"the surrogate is off by up to {_percent(np.nanmax(holdout.error[above]))} of std "
+            f"at {holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
+            f"there (estimated error at most {_percent(np.nanmax(holdout.statistics[above]))}): "
+            "PDFs, quantiles and Sobol' indices drawn from it are less accurate than its error "
+            "bars",
             output,
             _span(times, above),
         )
@@ -725,16 +807,134 @@ def _remedy(
     estimate: NDArray[np.float64],
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
+    budgets: Collection[str],
+    ends: NDArray[np.float64] | None = None,
+    by_element: str = "",
 ) -> str:
-    """What may help, read from where the tail's energy sits over the failing times.
+    """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
+    out (``budgets``: the codes of the design's budget records), with where a multi-element
+    surrogate's error sits (``by_element``, :func:`_element_errors`) and what was tried: the
+    order, the elements and the refinement's end."""
+    action, inputs, cause = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
+    orders = expansion.multi_index.max(axis=0)
+    order = int(orders.max())
+    elements = expansion.partition.size if isinstance(expansion, PiecewiseExpansion) else 1
+    shown = f"order {order}" if orders.min() == order else f"orders {'x'.join(map(str, orders))}"
+    tried = [f"{shown}, {plural(elements, 'element')}"]
+    along = f" along {inputs}" if inputs else ""
+    if "order-budget" in budgets:
+        tried.append(f"order: auto ended at order {order} (order-budget)")
+    if "element-budget" in budgets:
+        tried.append(f"elements: auto ended at {elements} elements (element-budget)")
+    if action == "sampling":
+        remedy = f"sampling (method.kind: montecarlo, lhs or sobol): {cause}"
+    elif action == "order" and "order-budget" in budgets:
+        remedy = (
+            f"multi-element chaos{along} (method.elements) or an order above {order} set by "
+            f"hand (method.order): {cause}"
+        )
+    elif action == "order":
+        remedy = f"raising the order{' of ' + inputs if inputs else ''} (method.order): {cause}"
+    elif isinstance(expansion, PiecewiseExpansion):
+        more = "raise method.max_elements" if "element-budget" in budgets else "finer cuts, or auto"
+        remedy = f"more elements{along} (method.elements: {more}): {cause}"
+    else:
+        remedy = f"multi-element chaos{along} (method.elements): {cause}"
+    if by_element:
+        remedy = f"{remedy}; {by_element}"
+    return f"{remedy}; tried: {'; '.join(tried)}"
+
+
+def _error_at_ends(
+    germ: NDArray[np.float64], residual: NDArray[np.float64], failing: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """(n,) where along each input the (K, T) held-out residual sits over the failing times:
+    the mean of |2u - 1|, u the runs' ranks along the input in (0, 1), weighted by the
+    squared residual; 0.5 for an error spread evenly, near 1 for one at the ends of the
+    range (a smooth response converging slowly), lower for one around a point inside it."""
+    ranks = np.argsort(np.argsort(germ, axis=0), axis=0)
+    distance = np.abs(2 * (ranks + 0.5) / germ.shape[0] - 1)
+    size = np.max(np.abs(residual[:, failing]))
+    if not size > 0 or not np.isfinite(size):
+        return np.full(germ.shape[1], 0.5)
+    weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
+    return weight @ distance / weight.sum()
+
+
+def _element_errors(
+    expansion: PiecewiseExpansion,
+    germ: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    failing: NDArray[np.bool_],
+) -> str:
+    """Which element holds the largest share of the (K, T) held-out squared error over the
+    failing times, with its box and probability: an error far above the element's
+    probability sits around a jump or kink there, one in proportion to it is spread."""
+    partition = expansion.partition
+    size = np.max(np.abs(residual[:, failing]))
+    if partition.size < 2 or not size > 0 or not np.isfinite(size):
+        return ""
+    theta = np.column_stack(
+        [d.to_physical(germ[:, k]) for k, d in enumerate(expansion.distributions)]
+    )
+    where = partition.locate(theta)
+    weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
+    inside = where >= 0
+    shares = np.bincount(where[inside], weights=weight[inside], minlength=partition.size)
+    shares = shares / weight.sum()
+    e = int(np.argmax(shares))
+    support = np.array([d.physical.support() for d in expansion.distributions], dtype=float)
+    bounds = zip(expansion.names, partition.bounds[e], support, strict=True)
+    box = ", ".join(
+        f"{name} in [{low:.4g}, {high:.4g}]"
+        for name, (low, high), whole in bounds
+        if low > whole[0] or high < whole[1]
+    )
+    return (
+        f"element {e} ({box}) holds {_percent(shares[e])} of the held-out squared error "
+        f"where the verdict fails, for {_percent(partition.probability[e])} of the probability"
+    )
+
+
+def _decay_read(name: str, kind: str, rate: float, first: int, last: int) -> str:
+    """The decay of the chaos coefficients along one input (:func:`_decay_shape`) in words."""
+    if kind == "geometric":
+        return (
+            f"the chaos coefficients along {name} fall geometrically (energy × {rate:.2g} per "
+            f"degree, degrees {first} to {last}), as those of a smooth response, which a "
+            "higher order resolves"
+        )
+    return (
+        f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
+        f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
+        "resolves only slowly"
+    )
+
+
+def _cause_remedy(
+    expansion: Expansion,
+    estimate: NDArray[np.float64],
+    failing: NDArray[np.bool_],
+    out_of_range_share: NDArray[np.float64],
+    ends: NDArray[np.float64] | None,
+) -> tuple[str, str, str]:
+    """What may help, read from where the tail's energy sits over the failing times:
+    ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"`` or ``"elements"``
+    along the named inputs (``""``: all), the cause in words.
 
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
       order fixes — sampling;
-    - else, for the input that holds the tail, the decay of the coefficients along it
-      (:func:`_decay_shape`): algebraic, as those of a jump or kink — multi-element chaos;
-      geometric, as those of an analytic response — a higher order;
-    - too few degrees to tell: steep or discontinuous when the spectrum decays slowly (the
+    - else, along every input that holds at least ``_SHARED`` of the tail (each failing
+      time weighing the same), the decay of the coefficients (:func:`_decay_shape`):
+      algebraic along any, as those of a jump or kink — multi-element chaos along those;
+      geometric along all, as those of an analytic response — a higher order, unless the
+      held-out error sits inside the input's range (at most ``_INSIDE``, below), as a
+      kink's does whose first degrees look geometric — multi-element chaos;
+    - too few degrees to tell: a higher order when the held-out error sits at the ends of
+      the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
+      of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
+      around a jump or kink; else steep or discontinuous when the spectrum decays slowly (the
       outer two layers hold between half and all of the energy of the two before them) or,
       below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
       higher order. The message says that the order was too low to tell.
@@ -742,54 +942,75 @@ def _remedy(
     index = expansion.multi_index
     tail = tail_terms(index)
     before = tail_terms(index, 4) & ~tail
-    energy = np.nansum(_energies(expansion)[:, failing], axis=1)
+    # Each failing time weighs the same: its energies as shares of its own variance.
+    energies = _energies(expansion)[:, failing]
+    variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
+    varies = np.isfinite(variance) & (variance > 0)
+    energy = np.nansum(energies[:, varies] / variance[varies], axis=1)
     by_input = (index[tail] > 0).T.astype(float) @ energy[tail]
     total = by_input.sum()
     top = int(np.argmax(by_input))
     name = expansion.names[top]
     if total <= 0:
-        return "raising the order (method.order)"
+        return "order", "", "the outer two layers of the expansion carry no energy to read"
     grows = estimate[-1] > _GROWTH * estimate[np.argmax(failing)]
     if expansion.n > 1 and by_input[top] < _CONCENTRATED * total and grows:
         return (
-            "sampling (method.kind: montecarlo, lhs or sobol): the error grows with time and "
-            "spreads over the inputs, as in chaotic or long-horizon dynamics, which a higher "
-            "order does not fix"
+            "sampling",
+            "",
+            "the error grows with time and spreads over the inputs, as in chaotic or "
+            "long-horizon dynamics, which a higher order does not fix",
         )
-    shape = _decay_shape(energy, index, top)
-    if shape is not None:
-        kind, rate, first, last = shape
-        if kind == "geometric":
+    holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
+    shapes = {k: _decay_shape(energy, index, k) for k in holders}
+    read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
+    place = ""
+    if ends is not None:
+        place = (
+            f"the range of {name} (mean |2u - 1| of their ranks u along it, weighted by the "
+            f"squared error: {ends[top]:.2f}; 0.5 if spread evenly)"
+        )
+    if top in read:
+        reads = "; ".join(_decay_read(expansion.names[k], *shapes[k]) for k in read)
+        jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
+        if jumps:
+            return "elements", " and ".join(jumps), reads
+        if place and ends[top] <= _INSIDE:  # a kink's first degrees may look geometric
             return (
-                f"raising the order of {name} (method.order): the chaos coefficients along "
-                f"{name} fall geometrically (energy × {rate:.2g} per degree, degrees {first} "
-                f"to {last}), as those of a smooth response, which a higher order resolves"
+                "elements",
+                name,
+                f"{reads}, but the surrogate's error at the held-out runs sits inside {place}, "
+                "around a kink or steep front there",
             )
-        cause = (
-            f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
-            f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
-            "resolves only slowly"
+        return "order", " and ".join(expansion.names[k] for k in read), reads
+    order = int(index[:, top].max())
+    unknown = (
+        f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
+        "to tell a jump or kink from a slowly converging smooth response by it"
+    )
+    cause = f"the response is steep or discontinuous in {name}{unknown}"
+    previous = energy[before].sum()
+    if place and ends[top] >= _AT_ENDS:
+        return (
+            "order",
+            name,
+            f"the surrogate's error at the held-out runs sits at the ends of {place}, as "
+            f"that of a smooth response converging slowly{unknown}",
         )
-        steep = True
-    else:
-        previous = energy[before].sum()
-        if previous > 0:
-            steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-        else:  # an order below 4: too few layers to see a decay, the overshoot tells
-            steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-        order = int(index[:, top].max())
-        unknown = (
-            f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
-            "to tell a jump or kink from a slowly converging smooth response"
+    if place and ends[top] <= _INSIDE:
+        return (
+            "elements",
+            name,
+            f"the surrogate's error at the held-out runs sits inside {place}, around a "
+            f"jump, kink or steep front there{unknown}",
         )
-        cause = f"the response is steep or discontinuous in {name}{unknown}"
-        if not steep:
-            return (
-                f"raising the order of {name} (method.order): its spectrum decays slowly{unknown}"
-            )
-    if isinstance(expansion, PiecewiseExpansion):
-        return f"more elements along {name} (finer method.elements cuts, or auto): {cause}"
-    return f"multi-element chaos (method.elements): {cause}"
+    if previous > 0:
+        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
+    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+    if not steep:
+        return "order", name, f"its spectrum decays slowly{unknown}"
+    return "elements", name, cause
 
 
 @dataclass(frozen=True)
@@ -825,6 +1046,7 @@ def diagnose_all(
     tolerance: float = TOLERANCE,
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
+    budgets: Collection[str] = (),
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -832,7 +1054,8 @@ def diagnose_all(
 
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
-    holds the run at the nominal parameters (output name -> (T,)), when one succeeded.
+    holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
+    ``budgets`` the codes of the design's budget records (:func:`diagnose`).
     """
     found = {}
     for name, expansion in expansions.items():
@@ -856,5 +1079,7 @@ def diagnose_all(
             germ[ok],
             label,
             None if nominal is None else nominal.get(name),
+            budgets,
+            None if holdout is None else held_out.germ[held_out.ok],
         )
     return found

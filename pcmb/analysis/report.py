@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.comparison import LEVEL, Comparison, compare, method_label
+from pcmb.analysis.diagnostics import SURROGATE_CAUTIONS
 from pcmb.analysis.statistics import (
     Analysis,
     AnalysisSettings,
@@ -419,6 +420,18 @@ def _plot_other_draws(
     axes.plot(value, density, color=other.color, lw=1.3, ls="--", label=other.label)
 
 
+def _caution_note(result: StudyResult, name: str, at: float) -> str:
+    """A title line naming the surrogate cautions (:data:`SURROGATE_CAUTIONS`) that cover the
+    point ``at`` of output ``name``, or ``""``."""
+    codes = dict.fromkeys(
+        w.code
+        for w in result.warnings_for(name)
+        if w.code in SURROGATE_CAUTIONS
+        and (w.time_range is None or w.time_range[0] <= at <= w.time_range[1])
+    )
+    return f"\ncaution: {', '.join(codes)} (see the index page)" if codes else ""
+
+
 def _pdf_figure(
     canvas: _Canvas,
     result: StudyResult,
@@ -451,7 +464,7 @@ def _pdf_figure(
                 axes.axvline(edge, color=_COLORS[0], lw=1.0, ls=":", label=label)
         axes.set_xlabel(labels.output(name))
         axes.set_ylabel("probability density")
-        axes.set_title(f"{name}{where}{_bandwidth_note(pdf, row)}")
+        axes.set_title(f"{name}{where}{_bandwidth_note(pdf, row)}{_caution_note(result, name, at)}")
     _legend(figure, panels)
     return canvas.save(figure, f"{name}_pdf.png")
 
@@ -652,13 +665,14 @@ def _compare_figure(
 
 
 #: The page's style: fits a 1,400 px window (figures are 1,000 px wide), tables wrap their
-#: cells rather than overflow, warnings red, information grey, a sound verdict green.
+#: cells rather than overflow, warnings red, information grey, a sound verdict green, cautions
+#: on what is drawn from the surrogate amber.
 _STYLE = (
     "body{font-family:sans-serif;max-width:1040px;margin:auto;padding:0 12px}"
     "table{border-collapse:collapse;max-width:100%}th,td{border:1px solid #ccc;"
     "padding:3px 8px;text-align:left;overflow-wrap:anywhere}td.num{text-align:right}"
     "pre{max-width:100%;overflow-x:auto}img{max-width:100%}.warn{color:#a00}"
-    ".info{color:#555}.ok{color:#060}"
+    ".info{color:#555}.ok{color:#060}.caution{color:#a60}"
 )
 
 
@@ -819,6 +833,7 @@ def _index_page(
     figures: dict[str, list[Path]],
     directory: Path,
     labels: _Labels,
+    spectra: Sequence[str],
     notes: Sequence[str] = (),
 ) -> str:
     e = html.escape
@@ -832,8 +847,7 @@ def _index_page(
     ]
     if result.partition is not None:
         rows.append(("elements", result.partition.describe(result.input_names)))
-    spectra = labels.settings.psd or ()
-    rows.append(("spectra", ", ".join(spectra) or "none asked for (analysis.psd)"))
+    rows.append(("spectra", ", ".join(spectra) or "none (analysis.psd)"))
     rows += [
         ("compared with", f"{other.label}, {other.result.seconds:.3g} s of runs")
         for other in others
@@ -874,6 +888,12 @@ def _index_page(
             )
             parts.append(
                 f'<p class="warn">Shaded: chaos unreliable{e(where)} (see Diagnostics).</p>'
+            )
+        cautions = [str(w) for w in result.warnings_for(name) if w.code in SURROGATE_CAUTIONS]
+        if cautions:
+            parts.append(
+                '<p class="caution">Caution on the PDFs, quantile bands and Sobol\' indices '
+                f"drawn from the surrogate: {e('; '.join(cautions))}</p>"
             )
         for path in paths:
             relative = os.path.relpath(path, directory)
@@ -989,7 +1009,7 @@ def write_report(
     others, found = _others(result, comparisons, labels)
     text = _Labels(analysis.settings, _horizon(result))
     figures: dict[str, list[Path]] = {}
-    spectra = analysis.settings.psd or ()
+    spectra = [name for name in result.outputs if analysis.outputs[name].spectrum is not None]
     for name in result.outputs:
         shared, matched = _shared(name, others, found)
         drawn = [
@@ -997,7 +1017,7 @@ def write_report(
             _draw(canvas, name, "PDF", _pdf_figure, result, name, analysis, shared, text),
             _draw(canvas, name, "Sobol'", _sobol_figure, result, name, text),
         ]
-        if name in spectra:  # a spectrum means something only where the study asks for it
+        if name in spectra:
             drawn += [
                 _draw(canvas, name, "PSD", _psd_figure, result, name, analysis, shared, text),
                 _draw(
@@ -1010,7 +1030,7 @@ def write_report(
         figures[name] = [path for path in drawn if path is not None]
     index = directory / "index.html"
     index.write_text(
-        _index_page(result, source, others, found, figures, directory, text, canvas.notes),
+        _index_page(result, source, others, found, figures, directory, text, spectra, canvas.notes),
         encoding="utf-8",
     )
     return [*canvas.written, index]

@@ -5,7 +5,7 @@ Each yields ``(key path, message)``; the caller locates them in the file.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING
 
 from pcmb.analysis.derived import derived_problems
@@ -15,7 +15,7 @@ from pcmb.designs import DESIGNS, MethodSettings, make_design
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
-    from pcmb.config.schema import StudyConfig
+    from pcmb.config.schema import MethodSpec, StudyConfig
 
 __all__ = ["config_design", "cross_check", "model_check"]
 
@@ -110,34 +110,25 @@ def _intrusive(config: StudyConfig) -> object:
         return None
 
 
-def _swept_intrusive(config: StudyConfig) -> Iterator[tuple[str, object]]:
-    """(key path, check) of the first intrusive setting of each sweep entry (and of the
-    sweep's reference), when the sweep itself is valid."""
-    from pcmb.sweep.plan import plan_sweep
-
-    if config.sweep is None:
-        return
-    try:
-        plan = plan_sweep(config)
-    except ValueError:  # a bad sweep: sweep_problems reports it
-        return
+def _swept_intrusive(
+    config: StudyConfig, swept: Iterable[tuple[str, MethodSpec]]
+) -> Iterator[tuple[str, object]]:
+    """(key path, check) of the first intrusive method of each key path in ``swept``."""
     seen = set()
-    for setting in (*plan.settings, *([plan.reference] if plan.reference else [])):
-        check = getattr(
-            _intrusive(config.model_copy(update={"method": setting.spec})), "check", None
-        )
-        if check is not None and setting.entry not in seen:
-            seen.add(setting.entry)
-            yield (
-                (f"sweep.methods[{setting.entry}]" if setting.entry >= 0 else "sweep.reference"),
-                check,
-            )
+    for where, method in swept:
+        check = getattr(_intrusive(config.model_copy(update={"method": method})), "check", None)
+        if check is not None and where not in seen:
+            seen.add(where)
+            yield where, check
 
 
-def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple[str, str]]:
+def model_check(
+    config: StudyConfig, swept: Iterable[tuple[str, MethodSpec]] = ()
+) -> Iterator[tuple[str, str]]:
     """Build the model in a worker, as a run would (the adapter reports its own keys), then
-    check the inputs, the analysis and the time grid against what it says of itself; with
-    ``check_sweep``, also the sweep's intrusive settings against the model's polynomial form."""
+    check the inputs, the analysis and the time grid against what it says of itself, and the
+    intrusive methods among ``swept`` ((key path, method) of a sweep's settings, see
+    :func:`pcmb.sweep.plan.swept_methods`) against the model's polynomial form."""
     from pcmb.run.backends import checking_pool
     from pcmb.run.executor import describe_model, run_in_worker
 
@@ -150,8 +141,8 @@ def model_check(config: StudyConfig, check_sweep: bool = True) -> Iterator[tuple
             check = getattr(_intrusive(config), "check", None)
             if check is not None:
                 yield from run_in_worker(factory, pool, check, config.output_names)
-            for where, swept in _swept_intrusive(config) if check_sweep else ():
-                for path, message in run_in_worker(factory, pool, swept, config.output_names):
+            for where, swept_check in _swept_intrusive(config, swept):
+                for path, message in run_in_worker(factory, pool, swept_check, config.output_names):
                     yield where + path.removeprefix("method"), message
     except ConfigError as exc:
         for problem in exc.problems:

@@ -11,7 +11,6 @@ example are written here. Nothing imports this module at start-up.
 from __future__ import annotations
 
 import json
-import re
 import sys
 import types
 import typing
@@ -24,6 +23,7 @@ from pydantic.fields import FieldInfo
 from pydantic_core import PydanticUndefined
 
 from pcmb.config.types import Name, selecting_key, unique
+from pcmb.wording import markdown
 
 __all__ = ["EXAMPLE", "config_reference", "main", "undescribed_keys"]
 
@@ -330,18 +330,8 @@ class _Table:
     children: list[_Table] = field(default_factory=list)
 
 
-def _text(doc: str | None) -> str:
-    """Docstring or description text as Markdown: ``code`` and :role:`target` become code."""
-    if not doc:
-        return ""
-    text = re.sub(r":[a-z]+:`~([^`]+)`", lambda m: f"`{m.group(1).split('.')[-1]}`", doc)
-    text = re.sub(r":[a-z]+:`([^`]+)`", r"`\1`", text)
-    text = re.sub(r"``([^`]+)``", r"`\1`", text)
-    return " ".join(text.split())
-
-
 def _paragraph(section: type[BaseModel]) -> str:
-    return _text((section.__doc__ or "").strip().split("\n\n")[0])
+    return markdown((section.__doc__ or "").strip().split("\n\n")[0])
 
 
 def _sentence(section: type[BaseModel]) -> str:
@@ -376,7 +366,7 @@ def _table(
     for name, info in section.model_fields.items():
         key = f"{path}.{name}" if path else name
         text, nested = _describe(info.annotation, info.metadata, info.discriminator)
-        description = _text(info.description)
+        description = markdown(info.description)
         if not description and name == selector:
             description = f"selects the form: {', '.join(f'`{c}`' for c in choices)}"
         elif not description and nested and len(nested.forms) == 1 and not nested.suffix:

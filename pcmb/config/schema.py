@@ -65,7 +65,7 @@ from pcmb.designs.regression import SAMPLINGS, SELECTIONS
 from pcmb.designs.sampling import FITS
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
-from pcmb.sweep.plan import sweep_problems
+from pcmb.sweep.plan import sweep_problems, swept_methods
 
 if TYPE_CHECKING:
     from pcmb.adapters.protocol import ModelFactory
@@ -683,7 +683,8 @@ def _validate(
         config._base_dir = base_dir
         problems = located(cross_check(config), lines)
         problems += located(sweep_problems(config), lines)
-        problems += located(model_check(config, check_sweep), lines)
+        swept = swept_methods(config) if check_sweep else ()
+        problems += located(model_check(config, swept), lines)
     if problems:
         raise ConfigError(sorted(problems, key=lambda p: (p.line or 0, p.path)), source)
     return config

@@ -153,7 +153,7 @@ class IntrusiveDesign(Protocol):
     (stochastic Galerkin, statistical linearization): it has no nodes (``runs`` is 0, ``nodes``
     is empty) and no ``recover``. ``Study.run`` calls :meth:`solve` as one task in a worker
     process, with the model built there, because the equations come from the model's own code
-    (its polynomial form, :mod:`pcmb.adapters.polynomial`); ``pcmb validate`` calls
+    (its polynomial form, :mod:`pcmb.designs.polynomial_form`); ``pcmb validate`` calls
     :meth:`check` the same way."""
 
     @property

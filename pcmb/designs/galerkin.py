@@ -20,13 +20,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.basis import PolynomialBasis, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
+from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design
 
 __all__ = ["Galerkin", "GalerkinSystem"]
@@ -98,7 +98,7 @@ class GalerkinSystem:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(d, S, T) state coefficients at ``times`` (one stacked solve of d·S unknowns)."""
-        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+        from pcmb.integrate.stacked_ode import solve_stacked  # scipy.integrate: when solving
 
         shape = (self.d, self.size)
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))

@@ -7,9 +7,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pcmb.adapters.polynomial import PolynomialForm
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
+from pcmb.designs.polynomial_form import PolynomialForm
 from pcmb.errors import ConfigError, ConfigProblem
 
 __all__ = ["WithoutNodes", "form_problems", "polynomial_form"]

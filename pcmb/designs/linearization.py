@@ -20,11 +20,11 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.adapters.polynomial import CompiledPolynomials, PolynomialForm
 from pcmb.chaos.inputs import Distribution, Normal
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.designs.base import MethodSettings, Recovery
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
+from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["GaussianMoments", "Linearization"]
@@ -152,7 +152,7 @@ class GaussianMoments:
 
     def solve(self, times: NDArray[np.float64]) -> NDArray[np.float64]:
         """(R, 2, T) mean and std of every output at ``times``."""
-        from pcmb.adapters.stacked_ode import solve_stacked  # scipy.integrate: when solving
+        from pcmb.integrate.stacked_ode import solve_stacked  # scipy.integrate: when solving
 
         y0 = self.initial_state()
         atol = np.broadcast_to(np.asarray(self.form.atol, dtype=float), (self.d,))

@@ -74,11 +74,12 @@ class Pool(Protocol):
 
 
 def _warm_up() -> None:
-    """Import what tasks need (the executor, and what python models commonly build on: their
-    adapter and pcmb's batched integrator), so that the first task does not wait for it."""
+    """Import what tasks need (the worker's side of the executor, and what python models
+    commonly build on: their adapter and pcmb's batched integrator), so that the first task does
+    not wait for it."""
     import pcmb.adapters.python.model
-    import pcmb.adapters.stacked_ode
-    import pcmb.run.executor  # noqa: F401
+    import pcmb.integrate.stacked_ode
+    import pcmb.run.worker  # noqa: F401
 
 
 class LokyPool:

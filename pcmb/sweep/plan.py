@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
 
+from pcmb.config.checks import config_design, cross_check
 from pcmb.designs import MethodSettings, NodeDesign, design_key
 
 if TYPE_CHECKING:
@@ -29,6 +30,7 @@ __all__ = [
     "default_sweep",
     "plan_sweep",
     "sweep_problems",
+    "swept_methods",
 ]
 
 #: Keys a sweep entry always sets unless it gives them: held-out runs and the nominal run are
@@ -158,20 +160,23 @@ def _first(entry: Mapping[str, Any], index: int) -> tuple[str, int, dict[str, An
     raise ValueError(f"sweep.methods[{index}] varies more than one key")
 
 
+def _method_spec(config: StudyConfig) -> type[MethodSpec]:
+    """The class of a ``method:`` section (:mod:`pcmb.config.schema` imports this module)."""
+    return type(config.method)
+
+
 def _design(config: StudyConfig, spec: MethodSpec) -> NodeDesign:
     """The design of a method block on the config's inputs."""
-    from pcmb.config.checks import config_design
-
     return config_design(config.model_copy(update={"method": spec}))
 
 
 def _settings_of(
     config: StudyConfig, entry: Mapping[str, Any], index: int, label: str, replicates: int
 ) -> Iterator[Setting]:
-    from pcmb.config.schema import MethodSpec
+    method_spec = _method_spec(config)
 
     for key, _, data in _expand(entry):
-        spec = MethodSpec.model_validate(data)
+        spec = method_spec.model_validate(data)
         copies = replicates if _design(config, spec).record().seed is not None else 1
         text = f"{key}={_text(data[key])}" if key else _fixed(entry)
         for replicate in range(copies):
@@ -244,7 +249,7 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
 
     The config must have passed :func:`sweep_problems` (``load_config`` checks it).
     """
-    from pcmb.config.schema import MethodSpec
+    method_spec = _method_spec(config)
 
     section = config.sweep
     if section is None:
@@ -259,7 +264,7 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
             None if section.reference is None else {**SWEPT_DEFAULTS, **section.reference}
         )
     firsts = [(entry, *_first(entry, index)) for index, entry in enumerate(methods)]
-    labels = _labels([(e, MethodSpec.model_validate(data), key) for e, key, _, data in firsts])
+    labels = _labels([(e, method_spec.model_validate(data), key) for e, key, _, data in firsts])
     settings = tuple(
         setting
         for index, (entry, label) in enumerate(zip(methods, labels, strict=True))
@@ -267,7 +272,7 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
     )
     reference = None
     if reference_data is not None:
-        spec = MethodSpec.model_validate(reference_data)
+        spec = method_spec.model_validate(reference_data)
         fixed = " ".join(
             f"{k}={_text(v)}" for k, v in reference_data.items() if k not in _UNLABELLED
         )
@@ -275,11 +280,23 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
     return SweepPlan(settings, reference, None if outputs is None else tuple(outputs))
 
 
+def swept_methods(config: StudyConfig) -> Iterator[tuple[str, MethodSpec]]:
+    """(key path, method) of every setting of the sweep and of its reference, when the sweep
+    itself is valid (:func:`sweep_problems` reports it otherwise); none without ``sweep:``."""
+    if config.sweep is None:
+        return
+    try:
+        plan = plan_sweep(config)
+    except ValueError:  # a bad sweep: sweep_problems reports it
+        return
+    for setting in (*plan.settings, *([plan.reference] if plan.reference else [])):
+        where = f"sweep.methods[{setting.entry}]" if setting.entry >= 0 else "sweep.reference"
+        yield where, setting.spec
+
+
 def _design_problems(
     config: StudyConfig, spec: MethodSpec, prefix: str, swept: str | None, index: int
 ) -> Iterator[tuple[str, str]]:
-    from pcmb.config.checks import cross_check
-
     for path, message in cross_check(config.model_copy(update={"method": spec})):
         key = path.removeprefix("method").lstrip(".")
         head = key.split(".")[0].split("[")[0]
@@ -294,7 +311,8 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
     an entry that varies no key or more than one, a setting the schema or its design
     refuses (named down to the list item, e.g. ``sweep.methods[1].order[2]``)."""
     from pcmb.config.messages import schema_problems
-    from pcmb.config.schema import MethodSpec
+
+    method_spec = _method_spec(config)
 
     section = config.sweep
     if section is None:
@@ -312,9 +330,9 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
             continue
         for key, position, data in _expand(entry):
             try:
-                spec = MethodSpec.model_validate(data)
+                spec = method_spec.model_validate(data)
             except ValidationError as error:
-                problems = schema_problems(error, MethodSpec, prefix=("sweep", "methods", index))
+                problems = schema_problems(error, method_spec, prefix=("sweep", "methods", index))
                 found = [
                     (
                         f"{p.path}[{position}]" if p.path == f"{prefix}.{key}" else p.path,
@@ -331,9 +349,9 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
     if section.reference is not None:
         data = {**SWEPT_DEFAULTS, **section.reference}
         try:
-            spec = MethodSpec.model_validate(data)
+            spec = method_spec.model_validate(data)
         except ValidationError as error:
-            for p in schema_problems(error, MethodSpec, prefix=("sweep", "reference")):
+            for p in schema_problems(error, method_spec, prefix=("sweep", "reference")):
                 yield p.path, p.message
         else:
             yield from _design_problems(config, spec, "sweep.reference", None, 0)

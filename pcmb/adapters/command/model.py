@@ -17,6 +17,7 @@ import re
 import shlex
 import shutil
 import signal
+import stat
 import subprocess
 import tempfile
 import time
@@ -74,6 +75,28 @@ _SHEBANG_BYTES = 256
 
 def _problem(path: str, message: str) -> ConfigError:
     return ConfigError([ConfigProblem(path=path, message=message)])
+
+
+def _open_to_others(folder: Path) -> str | None:
+    """Why another user could tamper with the work directories made in ``folder`` (swap one
+    for a link, plant its outputs), or None: it must be a real folder of this user's (or
+    root's), writable by no one else unless sticky like /tmp. A folder not made yet is safe:
+    pcmb makes it."""
+    try:
+        info = os.lstat(folder)
+    except FileNotFoundError:
+        return None
+    if not stat.S_ISDIR(info.st_mode):
+        return f"{folder} is not a folder (a link or a file)"
+    if info.st_uid not in (os.getuid(), 0):
+        return f"{folder} is owned by uid {info.st_uid}, not by this user (uid {os.getuid()})"
+    mode = stat.S_IMODE(info.st_mode)
+    if mode & (stat.S_IWGRP | stat.S_IWOTH) and not mode & stat.S_ISVTX:
+        return (
+            f"{folder} is writable by other users (mode {mode:04o}) without the sticky bit: "
+            f"use a folder of your own (chmod 700) or a sticky one like /tmp"
+        )
+    return None
 
 
 def split_command(text: str) -> list[str]:
@@ -288,6 +311,8 @@ class CommandModel(PointwiseModel):
         self.output_format = self._resolve_format(output_file, output_format)
         self.timeout = timeout
         self.run_dir = None if run_dir is None else Path(run_dir)
+        if self.run_dir is not None and (why := _open_to_others(self.run_dir)):
+            raise _problem("model.run_dir", why)
         self.keep = keep
         self.time_column = time_column
         self.axis, self.axis_column = axis, axis_column
@@ -518,6 +543,8 @@ class CommandModel(PointwiseModel):
         times = np.asarray(times, dtype=float)
         if self.run_dir is not None:
             self.run_dir.mkdir(parents=True, exist_ok=True)
+            if why := _open_to_others(self.run_dir):  # made by someone else since the check
+                raise ModelError(f"model.run_dir: {why}")
         workdir = Path(tempfile.mkdtemp(prefix="pcmb-node-", dir=self.run_dir))
         succeeded = False
         try:

@@ -20,7 +20,7 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from fmpy import platform, supported_platforms
@@ -29,9 +29,11 @@ from fmpy.simulation import instantiate_fmu, settable_in_instantiated, simulate_
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.adapters.fmu.cache import CacheError, extracted
-from pcmb.adapters.fmu.factory import Interface
 from pcmb.adapters.protocol import PointwiseModel, describe_exception
 from pcmb.errors import ConfigError, ConfigProblem, ModelDefinitionError, ModelError
+
+if TYPE_CHECKING:
+    from pcmb.adapters.fmu.factory import Interface  # the factory builds this model
 
 __all__ = ["FmuModel"]
 

@@ -1,2 +1,3 @@
-"""The MuJoCo adapter (``model.kind: mujoco``): :mod:`.spec` is its binding language and config
-section, :mod:`.model` the scene as a model (the only module that imports mujoco)."""
+"""The MuJoCo adapter (``model.kind: mujoco``): :mod:`.binding` is its binding language,
+:mod:`.spec` its config section, :mod:`.model` the scene as a model (the only module that
+imports mujoco)."""

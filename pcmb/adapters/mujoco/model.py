@@ -2,7 +2,7 @@
 
 Inputs reach a scene as ``{{ name }}`` placeholders (each node compiles its own scene),
 ``bind`` targets (MjModel fields, ``opt`` fields, initial joint states) or ``init`` values, in
-the binding language of :mod:`pcmb.adapters.mujoco.spec`. A batch runs in one
+the binding language of :mod:`pcmb.adapters.mujoco.binding`. A batch runs in one
 :class:`mujoco.batch.Batch` on MuJoCo's thread pool; a node that diverges is a failed run.
 See ``docs/architecture.md`` for how bindings, batching, threads and divergence work.
 """
@@ -25,8 +25,7 @@ import mujoco.batch
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.adapters.mujoco.files import mjcf_files
-from pcmb.adapters.mujoco.spec import (
+from pcmb.adapters.mujoco.binding import (
     FieldBind,
     InitSpec,
     Qpos0Bind,
@@ -38,6 +37,7 @@ from pcmb.adapters.mujoco.spec import (
     XposOutput,
     parse_scene_io,
 )
+from pcmb.adapters.mujoco.files import mjcf_files
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 
@@ -266,7 +266,7 @@ class MujocoModel:
     params:
         Nominal values: one for every placeholder, and optionally for bound inputs.
     bind:
-        In the binding language of :mod:`pcmb.adapters.mujoco.spec` (plain dicts or its
+        In the binding language of :mod:`pcmb.adapters.mujoco.binding` (plain dicts or its
         parsed entries), as are ``init`` and ``outputs``.
         Input name -> list of targets: ``{field: body_mass, name: bob}``,
         ``{field: geom_friction, name: foot, index: 0}``, ``{field: opt.gravity, index: 2}``,

@@ -3,7 +3,7 @@
 A collocation batch holds B nodes of the same model, each an independent initial value problem
 with d states, held as one (d, B) array -- states x nodes -- and integrated in one solver call
 with every right-hand side evaluated on whole (d, B) arrays. The explicit methods
-(:mod:`pcmb.adapters.runge_kutta`) control each node's error by its own norm; the implicit ones
+(:mod:`pcmb.integrate.runge_kutta`) control each node's error by its own norm; the implicit ones
 (scipy's Radau and BDF) get tolerances divided by sqrt(B), which bounds every node's RMS norm by
 the stacked one. :class:`StackedODEModel` builds the model protocol (docs/models.md) on top.
 """
@@ -20,7 +20,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.adapters.runge_kutta import (
+from pcmb.errors import ConfigError, ConfigProblem, ModelError
+from pcmb.integrate.runge_kutta import (
     PAIRS,
     RK45,
     initial_step,
@@ -29,7 +30,6 @@ from pcmb.adapters.runge_kutta import (
     rk_step,
     step_factor,
 )
-from pcmb.errors import ConfigError, ConfigProblem, ModelError
 
 __all__ = [
     "StackedODEModel",
@@ -75,7 +75,7 @@ def solve_stacked(
     t0:
         Time of the initial state.
     method:
-        An explicit pair of :mod:`pcmb.adapters.runge_kutta` (``"RK23"``, ``"RK45"``,
+        An explicit pair of :mod:`pcmb.integrate.runge_kutta` (``"RK23"``, ``"RK45"``,
         ``"DOP853"``) or scipy's implicit ``"Radau"``, ``"BDF"`` (with the block-diagonal
         Jacobian sparsity of the batch, so a finite-difference Jacobian costs d right-hand
         side calls, not B·d).
@@ -210,7 +210,7 @@ def solve_projected(
     accepted when the largest of these B norms is at most 1. Every node therefore meets the
     acceptance test of a separate run; the batch shares one step size (the smallest any node
     needs). Step, norm, starting step (measured with the same per-node norm) and step-size
-    rule are those of :data:`pcmb.adapters.runge_kutta.RK45`; unlike :func:`solve_stacked`,
+    rule are those of :data:`pcmb.integrate.runge_kutta.RK45`; unlike :func:`solve_stacked`,
     a step right after a rejection may grow.
 
     Parameters

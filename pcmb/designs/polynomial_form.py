@@ -286,7 +286,7 @@ class PolynomialForm:
     t0:
         Initial time.
     rtol, atol, method:
-        Integration settings of the intrusive systems (:func:`pcmb.adapters.stacked_ode.
+        Integration settings of the intrusive systems (:func:`pcmb.integrate.stacked_ode.
         solve_stacked`): ``atol`` scalar or one value per state.
     """
 
