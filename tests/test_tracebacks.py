@@ -157,6 +157,7 @@ def test_a_file_without_tracebacks_still_loads(tmp_path):
     assert str(result.failures[0]) == f"{_node(7, 6)}: KeyError: 'omega'"
 
 
+@pytest.mark.slow  # a pcmb process of its own
 def test_inprocess_shows_the_whole_traceback(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
     done = pcmb_cli("run", str(config), "--quiet", "--backend", "inprocess")
@@ -166,6 +167,7 @@ def test_inprocess_shows_the_whole_traceback(tmp_path):
     assert f'File "{PCMB / "run" / "worker.py"}"' in done.stderr, done.stderr
 
 
+@pytest.mark.slow  # a pcmb process of its own
 def test_pdb_opens_the_debugger_at_the_first_model_exception(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
     done = pcmb_cli("run", str(config), "--pdb", stdin="p table\nq\n")
