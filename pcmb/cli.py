@@ -34,7 +34,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.run.backends import BACKENDS
+from pcmb.run.backends import BACKENDS, close_kept
 from pcmb.run.progress import phase
 from pcmb.wording import plural
 
@@ -201,8 +201,9 @@ def _summary(config, address: str | None = None) -> str:
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    held_out = study.validation if design.basis is not None else 0
-    checks = f" + {held_out} held-out runs that check the expansion" if held_out else ""
+    first, most = study.held_out_runs(nodes.size) if design.basis is not None else (0, 0)
+    upto = f"{first} to {most}" if most > first else f"{most}"
+    checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(
         f"runs     {nodes.size} model runs{rounds}{checks} "
         f"({config.execution.on_failure} on failure)"
@@ -211,20 +212,29 @@ def _summary(config, address: str | None = None) -> str:
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
-    lines.append(_memory_line(study, nodes.size, outputs))
+    lines.append(_memory_line(study, nodes.size, outputs, config.output))
     return "\n".join(lines)
 
 
-def _memory_line(study, n_nodes: int, outputs) -> str:
-    """The ``memory`` line of the summary; checks that the run fits (raises UsageError)."""
+def _memory_line(study, n_nodes: int, outputs, output: str | None) -> str:
+    """The ``memory`` line of the summary; checks that the run fits or streams (raises
+    UsageError)."""
     from pcmb.run.memory import check_memory
     from pcmb.run.output import format_bytes
 
     estimate = study.memory_estimate(n_nodes, outputs)
-    available = check_memory(estimate)
+    available, plan = check_memory(
+        estimate, study.memory, inputs=len(study.inputs), streams=study.why_not_streamed(output)
+    )
+    streamed = (
+        ""
+        if plan is None
+        else f"; over {study.memory.describe(available)}: the runs stream to the file, "
+        f"quantiles from a reservoir of {plan.reservoir_rows} runs"
+    )
     return (
         f"memory   about {format_bytes(estimate.total)} at most in pcmb's process; "
-        f"{format_bytes(available)} available"
+        f"{format_bytes(available)} available{streamed}"
     )
 
 
@@ -291,22 +301,24 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if output is None:
         raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
     study = Study.from_config(config)
-    if args.jobs is not None:
-        study.jobs = args.jobs
+    changes = {} if args.jobs is None else {"jobs": args.jobs}
     if args.backend is not None:
-        study.backend = args.backend
-        if args.backend != "dask":
-            study.address = None  # a scheduler address only means something to dask
+        # A scheduler address only means something to dask.
+        changes |= {"backend": args.backend} | ({} if args.backend == "dask" else {"address": None})
+    if args.address is not None:  # every thread of the cluster, not the config's local jobs
+        changes |= {"backend": "dask", "address": args.address, "jobs": args.jobs}
+    if changes:
+        execution = study.execution.model_dump(exclude_unset=True) | changes
+        study = study.replace(execution=execution)
     if args.address is not None:
-        study.backend, study.address, study.address_key = "dask", args.address, "--address"
-        study.jobs = args.jobs  # every thread of the cluster, not the config's local jobs
+        study.address_key = "--address"
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,
         "command_line": shlex.join(["pcmb", *argv]),
     }
     debugging = post_mortem() if args.pdb else nullcontext()
-    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.backend), debugging:
+    with warnings.catch_warnings(), _quiet_backend(args.quiet, study.execution.backend), debugging:
         warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
         result = study.run(
             output,
@@ -464,7 +476,8 @@ def _inspect(path: str) -> str:
         "inputs   " + ", ".join(f"{n} ~ {d.law}" for n, d in named_inputs),
     ]
     design = dataclasses.asdict(result.design)
-    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in design.items() if v is not None))
+    shown = {k: v for k, v in design.items() if v is not None and k != "label"}  # label: above
+    lines.append("design   " + ", ".join(f"{k} {v}" for k, v in shown.items()))
     for name, found in result.processes.items():
         lines.append(
             f"process  {name}: {found.covariance.description['kind']} covariance, "
@@ -491,8 +504,10 @@ def _inspect(path: str) -> str:
             else "no held-out runs"
         )
         axis = result.axis(name)
-        if axis is None:  # a scalar: pass or fail
+        undecided = found.reliable and found.undecided.any()
+        if axis is None:  # a scalar: pass or fail, or too few runs to tell
             verdict = "reliable" if found.reliable else "UNRELIABLE"
+            verdict = "undecided" if undecided else verdict
         else:
             point = "time" if result.on_time(name) else f"{axis.name} point"
             verdict = (
@@ -500,6 +515,9 @@ def _inspect(path: str) -> str:
                 if found.reliable
                 else f"UNRELIABLE from {axis.name} = {found.failing_from:.4g}"
             )
+            if undecided:
+                first = axis.values[np.argmax(found.undecided)]
+                verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
             f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
@@ -612,7 +630,12 @@ _RESUME_HINT = "finished nodes are kept in the journal (run the same command wit
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``pcmb`` command; returns the exit code."""
+    """Entry point of the ``pcmb`` command; returns the exit code.
+
+    Called as the command (``argv`` not given) the process ends next: the workers it kept
+    (started before a config error, or idle after the run) are killed on the way out.
+    """
+    as_command = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         args = _parser().parse_args(argv)
@@ -650,6 +673,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception:
         _log("pcmb: unexpected error (please report it):\n" + traceback.format_exc())
         return EXIT_UNEXPECTED
+    finally:
+        if as_command:
+            close_kept(kill=True)
 
 
 if __name__ == "__main__":

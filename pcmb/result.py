@@ -72,8 +72,11 @@ class Design:
         number of runs made. An adaptive sparse grid refines to ``tolerance`` within
         ``max_runs`` runs (``samples``: the runs made); so does tensor collocation with
         ``order: auto`` (``orders``: the orders reached).
+    label:
+        A short label the design gives itself: ``chaos order 5``, ``chaos orders 3x5``,
+        ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule gauss-patterson``, ...
 
-    Records written before a field existed load with its default.
+    Records written before a field existed load with its default (the label: the kind).
     """
 
     kind: str
@@ -90,6 +93,7 @@ class Design:
     tolerance: float | None = None
     max_samples: int | None = None
     max_runs: int | None = None
+    label: str = ""
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -101,45 +105,8 @@ class Design:
         data = json.loads(text)
         if data.get("orders") is not None:
             data["orders"] = tuple(data["orders"])
+        data.setdefault("label", data["kind"])
         return cls(**data)
-
-    @property
-    def label(self) -> str:
-        """A short label: ``chaos order 5``, ``chaos orders 3x5``, ``chaos total order 4``,
-        ``chaos order 4 (order auto to 0.05, 99 runs)``, ``lhs``, ``lhs + chaos fit, total order
-        3``, ``Smolyak level 3, rule gauss-patterson``, ``LARS on hyperbolic order 5, q=0.75,
-        256 samples`` or ``adaptive sparse grid to 0.0001, 97 runs``."""
-        if self.kind == "adaptive":
-            return f"adaptive sparse grid to {self.tolerance:g}, {self.samples} runs"
-        if self.grid == "smolyak":
-            return f"Smolyak level {self.level}, rule {self.rule}"
-        if self.kind == "regression" and self.orders is not None:
-            shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
-            label = (
-                f"{self.fit.upper()} on {self.basis} order {max(self.orders)}{shape}, "
-                f"{self.samples} samples"
-            )
-            if self.tolerance is not None:
-                label += f" (to LOO {self.tolerance:g}, at most {self.max_samples})"
-            return label
-        if self.orders is None:
-            return self.kind
-        if self.basis == "tensor":
-            highest = set(self.orders)
-            order = (
-                f"order {self.orders[0]}"
-                if len(highest) == 1
-                else "orders " + "x".join(map(str, self.orders))
-            )
-        else:
-            order = f"total order {max(self.orders)}"
-        if self.kind == "galerkin":
-            return f"Galerkin, {order}"
-        if self.fit != "projection":
-            return f"{self.kind} + chaos fit, {order}"
-        if self.tolerance is not None:  # order: auto
-            return f"chaos {order} (order auto to {self.tolerance:g}, {self.samples} runs)"
-        return f"chaos {order}"
 
 
 @dataclass(frozen=True)
@@ -169,13 +136,13 @@ class Refinement:
     Attributes
     ----------
     orders:
-        (R, n) the orders of each round's grid.
+        (R, n) the orders (projection degrees) of each round's grid.
     runs:
         (R,) runs made by the end of each round.
     indicator:
-        (R,) the estimated error of each round's statistics: the largest difference, over
-        outputs and times, of its mean and std from the previous round's, relative to the
-        output's largest std (NaN in the first round).
+        (R,) the estimated error of each round's statistics, relative to the output's largest
+        std (:func:`pcmb.designs.refine.extrapolated_error`; the first round's is its change
+        from the centre run's, at least 1).
     """
 
     orders: NDArray[np.int64]
@@ -505,18 +472,18 @@ class StudyResult:
 
     def is_note(self, record: WarningRecord) -> bool:
         """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics call reliable, or about the whole study when
-        they call every output reliable): kept in the result and its file, not issued as a
-        warning."""
+        record about an output the diagnostics vouch for — reliable and nowhere undecided — or
+        about the whole study when they vouch for every output): kept in the result and its
+        file, not issued as a warning."""
         if record.code in RECORDED_ONLY:
             return True
         if record.code not in INDICATORS:
             return False
         if record.output is None:
             found = self.diagnostics.values()
-            return bool(found) and all(judged.reliable for judged in found)
+            return bool(found) and all(judged.vouched for judged in found)
         judged = self.diagnostics.get(record.output)
-        return judged is not None and judged.reliable
+        return judged is not None and judged.vouched
 
     @property
     def alerts(self) -> tuple[WarningRecord, ...]:

@@ -10,7 +10,7 @@ import io
 import json
 import os
 import platform
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -37,10 +37,17 @@ from pcmb.result import (
     StudyResult,
     WarningRecord,
 )
-from pcmb.run.files import write_durably
+from pcmb.run.files import durable_temporary, write_durably
 from pcmb.run.output import write_error
 
-__all__ = ["SCHEMA_VERSION", "check_replaceable", "is_result_file", "load", "write_result"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "check_replaceable",
+    "is_result_file",
+    "load",
+    "write_result",
+    "write_streamed",
+]
 
 SCHEMA_VERSION = 1
 #: The scale of an output's points: /time, /<axis name>, or None for a scalar output.
@@ -198,7 +205,11 @@ def _read_tracebacks(attrs: h5py.AttributeManager) -> dict[int, ModelTraceback]:
     return found
 
 
-def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) -> None:
+def _write(
+    file: h5py.File, result: StudyResult, provenance: Mapping[str, str], streamed: bool = False
+) -> None:
+    """Everything of ``result`` into ``file``; ``streamed``: the values datasets are made
+    (N, W) and left unwritten, to be filled run by run (:func:`write_streamed`)."""
     from pcmb import __version__
 
     n_nodes = result.n_nodes
@@ -261,7 +272,16 @@ def _write(file: h5py.File, result: StudyResult, provenance: Mapping[str, str]) 
         trail = trails[name]
         if not result.on_time(name):
             group.attrs["axis"] = "" if trail is None else result.axes[name].name
-        _points(group, "values", values, (node,), trail)
+        if streamed:
+            shape = (n_nodes,) if trail is None else (n_nodes, values.shape[1])
+            # Every row is written from the journal (every node has a record by then): no
+            # fill is written first (16 GB for the 10⁶-run twin).
+            empty = group.create_dataset(
+                "values", shape=shape, dtype=float, fillvalue=np.nan, fill_time="never"
+            )
+            _attach(empty, node, *(() if trail is None else (trail,)))
+        else:
+            _points(group, "values", values, (node,), trail)
         _points(group, "mean", result.mean(name), (), trail)
         _points(group, "std", result.std(name), (), trail)
         expansion = result.expansions.get(name)
@@ -425,10 +445,25 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
 
 
 #: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
-_DIAGNOSTIC_ARRAYS = {"decay": "decay", "out_of_range": "out_of_range", "estimate": "estimate"}
-#: ... and those of its held-out check: the estimated errors of the mean and the std, and the
-#: standard error of the larger (same names in the file as on HeldOutCheck).
-_HOLDOUT_STATISTICS = ("mean_error", "std_error", "spread")
+_DIAGNOSTIC_ARRAYS = {
+    "decay": "decay",
+    "out_of_range": "out_of_range",
+    "estimate": "estimate",
+    "noise": "noise",
+    "undecided": "undecided",
+}
+#: ... and those of its held-out check: the estimated errors of the mean and the std, the
+#: standard error of the larger, and the mean and std the held-out runs correct with their
+#: standard errors (same names in the file as on HeldOutCheck).
+_HOLDOUT_STATISTICS = (
+    "mean_error",
+    "std_error",
+    "spread",
+    "corrected_mean",
+    "corrected_std",
+    "corrected_mean_se",
+    "corrected_std_se",
+)
 
 
 def _write_diagnostics(
@@ -461,6 +496,7 @@ def _write_diagnostics(
     _attach(group.create_dataset("params", data=held_out.params), run, input_)
     status = np.where(held_out.ok, Status.OK, Status.FAILED).astype(np.int8)
     _attach(group.create_dataset("status", data=status), run)
+    _attach(group.create_dataset("weights", data=held_out.weights), run)
     for name, values in held_out.values.items():
         _points(group, f"{name}/values", values, (run,), trails[name])
 
@@ -487,9 +523,11 @@ def _read_diagnostics(
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )
-        arrays = {
-            field: _columns(group[key][()], scalar) for key, field in _DIAGNOSTIC_ARRAYS.items()
+        arrays = {  # older files have no noise (nor undecided): their verdict judged the estimate
+            field: _columns(group[key if key in group else "decay"][()] * (key in group), scalar)
+            for key, field in _DIAGNOSTIC_ARRAYS.items()
         }
+        arrays["undecided"] = arrays["undecided"].astype(bool)
         found[name] = OutputDiagnostics(
             output=name,
             scale=float(attrs["scale"]),
@@ -512,6 +550,7 @@ def _read_diagnostics(
             if isinstance(group[name], h5py.Group)
         },
         ok=group["status"][()] == Status.OK,
+        weights=group["weights"][()] if "weights" in group else np.ones(len(group["status"])),
     )
     return found, held_out
 
@@ -540,7 +579,8 @@ def _read_design(file: h5py.File, index: np.ndarray | None) -> Design:
     if kind == "collocation":
         orders = tuple(int(q) - 1 for q in (np.unique(c).size for c in file["nodes/germ"][()].T))
         full = index is not None and index.shape[0] == int(np.prod(np.add(orders, 1)))
-        return Design(kind, "tensor-gauss", "tensor" if full else "total", orders, fit="projection")
+        basis = "tensor" if full else "total"
+        return Design(kind, "tensor-gauss", basis, orders, fit="projection", label=kind)
     orders = None if index is None else tuple(int(p) for p in index.max(axis=0))
     return Design(
         kind,
@@ -549,6 +589,7 @@ def _read_design(file: h5py.File, index: np.ndarray | None) -> Design:
         orders,
         samples=int(file["nodes/germ"].shape[0]),
         fit="none" if index is None else "regression",
+        label=kind,
     )
 
 
@@ -585,6 +626,48 @@ def write_result(
             "and run again with --resume, which runs no node again"
             if journal.is_dir()
             else "free some space (or fix the folder) and write it again"
+        )
+        raise write_error(error, path, "result file", kept) from error
+    return path
+
+
+def write_streamed(
+    path: str | os.PathLike[str],
+    result: StudyResult,
+    chunks: Iterable[tuple[np.ndarray, Mapping[str, np.ndarray], np.ndarray]],
+    *,
+    provenance: Mapping[str, str],
+) -> Path:
+    """Write the result of a streamed study atomically: ``result`` holds its statistics and no
+    runs (``values`` without rows), ``chunks`` the runs, (B,) increasing node indices and
+    output name -> (B, W) values (:meth:`pcmb.run.journal.Journal.chunks`), written to
+    ``/outputs/<name>/values`` one chunk at a time. The file is built on disk beside ``path``
+    (a temporary of :func:`pcmb.run.files.durable_temporary`, HDF5's own file locking off
+    since that temporary is locked already) and renamed into place once complete.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    path = Path(path)
+    try:
+        with (
+            durable_temporary(path) as (_, temporary),
+            h5py.File(temporary, "w", locking=False) as file,
+        ):
+            _write(file, result, provenance, streamed=True)
+            for indices, values, _status in chunks:
+                rows = slice(int(indices[0]), int(indices[-1]) + 1)
+                if rows.stop - rows.start != indices.size:
+                    rows = indices
+                for name, part in values.items():
+                    dataset = file[f"outputs/{name}/values"]
+                    dataset[rows] = part if dataset.ndim == 2 else part[:, 0]
+    except OSError as error:
+        kept = (
+            f"the finished nodes are kept in {path}.journal: free some space (or fix the "
+            "folder) and run again with --resume, which runs no node again"
         )
         raise write_error(error, path, "result file", kept) from error
     return path

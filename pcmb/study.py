@@ -10,6 +10,7 @@ import hashlib
 import json
 import sys
 import time
+import typing
 import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,25 +19,32 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar
 import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import TypeAdapter, ValidationError
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
+    FIRST_BATCH,
     HELD_OUT_SEED,
     RANGE_DRAWS,
-    TOLERANCE,
-    VALIDATION,
     HeldOut,
     diagnose_all,
+    held_out_budget,
+    held_out_draws,
+    more_runs,
     pdf_outside_runs,
 )
 from pcmb.analysis.statistics import AnalysisSettings, analyse
+from pcmb.analysis.streaming import stream_statistics
 from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
-from pcmb.designs import METHOD_KINDS, MethodSettings, NodeDesign, make_design
+from pcmb.config.messages import schema_problems
+from pcmb.config.schema import DiagnosticsSpec, ExecutionSpec
+from pcmb.config.types import Section
+from pcmb.designs import MethodSection, MethodSpec, NodeDesign, make_design
 from pcmb.designs.base import Recovery
 from pcmb.errors import (
     ConfigError,
@@ -49,8 +57,8 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.result import Status, StudyResult, WarningRecord
-from pcmb.run.backends import BACKENDS, Pool, checking_pool, open_pool
+from pcmb.result import NodeFailure, Status, StudyResult, WarningRecord
+from pcmb.run.backends import Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
     RunResult,
@@ -63,7 +71,7 @@ from pcmb.run.executor import (
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import FRESH, Journal
-from pcmb.run.memory import MemoryEstimate, check_memory
+from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
 from pcmb.run.worker import Layout, ModelFacts
@@ -74,11 +82,7 @@ _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
 
-__all__ = ["FAILURE_POLICIES", "Study"]
-
-#: ``execution.on_failure`` values.
-FAILURE_POLICIES = ("abort", "retry", "regress")
-FailurePolicy = Literal["abort", "retry", "regress"]
+__all__ = ["DEPRECATED", "Study"]
 
 
 def _usage(key: str, message: str) -> UsageError:
@@ -108,8 +112,83 @@ def _check_inputs(
     return dict(inputs)
 
 
+#: The method of a study given none: tensor collocation of order 3.
+DEFAULT_METHOD: Mapping[str, Any] = {"kind": "collocation", "order": 3}
+#: Order of a method of pcmb 0.x's keywords that takes one and was given neither order nor
+#: level (their default then).
+_KEYWORD_ORDER = 3
+#: The keyword arguments of pcmb 0.x -> the (section, key) each now sets; accepted for one
+#: release with a DeprecationWarning.
+DEPRECATED: dict[str, tuple[str, str]] = {
+    **{
+        key: ("method", key)
+        for member in typing.get_args(typing.get_args(MethodSpec)[0])
+        for key in member.model_fields
+        if key != "kind"
+    },
+    **{key: ("execution", key) for key in ExecutionSpec.model_fields if key != "address"},
+    "diagnostics_tolerance": ("diagnostics", "tolerance"),
+    "diagnosed": ("diagnostics", "outputs"),
+}
+
+
+def _from_keywords(
+    kind: str | None,
+    execution: ExecutionSpec | Mapping[str, Any] | None,
+    diagnostics: DiagnosticsSpec | Mapping[str, Any] | None,
+    keywords: Mapping[str, Any],
+    method: MethodSection | Mapping[str, Any] | None,
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """The ``method``, ``execution`` and ``diagnostics`` keys that pcmb 0.x's keyword
+    arguments (and ``method="<kind>"``) describe, on top of the given sections; the keys of
+    ``method`` that a new kind does not take are dropped."""
+    unknown = sorted(set(keywords) - set(DEPRECATED))
+    if unknown:
+        raise _usage(unknown[0], f"unknown argument(s) {unknown}")
+    warnings.warn(
+        "Study's keyword arguments of pcmb 0.x (order=, samples=, jobs=, method='<kind>', ...) "
+        "are deprecated: give method=, execution= and diagnostics= sections (or mappings of "
+        "their config keys)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    given: dict[str, dict[str, Any]] = {
+        "method": {},
+        "execution": _dump(execution),
+        "diagnostics": _dump(diagnostics),
+    }
+    for key, value in keywords.items():
+        section, name = DEPRECATED[key]
+        if value is not None:  # None was "not set" in pcmb 0.x
+            given[section][name] = value
+    current = _dump(method) if method is not None else {"kind": "collocation"}
+    kind = kind or current["kind"]
+    takes = type(_section("method", MethodSpec, {"kind": kind})).model_fields
+    data = {key: value for key, value in current.items() if key in takes}
+    data.update(given["method"], kind=kind)
+    if "order" in takes and "order" not in data and "level" not in data:
+        data["order"] = _KEYWORD_ORDER
+    return data, given["execution"], given["diagnostics"]
+
+
+def _dump(section: Section | Mapping[str, Any] | None) -> dict[str, Any]:
+    """A section's keys (those set or not default), a mapping's copy, or nothing."""
+    if section is None:
+        return {}
+    return section.model_dump(exclude_unset=True) if isinstance(section, Section) else dict(section)
+
+
+def _section(key: str, root: Any, value: Any) -> Any:
+    """The validated section at ``key`` (``root``: its class or union) of a section or its
+    keys; a refusal is a UsageError at the section's keys."""
+    try:
+        return TypeAdapter(root).validate_python(value)
+    except ValidationError as error:
+        raise UsageError(schema_problems(error, root, prefix=(key,)), source="Study") from None
+
+
 class Study:
-    """A collocation (or sampling) study of a model.
+    """A study of a model: its nodes, runs, chaos expansions and statistics.
 
     Parameters
     ----------
@@ -124,73 +203,49 @@ class Study:
         is the germ order.
     times:
         (T,) output grid.
-    order:
-        Chaos order, one for all inputs or a mapping input -> order (a process's order is
-        that of each of its germs); ``"auto"`` (tensor
-        collocation) raises it in rounds until ``diagnostics_tolerance`` is met, within
-        ``max_runs`` (:mod:`pcmb.designs.refine`).
-    basis:
-        ``"tensor"`` (interpolation on the grid) or ``"total"`` (projection onto |α| <= P);
-        for regression ``"total"`` or ``"hyperbolic"`` candidates (default: tensor for
-        collocation, hyperbolic for regression).
     method:
-        A ``method.kind`` (:data:`pcmb.designs.METHOD_KINDS`): ``"collocation"`` (tensor
-        Gauss nodes; ``grid="smolyak"`` with ``level`` and ``rule``: a Smolyak sparse grid),
-        ``"regression"`` (sparse regression: ``samples``, ``sampling``, ``selection``,
-        ``basis``, ``q``, ``order``, ``seed``, optionally ``tolerance`` and ``max_samples``),
-        ``"adaptive"`` (a dimension-adaptive sparse grid to ``tolerance`` within ``max_runs``)
-        or a sampling method ``"montecarlo"``, ``"lhs"``, ``"sobol"`` (with ``samples`` and
-        ``seed``; ``fit="regression"`` adds a least-squares chaos fit of total order
-        ``order``). The keys are those of the config's ``method:`` (``docs/config.md``).
+        The ``method:`` section (a design's ``Settings``, e.g.
+        ``CollocationSettings(kind="collocation", order=3)``) or its keys as a mapping
+        (``{"kind": "lhs", "samples": 256}``); default: tensor collocation of order 3. The keys
+        are those of the config (``docs/config.md``).
+    execution:
+        The ``execution:`` section (:class:`pcmb.config.schema.ExecutionSpec`) or its keys:
+        jobs, backend, address, on_failure, retries, chunk_size, nominal_run, timeout.
+    analysis:
+        Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
+        can still be computed later with :func:`pcmb.analysis.statistics.analyse`).
+    diagnostics:
+        The ``diagnostics:`` section (:class:`pcmb.config.schema.DiagnosticsSpec`) or its
+        keys: the accepted error (``tolerance``) and the outputs judged (``outputs``).
+    address:
+        With backend dask: a ``distributed.Client`` or ``Cluster`` of your own, which pcmb
+        uses and leaves open (or an address; overrides ``execution.address``).
+        ``address_key`` (an attribute) names where the address came from in errors.
     outputs:
         Outputs to keep (default: all the model declares).
     params:
         Nominal parameters for a model class or function (ignored for a factory).
     name:
         Free text stored in the result.
-    jobs, backend, chunk_size, timeout:
-        Execution settings (see :func:`pcmb.run.executor.run_nodes`).
-    address:
-        With ``backend="dask"``: the address of a running dask scheduler
-        (``"tcp://host:8786"``; refused with :class:`~pcmb.errors.ClusterError` when none
-        answers within seconds), or a ``distributed.Client`` or ``Cluster`` (e.g.
-        ``LocalCluster``) of your own, which pcmb uses and leaves open; default: a local
-        cluster pcmb starts and closes. ``address_key`` (an attribute) names where the address
-        came from in that error: ``address``, ``execution.address`` or ``--address``.
-    nominal_run:
-        Whether to make the deterministic run at the nominal parameters (one more model
-        run, stored as ``nominal``; ``execution.nominal_run``).
-    on_failure, retries:
-        Failure policy: ``"abort"`` (raise :class:`ModelRunError` naming every failed
-        node), ``"retry"`` (re-run failed nodes ``retries`` times, then abort) or
-        ``"regress"`` (least-squares refit on the surviving nodes, recorded as a warning).
     nominal:
         Values of the uncertain inputs for the deterministic nominal run. An input not
         given here takes its value in ``params`` when there is one (for a config: the
         ``model.params`` value), else its distribution's mean.
-    analysis:
-        Quantile bands, PDFs and spectra to compute after recovery (``None``: none; they
-        can still be computed later with :func:`pcmb.analysis.statistics.analyse`).
-    validation:
-        Held-out runs at inputs drawn from their distribution (seed ``seed`` + 7919) that
-        check a chaos expansion (``method.validation``; 0: none; see
-        :mod:`pcmb.analysis.diagnostics`).
-    diagnostics_tolerance:
-        Accepted error of an expansion, relative to the output's largest standard deviation
-        (``diagnostics.tolerance``): the diagnostics' verdict.
-    diagnosed:
-        Outputs the diagnostics judge (``diagnostics.outputs``; default: all), e.g. to leave
-        out a residual that is zero to round-off, whose spread is noise.
     derived:
         Figures of merit computed from the time outputs after the runs, each a scalar
         output: name -> :class:`~pcmb.analysis.derived.DerivedOutput`, or a mapping as in
         the config's ``derived:`` (``{"x1_peak": {"max_abs": "x1"}}``).
+    **deprecated:
+        The keyword arguments of pcmb 0.x (``order=``, ``samples=``, ``jobs=``,
+        ``backend=``, ``diagnostics_tolerance=``, ``method="lhs"``, ...; :data:`DEPRECATED`
+        says where each goes), accepted for one release with a ``DeprecationWarning``.
 
     Raises
     ------
     UsageError
-        Bad arguments (no inputs, a non-increasing grid, a sampling method without samples,
-        an unknown method, a nominal value for an unknown input), named by argument.
+        Bad arguments (no inputs, a non-increasing grid, a setting the method's section
+        refuses or its design cannot use, a nominal value for an unknown input), named by
+        their key.
     """
 
     def __init__(
@@ -199,41 +254,24 @@ class Study:
         inputs: Mapping[str, Distribution | RandomProcess],
         times: ArrayLike,
         *,
-        order: int | Mapping[str, int] | Literal["auto"] = 3,
-        basis: str | None = None,
-        method: str = "collocation",
-        samples: int | None = None,
-        seed: int = 0,
-        fit: str = "none",
-        grid: str = "tensor",
-        level: int | None = None,
-        rule: str = "auto",
-        elements: Mapping[str, Sequence[float]] | str | None = None,
-        max_elements: int = 16,
-        selection: str = "lars",
-        sampling: str = "sobol",
-        q: float = 1.0,
-        tolerance: float | None = None,
-        max_samples: int | None = None,
-        max_runs: int | None = None,
+        method: MethodSection | Mapping[str, Any] | None = None,
+        execution: ExecutionSpec | Mapping[str, Any] | None = None,
+        analysis: AnalysisSettings | None = None,
+        diagnostics: DiagnosticsSpec | Mapping[str, Any] | None = None,
+        address: Any = None,
         outputs: Sequence[str] | None = None,
         params: Mapping[str, Any] | None = None,
         name: str = "study",
-        jobs: int | None = None,
-        backend: str = "loky",
-        address: Any = None,
-        chunk_size: int | None = None,
-        timeout: float | None = None,
-        nominal_run: bool = True,
-        on_failure: FailurePolicy = "abort",
-        retries: int = 1,
         nominal: Mapping[str, float] | None = None,
-        analysis: AnalysisSettings | None = None,
-        validation: int = VALIDATION,
-        diagnostics_tolerance: float = TOLERANCE,
-        diagnosed: Sequence[str] | None = None,
         derived: Mapping[str, DerivedOutput | Mapping[str, Any]] | None = None,
+        **deprecated: Any,
     ):
+        if isinstance(method, str) or deprecated:
+            kind = method if isinstance(method, str) else None
+            current = None if isinstance(method, str) else method
+            method, execution, diagnostics = _from_keywords(
+                kind, execution, diagnostics, deprecated, current
+            )
         #: What the model receives, by name: distributions and random processes.
         self.model_inputs = _check_inputs(inputs)
         self.processes = {
@@ -246,31 +284,19 @@ class Study:
         self.times = np.asarray(times, dtype=float)
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
             raise _usage("times", "must be a non-empty increasing 1-D grid")
-        self.order = order
-        self.basis = basis
-        self.method = method
-        self.samples = samples
-        self.seed = seed
-        self.fit = fit
-        self.method_options = {
-            "grid": grid,
-            "level": level,
-            "rule": rule,
-            "elements": elements,
-            "max_elements": max_elements,
-            "selection": selection,
-            "sampling": sampling,
-            "q": q,
-            "tolerance": tolerance,
-            "max_samples": max_samples,
-            "max_runs": max_runs,
-        }
-        self.name = name
-        self.jobs, self.backend, self.address = jobs, backend, address
+        self.method: MethodSection = _section("method", MethodSpec, method or DEFAULT_METHOD)
+        if isinstance(address, str):  # an address is an execution setting, checked there
+            execution, address = {**_dump(execution), "address": address}, None
+        self.execution: ExecutionSpec = _section("execution", ExecutionSpec, execution or {})
+        #: ``execution.memory`` (:class:`~pcmb.run.memory.MemoryBudget`).
+        self.memory = parse_memory(self.execution.memory)
+        self.diagnostics: DiagnosticsSpec = _section(
+            "diagnostics", DiagnosticsSpec, diagnostics or {}
+        )
+        self.analysis = analysis
+        self.address = self.execution.address if address is None else address
         self.address_key = "address"
-        self.chunk_size, self.timeout = chunk_size, timeout
-        self.nominal_run = nominal_run
-        self.on_failure, self.retries = on_failure, retries
+        self.name = name
         self.params = dict(params or {})
         if is_function_model(model):
             # A per-point function receives every parameter by name: uncertain inputs it was
@@ -287,94 +313,41 @@ class Study:
         self.model_factory: ModelFactory = model_factory(model, self.params, _tuple(outputs))
         self.outputs = _tuple(outputs)
         self.nominal = dict(nominal or {})
-        self.analysis = analysis
-        self.validation, self.diagnostics_tolerance = validation, diagnostics_tolerance
-        self.diagnosed = _tuple(diagnosed)
         self.derived = _derived(derived or {})
         self.fingerprint_extra = ""
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
             raise _usage("nominal", f"values given for unknown input(s) {unknown}")
-        choices = {
-            "method": (method, METHOD_KINDS),
-            "on_failure": (on_failure, FAILURE_POLICIES),
-            "backend": (backend, tuple(BACKENDS)),
-        }
-        for key, (value, allowed) in choices.items():
-            if value not in allowed:
-                raise _usage(key, f"expected one of {', '.join(allowed)}, got {value!r}")
         self.design = self._design()
 
-    def _uses_order(self) -> bool:
-        """Whether the method takes ``order`` (a Smolyak grid takes a level instead)."""
-        if self.method == "collocation":
-            return self.method_options["grid"] == "tensor"
-        return self.method in ("regression", "galerkin") or self.fit != "none"
-
     def _design(self) -> NodeDesign:
-        settings = MethodSettings(
-            kind=self.method,
-            orders=self.orders if self._uses_order() else None,
-            basis=self.basis,
-            samples=self.samples,
-            seed=self.seed,
-            fit=self.fit,
-            **self.method_options,
-            diagnostics_tolerance=self.diagnostics_tolerance,
-        )
+        settings = self.method.settings(self.orders, self.diagnostics.tolerance)
         try:
             return make_design(self.inputs, settings)
         except ValueError as error:
             key, _, message = str(error).partition(": ")
-            raise _usage(key.removeprefix("method."), message) from None
+            raise _usage(key, message) from None
 
     # -- construction from a config -----------------------------------------------------------
 
     @classmethod
     def from_config(cls, config: StudyConfig) -> Study:
         """The study a validated config describes (same code path as ``pcmb run``)."""
-        method = config.method
-        execution = config.execution
         study = cls(
             config.model_factory(),
             config.study_inputs,
             config.times,
-            order=_order(config),
-            basis=method.basis,
-            method=method.kind,
-            samples=method.samples,
-            seed=method.seed,
-            fit=method.fit,
-            grid=method.grid,
-            level=method.level,
-            rule=method.rule,
-            elements=method.elements,
-            max_elements=method.max_elements,
-            selection=method.selection,
-            sampling=method.sampling,
-            q=method.q,
-            tolerance=method.tolerance,
-            max_samples=method.max_samples,
-            max_runs=method.max_runs,
+            method=config.method,
+            execution=config.execution,
+            analysis=config.analysis_settings,
+            diagnostics=config.diagnostics,
             outputs=config.output_names,
             name=config.name,
-            jobs=execution.jobs,
-            backend=execution.backend,
-            address=execution.address,
-            chunk_size=execution.chunk_size,
-            timeout=execution.timeout,
-            nominal_run=execution.nominal_run,
-            on_failure=execution.on_failure,
-            retries=execution.retries,
             nominal={
                 name: float(config.model.params[name])
                 for name in config.input_names
                 if name in config.model.params
             },
-            analysis=config.analysis_settings,
-            validation=method.validation,
-            diagnostics_tolerance=config.diagnostics.tolerance,
-            diagnosed=config.diagnostics.outputs,
             derived=config.derived_outputs,
         )
         study.fingerprint_extra = _run_settings(config)
@@ -385,8 +358,10 @@ class Study:
         """A copy of this study with some constructor arguments changed, checked again.
 
         For example the Monte Carlo twin of a collocation study,
-        ``study.replace(method="montecarlo", samples=2000, seed=1)``, runs the same model,
-        inputs, grid, executor and analysis.
+        ``study.replace(method={"kind": "montecarlo", "samples": 2000, "seed": 1})``, runs the
+        same model, inputs, grid, executor and analysis. The keywords of pcmb 0.x are
+        accepted too (deprecated): ``study.replace(jobs=2)`` changes one key of a section;
+        ``method="lhs"`` keeps the keys of the current method the new kind takes.
 
         Raises
         ------
@@ -396,39 +371,38 @@ class Study:
         arguments = {
             "inputs": self.model_inputs,
             "times": self.times,
-            "order": self.order,
-            "basis": self.basis,
             "method": self.method,
-            "samples": self.samples,
-            "seed": self.seed,
-            "fit": self.fit,
-            **self.method_options,
+            "execution": self.execution,
+            "analysis": self.analysis,
+            "diagnostics": self.diagnostics,
             "outputs": self.outputs,
             "name": self.name,
-            "jobs": self.jobs,
-            "backend": self.backend,
-            "address": self.address,
-            "chunk_size": self.chunk_size,
-            "timeout": self.timeout,
-            "nominal_run": self.nominal_run,
-            "on_failure": self.on_failure,
-            "retries": self.retries,
             "params": self.params,
             "nominal": self.nominal,
-            "analysis": self.analysis,
-            "validation": self.validation,
-            "diagnostics_tolerance": self.diagnostics_tolerance,
-            "diagnosed": self.diagnosed,
             "derived": self.derived,
         }
-        unknown = sorted(set(changes) - set(arguments))
+        if self.address is not self.execution.address:
+            arguments["address"] = self.address
+        old = {key: changes.pop(key) for key in list(changes) if key in DEPRECATED}
+        if isinstance(changes.get("method"), str):
+            old["method"] = changes.pop("method")
+        unknown = sorted(set(changes) - set(arguments) - {"address"})
         if unknown:
             raise UsageError(f"unknown argument(s) {unknown}", source="Study.replace")
+        arguments.update(changes)
+        if old:
+            arguments["method"], arguments["execution"], arguments["diagnostics"] = _from_keywords(
+                old.pop("method", None),
+                arguments["execution"],
+                arguments["diagnostics"],
+                old,
+                arguments["method"],
+            )
         if "inputs" in changes and "nominal" not in changes:
             arguments["nominal"] = {k: v for k, v in self.nominal.items() if k in changes["inputs"]}
-        study = Study(self.model_factory, **{**arguments, **changes})
+        study = Study(self.model_factory, **arguments)
         study.fingerprint_extra = self.fingerprint_extra
-        if "address" not in changes:
+        if "address" not in changes and "address" not in old:
             study.address_key = self.address_key
         return study
 
@@ -439,19 +413,19 @@ class Study:
         return tuple(self.inputs)
 
     @property
-    def orders(self) -> tuple[int, ...] | Literal["auto"]:
-        """Chaos order per input, germ order (``"auto"``: chosen in rounds)."""
-        if isinstance(self.order, str):
-            if self.order != "auto":
-                raise _usage("order", f"expected an int, a mapping or 'auto', got {self.order!r}")
-            return "auto"
-        if isinstance(self.order, Mapping):
-            order = per_germ(self.order, self.model_inputs)
+    def orders(self) -> tuple[int, ...] | Literal["auto"] | None:
+        """Chaos order per input, germ order (``"auto"``: chosen in rounds; ``None``: the
+        method takes no order)."""
+        order = getattr(self.method, "order", None)
+        if order is None or order == "auto":
+            return order
+        if isinstance(order, Mapping):
+            order = per_germ(order, self.model_inputs)
             missing = set(self.inputs) - set(order)
             if missing:
-                raise _usage("order", f"no order given for input(s) {sorted(missing)}")
+                raise _usage("method.order", f"no order given for input(s) {sorted(missing)}")
             return tuple(int(order[name]) for name in self.inputs)
-        return (int(self.order),) * len(self.inputs)
+        return (int(order),) * len(self.inputs)
 
     def nominal_params(self) -> dict[str, float]:
         """Values of the uncertain inputs in the nominal run: given, else ``params``, else mean."""
@@ -510,7 +484,12 @@ class Study:
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
-        settings = [list(outputs), self.chunk_size, list(self.input_names), self.fingerprint_extra]
+        settings = [
+            list(outputs),
+            self.execution.chunk_size,
+            list(self.input_names),
+            self.fingerprint_extra,
+        ]
         if self.processes:  # by their settings: they make the modes, whose bits vary by BLAS
             settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
@@ -547,7 +526,7 @@ class Study:
         chaos = self.design.record().basis is not None
         return MemoryEstimate(
             nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.validation if chaos else 0,
+            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
             draws=RANGE_DRAWS if chaos else 0,
@@ -573,7 +552,7 @@ class Study:
         """
         if pool is None:
             # The workers that checked the config build it (or have it built already).
-            with checking_pool(self.backend, self.jobs) as own:
+            with checking_pool(self.execution.backend, self.execution.jobs) as own:
                 return self.check_model(own)
         return self._outputs(describe_model(self.model_factory, pool))
 
@@ -663,9 +642,13 @@ class Study:
             raise _usage("fresh", "resume continues the journal, fresh discards it: give one")
         nodes = self.node_set()
         if pool is None:
-            tasks = len(chunk_bounds(nodes.size, self.chunk_size)) if nodes.size else 1
+            tasks = len(chunk_bounds(nodes.size, self.execution.chunk_size)) if nodes.size else 1
             with open_pool(
-                self.backend, self.jobs, self.address, tasks=tasks, key=self.address_key
+                self.execution.backend,
+                self.execution.jobs,
+                self.address,
+                tasks=tasks,
+                key=self.address_key,
             ) as own:
                 return self.run(
                     output,
@@ -689,7 +672,12 @@ class Study:
         # Before any node runs and before a journal exists: a run that cannot fit in memory and
         # an output that cannot be written (a folder, a read-only or full file system) are
         # found now.
-        check_memory(self.memory_estimate(nodes.size, outputs, facts.axes))
+        _, streaming = check_memory(
+            self.memory_estimate(nodes.size, outputs, facts.axes),
+            self.memory,
+            inputs=len(self.inputs),
+            streams=self.why_not_streamed(output),
+        )
         journal_dir = None
         if output is not None:
             estimate = self.size_estimate(nodes.size, outputs, facts.axes)
@@ -717,20 +705,27 @@ class Study:
                 journal, journal_dir = None, None
                 found = self._solve(nodes, outputs, pool)
             else:
-                runs, journal = self._run_nodes(nodes, facts, outputs, pool, journal_dir, progress)
+                runs, journal = self._run_nodes(
+                    nodes, facts, outputs, pool, journal_dir, progress, keep=streaming is None
+                )
                 nodes, runs = self._run_rounds(
                     nodes, runs, facts, outputs, pool, journal_dir, progress
                 )
+            first, most = self.held_out_runs(nodes.size)
             held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress
+                facts, outputs, pool, journal_dir, progress, first
             )
         except PcmbError:
             if early is not None:
                 early.result()  # the nominal run sent ahead ends too: no run is left half done
             raise
         nominal = early.result() if early is not None else None
-        if self.nominal_run and nominal is None:
+        if self.execution.nominal_run and nominal is None:
             nominal = self._run_nominal(facts, outputs, pool)
+        if streaming is not None:
+            return self._finish_streamed(
+                nodes, runs, journal, nominal, facts, outputs, streaming, output, provenance, stream
+            )
         if not intrusive:
             runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
             axes = {
@@ -741,7 +736,16 @@ class Study:
             with phase(f"{fitting} ({self.design.record().label})", stream):
                 found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
         with phase("diagnostics", stream):
-            result = self._diagnosed(self._with_nominal(found, nominal), held_out, held_out_failed)
+            found = self._with_nominal(found, nominal)
+            result = self._diagnosed(found, held_out, held_out_failed)
+            wanted = max(map(more_runs, result.diagnostics.values()), default=0)
+            if held_out is not None and min(wanted, most - first) > 0:
+                more, more_failed = self._run_held_out(
+                    facts, outputs, pool, journal_dir, progress, min(wanted, most - first), 1
+                )
+                held_out = held_out.joined(self._with_derived(more))
+                held_out_failed = (*held_out_failed, *more_failed)
+                result = self._diagnosed(found, held_out, held_out_failed)
         if self.analysis is not None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
@@ -757,6 +761,82 @@ class Study:
                 journal.remove()
         for record in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
             warnings.warn(str(record), PcmbWarning, stacklevel=2)
+        return result
+
+    def why_not_streamed(self, output: str | Path | None) -> str | None:
+        """Why this study cannot stream its runs (``None``: it can): only a sampling design
+        without a fit, writing a file, without derived outputs, has statistics that
+        accumulate run by run."""
+        design = self.design.record()
+        if design.grid != "random" or design.basis is not None:
+            fit = "" if design.grid != "random" else " with fit: regression"
+            return f"method.kind {design.kind}{fit} needs every run at once"
+        if self.derived:
+            return "derived outputs are computed from every run at once"
+        if output is None:
+            return "without an output file its runs are kept in memory"
+        return None
+
+    def _finish_streamed(
+        self,
+        nodes: NodeSet,
+        runs: RunResult,
+        journal: Journal,
+        nominal: RunResult | None,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        plan: StreamPlan,
+        output: str | Path,
+        provenance: Mapping[str, str] | None,
+        stream: Any,
+    ) -> StudyResult:
+        """The end of a streamed study (:meth:`why_not_streamed`): one pass over the journal
+        in node order accumulates every output's mean and std block by block
+        (:class:`~pcmb.analysis.running_moments.RunningMoments`) and a reservoir of runs
+        (:class:`~pcmb.analysis.reservoir.Reservoir`) for the warnings, quantiles, PDFs and
+        spectra; a second pass writes the runs to the file (:func:`pcmb.store.write_streamed`).
+        The result holds the statistics and no runs (``values`` without rows)."""
+        from pcmb.store import write_streamed  # h5py only when a file is written
+
+        layout = Layout.of(outputs, self.times, facts.axes)
+        widths = dict(zip(outputs, layout.widths, strict=True))
+        with phase(f"statistics of {nodes.size} streamed runs", stream):
+            moments, reservoir = stream_statistics(
+                journal.chunks(), widths, plan.block_rows, plan.reservoir_rows, self.method.seed
+            )
+        axes = {name: axis for name, axis in facts.axes.items() if name in outputs}
+        kept = reservoir.index
+        sample_runs = RunResult(
+            values=layout.split(reservoir.rows),
+            status=np.full(kept.size, Status.OK, dtype=np.int8),
+            failures=(),
+            seconds=runs.seconds,
+            resumed=runs.resumed,
+        )
+        sample_nodes = NodeSet(nodes.distributions, nodes.nodes[kept], nodes.params[kept])
+        sample = self._with_nominal(
+            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes), axes=axes),
+            nominal,
+        )
+        result = dataclasses.replace(
+            sample,
+            germ=nodes.nodes,
+            params=nodes.params,
+            status=runs.status,
+            failures=runs.failures,
+            warnings=(*_nodes_failed(runs.failures, nodes.size), *sample.warnings),
+            values={name: np.empty((0, width)) for name, width in widths.items()},
+            moments={name: np.stack([m.mean, m.std()]) for name, m in moments.items()},
+        )
+        if self.analysis is not None:
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                found = analyse(sample, self.analysis)
+            result = dataclasses.replace(result, analysis=found)
+        with phase(f"writing {output}", stream):
+            write_streamed(output, result, journal.chunks(), provenance=provenance or {})
+        journal.remove()
+        for record in result.alerts:
+            warnings.warn(str(record), PcmbWarning, stacklevel=3)
         return result
 
     def _recover_by_axis(
@@ -873,11 +953,13 @@ class Study:
         chunk_size: int | None = None,
         *,
         proven: bool = False,
+        keep: bool = True,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
         be removed once the result is written); raise by the failure policy. ``chunk_size``
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
-        :func:`~pcmb.run.executor.run_nodes`)."""
+        :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the
+        journal only (a streamed study)."""
         self._check_finite(nodes)  # the held-out runs' and later rounds' nodes too
         journal = None
         fresh_journal = False
@@ -892,18 +974,17 @@ class Study:
                 model_params(self.model_inputs, nodes.params),
                 self.times,
                 outputs,
-                jobs=self.jobs,
-                backend=self.backend,
+                execution=self.execution,
                 address=self.address,
-                chunk_size=chunk_size or self.chunk_size,
-                retries=self.retries if self.on_failure == "retry" else 0,
-                timeout=self.timeout,
+                chunk_size=chunk_size,
+                retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
                 journal=journal,
                 progress=progress,
-                stop_on_failure=self.on_failure == "abort",
+                stop_on_failure=self.execution.on_failure == "abort",
                 pool=pool,
                 facts=facts,
                 proven=proven,
+                keep_values=keep,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -911,7 +992,7 @@ class Study:
             if journal is not None and fresh_journal:
                 journal.remove()
             raise
-        if runs.failures and self.on_failure != "regress":
+        if runs.failures and self.execution.on_failure != "regress":
             finished = int(np.sum(runs.status == Status.OK))
             kept = (
                 f"; the {finished} finished node(s) are kept in {journal.directory}"
@@ -928,9 +1009,19 @@ class Study:
             raise ModelRunError(
                 runs.failures,
                 f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
-                f"(on_failure: {self.on_failure}){kept}{stopped}:",
+                f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
             )
         return runs, journal
+
+    def held_out_runs(self, design_runs: int) -> tuple[int, int]:
+        """(first batch, most in all) of the held-out runs that check an expansion of
+        ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
+        at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
+        in all, the rest drawn only where the verdict is undecided."""
+        if self.method.validation is not None:
+            return self.method.validation, self.method.validation
+        most = held_out_budget(design_runs)
+        return min(FIRST_BATCH, most), most
 
     def _run_held_out(
         self,
@@ -939,32 +1030,40 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
+        count: int,
+        batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
-        """The held-out runs that check a chaos expansion (none for plain sampling), journaled
-        in the journal's ``validation`` folder, under the failure policy; and a
-        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
-        if not self.validation or self.design.record().basis is None:
+        """``count`` held-out runs that check a chaos expansion (none for plain sampling),
+        batch ``batch`` of the check (seed ``seed + 7919 + batch``), journaled in the
+        journal's ``validation`` folder (``validation-<batch>`` after the first), under the
+        failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
+        leaves them out)."""
+        if not count or self.design.record().basis is None:
             return None, ()
-        seed = self.seed + HELD_OUT_SEED
-        # A Latin hypercube: each input's range is met evenly, which steadies the estimated
-        # errors of the statistics against a few runs missing where the error sits.
-        batch = random_nodes(tuple(self.inputs.values()), self.validation, "lhs", seed)
-        folder = None if journal_dir is None else journal_dir / "validation"
+        seed = self.method.seed + HELD_OUT_SEED + batch
+        # A Latin hypercube, normal inputs widened into their tails (weighted back): each
+        # input's range is met evenly, which steadies the estimated errors of the statistics
+        # against a few runs missing where the error sits.
+        draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+        folder = None
+        if journal_dir is not None:
+            folder = journal_dir / ("validation" if batch == 0 else f"validation-{batch}")
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
-        halves = self.chunk_size or -(-self.validation // 2)
+        halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            batch, facts, outputs, pool, folder, progress, halves, proven=proven
+            draws, facts, outputs, pool, folder, progress, halves, proven=proven
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
-        held_out = HeldOut(seed, batch.nodes, batch.params, found.values, found.status == Status.OK)
+        ok = found.status == Status.OK
+        held_out = HeldOut(seed, draws.nodes, draws.params, found.values, ok, weights)
         if not found.failures:
             return held_out, ()
         failed = WarningRecord(
             "nodes-failed",
-            f"{len(found.failures)} of {batch.size} held-out run(s) failed and were left out of "
+            f"{len(found.failures)} of {draws.size} held-out run(s) failed and were left out of "
             f"the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
         )
         return held_out, (failed,)
@@ -984,7 +1083,7 @@ class Study:
             if held_out is None or not held_out.ok.any():
                 return dataclasses.replace(result, held_out=held_out, warnings=warnings)
             germ, values, ok = held_out.germ, held_out.values, held_out.ok
-        judged = self.diagnosed or tuple(result.expansions)
+        judged = self.diagnostics.outputs or tuple(result.expansions)
         found = diagnose_all(
             {name: e for name, e in result.expansions.items() if name in judged},
             germ,
@@ -992,7 +1091,7 @@ class Study:
             ok,
             result.times,
             held_out,
-            self.diagnostics_tolerance,
+            self.diagnostics.tolerance,
             axes=result.axes,
             nominal=result.nominal,
             budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
@@ -1011,7 +1110,7 @@ class Study:
         """The nominal run sent to the pool ahead of the nodes, to run beside them
         (:func:`~pcmb.run.executor.start_run`); ``None`` if not wanted, or with a timeout,
         when chunks must not wait behind it (it runs after them, :meth:`_run_nominal`)."""
-        if not self.nominal_run or self.timeout is not None:
+        if not self.execution.nominal_run or self.execution.timeout is not None:
             return None
         return start_run(self.model_factory, self._nominal_node(), self.times, outputs, pool, facts)
 
@@ -1026,8 +1125,8 @@ class Study:
             self._nominal_node(),
             self.times,
             outputs,
-            backend=self.backend,
-            timeout=self.timeout,
+            execution=self.execution,
+            address=self.address,
             progress=False,
             pool=pool,
             facts=facts,
@@ -1062,15 +1161,7 @@ class Study:
         """Expansions of every output: the design recovers the outputs of each axis together
         (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
-        warnings: list[WarningRecord] = []
-        if runs.failures:
-            warnings.append(
-                WarningRecord(
-                    "nodes-failed",
-                    f"{len(runs.failures)} of {nodes.size} node(s) failed and were left out "
-                    f"(on_failure: regress): " + "; ".join(str(f) for f in runs.failures),
-                )
-            )
+        warnings = _nodes_failed(runs.failures, nodes.size)
         try:
             recovery = self._recover_by_axis(nodes, runs.values, ok, axes)
         except IllPosedError as error:
@@ -1099,6 +1190,19 @@ class Study:
         )
 
 
+def _nodes_failed(failures: Sequence[NodeFailure], total: int) -> list[WarningRecord]:
+    """The ``nodes-failed`` record of the nodes left out (none if none failed)."""
+    if not failures:
+        return []
+    return [
+        WarningRecord(
+            "nodes-failed",
+            f"{len(failures)} of {total} node(s) failed and were left out "
+            f"(on_failure: regress): " + "; ".join(str(f) for f in failures),
+        )
+    ]
+
+
 def _by_axis(
     values: Mapping[str, Any], axes: Mapping[str, OutputAxis | None]
 ) -> list[tuple[OutputAxis | None, bool, dict[str, Any]]]:
@@ -1113,7 +1217,7 @@ def _by_axis(
 
 #: ``execution:`` keys that cannot change a node's values (left out of the fingerprint).
 _EXECUTION_ONLY = frozenset(
-    {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run"}
+    {"jobs", "backend", "address", "on_failure", "retries", "timeout", "nominal_run", "memory"}
 )
 #: Top-level config keys that cannot change a node's values.
 _NOT_RUN = frozenset({"name", "analysis", "diagnostics", "output", "execution", "derived"})
@@ -1130,14 +1234,6 @@ def _run_settings(config: StudyConfig) -> str:
     # The held-out runs have their own journal folder, fingerprinted by their own nodes.
     data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
-
-
-def _order(config: StudyConfig) -> int | dict[str, int] | Literal["auto"]:
-    """The ``order`` argument of a config's study (0 for a method without one)."""
-    orders = config.orders
-    if orders is None:
-        return 0
-    return orders if orders == "auto" else dict(zip(config.input_names, orders, strict=True))
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

@@ -90,9 +90,8 @@ class Model:
             {name: points[:, i] for i, name in enumerate(self.names)},
             self.config.times,
             self.outputs,
-            jobs=execution.jobs,
-            backend=execution.backend,
             stop_on_failure=True,
+            execution=execution,
         )
         seconds = time.perf_counter() - start
         if found.failures:

@@ -27,6 +27,7 @@ from pcmb.adapters.python import PythonModelFactory
 from pcmb.chaos import inputs
 from pcmb.cli import main as cli_main
 from pcmb.config import StudyConfig, config_json_schema, load_config, validate_config
+from pcmb.designs import METHOD_KINDS, method_section
 from pcmb.errors import ConfigError
 
 DATA = Path(__file__).parent / "data"
@@ -47,7 +48,6 @@ method:
   kind: collocation
   order: 3
   basis: tensor
-  seed: 0
 execution:
   jobs: 2
   backend: loky
@@ -93,7 +93,6 @@ def test_defaults():
     text = BASE.split("execution:")[0].replace("  basis: tensor\n", "")
     config = load(text)
     assert config.method.basis is None  # the method's own default: tensor for collocation
-    assert config.method.fit == "none"
     assert config.output is None
     execution = config.execution
     assert (execution.jobs, execution.backend, execution.address) == (None, "loky", None)
@@ -143,11 +142,11 @@ def test_numbers_in_any_notation(written, value):
 
 def test_yaml_12_plain_scalars():
     # YAML 1.1 would read `on` as True, 0o17 as a string, 2024-01-02 as a date, 1:30 as 90.
-    text = BASE.replace("name: decay study", "name: 2024-01-02").replace("seed: 0", "seed: 0o17")
+    text = BASE.replace("name: decay study", "name: 2024-01-02").replace("order: 3", "order: 0o17")
     text = text.replace("points: 21", "points: 0x15")
     config = load(text)
     assert config.name == "2024-01-02"
-    assert config.method.seed == 15
+    assert config.method.order == 15
     assert config.time.points == 21
     with pytest.raises(ConfigError, match="name: expected a string, found 90"):
         load(BASE.replace("name: decay study", "name: 90"))
@@ -233,11 +232,11 @@ BROKEN = [
     ),
     (
         "duplicate-key",
-        "  seed: 0",
-        "  seed: 0\n  seed: 1",
-        "method.seed",
-        "seed: 1",
-        "duplicate key 'seed' (first at line 15, again at line 16)",
+        "  order: 3",
+        "  order: 3\n  order: 4",
+        "method.order",
+        "order: 4",
+        "duplicate key 'order' (first at line 13, again at line 14)",
     ),
     (
         "bad-dist",
@@ -293,7 +292,7 @@ BROKEN = [
     ("retries<0", "retries: 1", "retries: -1", "execution.retries", "retries:", ">= 0"),
     (
         "samples-missing",
-        "kind: collocation",
+        "kind: collocation\n  order: 3\n  basis: tensor",
         "kind: montecarlo",
         "method.samples",
         "method:",
@@ -305,11 +304,11 @@ BROKEN = [
         "kind: collocation\n  fit: regression",
         "method.fit",
         "fit:",
-        "expected none: collocation recovers by projection",
+        "not a setting of kind collocation (it belongs to montecarlo, lhs, sobol",
     ),
     (
         "fit-needs-order",
-        "kind: collocation\n  order: 3",
+        "kind: collocation\n  order: 3\n  basis: tensor",
         "kind: lhs\n  fit: regression\n  samples: 10",
         "method.order",
         "method:",
@@ -392,13 +391,13 @@ BROKEN = [
     ),
     (
         "unsupported-tag",
-        "seed: 0",
-        "seed: !!binary AAAA",
-        "method.seed",
-        "seed:",
+        "order: 3",
+        "order: !!binary AAAA",
+        "method.order",
+        "order:",
         "unsupported YAML tag",
     ),
-    ("syntax-error", "  basis: tensor", "  basis: [tensor", "", "seed:", "YAML syntax error"),
+    ("syntax-error", "  basis: tensor", "  basis: [tensor", "", "execution:", "YAML syntax error"),
     (
         "bind-entry-typo",
         "kind: python\n  entry: toy_models.py:Decay\n  params: {k: 2.0, y0: 1.0}\n  outputs: [y]",
@@ -461,7 +460,7 @@ def test_every_problem_is_reported_at_once():
     with pytest.raises(ConfigError) as exc:
         load(text)
     assert [p.path for p in exc.value.problems] == ["inputs.k.low", "execution.jobs", "output"]
-    assert [p.line for p in exc.value.problems] == [9, 17, 21]
+    assert [p.line for p in exc.value.problems] == [9, 16, 20]
 
 
 @pytest.mark.slow
@@ -876,3 +875,58 @@ def test_the_time_forms_give_their_grids():
         )
     )
     np.testing.assert_allclose(logged.times, [0.01, 0.1, 1.0, 10.0, 100.0], rtol=1e-14)
+
+
+def test_a_key_of_another_method_is_refused_at_its_key_naming_the_methods_that_take_it():
+    with pytest.raises(ConfigError) as exc:
+        load(BASE.replace("  basis: tensor\n", "  basis: tensor\n  samples: 64\n"))
+    # The kinds that take samples, from the registry (a new sampling design joins the list).
+    takers = [
+        k for k in METHOD_KINDS if "samples" in type(method_section({"kind": k})).model_fields
+    ]
+    assert {"montecarlo", "lhs", "sobol", "regression"} <= set(takers)
+    assert [(p.path, p.line, p.message) for p in exc.value.problems] == [
+        (
+            "method.samples",
+            15,
+            f"not a setting of kind collocation (it belongs to {', '.join(takers)})",
+        )
+    ]
+    with pytest.raises(ConfigError) as exc:
+        load(
+            BASE.replace("kind: collocation\n  order: 3\n  basis: tensor", "kind: lhs\n  level: 2")
+        )
+    assert [(p.path, p.message) for p in exc.value.problems] == [
+        ("method.level", "not a setting of kind lhs (it belongs to collocation)")
+    ]
+
+
+@pytest.mark.parametrize(
+    "method",
+    [
+        "collocation\n  order: 3",
+        "adaptive\n  tolerance: 0.01",
+        "regression\n  order: 2\n  samples: 20",
+    ],
+)
+def test_every_design_takes_the_seed_of_its_held_out_runs(method):
+    """``seed`` seeds the held-out check of every design (the SPEC's example sets it beside
+    ``kind: collocation``), so no design refuses it."""
+    config = load(
+        BASE.replace("kind: collocation\n  order: 3\n  basis: tensor", f"kind: {method}\n  seed: 7")
+    )
+    assert config.method.seed == 7
+
+
+def test_the_schema_shows_method_as_a_union_keyed_by_kind_each_with_its_own_keys():
+    schema = config_json_schema()
+    method = schema["properties"]["method"]
+    assert method["discriminator"]["propertyName"] == "kind"
+    branches = {
+        kind: schema["$defs"][ref.rpartition("/")[2]]["properties"]
+        for kind, ref in method["discriminator"]["mapping"].items()
+    }
+    assert set(branches) == set(METHOD_KINDS)
+    assert "samples" in branches["lhs"] and "samples" not in branches["collocation"]
+    assert "level" in branches["collocation"] and "level" not in branches["regression"]
+    assert set(branches["linearization"]) == {"kind", "validation", "seed"}

@@ -17,10 +17,10 @@ import pytest
 import pcmb
 from pcmb.analysis.diagnostics import (
     TOLERANCE,
-    VALIDATION,
     HeldOut,
     HeldOutCheck,
     diagnose,
+    held_out_draws,
     holdout_error,
     out_of_range,
     range_checks,
@@ -38,7 +38,8 @@ from pcmb.errors import PcmbWarning
 from pcmb.references import double_well
 
 TIMES = np.linspace(0.0, 1.0, 101)
-HELD_OUT = VALIDATION
+#: Held-out runs of the checks below (a fixed ``method.validation``).
+HELD_OUT = 32
 
 
 def chaos(function, orders, index=None):
@@ -68,13 +69,21 @@ def true_statistics_error(expansion, function, points=120):
 
 
 def verdict_window(times, truth, rms):
-    """(earliest, latest) times the verdict may take (module docstring); where the truth
-    minus the noise never exceeds the tolerance, the latest is where the truth doubles it."""
-    noise = 3 * rms / np.sqrt(HELD_OUT)
-    late = crossing(times, truth - noise, TOLERANCE)
-    if np.isnan(late):
-        late = crossing(times, truth, 2 * TOLERANCE)
-    return crossing(times, truth + noise, TOLERANCE), late
+    """(earliest, latest) times the verdict may take (module docstring): it flags where the
+    estimate exceeds the tolerance by more than its noise (1.28 standard errors, the standard
+    error about RMS/√K), so no later than where the truth minus 3 + 2 × 1.28 of them does;
+    the horizon's end where that never happens."""
+    error = rms / np.sqrt(HELD_OUT)
+    late = crossing(times, truth - (3 + 2 * 1.28) * error, TOLERANCE)
+    return crossing(times, truth + 3 * error, TOLERANCE), times[-1] if np.isnan(late) else late
+
+
+def assert_flagged_or_undecided(found, times, truth, rms):
+    """Wherever the truth exceeds the tolerance by more than 3 RMS/√K, the verdict is flagged
+    or undecided, never silently reliable."""
+    wrong = truth - 3 * rms / np.sqrt(HELD_OUT) > TOLERANCE
+    silent = wrong & ~found.undecided & ~(times >= found.failing_from)
+    assert not silent.any(), times[silent]
 
 
 def held_out(expansion, function, seed=1):
@@ -148,10 +157,12 @@ def test_a_steepening_response_is_flagged_when_its_true_error_crosses_the_tolera
     expansion, values = chaos(steepening, (5,))
     truth = true_statistics_error(expansion, steepening)
     assert truth.max() > 2 * TOLERANCE
-    early, late = verdict_window(TIMES, truth, true_error(expansion, steepening))
+    rms = true_error(expansion, steepening)
+    early, late = verdict_window(TIMES, truth, rms)
     for seed in range(1, 9):
         found = diagnose("y", expansion, values, TIMES, held_out(expansion, steepening, seed))
         assert early <= found.failing_from <= late
+        assert_flagged_or_undecided(found, TIMES, truth, rms)
     (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
     assert record.output == "y" and record.time_range == (found.failing_from, 1.0)
     assert record.message.startswith(f"polynomial chaos unreliable from t = {found.failing_from}")
@@ -171,10 +182,12 @@ def test_an_even_response_defeats_the_top_shell_but_not_the_decay():
     assert alone.holdout is None
     assert alone.failing_from <= crossing(TIMES, truth, 2 * TOLERANCE)
     assert alone.decay.max() > TOLERANCE
-    early, late = verdict_window(TIMES, truth, true_error(expansion, even))
+    rms = true_error(expansion, even)
+    early, late = verdict_window(TIMES, truth, rms)
     for seed in range(1, 9):
         found = diagnose("y", expansion, values, TIMES, held_out(expansion, even, seed))
         assert early <= found.failing_from <= late
+        assert_flagged_or_undecided(found, TIMES, truth, rms)
 
 
 def test_an_error_spread_over_the_inputs_and_growing_points_to_sampling():
@@ -192,12 +205,23 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
     model = pytest.importorskip("model_loading").model_class("double_well", "DoubleWell")
     times = np.linspace(0.0, 4.0, 201)
     study = Study(model, {"x0": Uniform(-0.625, 0.375)}, times, order=7, jobs=1)
-    with pytest.warns(PcmbWarning, match=r"x: t in \[.*polynomial chaos unreliable from t ="):
-        result = study.run(progress=False)  # the study's own held-out runs find it too
-    checks = study.replace(method="lhs", samples=HELD_OUT, seed=7).run(progress=False)
+    # Its own check (8 runs, as many as the design's) cannot resolve a 10 % error of a
+    # surrogate 30 % off pointwise: it says so rather than calling the result reliable.
+    with pytest.warns(PcmbWarning, match=r"x: t in \[.*cannot tell whether mean and std hold"):
+        result = study.run(progress=False)
+    assert result.held_out.germ.shape[0] == 8
     expansion = result.expansions["x"]
-    predicted = expansion.evaluate_germ(checks.germ)
-    found = diagnose("x", expansion, result.values["x"], times, (predicted, checks.values["x"]))
+    draws, weights = held_out_draws(expansion.distributions, 64, 7)
+    observed = double_well(times, draws.params[:, 0])
+    found = diagnose(
+        "x",
+        expansion,
+        result.values["x"],
+        times,
+        (expansion.evaluate_germ(draws.nodes), observed),
+        weights=weights,
+        holdout_germ=draws.nodes,
+    )
     fine = TensorGrid(expansion.distributions, (399,))
     exact = double_well(times, fine.params[:, 0])
     mean = fine.weights @ exact
@@ -208,11 +232,11 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
     # The statistics are wrong from about t = 3 (the pointwise surrogate from about 2.1).
     assert 2.9 < crossing(times, truth, TOLERANCE) < 3.3
     early, _ = verdict_window(times, truth, rms)
-    # Its truth peaks at 0.097, below twice the tolerance: no late bound follows from the
-    # noise, so the issue's standard applies (within a tenth of the horizon of the truth).
-    for verdict_time in (found.failing_from, result.diagnostics["x"].failing_from):
-        assert early <= verdict_time
-        assert abs(verdict_time - crossing(times, truth, TOLERANCE)) <= 0.1 * times[-1]
+    # Its truth peaks at 0.097, below twice the tolerance: with 64 runs the issue's standard
+    # applies (within a tenth of the horizon of the truth).
+    assert early <= found.failing_from
+    assert abs(found.failing_from - crossing(times, truth, TOLERANCE)) <= 0.1 * times[-1]
+    assert_flagged_or_undecided(result.diagnostics["x"], times, truth, rms)
 
 
 # -- the held-out bound ------------------------------------------------------------------------

@@ -18,6 +18,7 @@ import executor_models as em
 import numpy as np
 import pytest
 
+from pcmb.config.schema import ExecutionSpec
 from pcmb.errors import ModelError, UsageError
 from pcmb.references import damped_oscillator
 from pcmb.result import NodeFailure, Status
@@ -83,8 +84,20 @@ def test_explicit_chunk_size_and_bad_values() -> None:
 
 def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     params = ramp_params(24)
-    serial = run_nodes(em.Ramp, params, TIMES, ["batch_size", "batch_first", "pid"], jobs=1)
-    pooled = run_nodes(em.Ramp, params, TIMES, ["batch_size", "batch_first", "pid"], jobs=2)
+    serial = run_nodes(
+        em.Ramp,
+        params,
+        TIMES,
+        ["batch_size", "batch_first", "pid"],
+        execution=ExecutionSpec(jobs=1),
+    )
+    pooled = run_nodes(
+        em.Ramp,
+        params,
+        TIMES,
+        ["batch_size", "batch_first", "pid"],
+        execution=ExecutionSpec(jobs=2),
+    )
     expected_size = np.empty(24)
     expected_first = np.empty(24)
     for start, stop in chunk_bounds(24):
@@ -98,28 +111,39 @@ def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
 
 def test_a_model_preferred_chunk_size_is_used_unless_the_config_sets_one() -> None:
     params = ramp_params(12)
-    preferred = run_nodes(em.PreferringRamp, params, TIMES, ["batch_size"], jobs=1)
+    preferred = run_nodes(
+        em.PreferringRamp, params, TIMES, ["batch_size"], execution=ExecutionSpec(jobs=1)
+    )
     np.testing.assert_array_equal(preferred.values["batch_size"][:, 0], [5] * 10 + [2] * 2)
-    explicit = run_nodes(em.PreferringRamp, params, TIMES, ["batch_size"], jobs=1, chunk_size=4)
+    explicit = run_nodes(
+        em.PreferringRamp,
+        params,
+        TIMES,
+        ["batch_size"],
+        chunk_size=4,
+        execution=ExecutionSpec(jobs=1),
+    )
     np.testing.assert_array_equal(explicit.values["batch_size"][:, 0], [4] * 12)
 
 
 def test_joblib_parallel_still_works_after_a_pooled_run() -> None:
     import joblib
 
-    run_nodes(em.Ramp, ramp_params(24), TIMES, ["y"], jobs=2)
+    run_nodes(em.Ramp, ramp_params(24), TIMES, ["y"], execution=ExecutionSpec(jobs=2))
     assert joblib.Parallel(n_jobs=2)(joblib.delayed(abs)(-k) for k in range(4)) == [0, 1, 2, 3]
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_the_model_never_runs_in_this_process(jobs: int) -> None:
-    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], jobs=jobs)
+    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], execution=ExecutionSpec(jobs=jobs))
     assert (result.values["pid"] != os.getpid()).all()
     assert len(np.unique(result.values["pid"])) <= jobs
 
 
 def test_backend_inprocess_runs_here_for_debugging() -> None:
-    result = run_nodes(em.Ramp, ramp_params(24), TIMES, ["pid"], backend="inprocess")
+    result = run_nodes(
+        em.Ramp, ramp_params(24), TIMES, ["pid"], execution=ExecutionSpec(backend="inprocess")
+    )
     assert (result.values["pid"] == os.getpid()).all()
 
 
@@ -129,7 +153,9 @@ def test_backend_inprocess_runs_here_for_debugging() -> None:
 @pytest.fixture(scope="module")
 def oscillator_serial():
     params, times = em.oscillator_nodes(48)
-    return run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=1)
+    return run_nodes(
+        em.StackedOscillator, params, times, ["x", "v"], execution=ExecutionSpec(jobs=1)
+    )
 
 
 def test_batched_nodes_match_the_closed_form(oscillator_serial) -> None:
@@ -146,7 +172,9 @@ def test_batch_composition_changes_the_last_bits(oscillator_serial) -> None:
     # Proof that the bit-identity tests below can fail: other chunks give other bits
     # (the stacked error control sees other nodes), though equally accurate values.
     params, times = em.oscillator_nodes(48)
-    single = run_nodes(em.StackedOscillator, params, times, ["x"], jobs=1, chunk_size=1)
+    single = run_nodes(
+        em.StackedOscillator, params, times, ["x"], chunk_size=1, execution=ExecutionSpec(jobs=1)
+    )
     assert not np.array_equal(single.values["x"], oscillator_serial.values["x"])
     np.testing.assert_allclose(single.values["x"], oscillator_serial.values["x"], atol=2e-6)
 
@@ -154,7 +182,9 @@ def test_batch_composition_changes_the_last_bits(oscillator_serial) -> None:
 @pytest.mark.slow
 def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
-    pooled = run_nodes(em.StackedOscillator, params, times, ["x", "v"], jobs=2)
+    pooled = run_nodes(
+        em.StackedOscillator, params, times, ["x", "v"], execution=ExecutionSpec(jobs=2)
+    )
     for name in ("x", "v"):
         np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
 
@@ -163,12 +193,22 @@ def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
 def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -> None:
     params, times = em.oscillator_nodes(48)
     pooled = run_nodes(
-        em.StackedOscillator, params, times, ["x", "v"], backend="dask", address=dask_address
+        em.StackedOscillator,
+        params,
+        times,
+        ["x", "v"],
+        address=dask_address,
+        execution=ExecutionSpec(backend="dask"),
     )
     for name in ("x", "v"):
         np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
     probe = run_nodes(
-        em.Ramp, ramp_params(24), TIMES, ["pid"], backend="dask", address=dask_address
+        em.Ramp,
+        ramp_params(24),
+        TIMES,
+        ["pid"],
+        address=dask_address,
+        execution=ExecutionSpec(backend="dask"),
     )
     assert (probe.values["pid"][chunk_bounds(24)[0][1] :] != os.getpid()).all()
 
@@ -176,13 +216,19 @@ def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -
 @pytest.mark.slow
 def test_dask_local_cluster_is_started_and_bit_identical(oscillator_serial) -> None:
     params, times = em.oscillator_nodes(48)
-    pooled = run_nodes(em.StackedOscillator, params, times, ["x", "v"], backend="dask", jobs=2)
+    pooled = run_nodes(
+        em.StackedOscillator,
+        params,
+        times,
+        ["x", "v"],
+        execution=ExecutionSpec(backend="dask", jobs=2),
+    )
     np.testing.assert_array_equal(pooled.values["x"], oscillator_serial.values["x"])
 
 
 def test_field_inputs_are_sliced_per_node() -> None:
     params = {"a": np.linspace(0.0, 1.0, 10), "z": np.arange(30.0).reshape(10, 3)}
-    result = run_nodes(em.Ramp, params, TIMES, ["y"], jobs=1)
+    result = run_nodes(em.Ramp, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     expected = (params["a"] + params["z"].sum(axis=1))[:, None] * TIMES
     np.testing.assert_array_equal(result.values["y"], expected)
 
@@ -194,7 +240,7 @@ def test_exceptions_are_narrowed_to_the_failing_nodes() -> None:
     params = ramp_params(32)
     bad = [5, 6, 20]
     factory = functools.partial(em.RaisingRamp, params["a"][bad])
-    result = run_nodes(factory, params, TIMES, ["y"], jobs=1)
+    result = run_nodes(factory, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     assert [f.index for f in result.failures] == bad
     for failure in result.failures:
         a = float(params["a"][failure.index])
@@ -212,7 +258,9 @@ def test_exceptions_are_narrowed_to_the_failing_nodes() -> None:
 def test_non_finite_rows_are_narrowed_in_workers() -> None:
     params = ramp_params(32)
     factory = functools.partial(em.NanRamp, params["a"][[9, 30]], t_bad=0.55)
-    result = run_nodes(factory, params, TIMES, ["y", "pid", "batch_size"], jobs=2)
+    result = run_nodes(
+        factory, params, TIMES, ["y", "pid", "batch_size"], execution=ExecutionSpec(jobs=2)
+    )
     assert [f.index for f in result.failures] == [9, 30]
     # Node 8 shares a chunk with node 9: its finite row from the batch is kept.
     assert result.values["batch_size"][8, 0] == 2
@@ -230,20 +278,24 @@ def test_a_nan_node_fails_a_stacked_solve_as_a_whole() -> None:
     params, times = em.oscillator_nodes(48)
     victim = 20  # in chunk [18, 21)
     factory = functools.partial(em.StackedOscillator, poison_k=params["k"][victim])
-    result = run_nodes(factory, params, times, ["x"], jobs=1)
+    result = run_nodes(factory, params, times, ["x"], execution=ExecutionSpec(jobs=1))
     assert [f.index for f in result.failures] == [victim]
     good = result.status == Status.OK
     exact = damped_oscillator(times, params["k"], params["c"])
     assert np.abs(result.values["x"][good] - exact[good]).max() < OSCILLATOR_TOL
     # Its chunk mates were re-run alone: bit for bit what a one-node batch gives.
     mates = {name: values[18:20] for name, values in params.items()}
-    alone = run_nodes(em.StackedOscillator, mates, times, ["x"], jobs=1, chunk_size=1)
+    alone = run_nodes(
+        em.StackedOscillator, mates, times, ["x"], chunk_size=1, execution=ExecutionSpec(jobs=1)
+    )
     np.testing.assert_array_equal(result.values["x"][18:20], alone.values["x"])
     assert result.failures[0].message.startswith("output 'x' has shape (1, ")
 
 
 def test_a_model_returning_the_wrong_shape_fails_every_node() -> None:
-    result = run_nodes(em.WrongShapeRamp, ramp_params(4), TIMES, ["y"], jobs=1)
+    result = run_nodes(
+        em.WrongShapeRamp, ramp_params(4), TIMES, ["y"], execution=ExecutionSpec(jobs=1)
+    )
     assert len(result.failures) == 4
     assert result.failures[0].message == "output 'y' has shape (1, 10), expected (1, 11)"
 
@@ -251,7 +303,7 @@ def test_a_model_returning_the_wrong_shape_fails_every_node() -> None:
 def test_a_model_cannot_write_into_its_inputs() -> None:
     params = ramp_params(4)
     original = params["a"].copy()
-    result = run_nodes(em.MutatingRamp, params, TIMES, ["y"], jobs=1)
+    result = run_nodes(em.MutatingRamp, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     assert {f.message for f in result.failures} == {
         "ValueError: assignment destination is read-only"
     }
@@ -262,11 +314,22 @@ def test_retries_rerun_failed_nodes() -> None:
     params = ramp_params(32)
     # The node fails in its first two calls: the chunk's batch call and its first single run.
     flaky = functools.partial(em.FlakyRamp, params["a"][[3]], failures=2)
-    failed = run_nodes(functools.partial(flaky, nonce=uuid.uuid4().hex), params, TIMES, ["y"])
+    failed = run_nodes(
+        functools.partial(flaky, nonce=uuid.uuid4().hex),
+        params,
+        TIMES,
+        ["y"],
+        execution=ExecutionSpec(),
+    )
     assert [f.index for f in failed.failures] == [3]
     assert failed.failures[0].message.startswith("RuntimeError: transient failure 2")
     healed = run_nodes(
-        functools.partial(flaky, nonce=uuid.uuid4().hex), params, TIMES, ["y"], retries=1
+        functools.partial(flaky, nonce=uuid.uuid4().hex),
+        params,
+        TIMES,
+        ["y"],
+        retries=1,
+        execution=ExecutionSpec(),
     )
     assert healed.failures == ()
     np.testing.assert_array_equal(healed.values["y"], ramp_exact(params))
@@ -333,7 +396,7 @@ def test_base_exceptions_of_the_model_are_failures_of_its_nodes(how: str, messag
     params = ramp_params(32)
     bad = [0, 13]  # in the first chunk (run in this process) and in a later one
     factory = functools.partial(LeavingRamp, list(params["a"][bad]), how)
-    result = run_nodes(factory, params, TIMES, ["y"], jobs=1)
+    result = run_nodes(factory, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     assert [(f.index, f.message) for f in result.failures] == [(i, message) for i in bad]
     good = result.status == Status.OK
     assert good.sum() == 30
@@ -347,7 +410,7 @@ def test_base_exceptions_in_workers_are_failures_of_their_nodes(how: str, messag
     params = ramp_params(24)
     bad = [13, 20]
     factory = functools.partial(LeavingRamp, list(params["a"][bad]), how)
-    result = run_nodes(factory, params, TIMES, ["y", "pid"], jobs=2)
+    result = run_nodes(factory, params, TIMES, ["y", "pid"], execution=ExecutionSpec(jobs=2))
     assert [(f.index, f.message) for f in result.failures] == [(i, message) for i in bad]
     good = result.status == Status.OK
     np.testing.assert_array_equal(result.values["y"][good], ramp_exact(params)[good])
@@ -361,7 +424,7 @@ def test_a_sigint_while_the_model_runs_interrupts_the_run(how: str) -> None:
     params = ramp_params(32)
     factory = functools.partial(LeavingRamp, [params["a"][13]], how)
     with pytest.raises(KeyboardInterrupt):
-        run_nodes(factory, params, TIMES, ["y"], jobs=1)
+        run_nodes(factory, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
@@ -370,7 +433,7 @@ def test_a_keyboard_interrupt_pcmb_cannot_attribute_stays_the_users() -> None:
     params = ramp_params(32)
     factory = functools.partial(LeavingRamp, [params["a"][13]], "replaced")
     with pytest.raises(KeyboardInterrupt):
-        run_nodes(factory, params, TIMES, ["y"], jobs=1)
+        run_nodes(factory, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
@@ -381,7 +444,9 @@ def test_a_keyboard_interrupt_outside_the_main_thread_is_the_models() -> None:
     found: list = []
     factory = functools.partial(LeavingRamp, [params["a"][5]], "keyboard")
     thread = threading.Thread(
-        target=lambda: found.append(run_nodes(factory, params, TIMES, ["y"], jobs=1))
+        target=lambda: found.append(
+            run_nodes(factory, params, TIMES, ["y"], execution=ExecutionSpec(jobs=1))
+        )
     )
     thread.start()
     thread.join()
@@ -390,7 +455,7 @@ def test_a_keyboard_interrupt_outside_the_main_thread_is_the_models() -> None:
 
 def test_a_model_that_exits_while_it_is_built_raises_model_error() -> None:
     with pytest.raises(ModelError, match=r"could not build the model: SystemExit: 2$"):
-        run_nodes(ExitingFactory(), ramp_params(4), TIMES, ["y"])
+        run_nodes(ExitingFactory(), ramp_params(4), TIMES, ["y"], execution=ExecutionSpec())
 
 
 @pytest.mark.slow
@@ -401,7 +466,7 @@ def test_a_dying_worker_costs_only_its_node(how: str, cause: str) -> None:
     params = ramp_params(24)
     victim = 13  # in chunk [12, 14), not in the first chunk that runs in-process
     factory = functools.partial(em.CrashingRamp, params["a"][victim], how, os.getpid())
-    result = run_nodes(factory, params, TIMES, ["y", "batch_size"], jobs=2)
+    result = run_nodes(factory, params, TIMES, ["y", "batch_size"], execution=ExecutionSpec(jobs=2))
     assert [f.index for f in result.failures] == [victim]
     assert result.failures[0].message == f"worker process died ({cause})"
     good = np.arange(24) != victim
@@ -426,7 +491,12 @@ def test_a_dying_dask_worker_costs_only_its_node() -> None:
         ) as cluster,
     ):
         result = run_nodes(
-            factory, params, TIMES, ["y"], backend="dask", address=cluster.scheduler_address
+            factory,
+            params,
+            TIMES,
+            ["y"],
+            address=cluster.scheduler_address,
+            execution=ExecutionSpec(backend="dask"),
         )
     assert [str(f) for f in result.failures] == [
         "node 13 (a=0.130435): worker process died (dask KilledWorker: see the dask worker logs)"
@@ -510,12 +580,13 @@ def test_isolation_names_the_killer_and_retries_it(retries: int, survives: bool)
 
 
 def test_bad_arguments_are_all_reported_before_anything_runs() -> None:
+    # The execution settings come validated, where they are declared (ExecutionSpec).
     em.SIMULATED.clear()
     params = {"a": np.zeros(4), "b": np.zeros(5), "c": np.array([0.0, np.nan, 1.0, 2.0])}
     with pytest.raises(UsageError) as caught:
-        run_nodes(em.Ramp, params, TIMES, "y", jobs=0, backend="mpi", chunk_size=0, retries=-1)
+        run_nodes(em.Ramp, params, TIMES, "y", execution=ExecutionSpec())
     text = str(caught.value)
-    for key in ("params.c", "params:", "outputs", "jobs", "backend", "chunk_size", "retries"):
+    for key in ("params.c", "params:", "outputs"):
         assert f"run_nodes: {key}" in text
     assert em.SIMULATED == []
 
@@ -524,13 +595,13 @@ def test_bad_arguments_are_all_reported_before_anything_runs() -> None:
 def test_an_output_the_model_lacks_is_rejected_before_running() -> None:
     em.SIMULATED.clear()
     with pytest.raises(UsageError, match=r"outputs: the model has no output \['z'\]"):
-        run_nodes(em.Ramp, ramp_params(4), TIMES, ["y", "z"])
+        run_nodes(em.Ramp, ramp_params(4), TIMES, ["y", "z"], execution=ExecutionSpec())
     assert em.SIMULATED == []
 
 
 def test_a_model_that_cannot_be_built_raises_model_error() -> None:
     with pytest.raises(ModelError, match="could not build the model: FileNotFoundError"):
-        run_nodes(em.BrokenFactory(), ramp_params(4), TIMES, ["y"])
+        run_nodes(em.BrokenFactory(), ramp_params(4), TIMES, ["y"], execution=ExecutionSpec())
 
 
 def test_node_failure_formats_on_one_line() -> None:
@@ -539,12 +610,16 @@ def test_node_failure_formats_on_one_line() -> None:
 
 
 def test_progress_line_only_when_asked_or_on_a_terminal(capsys: pytest.CaptureFixture) -> None:
-    run_nodes(em.Ramp, ramp_params(24), TIMES, ["y"], jobs=1, progress=True)
+    run_nodes(
+        em.Ramp, ramp_params(24), TIMES, ["y"], progress=True, execution=ExecutionSpec(jobs=1)
+    )
     err = capsys.readouterr().err  # not a terminal: whole lines, the last at 100 %
     assert "\r" not in err and err.endswith("\n")
     assert err.splitlines()[-1].startswith("pcmb: 24/24 nodes (100%)")
     assert "nodes/s, ETA 0:00:00" in err
-    run_nodes(em.Ramp, ramp_params(24), TIMES, ["y"], jobs=1)  # stderr is not a terminal here
+    run_nodes(
+        em.Ramp, ramp_params(24), TIMES, ["y"], execution=ExecutionSpec(jobs=1)
+    )  # stderr is not a terminal here
     assert capsys.readouterr().err == ""
 
 
@@ -556,19 +631,25 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
     flaky = functools.partial(em.FlakyRamp, params["a"][[3]], failures=2, nonce=uuid.uuid4().hex)
     journal = Journal(tmp_path / "run.journal", "fp", 32, ["y"], TIMES.size)
     # In this process, to count the calls (SIMULATED) and keep the model's state.
-    first = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
+    first = run_nodes(
+        flaky, params, TIMES, ["y"], journal=journal, execution=ExecutionSpec(backend="inprocess")
+    )
     assert [f.index for f in first.failures] == [3] and first.resumed == 0
     assert Journal(tmp_path / "run.journal", "fp", 32, ["y"], TIMES.size).messages() == {
         3: first.failures[0].message
     }
     em.SIMULATED.clear()
     # Same factory, same cached model: its third call for node 3 succeeds.
-    second = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
+    second = run_nodes(
+        flaky, params, TIMES, ["y"], journal=journal, execution=ExecutionSpec(backend="inprocess")
+    )
     assert second.resumed == 31 and second.failures == ()
     assert em.SIMULATED == [1]  # only node 3, alone as in its narrowed chunk
     np.testing.assert_array_equal(second.values["y"], ramp_exact(params))
     em.SIMULATED.clear()
-    third = run_nodes(flaky, params, TIMES, ["y"], backend="inprocess", journal=journal)
+    third = run_nodes(
+        flaky, params, TIMES, ["y"], journal=journal, execution=ExecutionSpec(backend="inprocess")
+    )
     assert third.resumed == 32 and em.SIMULATED == []
     np.testing.assert_array_equal(third.values["y"], ramp_exact(params))
 
@@ -577,7 +658,9 @@ def test_resume_takes_journaled_nodes_and_reruns_failed_ones(tmp_path: Path) -> 
 def test_a_journal_of_another_shape_is_refused(tmp_path: Path) -> None:
     journal = Journal(tmp_path / "j", "fp", 16, ["y"], TIMES.size)
     with pytest.raises(UsageError, match="delete it or start over with --fresh"):
-        run_nodes(em.Ramp, ramp_params(32), TIMES, ["y"], journal=journal)
+        run_nodes(
+            em.Ramp, ramp_params(32), TIMES, ["y"], journal=journal, execution=ExecutionSpec()
+        )
 
 
 _KILLED_RUN = """
@@ -585,13 +668,15 @@ import sys
 sys.path.insert(0, {tests!r})
 import functools
 import executor_models as em
+from pcmb.config.schema import ExecutionSpec
 from pcmb.run.executor import run_nodes
 from pcmb.run.journal import Journal
 
 params, times = em.oscillator_nodes(48)
 journal = Journal(sys.argv[1], "fp", 48, ["x", "v"], times.size)
 model = functools.partial(em.StackedOscillator, sleep=0.4)
-run_nodes(model, params, times, ["x", "v"], jobs=2, journal=journal, progress=False)
+execution = ExecutionSpec(jobs=2)
+run_nodes(model, params, times, ["x", "v"], journal=journal, progress=False, execution=execution)
 """
 
 
@@ -626,7 +711,12 @@ def test_a_run_killed_with_sigkill_resumes_to_identical_results(
     assert 15 <= journaled < 48  # >= 5 chunks of 3 nodes, not all of them
     em.SIMULATED.clear()
     resumed = run_nodes(
-        em.StackedOscillator, params, times, ["x", "v"], backend="inprocess", journal=journal
+        em.StackedOscillator,
+        params,
+        times,
+        ["x", "v"],
+        journal=journal,
+        execution=ExecutionSpec(backend="inprocess"),
     )
     assert resumed.resumed == journaled
     assert sum(em.SIMULATED) == 48 - journaled

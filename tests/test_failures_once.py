@@ -19,6 +19,7 @@ import pytest
 import pcmb
 from pcmb.adapters.python import FunctionModel
 from pcmb.cli import main
+from pcmb.config.schema import ExecutionSpec
 from pcmb.result import Status
 from pcmb.run.executor import run_nodes
 
@@ -84,7 +85,12 @@ def test_a_failing_node_of_a_pointwise_batch_runs_once_per_try(tmp_path: Path, r
     bad = [5, 20]
     log = tmp_path / "calls.log"
     result = run_nodes(
-        point_factory(log, list(a[bad])), {"a": a}, TIMES, ["y"], jobs=1, retries=retries
+        point_factory(log, list(a[bad])),
+        {"a": a},
+        TIMES,
+        ["y"],
+        retries=retries,
+        execution=ExecutionSpec(jobs=1),
     )
     assert [f.index for f in result.failures] == bad
     for failure in result.failures:
@@ -105,7 +111,9 @@ def test_a_failing_node_of_a_pointwise_batch_runs_once_per_try(tmp_path: Path, r
 def test_a_failing_pointwise_node_runs_once_in_workers(tmp_path: Path):
     a = np.linspace(1.0, 2.0, 32)
     log = tmp_path / "calls.log"
-    result = run_nodes(point_factory(log, [float(a[30])]), {"a": a}, TIMES, ["y"], jobs=2)
+    result = run_nodes(
+        point_factory(log, [float(a[30])]), {"a": a}, TIMES, ["y"], execution=ExecutionSpec(jobs=2)
+    )
     assert [f.index for f in result.failures] == [30]
     assert sorted(calls(log)) == sorted(repr(float(x)) for x in a)
 
@@ -118,7 +126,9 @@ def test_a_raising_batch_is_narrowed_by_bisection(tmp_path: Path, bad: int):
     a = np.linspace(1.0, 2.0, 16)
     log = tmp_path / "calls.log"
     factory = functools.partial(LoggedBatch, str(log), (float(a[bad]),))
-    result = run_nodes(factory, {"a": a}, TIMES, ["y"], jobs=1, chunk_size=16)
+    result = run_nodes(
+        factory, {"a": a}, TIMES, ["y"], chunk_size=16, execution=ExecutionSpec(jobs=1)
+    )
     assert [f.index for f in result.failures] == [bad]
     assert result.failures[0].message == f"ValueError: no convergence at a={float(a[bad])!r}"
     # One batched call, then two halves per level down to the bad node (it was 1 + 16).
@@ -131,7 +141,9 @@ def test_bisection_retries_each_failed_node(tmp_path: Path):
     a = np.linspace(1.0, 2.0, 16)
     log = tmp_path / "calls.log"
     factory = functools.partial(LoggedBatch, str(log), (float(a[3]), float(a[12])))
-    result = run_nodes(factory, {"a": a}, TIMES, ["y"], jobs=1, chunk_size=16, retries=2)
+    result = run_nodes(
+        factory, {"a": a}, TIMES, ["y"], chunk_size=16, retries=2, execution=ExecutionSpec(jobs=1)
+    )
     assert [f.index for f in result.failures] == [3, 12]
     # Each bad node's one-node calls: its first try and 2 retries.
     assert calls(log).count("1") <= 2 * (1 + 2) + 2  # + at most one good mate alone per side
@@ -141,7 +153,13 @@ def test_bisection_retries_each_failed_node(tmp_path: Path):
 def test_nothing_fails_nothing_changes(tmp_path: Path):
     a = np.linspace(1.0, 2.0, 48)
     log = tmp_path / "calls.log"
-    result = run_nodes(functools.partial(LoggedBatch, str(log), ()), {"a": a}, TIMES, ["y"], jobs=1)
+    result = run_nodes(
+        functools.partial(LoggedBatch, str(log), ()),
+        {"a": a},
+        TIMES,
+        ["y"],
+        execution=ExecutionSpec(jobs=1),
+    )
     assert result.failures == ()
     assert calls(log) == ["3"] * 16  # one call per chunk, the chunks of the documented rule
 
@@ -162,8 +180,8 @@ def test_stop_on_failure_stops_early_and_names_every_failure_found(tmp_path: Pat
         {"a": a},
         TIMES,
         ["y"],
-        jobs=jobs,
         stop_on_failure=True,
+        execution=ExecutionSpec(jobs=jobs),
     )
     ran = len(calls(log))
     # Chunks 0 to 2, plus at most the chunks in flight beside chunk 2 and after it (one per
@@ -175,7 +193,9 @@ def test_stop_on_failure_stops_early_and_names_every_failure_found(tmp_path: Pat
     assert np.sum(result.status == Status.OK) == ran - 2
     # Without the policy every node runs.
     log.unlink()
-    everything = run_nodes(point_factory(log, list(a[bad])), {"a": a}, TIMES, ["y"], jobs=jobs)
+    everything = run_nodes(
+        point_factory(log, list(a[bad])), {"a": a}, TIMES, ["y"], execution=ExecutionSpec(jobs=jobs)
+    )
     assert [f.index for f in everything.failures] == bad
     assert len(calls(log)) == 64
 

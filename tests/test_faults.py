@@ -432,7 +432,12 @@ EDGE_INPUTS = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
 
 def _edge_study() -> pcmb.Study:
     return pcmb.Study(
-        edges, EDGE_INPUTS, EDGE_TIMES, order={"a": 1, "b": 2}, params={"a": 2.0, "b": 0.0}, jobs=1
+        edges,
+        EDGE_INPUTS,
+        EDGE_TIMES,
+        method={"kind": "collocation", "order": {"a": 1, "b": 2}},
+        execution={"jobs": 1},
+        params={"a": 2.0, "b": 0.0},
     )
 
 

@@ -394,13 +394,13 @@ def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
     config = load_config(Path(__file__).parents[1] / "configs" / "quarter_car.yaml")
     study = Study.from_config(config)
     estimate = study.memory_estimate(study.node_set().size, config.model.outputs)
-    # It counts what the config asks for: the (order + 1)^d tensor nodes, the held-out runs,
-    # every time, both outputs, and the range check's draws of the chaos surrogate.
+    # It counts what the config asks for: the (order + 1)^d tensor nodes, the most held-out
+    # runs the study may make, every time, both outputs, and the range check's draws.
     nodes = (config.method.order + 1) ** len(config.inputs)
-    assert (estimate.nodes, estimate.held_out) == (nodes, config.method.validation)
+    assert (estimate.nodes, estimate.held_out) == (nodes, study.held_out_runs(nodes)[1])
     assert (estimate.width, estimate.outputs) == (config.time.points, len(config.model.outputs))
     assert estimate.draws > 0
-    # A few copies of 248 runs × 301 times × 2 outputs (1.2 MB each): tens of MB, not more.
+    # A few copies of 270 runs × 301 times × 2 outputs (1.3 MB each): tens of MB, not more.
     assert estimate.values < estimate.total < 64 * 2**20
 
 
@@ -419,3 +419,21 @@ def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: P
         model.run_point({"a": 1.0}, np.linspace(0.0, 1.0, 3))
     assert "interpreter '/usr/bin/nonexistent-interpreter'" in str(failed.value)
     assert "No such file or directory" not in str(failed.value)
+
+
+def test_pcmb_ends_without_waiting_for_workers_still_starting(tmp_path: Path) -> None:
+    """`pcmb run` starts its workers before it reads the config: on a bad config it exits at
+    once, killing them, instead of waiting for them to finish starting."""
+    (tmp_path / "sitecustomize.py").write_text(  # loky's workers hang while they start
+        "import sys, time\nif 'LokyProcess' in ' '.join(sys.argv): time.sleep(600)\n"
+    )
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}
+    done = subprocess.run(
+        [sys.executable, "-m", "pcmb.cli", "run", str(tmp_path / "missing.yaml"), "-o", "o.h5"],
+        cwd=tmp_path,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2, done.stderr

@@ -196,8 +196,8 @@ def test_galerkin_study_end_to_end_stores_and_loads_like_collocation(tmp_path):
         validation=4,
     )
     # The held-out runs check the expansion as they check collocation's: order 2 is too low
-    # for x1 by the end of the second.
-    with pytest.warns(PcmbWarning, match="x1: .*polynomial chaos unreliable"):
+    # for x1 by the end of the second (4 runs find it or say they cannot tell).
+    with pytest.warns(PcmbWarning, match="x1: .*(chaos unreliable|cannot tell whether)"):
         result = study.run(tmp_path / "g.h5", progress=False)
     loaded = pcmb.load(tmp_path / "g.h5")
     assert loaded.design.kind == "galerkin" and loaded.n_nodes == 0

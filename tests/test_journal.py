@@ -66,6 +66,29 @@ def test_a_later_record_supersedes_an_earlier_one(tmp_path: Path) -> None:
     assert make(tmp_path / "j").messages() == {}
 
 
+def test_chunks_give_every_node_once_in_node_order_with_its_latest_values(
+    tmp_path: Path,
+) -> None:
+    journal = make(tmp_path / "j")
+    first, late = chunk([6, 2, 3, 4], 1), chunk([3], 2)  # a record need not be sorted
+    journal.record([6, 2, 3, 4], first, [Status.OK, Status.OK, Status.FAILED, Status.OK], {3: "x"})
+    journal.record([0, 1], chunk([0, 1], 3), [Status.OK, Status.OK])
+    make(tmp_path / "j").record([3], late, [Status.OK])  # node 3 re-run alone on a resume
+    reopened = make(tmp_path / "j")
+    indices, status = reopened.statuses()
+    np.testing.assert_array_equal(indices, [0, 1, 2, 3, 4, 6])
+    assert status.tolist() == [Status.OK] * 6
+    pieces = list(reopened.chunks())
+    # Runs of consecutive nodes of one record: [0, 1], [2], [3] (the later record), [4], [6].
+    assert [piece[0].tolist() for piece in pieces] == [[0, 1], [2], [3], [4], [6]]
+    expected = {2: first["x"][1], 3: late["x"][0], 4: first["x"][3], 6: first["x"][0]}
+    for node, row in expected.items():
+        found = next(values["x"][0] for idx, values, _ in pieces if idx[0] == node)
+        np.testing.assert_array_equal(found, row)
+    _, completed, _ = reopened.completed()
+    np.testing.assert_array_equal(np.concatenate([v["v"] for _, v, _ in pieces]), completed["v"])
+
+
 def test_a_journal_of_another_config_is_refused(tmp_path: Path) -> None:
     make(tmp_path / "j", fingerprint="abc")
     with pytest.raises(ResultFileError, match="was written for a different config; delete it"):

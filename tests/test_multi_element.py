@@ -220,8 +220,6 @@ def test_the_design_contract_and_the_element_files():
         _design(JUMP_INPUTS, (2, 1), elements={"x": [0.5, -0.5]})
     with pytest.raises(ValueError, match=r"method\.elements\.x: .*strictly increasing"):
         _design(JUMP_INPUTS, (2, 1), elements={"x": [0.5, 0.5]})
-    with pytest.raises(ValueError, match=r"method\.max_elements: must be >= 1"):
-        _design(JUMP_INPUTS, (2, 1), elements="auto", max_elements=0)
     # Fixed elements run in one round.
     assert design.more(nodes, {"y": _jump(nodes.params)}, np.ones(nodes.size, bool)) is None
 

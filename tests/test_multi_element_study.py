@@ -62,19 +62,21 @@ def test_two_elements_beat_one_tenfold_through_the_python_api():
 
 def test_the_held_out_verdict_calls_one_element_failing_and_two_fixed_at_equal_cost(tmp_path):
     # 8 runs each: one element of order 7 fails from t ≈ 3.1 (its mean passes 5 % of the
-    # largest std there), two elements of order 3 stay within 1 % (docs/diagnostics.md).
-    one = pcmb.Study(DoubleWell, X0, TIMES, backend="inprocess", order=7)
-    with pytest.warns(pcmb.PcmbWarning, match="chaos-unreliable"):
+    # largest std there), two elements of order 3 stay within 1 % (docs/diagnostics.md). The
+    # default check (8 runs) cannot resolve a 10 % error of a surrogate 30 % off pointwise (it
+    # says "undecided"): 64 held-out runs decide.
+    one = pcmb.Study(DoubleWell, X0, TIMES, backend="inprocess", order=7, validation=64)
+    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable, chaos-undecided before it
         failing = one.run()
     fixed = pcmb.Study(
-        DoubleWell, X0, TIMES, backend="inprocess", order=3, elements={"x0": [0.0]}
+        DoubleWell, X0, TIMES, backend="inprocess", order=3, elements={"x0": [0.0]}, validation=64
     ).run(tmp_path / "fixed.h5")
     scale = failing.std("x").max()
     assert _mean_error(failing) > 0.05 * scale and _mean_error(fixed) < 0.01 * scale
     assert not failing.diagnostics["x"].reliable
     found = pcmb.load(tmp_path / "fixed.h5").diagnostics["x"]  # through the file, too
     assert found.reliable and np.isnan(found.failing_from)
-    assert found.holdout.statistics.max() < 0.05 and found.holdout.count == 32
+    assert found.holdout.statistics.max() < 0.05 and found.holdout.count == 64
 
 
 @pytest.mark.slow

@@ -321,7 +321,6 @@ def test_the_design_follows_the_node_design_protocol():
         (_Settings("smolyak", level=2, rule="simpson"), "method.rule"),
         (_Settings("smolyak", level=2, rule="genz-keister"), "method.rule"),
         (_Settings("smolyak", level=2, orders=(2, 2, 2)), "method.order"),
-        (_Settings("smolyak", level=2, fit="regression"), "method.fit"),
     ],
 )
 def test_unusable_settings_name_their_key(settings, key):

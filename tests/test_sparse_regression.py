@@ -5,14 +5,16 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pydantic
 import pytest
 
 import pcmb
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
 from pcmb.chaos.expansion import ChaosExpansion
-from pcmb.chaos.nodes import random_nodes
+from pcmb.chaos.nodes import NodeSet, random_nodes
 from pcmb.chaos.recovery import fit_least_squares
 from pcmb.chaos.sparse_regression import fit_sparse, next_batch, selection_path
+from pcmb.designs import method_section
 from pcmb.designs.regression import SparseRegression
 from pcmb.errors import IllPosedError
 from pcmb.references import damped_oscillator, ishigami, ishigami_moments
@@ -150,7 +152,7 @@ def test_per_time_coefficients_are_least_squares_on_the_selected_terms():
 
 def _settings(**changes):
     base = dict(kind="regression", orders=(6, 6, 6), basis="hyperbolic", samples=64, seed=0)
-    base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None)
+    base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None, max_samples=None)
     return SimpleNamespace(**{**base, **changes})
 
 
@@ -164,14 +166,17 @@ def test_too_small_designs_are_refused_before_any_run():
         SparseRegression(INPUTS, _settings(samples=2))
     with pytest.raises(IllPosedError, match="at least 85 nodes"):
         fit_sparse(_candidates(ISHIGAMI, 6, 1.0), np.zeros((84, 3)), np.zeros(84), "none")
+    # Values outside a key's range are refused by the method: section, at the key.
+    base = {"kind": "regression", "order": 4, "samples": 64}
     for key, value in [
         ("selection", "lasso"),
         ("sampling", "halton"),
         ("basis", "tensor"),
         ("q", 0.0),
     ]:
-        with pytest.raises(ValueError, match=rf"^method\.{key}:"):
-            SparseRegression(INPUTS, _settings(**{key: value}))
+        with pytest.raises(pydantic.ValidationError) as exc:
+            method_section({**base, key: value})
+        assert [error["loc"][-1] for error in exc.value.errors()] == [key]
 
 
 def test_the_design_recovers_every_output_on_the_union_of_their_terms():
@@ -224,3 +229,35 @@ def test_batches_extend_the_sobol_sequence_until_the_tolerance_is_met():
     assert next_batch(history, 1e-9, 10**6) == 1024 - 128
     assert next_batch([(512, 1e-3)], 1e-6, 700) == 700 - 512
     assert next_batch([(700, 1e-3)], 1e-6, 700) == 0
+
+
+def test_rounds_stop_on_the_error_of_the_mean_and_std_not_on_the_loo_error():
+    """exp(Σ c_k x_k) in 4 uniform inputs to tolerance 1e-3: the tolerance is the error of the
+    mean and std relative to the std (as everywhere), estimated from the corrected LOO error
+    ε as √ε (1/√N + √ε / 2). Stopping at ε <= 1e-3 (128 runs) left an estimate of 2e-3."""
+    rates = np.array([1.0, 0.7, 0.5, 0.3])
+    inputs = {f"x{k}": pcmb.Uniform(0.0, 1.0) for k in range(rates.size)}
+    mean = np.prod(np.expm1(rates) / rates)
+    std = np.sqrt(np.prod(np.expm1(2 * rates) / (2 * rates)) - mean**2)
+    tolerance = 1e-3
+    design = SparseRegression(
+        inputs,
+        _settings(orders=(8,) * 4, samples=32, tolerance=tolerance, max_samples=4096),
+    )
+    nodes = design.nodes()
+    while (
+        more := design.more(nodes, {"y": np.exp(nodes.params @ rates)}, np.ones(nodes.size, bool))
+    ) is not None:
+        nodes = NodeSet(
+            nodes.distributions,
+            np.vstack([nodes.nodes, more.nodes]),
+            np.vstack([nodes.params, more.params]),
+        )
+    values = {"y": np.exp(nodes.params @ rates)}
+    recovery = design.recover(nodes, values, np.ones(nodes.size, bool))
+    expansion = recovery.expansions["y"]
+    error = max(abs(expansion.mean() - mean), abs(expansion.std() - std)) / std
+    relative = np.sqrt(recovery.regression["y"].loo.max())
+    estimate = relative * (1 / np.sqrt(nodes.size) + relative / 2)
+    assert estimate <= tolerance and error <= 10 * tolerance
+    assert error / 10 <= estimate <= 10 * error

@@ -19,6 +19,7 @@ from test_resume import (
 
 import pcmb
 from pcmb.config.schema import load_config
+from pcmb.designs.regression import loo_statistics_error
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import ishigami, ishigami_moments
 from pcmb.result import Design
@@ -44,9 +45,8 @@ def ishigami_study(**method) -> Study:
     return Study(ishigami_model, ISHIGAMI, TIMES, backend="inprocess", **method)
 
 
-@pytest.mark.filterwarnings(
-    "ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning"
-)  # low levels
+@pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+@pytest.mark.filterwarnings("ignore:.*chaos-undecided:pcmb.errors.PcmbWarning")  # low levels
 def test_smolyak_study_of_ishigami_converges_to_the_closed_form():
     exact = ishigami_moments()
     errors = []
@@ -64,27 +64,28 @@ def test_smolyak_study_of_ishigami_converges_to_the_closed_form():
     assert errors[1] < 1e-3 < errors[0] / 10  # 111 -> 351 runs: at least 100x more accurate
 
 
-def test_lars_study_adds_rounds_until_the_loo_error_meets_the_tolerance():
-    tolerance = 1e-6
+def test_lars_study_adds_rounds_until_the_estimated_error_meets_the_tolerance():
+    tolerance = 1e-5
     study = ishigami_study(
         method="regression", samples=32, order=12, tolerance=tolerance, max_samples=2048
     )
     assert study.design.record().samples == 32  # the first round, before any run
     result = study.run()
-    fit = result.regression["y"]
     assert result.n_nodes > 32 and result.design.samples == result.n_nodes
-    assert np.nanmax(fit.loo) <= tolerance
     assert not [w for w in result.warnings if w.code.startswith("regression-")]
     # Sobol' points in rounds: the first N points of the one sequence.
     whole = pcmb.chaos.nodes.random_nodes(tuple(ISHIGAMI.values()), result.n_nodes, "sobol", 0)
     np.testing.assert_array_equal(result.germ, whole.nodes)
-    # The LOO error estimates ‖f - f̂‖²/Var f: so |σ̂ - σ| <= σ √ε and |μ̂ - μ| <= σ √ε.
+    # The tolerance is on the error of the mean and std relative to the std, which the
+    # corrected LOO error ε gives as √ε σ (1/√N + √ε / 2): within 10x of the truth.
+    fits = {"y": result.regression["y"]}
     exact = ishigami_moments()
     sigma = np.sqrt(exact.variance)
-    bound = 3 * np.sqrt(tolerance)
-    np.testing.assert_allclose(result.std("y"), sigma, rtol=bound)
-    np.testing.assert_allclose(result.mean("y"), exact.mean, atol=bound * sigma)
-    np.testing.assert_allclose(result.sobol_total("y")[:, 0], exact.total, atol=2 * bound)
+    error = max(abs(result.mean("y")[0] - exact.mean), abs(result.std("y")[0] - sigma)) / sigma
+    relative = np.sqrt(np.max(fits["y"].loo))
+    estimate = relative * (1 / np.sqrt(result.n_nodes) + relative / 2)
+    assert estimate <= tolerance and error <= 10 * tolerance
+    assert error / 10 <= estimate <= 10 * error
 
 
 def test_a_budget_that_ends_before_the_tolerance_is_reported():
@@ -107,14 +108,14 @@ def test_design_records_of_older_files_load_without_the_new_fields():
     )
     record = Design.from_description(old)
     assert (record.rule, record.q, record.tolerance, record.max_samples) == (None,) * 4
-    assert record.label == "chaos order 5"
+    assert record.label == "collocation"  # the label its design gave it came later
 
 
 @pytest.mark.parametrize(
     ("method", "key", "message"),
     [
-        ({"grid": "smolyak", "level": -1}, "level", "expected an integer >= 0"),
-        ({"method": "regression", "samples": 8, "tolerance": 0.0}, "tolerance", "must be > 0"),
+        ({"grid": "smolyak", "level": -1}, "level", "expected a value >= 0"),
+        ({"method": "regression", "samples": 8, "tolerance": 0.0}, "tolerance", "a value > 0"),
         (
             {"method": "regression", "samples": 64, "tolerance": 1e-3, "max_samples": 64},
             "max_samples",
@@ -171,7 +172,7 @@ def test_validate_prints_the_first_round_and_the_budget(tmp_path):
     path = _write_config(tmp_path, ROUNDS_METHOD)
     shown = pcmb_here("validate", str(path))
     assert shown.returncode == 0, shown.stderr
-    assert "LARS on total order 6, 16 samples (to LOO 0.0001, at most 256)" in shown.stdout
+    assert "LARS on total order 6, 16 samples (to 0.0001, at most 256)" in shown.stdout
     assert "16 model runs in the first round, at most 256 in all" in shown.stdout
 
 
@@ -239,7 +240,9 @@ def test_lars_config_from_yaml_and_python_agrees_with_the_tensor_grid(tmp_path, 
     assert result.design.label.startswith("LARS on hyperbolic order 12, q=0.75, ")
     _same_values(result, _quarter_car("quarter_car_lars").run())
     for name, fit in result.regression.items():
-        assert np.nanmax(fit.loo) <= method.tolerance  # met before the budget ended
+        # Met before the budget ended: the error of the mean and std estimated from the LOO.
+        estimate = loo_statistics_error(fit.loo, result.std(name), result.n_nodes)
+        assert estimate <= method.tolerance
         # Every time: |Δμ|, |Δσ| <= σ √ε (ε the LOO estimate of ‖f - f̂‖²/Var f), with a
         # factor 3 for the estimate and 1e-3 σ_max for the reference's own error.
         sigma = reference.std(name)

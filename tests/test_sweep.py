@@ -22,7 +22,8 @@ import pytest
 import pcmb
 from pcmb.cli import main
 from pcmb.config.schema import load_config
-from pcmb.sweep.plan import plan_sweep
+from pcmb.designs import method_section
+from pcmb.sweep.plan import default_sweep, plan_sweep
 from pcmb.sweep.runner import LEDGER
 from pcmb.sweep.table import COLUMNS, read_sweep
 
@@ -406,3 +407,25 @@ def test_a_plain_run_leaves_the_sweeps_model_checks_to_sweep_and_validate(tmp_pa
     output = tmp_path / "run.h5"
     assert main(["run", str(config), "-o", str(output), "--quiet"]) == 0
     assert output.exists()
+
+
+@pytest.mark.parametrize(
+    "method",
+    [
+        {"kind": "collocation", "order": 3},
+        {"kind": "collocation", "grid": "smolyak", "level": 2},
+        {"kind": "collocation", "order": "auto", "max_runs": 200},
+        {"kind": "lhs", "samples": 64},
+        {"kind": "regression", "samples": 64, "order": 4, "tolerance": 0.01},
+        {"kind": "adaptive", "tolerance": 1e-3},
+        {"kind": "galerkin", "order": 2},
+        {"kind": "linearization"},
+    ],
+)
+def test_the_default_sweep_of_every_method_is_made_of_valid_method_blocks(method):
+    # The design says which key its cost is; a method without one (linearization) is run as
+    # it is, beside Monte Carlo, instead of being given a max_runs list it does not take.
+    found = default_sweep(method_section(method), 100)
+    for block in [*found["methods"], found["reference"]]:
+        values = {k: v[0] if isinstance(v, list) else v for k, v in block.items()}
+        method_section(values)

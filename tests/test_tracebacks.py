@@ -22,6 +22,7 @@ import pytest
 from cli_process import pcmb_cli, pcmb_here
 
 import pcmb
+from pcmb.config.schema import ExecutionSpec
 from pcmb.result import NodeFailure
 from pcmb.run.executor import run_nodes
 
@@ -227,7 +228,9 @@ def test_run_nodes_keeps_the_models_frames_only(tmp_path, monkeypatch, wrapped):
         if wrapped
         else dispatched.Model
     )
-    found = run_nodes(model, {"a": [1.0, 2.0]}, np.linspace(0, 1, 3), ["y"], jobs=1)
+    found = run_nodes(
+        model, {"a": [1.0, 2.0]}, np.linspace(0, 1, 3), ["y"], execution=ExecutionSpec(jobs=1)
+    )
     first = found.failures[0]
     assert first.traceback is not None
     text = first.traceback.text

@@ -13,10 +13,12 @@ raises false alarms.
   response even in a symmetric input has exactly zero odd coefficients, so its top shell
   alone can be empty while the expansion is far from converged.
 - **Held-out check** (:func:`holdout_error`): the surrogate against K extra model runs at
-  random inputs (a Latin hypercube of the inputs' distribution): the RMS error of the
-  surrogate and an upper confidence bound on it that fits K; and, with the surrogate as a
-  control variate, the errors of the mean and of the standard deviation themselves
-  (:func:`statistics_error`), which are what the error bars show.
+  random inputs (:func:`held_out_draws`: a Latin hypercube of the inputs' distribution, normal
+  inputs widened into their tails and weighted back; K sized to the design,
+  :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
+  it that fits K; and, with the surrogate as a control variate, the errors of the mean and
+  of the standard deviation themselves (:func:`statistics_error`), which are what the error
+  bars show, and the mean and std those runs correct.
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
@@ -26,8 +28,10 @@ raises false alarms.
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
-runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance, explained in a
-``chaos-unreliable`` record with a remedy that fits the failure. A surrogate whose pointwise
+runs), its verdict (:func:`verdict`) the first time that exceeds the tolerance by more than its
+noise, explained in a ``chaos-unreliable`` record with a remedy that fits the failure; where
+the noise is too large to tell, a ``chaos-undecided`` record says how many more held-out runs
+would (:func:`more_runs`). A surrogate whose pointwise
 error exceeds the tolerance while its statistics hold gets a ``surrogate-inaccurate`` record:
 the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the error bars;
 :func:`pdf_outside_runs` flags a PDF with mass beyond every run made.
@@ -36,7 +40,8 @@ the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Collection, Mapping
+import math
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,22 +51,27 @@ from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
-from pcmb.chaos.nodes import draw_germs
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import NodeSet, draw_germs, random_nodes
+from pcmb.chaos.polynomials import Hermite
 from pcmb.result import StudyResult, WarningRecord
 from pcmb.wording import plural
 
 __all__ = [
     "CODES",
     "CONFIDENCE",
+    "FIRST_BATCH",
     "SURROGATE_CAUTIONS",
     "TOLERANCE",
-    "VALIDATION",
     "HeldOut",
     "HeldOutCheck",
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
+    "held_out_budget",
+    "held_out_draws",
     "holdout_error",
+    "more_runs",
     "out_of_range",
     "pdf_outside_runs",
     "range_checks",
@@ -75,6 +85,7 @@ __all__ = [
 CODES = frozenset(
     {
         "chaos-unreliable",
+        "chaos-undecided",
         "surrogate-inaccurate",
         "variance-nonpositive",
         "surrogate-out-of-range",
@@ -85,17 +96,24 @@ CODES = frozenset(
 #: Codes of the records that caution the PDFs, quantiles and Sobol' indices drawn from the
 #: surrogate where its statistics may hold.
 SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
-#: Default number of held-out runs (``method.validation``).
-VALIDATION = 32
+#: By default the held-out check makes at most this many runs or this share of the design's
+#: runs, the larger (:func:`held_out_budget`; ``method.validation: K`` fixes K instead) ...
+HELD_OUT_FLOOR, HELD_OUT_SHARE = 8, 0.25
+#: ... in a first batch of at most this many, and the rest only where the verdict is undecided.
+FIRST_BATCH = 8
+#: The fewest held-out runs whose standard error is read from neighbouring pairs
+#: (:func:`_standard_error`); fewer are taken as independent draws.
+PAIRED_FROM = 16
+#: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
+#: the weighted runs count at least as 1/this many plain ones.
+WEIGHT_MOMENT = 3.0
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
 #: design's own first nodes.
 HELD_OUT_SEED = 7919
 #: Default accepted error, relative to the output's largest standard deviation.
 TOLERANCE = 0.05
-#: A standard error of the held-out estimates above this multiple of the tolerance fails the
-#: verdict by itself (:meth:`HeldOutCheck.estimate`).
-UNRESOLVED = 2.0
-#: Confidence level of the held-out upper bound.
+#: Confidence level of the held-out upper bound, and the one-sided level at which the verdict
+#: calls an estimated error above (or below) the tolerance.
 CONFIDENCE = 0.9
 #: Surrogate draws of the range check, and its seed.
 RANGE_DRAWS, RANGE_SEED = 4096, 0
@@ -192,6 +210,45 @@ def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float
 # -- held-out runs -----------------------------------------------------------------------------
 
 
+def held_out_budget(design_runs: int) -> int:
+    """The most held-out runs a check makes by default: ``HELD_OUT_FLOOR`` or
+    ``HELD_OUT_SHARE`` of the design's runs, the larger."""
+    return max(HELD_OUT_FLOOR, math.ceil(HELD_OUT_SHARE * design_runs))
+
+
+def _tail_width(normal_inputs: int) -> float:
+    """λ of the N(0, λ²) draws of each of m normal germs: the widest that keeps the weights'
+    second moment E[w²] = (λ² / √(2λ² - 1))^m at ``WEIGHT_MOMENT`` (λ = 4.2 for one normal
+    input, 2.3 for two, 1.7 for four)."""
+    b = WEIGHT_MOMENT ** (1.0 / normal_inputs)
+    return math.sqrt(b * b + b * math.sqrt(b * b - 1.0))
+
+
+def held_out_draws(
+    distributions: Sequence[Distribution], count: int, seed: int
+) -> tuple[NodeSet, NDArray[np.float64]]:
+    """K held-out inputs and their importance weights.
+
+    A Latin hypercube of the inputs' distribution (one run in each of K equal-probability
+    slices of every input), except that each normal germ is drawn from N(0, λ²)
+    (:func:`_tail_width`) and every run weighted by the ratio of the densities,
+    w = Π λ exp(-z² (1 - 1/λ²) / 2): the errors of a surrogate of a normal input sit in its
+    tails (a lognormal response), which K plain draws rarely reach. Without normal inputs the
+    weights are 1.
+    """
+    batch = random_nodes(distributions, count, "lhs", seed)
+    normal = np.array([isinstance(d.family, Hermite) for d in distributions], dtype=bool)
+    if not normal.any():
+        return batch, np.ones(count)
+    width = _tail_width(int(normal.sum()))
+    germ = batch.nodes.copy()
+    germ[:, normal] *= width
+    params = np.column_stack([d.to_physical(germ[:, k]) for k, d in enumerate(distributions)])
+    z = germ[:, normal]
+    log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
+    return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+
+
 @dataclass(frozen=True)
 class HeldOutCheck:
     """The surrogate against K held-out model runs at random inputs.
@@ -210,6 +267,11 @@ class HeldOutCheck:
     spread:
         (T,) standard error of the two estimates (the larger of theirs), over the scale: how
         finely K runs resolve the statistics' errors.
+    corrected_mean, corrected_std:
+        (T,) the mean and std corrected by the held-out runs (the surrogate as a control
+        variate), in the output's units.
+    corrected_mean_se, corrected_std_se:
+        (T,) their standard errors, in the output's units.
     count:
         K, the finite runs used.
     confidence:
@@ -221,6 +283,10 @@ class HeldOutCheck:
     mean_error: NDArray[np.float64]
     std_error: NDArray[np.float64]
     spread: NDArray[np.float64]
+    corrected_mean: NDArray[np.float64]
+    corrected_std: NDArray[np.float64]
+    corrected_mean_se: NDArray[np.float64]
+    corrected_std_se: NDArray[np.float64]
     count: int
     confidence: float
 
@@ -229,12 +295,83 @@ class HeldOutCheck:
         """(T,) the larger of the estimated errors of the mean and the std."""
         return np.fmax(self.mean_error, self.std_error)
 
-    def estimate(self, tolerance: float) -> NDArray[np.float64]:
-        """(T,) the error the verdict judges: :attr:`statistics`, raised to the standard
-        error where that exceeds ``UNRESOLVED`` times the tolerance — where K runs cannot
-        tell whether the statistics hold, they are not vouched for (a surrogate far off
-        pointwise, whose residual the K runs sample too coarsely)."""
-        return np.where(self.spread > UNRESOLVED * tolerance, self.spread, self.statistics)
+    @property
+    def noise(self) -> NDArray[np.float64]:
+        """(T,) how far :attr:`statistics` may lie from the truth at the one-sided
+        ``confidence``: the standard error times its normal quantile (1.28 at 90 %)."""
+        from scipy.special import ndtri
+
+        return float(ndtri(self.confidence)) * self.spread
+
+
+def _standard_error(
+    values: NDArray[np.float64], germ: NDArray[np.float64] | None
+) -> NDArray[np.float64]:
+    """(T,) standard error of the mean of (K, T) values drawn as a Latin hypercube at ``germ``
+    ((K, n); ``None``: independent draws, sd/√K).
+
+    A Latin hypercube stratifies every input, so its mean varies far less than that of
+    independent draws (the double well at K = 32: 8 times less). Sorted along input k, the
+    K runs pair with their neighbours, and Σ (y_a - y_b)² / (2 K · K/2) estimates the
+    variance of a mean stratified along k alone, which bounds the Latin hypercube's (it
+    stratifies k and the others); the smallest over the inputs is the estimate, never
+    above sd/√K. Below ``PAIRED_FROM`` runs the few pairs' estimate is itself too noisy (a
+    bouncing ball at K = 8: three flags on noise in ten seeds), and sd/√K stands.
+    """
+    count = values.shape[0]
+    plain = values.std(axis=0, ddof=1) / np.sqrt(count)
+    if germ is None or count < PAIRED_FROM:
+        return plain
+    even = count // 2 * 2
+    found = plain
+    for column in np.asarray(germ, dtype=float).T:
+        ordered = values[np.argsort(column, kind="stable")]
+        pairs = ordered[1:even:2] - ordered[0:even:2]
+        found = np.fmin(found, np.sqrt(np.mean(pairs**2, axis=0) / (2 * count)))
+    return found
+
+
+@dataclass(frozen=True)
+class _ControlVariate:
+    """The held-out runs' corrections of the mean and std (:func:`statistics_error`), over the
+    scale, with their standard errors."""
+
+    mean: NDArray[np.float64]
+    std: NDArray[np.float64]
+    mean_se: NDArray[np.float64]
+    std_se: NDArray[np.float64]
+
+
+def _control_variate(
+    predicted: NDArray[np.float64],
+    observed: NDArray[np.float64],
+    mean: ArrayLike,
+    std: ArrayLike,
+    scale: float,
+    weights: NDArray[np.float64],
+    germ: NDArray[np.float64] | None,
+) -> _ControlVariate:
+    """The corrected mean and std over the scale (see :func:`statistics_error`)."""
+    count = predicted.shape[0]
+    weight = weights[:, None]
+    residual = (observed - predicted) / scale
+    centred = (predicted - np.asarray(mean, dtype=float)) / scale
+    sigma = np.asarray(std, dtype=float) / scale
+    change = weight * (2 * centred + residual) * residual
+    residual = weight * residual
+    bias = residual.mean(axis=0)
+    corrected = np.sqrt(np.maximum(sigma**2 + change.mean(axis=0) - bias**2, 0.0))
+    if count < 2:
+        infinite = np.full(bias.shape, np.inf)
+        return _ControlVariate(np.asarray(mean) / scale + bias, corrected, infinite, infinite)
+    mean_se = _standard_error(residual, germ)
+    # Δσ = ΔV / (σ + σ'): the variance's standard error carried to the std; √ΔV where
+    # neither varies.
+    variance_se = _standard_error(change, germ)
+    both = sigma + corrected
+    std_se = np.sqrt(variance_se)
+    np.divide(variance_se, both, out=std_se, where=both > 0)
+    return _ControlVariate(np.asarray(mean) / scale + bias, corrected, mean_se, std_se)
 
 
 def statistics_error(
@@ -243,13 +380,17 @@ def statistics_error(
     mean: ArrayLike,
     std: ArrayLike,
     scale: float,
+    weights: ArrayLike | None = None,
+    germ: ArrayLike | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Errors of the expansion's mean and std, estimated from K held-out runs.
 
     The surrogate s is a control variate whose mean μ and std σ are known exactly; with
     r = f - s at the runs, E f = μ + E r and Var f = σ² + E[2 (s - μ) r + r²] - (E r)². The
-    sample means of r and of q = 2 (s - μ) r + r² estimate both without bias, with standard
-    errors sd(r)/√K and sd(q)/√K; their noise is that of the residual, not of the output,
+    weighted sample means of r and of q = 2 (s - μ) r + r² (importance weights w of the
+    draws, :func:`held_out_draws`) estimate both without bias, with standard errors
+    sd(w r)/√K and sd(w q)/√K (less for a Latin hypercube, :func:`_standard_error`); their
+    noise is that of the residual, not of the output,
     so K = 32 runs resolve errors of a few percent of the std where plain sampling of f
     would need thousands. The surrogate's pointwise error bounds both (|Δ mean|,
     |Δ std| <= RMS r) but is often much larger: collocation statistics are quadratures, exact
@@ -263,6 +404,11 @@ def statistics_error(
         (T,) the expansion's mean and standard deviation.
     scale:
         The output's largest standard deviation over time.
+    weights:
+        (K,) importance weights of the runs (default: 1).
+    germ:
+        (K, n) germ of the runs when they are a Latin hypercube: a smaller standard error
+        (:func:`_standard_error`; default: independent draws).
 
     Returns
     -------
@@ -270,32 +416,8 @@ def statistics_error(
         (T,) |estimated error of the mean|, |estimated error of the std| and the larger of
         their standard errors, all over the scale (scaled before squaring: no overflow).
     """
-    predicted, observed = np.atleast_2d(predicted), np.atleast_2d(observed)
-    count = predicted.shape[0]
-    if count == 0 or not scale > 0 or not np.isfinite(scale):
-        zeros = np.zeros(predicted.shape[1:])
-        return zeros, zeros, zeros
-    residual = (observed - predicted) / scale
-    centred = (predicted - np.asarray(mean, dtype=float)) / scale
-    sigma = np.asarray(std, dtype=float) / scale
-    bias = residual.mean(axis=0)
-    change = 2 * centred * residual + residual**2
-    variance = sigma**2 + change.mean(axis=0) - bias**2
-    corrected = np.sqrt(np.maximum(variance, 0.0))
-    std_error = np.abs(corrected - sigma)
-    mean_error = np.abs(bias)
-    if count < 2:
-        spread = np.full(bias.shape, np.inf)
-    else:
-        spread_mean = residual.std(axis=0, ddof=1) / np.sqrt(count)
-        # Δσ = ΔV / (σ + σ'): the variance's standard error carried to the std; √ΔV where
-        # neither varies.
-        spread_variance = change.std(axis=0, ddof=1) / np.sqrt(count)
-        both = sigma + corrected
-        spread_std = np.sqrt(spread_variance)
-        np.divide(spread_variance, both, out=spread_std, where=both > 0)
-        spread = np.fmax(spread_mean, spread_std)
-    return mean_error, std_error, spread
+    found = holdout_error(predicted, observed, mean, std, scale, weights=weights, germ=germ)
+    return found.mean_error, found.std_error, found.spread
 
 
 def holdout_error(
@@ -305,9 +427,12 @@ def holdout_error(
     std: ArrayLike,
     scale: float,
     confidence: float = CONFIDENCE,
+    weights: ArrayLike | None = None,
+    germ: ArrayLike | None = None,
 ) -> HeldOutCheck:
-    """The surrogate at K held-out runs: its RMS error with an upper confidence bound, and
-    the estimated errors of its mean and std (:func:`statistics_error`).
+    """The surrogate at K held-out runs: its RMS error with an upper confidence bound, the
+    estimated errors of its mean and std (:func:`statistics_error`), and the mean and std
+    those runs correct.
 
     With d_k the errors at K independent inputs drawn from their distribution, Σ d_k² / σ²
     is χ²_K when the d_k are N(0, σ²), so σ <= √(Σ d_k² / χ²_K(1 - confidence)) with the
@@ -326,6 +451,12 @@ def holdout_error(
         The output's largest standard deviation over time.
     confidence:
         Level of the upper bound, in (0, 1).
+    weights:
+        (K,) importance weights of the runs (:func:`held_out_draws`; default: 1); the RMS
+        error is that of the draws as they fell.
+    germ:
+        (K, n) germ of the runs when they are a Latin hypercube (:func:`_standard_error`;
+        default: independent draws).
 
     Returns
     -------
@@ -340,14 +471,33 @@ def holdout_error(
     kept = np.isfinite(observed).all(axis=tuple(range(1, observed.ndim)))
     differences = predicted[kept] - observed[kept]
     count = int(kept.sum())
+    mean, std = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
-        return HeldOutCheck(nan, nan, nan, nan, nan, 0, confidence)
+        return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
+    weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
     quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
+    if not scale > 0 or not np.isfinite(scale):  # nothing varies: nothing to correct
+        zeros = np.zeros(observed.shape[1:])
+        corrected = (mean, std, zeros, zeros)
+        errors = (zeros, zeros, zeros)
+    else:
+        germ = None if germ is None else np.asarray(germ, dtype=float)[kept]
+        found = _control_variate(
+            predicted[kept], observed[kept], mean, std, scale, weights[kept], germ
+        )
+        corrected = (found.mean * scale, found.std * scale)
+        corrected += (found.mean_se * scale, found.std_se * scale)
+        errors = (
+            np.abs(found.mean - mean / scale),
+            np.abs(found.std - std / scale),
+            np.fmax(found.mean_se, found.std_se),
+        )
     return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
-        *statistics_error(predicted[kept], observed[kept], mean, std, scale),
+        *errors,
+        *corrected,
         count,
         confidence,
     )
@@ -527,9 +677,13 @@ def _percent(share: float) -> str:
 # -- the verdict -------------------------------------------------------------------------------
 
 
-def verdict(times: ArrayLike, estimate: ArrayLike, tolerance: float = TOLERANCE) -> float:
-    """The first time at which the estimated error exceeds the tolerance (NaN if never)."""
-    above = np.flatnonzero(np.asarray(estimate, dtype=float) > tolerance)
+def verdict(
+    times: ArrayLike, estimate: ArrayLike, tolerance: float = TOLERANCE, noise: ArrayLike = 0.0
+) -> float:
+    """The first time at which the estimated error exceeds the tolerance by more than its
+    ``noise`` (NaN if never)."""
+    lower = np.asarray(estimate, dtype=float) - np.asarray(noise, dtype=float)
+    above = np.flatnonzero(lower > tolerance)
     return float(np.asarray(times, dtype=float)[above[0]]) if above.size else float("nan")
 
 
@@ -552,14 +706,21 @@ class OutputDiagnostics:
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
         mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
+    noise:
+        (T,) how far the estimate may be off at the held-out check's confidence
+        (:attr:`HeldOutCheck.noise`; 0 for the decay).
+    undecided:
+        (T,) the times before ``failing_from`` where the estimate lies within its noise of
+        the tolerance: more held-out runs would tell.
     tolerance:
         The accepted error, relative to the scale.
     failing_from:
-        :func:`verdict` of the estimate: the first time it exceeds the tolerance, or where
-        the design's runs are all equal while the held-out runs vary; NaN if never.
+        :func:`verdict` of the estimate: the first time it exceeds the tolerance by more than
+        its noise, or where the design's runs are all equal while the held-out runs vary; NaN
+        if never.
     warnings:
-        ``chaos-unreliable`` (when ``failing_from`` is a time) and the range checks'
-        records (:func:`range_checks`).
+        ``chaos-unreliable`` (when ``failing_from`` is a time), ``chaos-undecided`` (where
+        the noise is too large to tell) and the range checks' records (:func:`range_checks`).
     """
 
     output: str
@@ -568,14 +729,22 @@ class OutputDiagnostics:
     holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
+    noise: NDArray[np.float64]
+    undecided: NDArray[np.bool_]
     tolerance: float
     failing_from: float
     warnings: tuple[WarningRecord, ...]
 
     @property
     def reliable(self) -> bool:
-        """Whether the estimated error stays within the tolerance at every time."""
+        """Whether no time is flagged (the estimate never exceeds the tolerance by more than
+        its noise)."""
         return bool(np.isnan(self.failing_from))
+
+    @property
+    def vouched(self) -> bool:
+        """Whether the check vouches for every time: none flagged, none undecided."""
+        return self.reliable and not self.undecided.any()
 
 
 def diagnose(
@@ -590,6 +759,7 @@ def diagnose(
     nominal: ArrayLike | None = None,
     budgets: Collection[str] = (),
     holdout_germ: ArrayLike | None = None,
+    weights: ArrayLike | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -624,8 +794,11 @@ def diagnose(
         Codes of the design's budget records (``order-budget``, ``element-budget``): the
         refinements that ran out, which the remedy does not ask for again.
     holdout_germ:
-        (K, n) germ of the held-out runs, which tells the remedy where along each input the
-        surrogate's error sits (:func:`_error_at_ends`).
+        (K, n) germ of the held-out runs, a Latin hypercube: it tells the remedy where along
+        each input the surrogate's error sits (:func:`_error_at_ends`), and the check's
+        standard errors (:func:`_standard_error`; default: taken as independent draws).
+    weights:
+        (K,) importance weights of the held-out runs (:func:`held_out_draws`; default: 1).
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -645,12 +818,15 @@ def diagnose(
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None:
-        checked = holdout_error(*holdout, expansion.mean(), std, scale)
+        checked = holdout_error(
+            *holdout, expansion.mean(), std, scale, weights=weights, germ=holdout_germ
+        )
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
-    estimate = decay if checked is None else checked.estimate(tolerance)
-    failing_from = verdict(times, estimate, tolerance)
+    estimate = decay if checked is None else checked.statistics
+    noise = np.zeros(times.size) if checked is None else np.nan_to_num(checked.noise, nan=np.inf)
+    failing_from = verdict(times, estimate, tolerance, noise)
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
@@ -678,16 +854,68 @@ def diagnose(
                 f"{checked.count} held-out runs vary there, which no expansion can learn "
                 f"from; {evidence}"
             )
+        # The remedy reads the times from where the estimate passes the tolerance, which
+        # the flag, waiting for the noise, may follow late.
+        passing = times >= times[np.argmax((estimate > tolerance) | failing)]
         message = (
             f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{_remedy(expansion, estimate, failing, share, budgets, ends, by_element)}"
+            f"{_remedy(expansion, estimate, passing, share, budgets, ends, by_element)}"
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
+    undecided = (estimate + noise > tolerance) & ~(times >= failing_from)
+    found = OutputDiagnostics(
+        output,
+        scale,
+        decay,
+        checked,
+        share,
+        estimate,
+        noise,
+        undecided,
+        tolerance,
+        failing_from,
+        (),
+    )
+    if found.undecided.any():
+        records.append(_undecided(found, times, axis))
     if axis != "t":  # a record's time_range is in time: off time, the message says where
         records = [dataclasses.replace(record, time_range=None) for record in records]
-    return OutputDiagnostics(
-        output, scale, decay, checked, share, estimate, tolerance, failing_from, tuple(records)
+    return dataclasses.replace(found, warnings=tuple(records))
+
+
+def more_runs(found: OutputDiagnostics) -> int:
+    """How many held-out runs, beyond those made, would decide every undecided time of
+    ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
+    undecided): the noise falls as 1/√K."""
+    undecided = found.undecided
+    if found.holdout is None or not undecided.any():
+        return 0
+    margin = np.abs(found.estimate - found.tolerance)[undecided]
+    margin = np.maximum(margin, found.tolerance / 10)
+    needed = found.holdout.count * np.max(found.noise[undecided] / margin) ** 2
+    return max(int(np.ceil(needed)) - found.holdout.count, 1)
+
+
+def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) -> WarningRecord:
+    """The ``chaos-undecided`` record: where the held-out check cannot tell whether the
+    statistics hold, the estimate at the worst such time and the runs that would decide."""
+    undecided = found.undecided
+    worst = int(np.flatnonzero(undecided)[np.argmax(found.estimate[undecided])])
+    holdout = found.holdout
+    where = f" at {axis} = {times[worst]:.4g}" if axis else ""
+    count = 0 if holdout is None else holdout.count
+    more = more_runs(found)
+    return WarningRecord(
+        "chaos-undecided",
+        f"the held-out check cannot tell whether mean and std hold within the tolerance "
+        f"{_percent(found.tolerance)} of the largest std at {_count(undecided)}: estimated "
+        f"error {_percent(found.estimate[worst])} ± {_percent(found.noise[worst])}{where} "
+        f"({_percent(holdout.confidence if holdout else CONFIDENCE)} confidence, {count} "
+        f"held-out runs); about {more} more held-out runs would decide (method.validation: "
+        f"{count + more})",
+        found.output,
+        _span(times, undecided),
     )
 
 
@@ -1027,6 +1255,8 @@ class HeldOut:
         Output name -> (K, T) model values (NaN rows where a run failed).
     ok:
         (K,) which runs succeeded.
+    weights:
+        (K,) importance weights of the draws (:func:`held_out_draws`).
     """
 
     seed: int
@@ -1034,6 +1264,19 @@ class HeldOut:
     params: NDArray[np.float64]
     values: dict[str, NDArray[np.float64]]
     ok: NDArray[np.bool_]
+    weights: NDArray[np.float64]
+
+    def joined(self, more: HeldOut) -> HeldOut:
+        """These runs followed by ``more`` (a later batch of the same check; the seed is the
+        first batch's)."""
+        return HeldOut(
+            self.seed,
+            np.concatenate([self.germ, more.germ]),
+            np.concatenate([self.params, more.params]),
+            {name: np.concatenate([v, more.values[name]]) for name, v in self.values.items()},
+            np.concatenate([self.ok, more.ok]),
+            np.concatenate([self.weights, more.weights]),
+        )
 
 
 def diagnose_all(
@@ -1081,5 +1324,6 @@ def diagnose_all(
             None if nominal is None else nominal.get(name),
             budgets,
             None if holdout is None else held_out.germ[held_out.ok],
+            None if holdout is None else held_out.weights[held_out.ok],
         )
     return found

@@ -68,6 +68,8 @@ _LEGEND_CHARACTERS = 44
 _BINS = 40
 #: The diagnostics' record that explains a shaded time range.
 _FLAG = "chaos-unreliable"
+#: ... and where its held-out check cannot tell (shown in the same section).
+_UNDECIDED = "chaos-undecided"
 #: Shading of the time range where the diagnostics call the chaos unreliable.
 UNRELIABLE_COLOR, UNRELIABLE_ALPHA = "tab:red", 0.12
 _COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
@@ -730,6 +732,9 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
         shaded = f"shaded in {'the time plot' if result.on_time(name) else 'its figures'}"
         why = " ".join(w.message for w in result.warnings_for(name) if w.code == _FLAG)
         return "warn", f"unreliable{where} ({shaded}; {tolerance}): {why}"
+    if not found.vouched:
+        why = " ".join(w.message for w in result.warnings_for(name) if w.code == _UNDECIDED)
+        return "warn", f"undecided ({tolerance}): {why}"
     error = float(np.nanmax(found.estimate, initial=0.0))
     numbers = [f"error up to {error:.2g} of the largest std ({tolerance})"]
     if found.holdout is None:
@@ -748,7 +753,7 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
 def _record_lists(result: StudyResult) -> list[str]:
     """The warning records by severity: warnings in red, information apart (not red); the
     diagnostics' verdict is in its own section."""
-    warnings = [w for w in result.alerts if w.code != _FLAG]
+    warnings = [w for w in result.alerts if w.code not in (_FLAG, _UNDECIDED)]
     information = [w for w in result.warnings if result.is_note(w)]
     parts: list[str] = []
     for title, records, kind in (

@@ -25,6 +25,7 @@ is named by integer positions in those sequences (no floating-point tolerance in
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -41,11 +42,17 @@ from pcmb.chaos.recovery import _along_axes, _rows
 
 __all__ = [
     "SparseGrid",
+    "box_index_set",
     "combination_coefficients",
     "find_rows",
     "project_sparse",
     "smolyak_index_set",
 ]
+
+
+def box_index_set(levels: Sequence[int]) -> NDArray[np.int64]:
+    """(K, n) every level multi-index of the box 0..levels[k] in each input: a tensor grid."""
+    return np.array(list(itertools.product(*(range(top + 1) for top in levels))), dtype=np.int64)
 
 
 def smolyak_index_set(

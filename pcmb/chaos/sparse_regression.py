@@ -307,7 +307,8 @@ def fit_sparse(
 def next_batch(history: Sequence[tuple[int, float]], tolerance: float, max_samples: int) -> int:
     """How many samples to add before the next fit; 0: stop.
 
-    Stops when the last worst corrected LOO error meets ``tolerance`` or ``max_samples`` is
+    Stops when the last error (the regression design's estimate of the error of the mean and
+    std from the corrected LOO error) meets ``tolerance`` or ``max_samples`` is
     reached. Otherwise the next total extrapolates the error's observed decay
     ε ∝ N^(-rate) from the last two rounds to the size that meets the tolerance (doubling when
     there is no decay to extrapolate yet), kept between 2N and 8N and rounded up to a power of
@@ -316,7 +317,7 @@ def next_batch(history: Sequence[tuple[int, float]], tolerance: float, max_sampl
     Parameters
     ----------
     history:
-        (samples, worst corrected LOO error over outputs and times) of every fit so far.
+        (samples, error) of every fit so far.
     tolerance:
         The error wanted.
     max_samples:

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from pcmb.analysis.derived import derived_problems
 from pcmb.chaos.nodes import overflowing_inputs
 from pcmb.config.types import MAX_RUNS, MAX_VALUES
-from pcmb.designs import DESIGNS, MethodSettings, make_design
+from pcmb.designs import DESIGNS, make_design, section_key
 from pcmb.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -30,31 +30,26 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
         for problem in error.problems:
             yield problem.path, problem.message
     method = config.method
-    if isinstance(method.order, dict):
-        unknown = [key for key in method.order if key not in config.inputs]
+    order = getattr(method, "order", None)
+    if isinstance(order, dict):
+        unknown = [key for key in order if key not in config.inputs]
         for key in unknown:
             yield f"method.order.{key}", f"names no input (inputs: {', '.join(config.inputs)})"
-        missing = [name for name in config.inputs if name not in method.order]
+        missing = [name for name in config.inputs if name not in order]
         if missing:
             yield "method.order", f"no order given for input(s) {', '.join(missing)}"
         if unknown or missing:
             return
-    # MethodSpec's keys are MethodSettings' fields, but for order (one per input there) and
-    # the held-out runs (the study's, not the design's); order auto refines to the
-    # diagnostics' tolerance.
     try:
         design = config_design(config)
     except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
         key, _, message = str(error).partition(": ")
         yield key, message
         return
-    if method.tolerance is not None or method.order == "auto":  # rounds: bounded by the budget
-        budget_key = "max_samples" if method.kind == "regression" else "max_runs"
-        key, runs = f"method.{budget_key}", getattr(design, "budget", design.runs)
-    elif method.samples is not None:
-        key, runs = "method.samples", design.runs
-    else:
-        key, runs = ("method.level" if method.level is not None else "method.order"), design.runs
+    # A design that runs in rounds is bounded by its budget, the others by their first round.
+    rounds = method.size_key == method.budget_key
+    key = f"method.{method.size_key}"
+    runs = getattr(design, "budget", design.runs) if rounds else design.runs
     if runs > MAX_RUNS:
         yield key, f"the design asks for {_many(runs)} runs, more than the limit of {MAX_RUNS:.0e}"
     elif runs * config.time.points > MAX_VALUES:
@@ -77,15 +72,6 @@ def _many(count: int) -> str:
     return f"{count:.3g}" if count < 1e300 else f"~10^{len(str(int(count))) - 1}"
 
 
-def _method_settings(config: StudyConfig) -> MethodSettings:
-    """The design settings of a config's ``method:`` (orders per input, in germ order)."""
-    return MethodSettings(
-        orders=config.orders,
-        diagnostics_tolerance=config.diagnostics.tolerance,
-        **config.method.model_dump(exclude={"order", "validation"}),
-    )
-
-
 def config_design(config: StudyConfig) -> object:
     """The design a config's ``method:`` makes on its inputs.
 
@@ -95,14 +81,14 @@ def config_design(config: StudyConfig) -> object:
         Settings the design cannot use (the message starts with the key).
     """
     inputs = dict(zip(config.input_names, config.distributions, strict=True))
-    return make_design(inputs, _method_settings(config))
+    return make_design(inputs, config.method.settings(config.orders, config.diagnostics.tolerance))
 
 
 def _intrusive(config: StudyConfig) -> object:
     """The config's intrusive design (``IntrusiveDesign``: it checks the model in a worker);
     ``None`` for a node design, or when the cross checks reject the settings (an order
     mapping that misses an input cannot even be read)."""
-    if not hasattr(DESIGNS.get(config.method.kind), "check"):
+    if not hasattr(DESIGNS[section_key(config.method)], "check"):
         return None
     try:
         return config_design(config)

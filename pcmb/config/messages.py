@@ -183,6 +183,31 @@ def _union_tags(root: Any, loc: Sequence[Any]) -> list[str]:
     return []
 
 
+def _owners(root: Any, loc: Sequence[Any]) -> tuple[str, str, list[str]] | None:
+    """For a key that a member of a discriminated union refuses (``loc`` ends with the
+    member's tag and the key): the discriminator, the member's tag and the tags of the
+    members that take the key; ``None`` elsewhere or when no member takes it."""
+    if len(loc) < 2:
+        return None
+    _, annotation = _walk(root, loc[:-2])
+    while annotation is not None:
+        inner, metadata = _unwrap(annotation)
+        if not _is_union(inner):
+            return None
+        tags = _member_tags(inner, metadata)
+        if tags:
+            break
+        members = [a for a in typing.get_args(inner) if a is not type(None)]
+        annotation = members[0] if len(members) == 1 else None
+    else:
+        return None
+    key, tag = _discriminator(metadata), loc[-2]
+    takers = [t for t, member in tags if loc[-1] in getattr(_unwrap(member)[0], "model_fields", {})]
+    if key is None or tag not in dict(tags) or not takers:
+        return None
+    return key, str(tag), takers
+
+
 # --------------------------------------------------------------------------- messages
 
 _EXPECTED = {
@@ -244,6 +269,13 @@ def _message(error: Mapping[str, Any], root: Any) -> tuple[str, str | None]:
         # pydantic's own 'missing' has no context; the validators' ones explain the need.
         return (error["msg"] if ctx else "required key is missing"), None
     if kind == "extra_forbidden":
+        owners = _owners(root, error["loc"])
+        if owners is not None:
+            discriminator, tag, takers = owners
+            return (
+                f"not a setting of {discriminator} {tag} (it belongs to {', '.join(takers)})",
+                None,
+            )
         key = str(error["loc"][-1])
         allowed = _allowed_keys(root, error["loc"][:-1])
         listing = f" (allowed: {', '.join(allowed)})" if allowed else ""

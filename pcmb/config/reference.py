@@ -205,8 +205,7 @@ def _plural(text: str) -> str:
 def _label(section: type[BaseModel], selector: Any) -> str:
     """What tells a form of a union apart: its ``selector`` value, else its first key."""
     if isinstance(selector, str):
-        (value,) = get_args(section.model_fields[selector].annotation)
-        return str(value)
+        return " | ".join(map(str, get_args(section.model_fields[selector].annotation)))
     return selecting_key(section)
 
 

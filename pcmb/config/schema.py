@@ -20,10 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import (
     AfterValidator,
-    Discriminator,
+    BeforeValidator,
     Field,
     PrivateAttr,
-    Tag,
     ValidationError,
     ValidationInfo,
     create_model,
@@ -33,10 +32,9 @@ from pydantic import (
 
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
-from pcmb.analysis.diagnostics import TOLERANCE, VALIDATION
+from pcmb.analysis.diagnostics import TOLERANCE
 from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs, process
-from pcmb.chaos.nested import RULES
 from pcmb.config.checks import cross_check, model_check
 from pcmb.config.loader import parse_yaml
 from pcmb.config.messages import KeyPath, located, schema_problems
@@ -58,13 +56,10 @@ from pcmb.config.types import (
     tagged_by_key,
     unique,
 )
-from pcmb.designs import GRIDS, METHOD_KINDS
-from pcmb.designs.collocation import BASES
-from pcmb.designs.regression import BASES as REGRESSION_BASES
-from pcmb.designs.regression import SAMPLINGS, SELECTIONS
-from pcmb.designs.sampling import FITS
+from pcmb.designs import MethodSpec
 from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.run.backends import BACKENDS
+from pcmb.run.memory import DEFAULT_MEMORY, parse_memory
 from pcmb.sweep.plan import sweep_problems, swept_methods
 
 if TYPE_CHECKING:
@@ -317,77 +312,9 @@ TimeSpec = tagged_by_key(
 )
 
 
-def _order_tag(value: Any) -> str:
-    if isinstance(value, str):
-        return "order:auto"
-    return "order:mapping" if isinstance(value, Mapping) else "order:int"
-
-
-# Tagged by the value's type, so an error names the form the user wrote (an int, a mapping or
-# auto) instead of listing how the value fails every form.
-OrderSpec = Annotated[
-    Annotated[NonNegativeInt, Tag("order:int")]
-    | Annotated[dict[Name, NonNegativeInt], Tag("order:mapping")]
-    | Annotated[Literal["auto"], Tag("order:auto")],
-    Discriminator(_order_tag),
-]
-
-
-class MethodSpec(Section):
-    """How nodes are chosen and coefficients recovered."""
-
-    kind: Literal[METHOD_KINDS] = Field(description="how nodes are made (a registered design)")
-    fit: Literal[FITS] = Field(
-        default="none", description="regression: least-squares chaos fit on sampled nodes"
-    )
-    order: OrderSpec | None = Field(
-        default=None,
-        validate_default=True,
-        description="int, a mapping input -> int, or auto: tensor collocation raised order by "
-        "order until diagnostics.tolerance is met",
-    )
-    basis: Literal[tuple(dict.fromkeys((*BASES, *REGRESSION_BASES)))] | None = Field(
-        default=None,
-        description="chaos terms (default: tensor for collocation, hyperbolic for regression; "
-        "kind adaptive: tensor raises a tensor grid one input at a time)",
-    )
-    samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
-    seed: NonNegativeInt = Field(default=0, description="seed of a sampling method")
-    grid: Literal[GRIDS] = Field(
-        default="tensor", description="collocation nodes: tensor grid or Smolyak"
-    )
-    level: NonNegativeInt | None = Field(default=None, description="level of a Smolyak grid")
-    rule: Literal[RULES] = Field(default="auto", description="nested 1-D rule of a Smolyak grid")
-    elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
-        default=None,
-        description="multi-element collocation: input -> split points (physical units), or auto",
-    )
-    max_elements: PositiveInt = Field(default=16, description="most elements of elements: auto")
-    selection: Literal[tuple(SELECTIONS)] = Field(
-        default="lars", description="term selection of kind regression"
-    )
-    sampling: Literal[tuple(SAMPLINGS)] = Field(
-        default="sobol", description="how kind regression samples its nodes"
-    )
-    q: Annotated[float, Field(gt=0, le=1)] = Field(
-        default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
-    )
-    tolerance: PositiveReal | None = Field(
-        default=None,
-        description="regression: add samples until the LOO error meets it; adaptive: refine "
-        "until the estimated error meets it",
-    )
-    max_samples: PositiveInt | None = Field(
-        default=None, description="kind regression with tolerance: most samples in all"
-    )
-    max_runs: PositiveInt | None = Field(
-        default=None,
-        description="kind adaptive, or order auto: most runs in all (default 1000)",
-    )
-    validation: NonNegativeInt = Field(
-        default=VALIDATION,
-        description="held-out runs at random inputs that check a chaos expansion (0: none)",
-    )
+def _memory(value: int | str) -> int | str:
+    parse_memory(value)
+    return value
 
 
 class ExecutionSpec(Section):
@@ -419,6 +346,11 @@ class ExecutionSpec(Section):
     timeout: PositiveReal | None = Field(
         default=None,
         description="seconds a node may take before its worker is killed (backend loky)",
+    )
+    memory: Annotated[int | str, BeforeValidator(_memory)] = Field(
+        default=DEFAULT_MEMORY,
+        description="memory pcmb's process may use: a size (2GB, 512MiB, bytes) or a share of "
+        "the memory available (80%); a sampling study over it streams its runs to the file",
     )
 
     @field_validator("timeout")
@@ -546,7 +478,7 @@ class StudyConfig(Section):
     inputs: Annotated[dict[Name, InputSpec], Field(min_length=1)] = Field(
         description="ordered: the order is the germ order"
     )
-    method: MethodSpec
+    method: MethodSpec = Field(description="how nodes are made: one section per method.kind")
     execution: ExecutionSpec = Field(default_factory=ExecutionSpec)
     diagnostics: DiagnosticsSpec = Field(default_factory=DiagnosticsSpec)
     analysis: AnalysisSpec | None = Field(
@@ -615,7 +547,7 @@ class StudyConfig(Section):
     def orders(self) -> tuple[int, ...] | Literal["auto"] | None:
         """Chaos order per input in germ order (``None`` when the method has none, ``"auto"``
         for order refinement)."""
-        order = self.method.order
+        order = getattr(self.method, "order", None)
         if order is None or order == "auto":
             return order
         names = self.input_names

@@ -7,7 +7,7 @@ import typing
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import (
     AfterValidator,
@@ -31,6 +31,7 @@ __all__ = [
     "NameList",
     "NonNegativeInt",
     "NonNegativeReal",
+    "OrderSpec",
     "Points",
     "PositiveInt",
     "PositiveReal",
@@ -48,7 +49,6 @@ __all__ = [
 MAX_RUNS = 10_000_000
 #: Largest number of stored values per output (runs x time points): 8 GB of float64.
 MAX_VALUES = 1_000_000_000
-#: ``method.kind`` values that sample their nodes (and need ``samples``).
 
 
 def reject_text_and_bool(expected: str) -> Callable[[Any], Any]:
@@ -160,3 +160,19 @@ def tagged_by_key(*variants: Any, error: str) -> Any:
         typing.Union[members],  # noqa: UP007 (a runtime tuple of members)
         Discriminator(tag, custom_error_type="no_variant", custom_error_message=error),
     ]
+
+
+def _order_tag(value: Any) -> str:
+    if isinstance(value, str):
+        return "order:auto"
+    return "order:mapping" if isinstance(value, Mapping) else "order:int"
+
+
+# Tagged by the value's type, so an error names the form the user wrote (an int, a mapping or
+# auto) instead of listing how the value fails every form.
+OrderSpec = Annotated[
+    Annotated[NonNegativeInt, Tag("order:int")]
+    | Annotated[dict[Name, NonNegativeInt], Tag("order:mapping")]
+    | Annotated[Literal["auto"], Tag("order:auto")],
+    Discriminator(_order_tag),
+]

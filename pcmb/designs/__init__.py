@@ -7,7 +7,11 @@ its tests.
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Mapping
+from typing import Annotated, Any
+
+from pydantic import Field, TypeAdapter
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.designs.adaptive import AdaptiveCollocation
@@ -15,13 +19,15 @@ from pcmb.designs.anisotropic import AnisotropicTensor
 from pcmb.designs.base import (
     RECORDED_ONLY,
     IntrusiveDesign,
+    MethodSection,
     MethodSettings,
     NodeDesign,
     Recovery,
     statistics_warnings,
 )
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.collocation import GRIDS, TensorCollocation
 from pcmb.designs.galerkin import Galerkin
+from pcmb.designs.halton import HaltonSampling
 from pcmb.designs.linearization import Linearization
 from pcmb.designs.multi_element import MultiElementCollocation
 from pcmb.designs.refine import OrderRefinement
@@ -35,11 +41,15 @@ __all__ = [
     "METHOD_KINDS",
     "RECORDED_ONLY",
     "IntrusiveDesign",
+    "MethodSection",
     "MethodSettings",
+    "MethodSpec",
     "NodeDesign",
     "Recovery",
     "design_key",
     "make_design",
+    "method_section",
+    "section_key",
     "statistics_warnings",
 ]
 
@@ -56,6 +66,7 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     "montecarlo": Sampling,
     "lhs": Sampling,
     "sobol": Sampling,
+    "halton": HaltonSampling,
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
     "adaptive:tensor": AnisotropicTensor,
@@ -66,17 +77,30 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
 }
 #: ``method.kind`` values.
 METHOD_KINDS = tuple(dict.fromkeys(key.partition(":")[0] for key in DESIGNS))
-#: Collocation keys chosen by other keys than ``method.grid``.
-_NOT_GRIDS = ("collocation:elements", "collocation:refine")
-#: ``method.grid`` values of collocation.
-GRIDS = (
-    "tensor",
-    *(
-        key.partition(":")[2]
-        for key in DESIGNS
-        if key.startswith("collocation:") and key not in _NOT_GRIDS
-    ),
-)
+#: The ``method:`` section: one member per design family (each design's ``Settings``), tagged
+#: by ``kind``, each with only its own keys.
+MethodSpec = Annotated[
+    typing.Union[tuple(dict.fromkeys(design.Settings for design in DESIGNS.values()))],  # noqa: UP007
+    Field(discriminator="kind"),
+]
+_METHOD = TypeAdapter(MethodSpec)
+
+
+def method_section(data: Mapping[str, Any] | MethodSection) -> MethodSection:
+    """The ``method:`` section of this data (a section is returned as it is).
+
+    Raises
+    ------
+    pydantic.ValidationError
+        Data no section takes (:func:`pcmb.config.messages.schema_problems` locates it).
+    """
+    return data if isinstance(data, MethodSection) else _METHOD.validate_python(data)
+
+
+def section_key(section: MethodSection) -> str:
+    """The :data:`DESIGNS` key of a ``method:`` section, e.g. ``collocation:smolyak``."""
+    order = getattr(section, "order", None)
+    return design_key(section.settings("auto" if order == "auto" else None))
 
 
 def design_key(settings: MethodSettings) -> str:
@@ -99,20 +123,9 @@ def make_design(inputs: Mapping[str, Distribution], settings: MethodSettings) ->
     Raises
     ------
     ValueError
-        An unknown kind or grid, or settings the design cannot use (the message starts with
-        the key).
+        Settings the design cannot use on these inputs (the message starts with the key); the
+        keys themselves were checked by their section (:data:`MethodSpec`).
     """
-    if settings.kind not in METHOD_KINDS:
-        raise ValueError(
-            f"method.kind: expected one of {', '.join(METHOD_KINDS)}, got {settings.kind!r}"
-        )
-    if settings.kind == "collocation" and settings.grid not in GRIDS:
-        raise ValueError(f"method.grid: expected one of {', '.join(GRIDS)}, got {settings.grid!r}")
-    if settings.elements is not None and settings.kind != "collocation":
-        raise ValueError(
-            "method.elements: multi-element designs are collocation (kind: collocation), "
-            f"got kind {settings.kind!r}"
-        )
     if settings.elements is not None and settings.grid != "tensor":
         raise ValueError(
             "method.elements: multi-element collocation uses tensor grids (grid: tensor)"

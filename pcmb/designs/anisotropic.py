@@ -14,7 +14,6 @@ box reached.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 from collections.abc import Mapping
 
 import numpy as np
@@ -22,17 +21,12 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
-from pcmb.chaos.sparse import SparseGrid
+from pcmb.chaos.sparse import SparseGrid, box_index_set
 from pcmb.designs.adaptive import AdaptiveCollocation
 from pcmb.designs.base import MethodSettings
 from pcmb.result import Design
 
 __all__ = ["AnisotropicTensor"]
-
-
-def _box(levels: tuple[int, ...]) -> NDArray[np.int64]:
-    """(K, n) every level multi-index of the box 0..levels[k] in each input."""
-    return np.array(list(itertools.product(*(range(top + 1) for top in levels))), dtype=np.int64)
 
 
 class AnisotropicTensor(AdaptiveCollocation):
@@ -46,7 +40,7 @@ class AnisotropicTensor(AdaptiveCollocation):
         super().__init__(inputs, dataclasses.replace(settings, basis=None))
 
     def _first_indices(self) -> NDArray[np.int64]:
-        return _box((1,) * len(self.distributions))
+        return box_index_set((1,) * len(self.distributions))
 
     def _reset(self) -> None:
         super()._reset()
@@ -87,7 +81,7 @@ class AnisotropicTensor(AdaptiveCollocation):
             if rule.max_level is not None and self._levels[k] >= rule.max_level:
                 continue
             levels = tuple(top + (j == k) for j, top in enumerate(self._levels))
-            box = _box(levels)
+            box = box_index_set(levels)
             if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
                 self._stopped = (
                     f"raising {self.names[k]} would pass method.max_runs: raise "

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
+from pcmb.config.types import NonNegativeInt, Section
 from pcmb.result import (
     RECORDED_ONLY,
     AdaptiveFit,
@@ -26,10 +28,12 @@ __all__ = [
     "RECORDED_ONLY",
     "AdaptiveDesign",
     "IntrusiveDesign",
+    "MethodSection",
     "MethodSettings",
     "NodeDesign",
     "Recovery",
     "least_squares_recovery",
+    "order_words",
     "statistics_warnings",
 ]
 
@@ -39,7 +43,8 @@ _SQUARE_LIMIT = float(np.sqrt(np.finfo(float).max))
 
 @dataclass(frozen=True)
 class MethodSettings:
-    """The ``method:`` settings a design is built from (config keys of the same names).
+    """The ``method:`` settings a design is built from (config keys of the same names), made by
+    :meth:`MethodSection.settings` from a validated section.
 
     ``orders`` is one order per input (germ order), ``"auto"`` for order refinement, ``None``
     when the method has none. :func:`pcmb.designs.design_key` picks the design from ``kind``
@@ -66,6 +71,51 @@ class MethodSettings:
     max_samples: int | None = None
     max_runs: int | None = None
     diagnostics_tolerance: float | None = None
+
+
+class MethodSection(Section):
+    """Base of every ``method:`` section: the keys of one design family, tagged by ``kind``.
+
+    A design class names its section as ``Settings``; the config's ``method:`` union is built
+    from the sections of :data:`pcmb.designs.DESIGNS`, so a section holds only its own keys.
+    A subclass declares ``kind: Literal[...]`` and says which key sets its number of runs
+    (:attr:`size_key`), which one a sweep raises (:attr:`cost_key`) and which one bounds the
+    runs of all its rounds (:attr:`budget_key`).
+    """
+
+    #: The key that bounds the runs of all rounds of a design that runs in rounds.
+    budget_key: ClassVar[str] = "max_runs"
+
+    kind: str  # each section narrows it to its Literal (kept first in listings)
+    validation: NonNegativeInt | None = Field(
+        default=None,
+        description="held-out runs at random inputs that check a chaos expansion (0: none; "
+        "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
+        "batches while the verdict is undecided)",
+    )
+    seed: NonNegativeInt = Field(
+        default=0, description="seed of the design's random nodes and of the held-out runs"
+    )
+
+    @property
+    def size_key(self) -> str:
+        """The key that sets the number of runs (where a design too large is reported)."""
+        return "kind"
+
+    @property
+    def cost_key(self) -> str | None:
+        """The key a default sweep raises (``None``: nothing to raise)."""
+        return None
+
+    def settings(
+        self,
+        orders: tuple[int, ...] | str | None = None,
+        diagnostics_tolerance: float | None = None,
+    ) -> MethodSettings:
+        """The record a design is built from: these keys, with ``orders`` one per germ input
+        (or ``"auto"``) and ``diagnostics.tolerance``."""
+        data = self.model_dump(exclude={"order", "validation"})
+        return MethodSettings(orders=orders, diagnostics_tolerance=diagnostics_tolerance, **data)
 
 
 @dataclass(frozen=True)
@@ -181,6 +231,15 @@ class IntrusiveDesign(Protocol):
             The integration failed.
         """
         ...
+
+
+def order_words(orders: Sequence[int], basis: str | None) -> str:
+    """The chaos order in words: ``order 5``, ``orders 3x5`` (tensor), ``total order 4``."""
+    if basis != "tensor":
+        return f"total order {max(orders)}"
+    if len(set(orders)) == 1:
+        return f"order {orders[0]}"
+    return "orders " + "x".join(map(str, orders))
 
 
 def least_squares_recovery(

@@ -4,26 +4,75 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.basis import total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nested import RULES
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.chaos.recovery import project_tensor
+from pcmb.config.types import Name, NonNegativeInt, OrderSpec, PositiveInt, Real
 from pcmb.designs.base import (
+    MethodSection,
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["TensorCollocation"]
+__all__ = ["CollocationSettings", "TensorCollocation"]
 
 BASES = ("tensor", "total")
+#: ``method.grid`` values: the tensor Gauss grid, or a Smolyak sparse grid.
+GRIDS = ("tensor", "smolyak")
+
+
+class CollocationSettings(MethodSection):
+    """``method: {kind: collocation, ...}``: a tensor Gauss grid (``order``), a Smolyak grid
+    (``grid: smolyak``, ``level``, ``rule``), multi-element collocation (``elements``) or
+    order refinement (``order: auto``, within ``max_runs``)."""
+
+    kind: Literal["collocation"] = Field(description="how nodes are made (a registered design)")
+    order: OrderSpec | None = Field(
+        default=None,
+        description="int, a mapping input -> int, or auto: tensor grids of nested rules raised "
+        "level by level until diagnostics.tolerance is met",
+    )
+    basis: Literal[BASES] | None = Field(
+        default=None, description="chaos terms: tensor (default) or total degree"
+    )
+    grid: Literal[GRIDS] = Field(default="tensor", description="tensor Gauss grid or Smolyak")
+    level: NonNegativeInt | None = Field(default=None, description="level of a Smolyak grid")
+    rule: Literal[RULES] = Field(
+        default="auto", description="nested 1-D rule of a Smolyak grid or of order auto"
+    )
+    elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
+        default=None,
+        description="multi-element collocation: input -> split points (physical units), or auto",
+    )
+    max_elements: PositiveInt = Field(default=16, description="most elements of elements: auto")
+    max_runs: PositiveInt | None = Field(
+        default=None, description="order auto: most runs in all (default 1000)"
+    )
+
+    @property
+    def size_key(self) -> str:
+        if self.order == "auto":
+            return self.budget_key
+        return "level" if self.level is not None else "order"
+
+    @property
+    def cost_key(self) -> str:
+        if self.order == "auto":
+            return self.budget_key
+        return "level" if self.level is not None else "order"
 
 
 class TensorCollocation:
@@ -34,16 +83,11 @@ class TensorCollocation:
     is no quadrature rule: its survivors are refitted by least squares.
     """
 
+    Settings = CollocationSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind collocation)")
-        if (settings.basis or "tensor") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
-        if settings.fit != "none":
-            raise ValueError(
-                "method.fit: expected none: collocation recovers by projection (fit: regression "
-                "is for the sampling methods)"
-            )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.basis = settings.basis or "tensor"
@@ -65,6 +109,7 @@ class TensorCollocation:
             basis=self.basis,
             orders=self.orders,
             fit="projection",
+            label=f"chaos {order_words(self.orders, self.basis)}",
         )
 
     def _index(self, grid: TensorGrid) -> NDArray[np.int64]:

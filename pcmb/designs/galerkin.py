@@ -16,20 +16,29 @@ and checks it).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.basis import PolynomialBasis, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid
-from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
+from pcmb.config.types import OrderSpec
+from pcmb.designs.base import (
+    MethodSection,
+    MethodSettings,
+    Recovery,
+    order_words,
+    statistics_warnings,
+)
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design
 
-__all__ = ["Galerkin", "GalerkinSystem"]
+__all__ = ["Galerkin", "GalerkinSettings", "GalerkinSystem"]
 
 BASES = ("tensor", "total")
 
@@ -137,26 +146,49 @@ def _germ_degrees(
     return (state_power[:, None] * orders[None, :] + input_power).max(axis=0)
 
 
+class GalerkinSettings(MethodSection):
+    """``method: {kind: galerkin, order, basis}``."""
+
+    kind: Literal["galerkin"] = Field(description="how nodes are made (a registered design)")
+    order: OrderSpec | None = Field(
+        default=None, description="chaos order: int or a mapping input -> int"
+    )
+    basis: Literal[BASES] | None = Field(
+        default=None, description="chaos terms: tensor (default) or total degree"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return "order"
+
+    @property
+    def cost_key(self) -> str:
+        return "order"
+
+
 class Galerkin(WithoutNodes):
     """``method: {kind: galerkin, order, basis}``: stochastic Galerkin on a tensor or total
     basis of order P (per input for ``tensor``); needs the model's polynomial form."""
+
+    Settings = GalerkinSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.orders is None or settings.orders == "auto":
             raise ValueError(
                 "method.order: an integer order (or one per input) is required by kind galerkin"
             )
-        if (settings.basis or "tensor") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)} for kind galerkin")
-        if settings.fit != "none":
-            raise ValueError("method.fit: expected none: galerkin solves for the coefficients")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(int(p) for p in settings.orders)
         self.basis = settings.basis or "tensor"
 
     def record(self) -> Design:
         return Design(
-            kind="galerkin", grid="none", basis=self.basis, orders=self.orders, fit="galerkin"
+            kind="galerkin",
+            grid="none",
+            basis=self.basis,
+            orders=self.orders,
+            fit="galerkin",
+            label=f"Galerkin, {order_words(self.orders, self.basis)}",
         )
 
     def index(self) -> NDArray[np.int64]:

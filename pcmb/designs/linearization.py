@@ -16,18 +16,20 @@ is Gaussian, and then the method is exact.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.inputs import Distribution, Normal
 from pcmb.chaos.nodes import TensorGrid
-from pcmb.designs.base import MethodSettings, Recovery
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.intrusive import WithoutNodes, form_problems, polynomial_form
 from pcmb.designs.polynomial_form import CompiledPolynomials, PolynomialForm
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["GaussianMoments", "Linearization"]
+__all__ = ["GaussianMoments", "Linearization", "LinearizationSettings"]
 
 #: Points of the 1-D rule that gives an input's mean and variance (exact for affine maps).
 _MOMENT_POINTS = 16
@@ -186,20 +188,24 @@ class GaussianMoments:
         return out
 
 
+class LinearizationSettings(MethodSection):
+    """``method: {kind: linearization}``: no keys of its own."""
+
+    kind: Literal["linearization"] = Field(description="how nodes are made (a registered design)")
+
+
 class Linearization(WithoutNodes):
     """``method: {kind: linearization}``: statistical linearization with Gaussian closure;
     needs the model's polynomial form. Non-Gaussian inputs enter by their mean and variance
     only (a warning record says so)."""
 
+    Settings = LinearizationSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        if settings.orders is not None:
-            raise ValueError("method.order: kind linearization has no chaos order")
-        if settings.basis is not None:
-            raise ValueError("method.basis: kind linearization has no chaos basis")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
 
     def record(self) -> Design:
-        return Design(kind="linearization", grid="none")
+        return Design(kind="linearization", grid="none", label="linearization")
 
     def check(self, model: object, outputs: Sequence[str] | None) -> list[tuple[str, str]]:
         return form_problems(model, self.names, outputs, "linearization")

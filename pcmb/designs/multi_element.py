@@ -39,9 +39,10 @@ from pcmb.designs.base import (
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.collocation import CollocationSettings, TensorCollocation
 from pcmb.result import Design, WarningRecord
 
 __all__ = ["MultiElementCollocation", "decay_scores"]
@@ -79,6 +80,8 @@ class MultiElementCollocation:
         ``method.<key>: ...`` for settings the design cannot use.
     """
 
+    Settings = CollocationSettings
+
     def __init__(
         self,
         inputs: Mapping[str, Distribution],
@@ -91,8 +94,6 @@ class MultiElementCollocation:
         self.orders, self.basis = self._collocation.orders, self._collocation.basis
         self.elements = settings.elements
         self.max_elements = settings.max_elements
-        if self.max_elements < 1:
-            raise ValueError(f"method.max_elements: must be >= 1, got {self.max_elements}")
         if self.elements == "auto" and max(self.orders) < 2:
             raise ValueError(
                 "method.order: elements: auto needs order >= 2 (its decay indicator reads the "
@@ -221,6 +222,7 @@ class MultiElementCollocation:
             orders=self.orders,
             elements=self.partition.size,
             fit="projection",
+            label=f"chaos {order_words(self.orders, self.basis)}",
         )
 
     # -- recovery ---------------------------------------------------------------------------

@@ -1,44 +1,47 @@
 """Order refinement of tensor collocation (``method.order: auto``).
 
-Round k runs the tensor Gauss grid of order k in every input, from order 1. From the second
-round on, the indicator compares the round's statistics with the previous order's: the largest
-difference, over outputs and times, of the mean and of the std, relative to the output's
-largest std over time (the diagnostics' scale, ``docs/diagnostics.md``: on the paper cases
-this indicator fired no later than the true error in every output and order measured, where
-per-time normalisations raise false alarms). The rounds end when it is below
-``diagnostics.tolerance``, or, with an ``order-budget`` warning, when the next order would
-pass :data:`MAX_ORDER` or ``method.max_runs``, or a node failed.
+Round l runs the tensor grid of level l in every input of the nested ``rule`` (``auto``:
+Gauss–Patterson for uniform inputs, Genz–Keister for normal ones, Leja otherwise;
+:mod:`pcmb.chaos.nested`), from level 1, and projects on the tensor basis of the degrees that
+grid integrates exactly (its orders). The rules are nested, so each grid holds every node of
+the one before: a round runs only the new nodes and no run is discarded. From the second
+round on, d_l is the largest difference, over outputs and times, of the mean and std from the
+previous round's (the first round's from the centre run's, level 0, std 0), relative to the
+output's largest std over time (the diagnostics' scale, ``docs/diagnostics.md``): the error
+of the coarser grid. A round doubles the points per input, so the finer grid's error is far
+smaller: :func:`extrapolated_error` carries the decay per degree observed over the last two
+changes to the finer grid's degree (the smallest over inputs).
+The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
+warning, when the next level's order would pass :data:`MAX_ORDER` or its grid
+``method.max_runs``, or a node failed.
 
-All inputs are raised together: the indicator compares whole orders and does not say which
-input holds the error, and the grid of the next order must be run anyway, as Gauss rules are
-not nested. For the same reason few runs are reused: a node of an earlier round is reused
-only where the new grid has the very same node, which for Gauss rules of symmetric inputs
-(uniform, normal) is the centre, shared by every even order; the orders in between share
-none. Nested rules (``pcmb.chaos.nested``) would reuse every run, but their grids are not
-Gauss grids and they grow in levels, not orders (kind ``adaptive`` refines that way); here
-the final expansion is exactly the tensor collocation of the order reached.
+All inputs are raised together: the estimate compares whole levels and does not say which
+input holds the error (kind ``adaptive`` with ``basis: tensor`` raises one input at a time).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nested import nested_rule
+from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
-from pcmb.designs.base import MethodSettings, Recovery
-from pcmb.designs.collocation import TensorCollocation
+from pcmb.designs.base import MethodSettings, Recovery, order_words
+from pcmb.designs.collocation import CollocationSettings
+from pcmb.designs.smolyak import sparse_recovery
 from pcmb.result import Design, Refinement, WarningRecord
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "order_indicator"]
+__all__ = ["MAX_ORDER", "OrderRefinement", "extrapolated_error", "order_indicator"]
 
 #: Highest order ``order: auto`` tries.
-MAX_ORDER = 12
+MAX_ORDER = 24
 
 Statistics = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
 
@@ -55,10 +58,23 @@ def order_indicator(lower: Statistics, higher: Statistics) -> float:
     return worst
 
 
+def extrapolated_error(changes: list[float], degrees: list[int]) -> float:
+    """The estimated error of the last grid from the changes d_1..d_l of the mean and std
+    between successive grids (levels 0..l) of degrees 0 = p_0 < p_1 < ... < p_l: the error
+    falls geometrically in the degree, by ρ = min(1, d_l / d_{l-1})^(1 / (p_{l-1} - p_{l-2}))
+    per degree as observed last, so the last grid's is d_l ρ^(p_l - p_{l-1}) (d_1 alone)."""
+    if len(changes) < 2 or changes[-2] <= 0:
+        return changes[-1]
+    rate = min(1.0, changes[-1] / changes[-2]) ** (1.0 / (degrees[-2] - degrees[-3]))
+    return changes[-1] * rate ** (degrees[-1] - degrees[-2])
+
+
 class OrderRefinement:
-    """``method: {kind: collocation, order: auto, basis, max_runs}``: tensor Gauss grids of
-    orders 1, 2, ... until the order indicator meets ``diagnostics_tolerance`` (see the
-    module); ``max_runs`` (default 1000) bounds the runs of all rounds together."""
+    """``method: {kind: collocation, order: auto, rule, max_runs}``: tensor grids of nested
+    rules, one level more in every input per round, until the estimated error meets
+    ``diagnostics_tolerance`` (see the module); ``max_runs`` (default 1000) bounds the runs."""
+
+    Settings = CollocationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         for key in ("tolerance", "max_samples", "level"):
@@ -69,125 +85,169 @@ class OrderRefinement:
                 )
         if settings.diagnostics_tolerance is None:
             raise ValueError("diagnostics.tolerance: required by method.order auto")
-        self.inputs = dict(inputs)
-        self.distributions = tuple(inputs.values())
-        self.settings = settings
+        if (settings.basis or "tensor") != "tensor":
+            raise ValueError(
+                f"method.basis: order auto projects on the tensor basis of its grid, got "
+                f"{settings.basis!r}"
+            )
+        self.names, self.distributions = tuple(inputs), tuple(inputs.values())
+        rules = []
+        for name, dist in inputs.items():
+            try:
+                rules.append(nested_rule(dist.family, settings.rule))
+            except ValueError as error:
+                raise ValueError(f"method.rule: input {name!r}: {error}") from None
+        self.rules = tuple(rules)
         self.tolerance = float(settings.diagnostics_tolerance)
         self.max_runs = DEFAULT_MAX_RUNS if settings.max_runs is None else int(settings.max_runs)
-        self._first = self._collocation(1)  # checks basis and fit
-        two = 2 ** len(self.distributions) + 3 ** len(self.distributions)
+        self._first = self._level(1)
+        two = self._level(2).size
         if self.max_runs < two:
             raise ValueError(
-                f"method.max_runs: {self.max_runs} runs do not allow one comparison: orders 1 "
+                f"method.max_runs: {self.max_runs} runs do not allow one comparison: levels 1 "
                 f"and 2 take {two} runs"
             )
         self._reset()
 
-    def _collocation(self, order: int) -> TensorCollocation:
-        orders = (order,) * len(self.distributions)
-        return TensorCollocation(self.inputs, dataclasses.replace(self.settings, orders=orders))
+    def _level(self, level: int) -> SparseGrid:
+        """The tensor grid of ``level`` in every input."""
+        return SparseGrid(self.distributions, box_index_set((level,) * len(self.rules)), self.rules)
+
+    def _orders(self, grid: SparseGrid) -> tuple[int, ...]:
+        return tuple(int(p) for p in grid.multi_index.max(axis=0))
 
     def _reset(self) -> None:
-        """The state of the first round: the grid of order 1."""
-        self._grid = TensorGrid(self.distributions, self._first.orders)
-        self._rows = np.arange(self._grid.size)
-        self._known = {row.tobytes(): k for k, row in enumerate(self._grid.nodes)}
+        """The state of the first round: the grid of level 1."""
+        self._grid = self._first
+        self._ids = self._first.node_ids
         self._statistics: Statistics | None = None
+        self._changes: list[float] = []
+        self._degrees = [0]
         self._history: list[tuple[tuple[int, ...], int, float]] = []
         self._stopped: str | None = None
 
     @property
     def runs(self) -> int:
         """Runs of the first round."""
-        return self._first.runs
+        return self._first.size
 
     @property
     def budget(self) -> int:
         """Most runs of all rounds together."""
-        n = len(self.distributions)
-        return min(self.max_runs, sum((p + 1) ** n for p in range(1, MAX_ORDER + 1)))
+        return self.max_runs
 
-    def nodes(self) -> TensorGrid:
-        return self._grid
+    def nodes(self) -> NodeSet:
+        return NodeSet(self.distributions, self._first.nodes, self._first.params)
 
-    def weights(self, nodes: TensorGrid | NodeSet) -> NDArray[np.float64]:
-        """(N,) the Gauss weights of the last grid at its nodes, 0 at the other runs."""
-        weights = np.zeros(nodes.size)
-        weights[self._rows] = self._grid.weights
+    def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
+        """Row of every grid node among ``nodes`` (in run order)."""
+        if nodes.size != self._grid.size:
+            raise ValueError(f"{nodes.size} nodes given, the grid so far has {self._grid.size}")
+        return find_rows(self._ids, self._grid.node_ids)
+
+    def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
+        """(N,) the quadrature weights of the last grid, in run order."""
+        weights = np.empty(nodes.size)
+        weights[self._order(nodes)] = self._grid.weights
         return weights
 
     def record(self) -> Design:
-        return dataclasses.replace(
-            self._collocation(self._grid.orders[0]).record(),
-            samples=len(self._known),
+        orders = self._orders(self._grid)
+        return Design(
+            kind="collocation",
+            grid="tensor-nested",
+            basis="tensor",
+            orders=orders,
+            fit="projection",
+            rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
+            samples=self._grid.size,
             tolerance=self.tolerance,
             max_runs=self.max_runs,
+            label=f"chaos {order_words(orders, 'tensor')} (order auto to {self.tolerance:g}, "
+            f"{self._grid.size} runs)",
         )
 
     def more(
         self,
-        nodes: TensorGrid | NodeSet,
+        nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
-        """The new nodes of the next order's grid while the indicator exceeds the tolerance
-        and the budget allows, else ``None``."""
+        """The new nodes of the next level's grid while the estimated error exceeds the
+        tolerance and the budget allows, else ``None``."""
         if nodes.size == self.runs:  # the first round of a (new) run
             self._reset()
-        order = self._grid.orders[0]
-        if not ok[self._rows].all():
+        order = self._order(nodes)
+        level = int(self._grid.index_set.max())
+        if not ok[order].all():
             self._stopped = (
-                f"{int(np.sum(~ok[self._rows]))} node(s) of order {order} failed, and a round "
+                f"{int(np.sum(~ok[order]))} node(s) of level {level} failed, and a round "
                 "needs every node: see the failures"
             )
             return None
-        on_grid = {name: y[self._rows] for name, y in values.items()}
-        found = self._collocation(order).recover(self._grid, on_grid, ok[self._rows])
-        statistics = {name: (e.mean(), e.std()) for name, e in found.expansions.items()}
-        indicator = (
-            math.nan if self._statistics is None else order_indicator(self._statistics, statistics)
-        )
+        if self._statistics is None:  # level 0: the centre run, in every grid
+            self._statistics = self._statistics_on(self._level(0), nodes, values)
+        statistics = self._statistics_on(self._grid, nodes, values)
+        self._changes.append(order_indicator(self._statistics, statistics))
+        self._degrees.append(min(self._orders(self._grid)))
+        estimate = extrapolated_error(self._changes, self._degrees)
         self._statistics = statistics
-        self._history.append((self._grid.orders, nodes.size, indicator))
-        if indicator < self.tolerance:
+        self._history.append((self._orders(self._grid), nodes.size, estimate))
+        if estimate < self.tolerance:
             return None
-        if order == MAX_ORDER:
+        last = any(rule.max_level is not None and level >= rule.max_level for rule in self.rules)
+        grid = None if last else self._level(level + 1)
+        if grid is None or max(self._orders(grid)) > MAX_ORDER:
             self._stopped = (
-                f"order {MAX_ORDER} is the highest order auto tries "
-                f"(pcmb.designs.refine.MAX_ORDER), so more runs would not help: order alone "
-                "may not converge (a steep, discontinuous or chaotic response), follow the "
-                "diagnostics' remedy"
+                f"the next level passes order {MAX_ORDER}, the highest order auto tries "
+                "(pcmb.designs.refine.MAX_ORDER), or its rule's last level, so more runs would "
+                "not help: order alone may not converge (a steep, discontinuous or chaotic "
+                "response), follow the diagnostics' remedy"
             )
             return None
-        grid = TensorGrid(self.distributions, (order + 1,) * len(self.distributions))
-        rows = np.array([self._known.get(row.tobytes(), -1) for row in grid.nodes])
-        new = rows < 0
-        if nodes.size + int(new.sum()) > self.max_runs:
+        if grid.size > self.max_runs:
             self._stopped = (
-                f"order {order + 1} would take {int(new.sum())} more runs, past the budget: "
-                "raise method.max_runs, or follow the diagnostics' remedy (order alone may not "
-                "converge for a steep, discontinuous or chaotic response)"
+                f"level {level + 1} would take {grid.size - nodes.size} more runs, past the "
+                "budget: raise method.max_runs, or follow the diagnostics' remedy (order alone "
+                "may not converge for a steep, discontinuous or chaotic response)"
             )
             return None
-        rows[new] = nodes.size + np.arange(int(new.sum()))
-        self._known.update(
-            (row.tobytes(), k) for row, k in zip(grid.nodes[new], rows[new], strict=True)
-        )
-        self._grid, self._rows = grid, rows
+        self._grid = grid
+        new = find_rows(self._ids, grid.node_ids) < 0
+        self._ids = np.vstack([self._ids, grid.node_ids[new]])
         return NodeSet(self.distributions, grid.nodes[new], grid.params[new])
 
-    def recover(
+    def _statistics_on(
+        self, grid: SparseGrid, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]]
+    ) -> Statistics:
+        """The mean and std of every output on ``grid``, whose nodes have all run."""
+        rows = find_rows(self._ids, grid.node_ids)
+        projected = grid.project(np.stack([y[rows] for y in values.values()], axis=1))
+        statistics = {}
+        for k, name in enumerate(values):
+            expansion = ChaosExpansion(projected[:, k], grid.multi_index, self.distributions)
+            statistics[name] = (expansion.mean(), expansion.std())
+        return statistics
+
+    def _recover(
         self,
-        nodes: TensorGrid | NodeSet,
+        nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        rows = self._rows
-        on_grid = {name: y[rows] for name, y in values.items()}
-        recovery = self._collocation(self._grid.orders[0]).recover(
-            self._grid, on_grid, ok[rows], times
-        )
+        order = self._order(nodes)
+        on_grid = {name: y[order] for name, y in values.items()}
+        return sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
+
+    def recover(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        recovery = self._recover(nodes, values, ok, times)
         history = self._history
         refinement = Refinement(
             orders=np.array([h[0] for h in history], dtype=np.int64).reshape(
@@ -202,9 +262,9 @@ class OrderRefinement:
             warnings += (
                 WarningRecord(
                     "order-budget",
-                    f"order refinement ended at order {self._grid.orders[0]} after "
-                    f"{nodes.size} of {self.max_runs} runs (method.max_runs), the last "
-                    f"indicator {reached} above the tolerance {self.tolerance:g} "
+                    f"order refinement ended at order {max(self._orders(self._grid))} after "
+                    f"{nodes.size} of {self.max_runs} runs (method.max_runs), the estimated "
+                    f"error {reached} above the tolerance {self.tolerance:g} "
                     f"(diagnostics.tolerance): {self._stopped}",
                 ),
             )

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 
 from pcmb.chaos.basis import PolynomialBasis, hyperbolic_index_set
 from pcmb.chaos.expansion import ChaosExpansion
@@ -18,17 +20,61 @@ from pcmb.chaos.sparse_regression import (
     minimum_samples,
     next_batch,
 )
-from pcmb.designs.base import MethodSettings, Recovery, statistics_warnings
+from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
+from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
 from pcmb.result import Design, RegressionFit, WarningRecord
 
-__all__ = ["SparseRegression"]
+__all__ = ["RegressionSettings", "SparseRegression", "estimated_error", "loo_statistics_error"]
 
 #: ``method.sampling`` -> the :func:`pcmb.chaos.nodes.random_nodes` method.
 SAMPLINGS = {"sobol": "sobol", "lhs": "lhs", "random": "montecarlo"}
 BASES = ("total", "hyperbolic")
 #: ``method.selection`` -> the ``fit`` recorded in :class:`pcmb.result.Design`.
 FITS = {"lars": "lars", "omp": "omp", "none": "ols"}
-#: Worst corrected LOO error reported as a warning when no tolerance is set.
+
+
+class RegressionSettings(MethodSection):
+    """``method: {kind: regression, samples, sampling, selection, basis, q, order, seed,
+    tolerance, max_samples}``."""
+
+    budget_key: ClassVar[str] = "max_samples"
+
+    kind: Literal["regression"] = Field(description="how nodes are made (a registered design)")
+    order: OrderSpec | None = Field(
+        default=None, description="highest order of the candidate terms (int or input -> int)"
+    )
+    basis: Literal[BASES] | None = Field(
+        default=None, description="candidate terms: hyperbolic (default) or total degree"
+    )
+    samples: PositiveInt | None = Field(default=None, description="runs of the first round")
+    selection: Literal[tuple(SELECTIONS)] = Field(
+        default="lars", description="term selection of kind regression"
+    )
+    sampling: Literal[tuple(SAMPLINGS)] = Field(
+        default="sobol", description="how kind regression samples its nodes"
+    )
+    q: Annotated[float, Field(gt=0, le=1)] = Field(
+        default=1.0, description="hyperbolic-set exponent of kind regression (1: total degree)"
+    )
+    tolerance: PositiveReal | None = Field(
+        default=None,
+        description="add samples until the error of the mean and std estimated from the "
+        "corrected LOO error, relative to the largest std, meets it",
+    )
+    max_samples: PositiveInt | None = Field(
+        default=None, description="with tolerance: most samples in all"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return self.budget_key if self.tolerance is not None else "samples"
+
+    @property
+    def cost_key(self) -> str:
+        return "samples"
+
+
+#: Corrected LOO error above which a ``regression-loo`` record is made.
 LOO_WARNING = 1e-2
 #: Default largest total samples, as a multiple of ``method.samples``, with a tolerance.
 MAX_GROWTH = 16
@@ -37,6 +83,32 @@ MAX_GROWTH = 16
 def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     """The largest corrected LOO error over outputs and times (0 without an output)."""
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
+
+
+def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
+    """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
+    worst = 0.0
+    for fit in fits.values():
+        std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
+        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs))
+    return worst
+
+
+def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: int) -> float:
+    """The estimated error of the mean and std of a least-squares fit, relative to the largest
+    std, the largest over times, from its corrected LOO error ε and std σ per time.
+
+    ε estimates the surrogate's mean squared error over the variance, so e = √ε σ is its RMS
+    error. The coefficients then err by about e/√N each (N runs): the mean by e/√N, the std by
+    e/√N (their projection on the coefficients' direction) plus e²/(2σ) (the variance the
+    unselected terms carry).
+    """
+    std = np.asarray(std, dtype=float)
+    scale = float(np.max(std, initial=0.0))
+    if scale <= 0:
+        return 0.0
+    relative = np.sqrt(np.nan_to_num(np.asarray(loo, dtype=float)))
+    return float(np.max(std * relative * (1.0 / np.sqrt(runs) + relative / 2.0))) / scale
 
 
 class SparseRegression:
@@ -49,34 +121,24 @@ class SparseRegression:
     expansions hold the union of the selected terms (zero where an output did not select one).
 
     With a ``tolerance`` the design is adaptive (:class:`~pcmb.designs.base.AdaptiveDesign`):
-    after each round :meth:`more` adds samples until the worst corrected LOO error meets it or
-    the runs reach ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
+    after each round :meth:`more` adds samples until the error of the mean and std estimated
+    from the corrected LOO error (:func:`estimated_error`) meets it or the runs reach
+    ``max_samples`` (default :data:`MAX_GROWTH` × ``samples``).
     """
 
+    Settings = RegressionSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        selection = getattr(settings, "selection", "lars")
-        sampling = getattr(settings, "sampling", "sobol")
-        q = getattr(settings, "q", 1.0)
-        tolerance = getattr(settings, "tolerance", None)
-        max_samples = getattr(settings, "max_samples", None)
+        selection, sampling, q = settings.selection, settings.sampling, settings.q
+        tolerance, max_samples = settings.tolerance, settings.max_samples
         if settings.samples is None:
             raise ValueError("method.samples: required key is missing (needed by kind regression)")
         if settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by kind regression)")
-        if selection not in SELECTIONS:
-            raise ValueError(f"method.selection: expected one of {', '.join(SELECTIONS)}")
-        if sampling not in SAMPLINGS:
-            raise ValueError(f"method.sampling: expected one of {', '.join(SAMPLINGS)}")
-        if (settings.basis or "hyperbolic") not in BASES:
-            raise ValueError(f"method.basis: expected one of {', '.join(BASES)}")
-        if not 0.0 < q <= 1.0:
-            raise ValueError(f"method.q: must be in (0, 1], got {q}")
-        if tolerance is not None and not tolerance > 0:
-            raise ValueError(f"method.tolerance: must be > 0, got {tolerance}")
         if max_samples is not None and tolerance is None:
             raise ValueError(
                 "method.max_samples: only used with method.tolerance (the budget of the rounds "
-                "that add samples until the LOO error meets it)"
+                "that add samples until the estimated error meets it)"
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
@@ -133,7 +195,19 @@ class SparseRegression:
             q=self.q,
             tolerance=self.tolerance,
             max_samples=None if self.tolerance is None else self.max_samples,
+            label=self._label(),
         )
+
+    def _label(self) -> str:
+        """``LARS on hyperbolic order 5, q=0.75, 256 samples (to 0.05, at most 2048)``."""
+        shape = f", q={self.q:g}" if self.basis == "hyperbolic" else ""
+        label = (
+            f"{FITS[self.selection].upper()} on {self.basis} order {max(self.orders)}{shape}, "
+            f"{self._made} samples"
+        )
+        if self.tolerance is not None:
+            label += f" (to {self.tolerance:g}, at most {self.max_samples})"
+        return label
 
     def next_nodes(self, done: int, history: Sequence[tuple[int, float]]) -> NodeSet | None:
         """The next batch of nodes while the tolerance is not met, else ``None``.
@@ -144,7 +218,7 @@ class SparseRegression:
             Nodes made so far (the batch continues them: the Sobol' sequence is extended; LHS
             and random batches are drawn afresh with a seed derived from ``seed`` and ``done``).
         history:
-            (samples, worst corrected LOO error over outputs and times) of every fit so far.
+            (samples, estimated error of the mean and std) of every fit so far.
         """
         if self.tolerance is None:
             return None
@@ -164,13 +238,14 @@ class SparseRegression:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
-        """The next round's nodes while the worst corrected LOO error of a fit on every node so
-        far exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
+        """The next round's nodes while the estimated error of a fit on every node so far
+        exceeds the tolerance and the budget allows (:meth:`next_nodes`), else ``None``."""
         if self.tolerance is None:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        self._history.append((nodes.size, _worst_loo(self._fits(nodes, values, ok))))
+        fits = self._fits(nodes, values, ok)
+        self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
@@ -212,15 +287,16 @@ class SparseRegression:
             for name, fit in fits.items()
             if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        worst = _worst_loo(fits)
-        if self.tolerance is not None and worst > self.tolerance:
+        estimate = estimated_error(fits, runs)
+        if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
                     f"the rounds ended after {nodes.size} of {self.max_samples} runs "
-                    f"(method.max_samples) before the tolerance was met: worst corrected "
-                    f"leave-one-out error {worst:.3g} > {self.tolerance:g}; raise "
-                    "method.max_samples, or lower the order",
+                    f"(method.max_samples) before the tolerance was met: estimated error of the "
+                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
+                    f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
+                    "lower the order",
                 ),
             )
         regression = {
@@ -234,9 +310,9 @@ class SparseRegression:
     def _loo_warning(
         self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None
     ) -> WarningRecord | None:
-        """A ``regression-loo`` record where the corrected LOO error exceeds the tolerance (or
-        :data:`LOO_WARNING`), else ``None``."""
-        limit = self.tolerance or LOO_WARNING
+        """A ``regression-loo`` record where the corrected LOO error exceeds
+        :data:`LOO_WARNING`, else ``None``."""
+        limit = LOO_WARNING
         loo = np.atleast_1d(fit.loo_error)
         large = np.flatnonzero(loo > limit)
         if large.size == 0:

@@ -3,23 +3,51 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, random_nodes
+from pcmb.config.types import OrderSpec, PositiveInt
 from pcmb.designs.base import (
+    MethodSection,
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    order_words,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
 
-__all__ = ["Sampling"]
+__all__ = ["Sampling", "SamplingSettings"]
 
 FITS = ("none", "regression")
+
+
+class SamplingSettings(MethodSection):
+    """``method: {kind: montecarlo | lhs | sobol, samples, seed, fit, order}``."""
+
+    kind: Literal["montecarlo", "lhs", "sobol"] = Field(
+        description="how nodes are made (a registered design)"
+    )
+    samples: PositiveInt | None = Field(default=None, description="runs of a sampling method")
+    fit: Literal[FITS] = Field(
+        default="none", description="regression: least-squares chaos fit on sampled nodes"
+    )
+    order: OrderSpec | None = Field(
+        default=None, description="total order of fit: regression (int or input -> int)"
+    )
+
+    @property
+    def size_key(self) -> str:
+        return "samples"
+
+    @property
+    def cost_key(self) -> str:
+        return "samples"
 
 
 class Sampling:
@@ -28,6 +56,8 @@ class Sampling:
     Statistics are sample statistics; ``fit: regression`` adds a least-squares chaos fit of
     total order ``order`` (the largest stable one).
     """
+
+    Settings = SamplingSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         if settings.samples is None:
@@ -38,8 +68,6 @@ class Sampling:
             raise ValueError(
                 f"method.samples: {settings.kind} needs at least 2 samples, got {settings.samples}"
             )
-        if settings.fit not in FITS:
-            raise ValueError(f"method.fit: expected one of {', '.join(FITS)}")
         if settings.fit == "regression" and settings.orders is None:
             raise ValueError("method.order: required key is missing (needed by fit regression)")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
@@ -66,6 +94,9 @@ class Sampling:
             samples=self.samples,
             seed=self.seed,
             fit=self.fit,
+            label=self.kind
+            if self.orders is None
+            else f"{self.kind} + chaos fit, {order_words(self.orders, 'total')}",
         )
 
     def recover(

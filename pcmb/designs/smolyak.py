@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import RULES, nested_rule
+from pcmb.chaos.nested import nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid
 from pcmb.designs.base import (
@@ -20,6 +20,7 @@ from pcmb.designs.base import (
     least_squares_recovery,
     statistics_warnings,
 )
+from pcmb.designs.collocation import CollocationSettings
 from pcmb.result import Design
 
 __all__ = ["SparseCollocation", "sparse_recovery"]
@@ -40,23 +41,15 @@ class SparseCollocation:
     refitted by (unweighted) least squares.
     """
 
+    Settings = CollocationSettings
+
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        level = getattr(settings, "level", None)
-        rule = getattr(settings, "rule", "auto")
+        level, rule = settings.level, settings.rule
         kind = settings.kind
         if level is None:
             raise ValueError(f"method.level: required key is missing (needed by kind {kind})")
-        if isinstance(level, bool) or not isinstance(level, int | np.integer) or level < 0:
-            raise ValueError(f"method.level: expected an integer >= 0, got {level!r}")
-        if rule not in RULES:
-            raise ValueError(f"method.rule: expected one of {', '.join(RULES)}, got {rule!r}")
         if settings.orders is not None:
             raise ValueError(f"method.order: kind {kind} takes method.level, not an order")
-        if settings.fit != "none":
-            raise ValueError(
-                f"method.fit: expected none: kind {kind} recovers by projection (fit: "
-                "regression is for the sampling methods)"
-            )
         self.kind, self.level, self.rule = kind, int(level), rule
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         n = len(self.distributions)
@@ -92,6 +85,7 @@ class SparseCollocation:
         return tuple(int(p) for p in self.grid.multi_index.max(axis=0))
 
     def record(self) -> Design:
+        rule = ", ".join(dict.fromkeys(rule.name for rule in self.grid.rules))
         return Design(
             kind=self.kind,
             grid="smolyak",
@@ -99,7 +93,8 @@ class SparseCollocation:
             orders=self.orders,
             level=self.level,
             fit="projection",
-            rule=", ".join(dict.fromkeys(rule.name for rule in self.grid.rules)),
+            rule=rule,
+            label=f"Smolyak level {self.level}, rule {rule}",
         )
 
     def recover(

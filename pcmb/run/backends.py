@@ -547,12 +547,17 @@ def _workers(backend: str, jobs: int | None, tasks: int | None) -> int:
 _KEPT: dict[int, LokyPool] = {}
 
 
-def _close_kept() -> None:
+def close_kept(kill: bool = False) -> None:
+    """Close the kept loky pools; ``kill``: at once, busy or not (a process about to end).
+
+    At interpreter exit loky's own hook ends their workers first, gracefully: after their
+    tasks, so ``pcmb`` kills them when its command is done instead of waiting for that.
+    """
     while _KEPT:
-        _KEPT.popitem()[1].close()
+        _KEPT.popitem()[1].close(kill=kill)
 
 
-atexit.register(_close_kept)
+atexit.register(close_kept)
 
 
 def warm_up(jobs: int | None = None, tasks: int | None = None) -> None:

@@ -21,7 +21,7 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import cloudpickle
 import numpy as np
@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigProblem, ModelDefinitionError, UsageError
-from pcmb.run.backends import BACKENDS, Pool, open_pool
+from pcmb.run.backends import Pool, open_pool
 from pcmb.run.journal import FRESH, Journal
 from pcmb.run.progress import Progress
 from pcmb.run.status import ModelTraceback, NodeFailure, Status
@@ -47,6 +47,7 @@ if TYPE_CHECKING:
     from pcmb.adapters.protocol import Model
 
 __all__ = [
+    "Execution",
     "PendingRun",
     "RunResult",
     "chunk_bounds",
@@ -236,7 +237,8 @@ class _Campaign:
     """The state of one :func:`run_nodes` call: arguments, results so far, journal, progress.
 
     ``proven``: the model is known to work (see :func:`run_nodes`), so that a break of the
-    protocol is never taken for a model error.
+    protocol is never taken for a model error. ``keep_values`` False: the values go to the
+    journal only (a streamed study, :mod:`pcmb.run.memory`), the result's arrays have no rows.
     """
 
     def __init__(
@@ -249,15 +251,17 @@ class _Campaign:
         journal: Journal | None,
         axes: Mapping[str, OutputAxis | None] | None = None,
         proven: bool = False,
+        keep_values: bool = True,
     ) -> None:
         layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
         self.params, self.layout, self.outputs = params, layout, layout.outputs
         self.retries, self.journal = retries, journal
         n_nodes = len(next(iter(params.values())))
+        self.keep_values = keep_values
         self.values = {
             name: np.ascontiguousarray(part)
-            for name, part in layout.split(layout.empty(n_nodes)).items()
+            for name, part in layout.split(layout.empty(n_nodes if keep_values else 0)).items()
         }
         self.status = np.zeros(n_nodes, dtype=np.int8)
         self.messages: dict[int, str] = {}
@@ -269,10 +273,13 @@ class _Campaign:
 
     def resume(self, journal: Journal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
-        indices, values, status = journal.completed()
+        if self.keep_values:
+            indices, values, status = journal.completed()
+            for name in self.outputs:
+                self.values[name][indices[status == Status.OK]] = values[name][status == Status.OK]
+        else:
+            indices, status = journal.statuses()
         ok = indices[status == Status.OK]
-        for name in self.outputs:
-            self.values[name][ok] = values[name][status == Status.OK]
         self.status[ok] = Status.OK
         self.resumed = int(ok.size)
 
@@ -314,8 +321,9 @@ class _Campaign:
             name: np.where(failed[:, None], np.nan, part)
             for name, part in self.layout.split(values).items()
         }
-        for name, column in chunk.items():
-            self.values[name][task.indices] = column
+        if self.keep_values:
+            for name, column in chunk.items():
+                self.values[name][task.indices] = column
         self.status[task.indices] = np.where(failed, Status.FAILED, Status.OK)
         found = {int(i): m for i, m in zip(task.indices, messages, strict=True) if m}
         raised = {int(i): t for i, t in zip(task.indices, tracebacks, strict=False) if t}
@@ -488,27 +496,23 @@ def _run_pooled(
 # -- argument checks -------------------------------------------------------------------------
 
 
+class Execution(Protocol):
+    """The validated ``execution:`` settings the executor runs by
+    (:class:`pcmb.config.schema.ExecutionSpec`, where each is declared and checked)."""
+
+    jobs: int | None
+    backend: str
+    address: str | None
+    chunk_size: int | None
+    timeout: float | None
+
+
 def _check_arguments(
-    params: Mapping[str, ArrayLike],
-    times: ArrayLike,
-    outputs: Sequence[str],
-    jobs: int | None,
-    backend: str,
-    address: str | None,
-    chunk_size: int | None,
-    retries: int,
-    timeout: float | None = None,
+    params: Mapping[str, ArrayLike], times: ArrayLike, outputs: Sequence[str]
 ) -> tuple[dict[str, NDArray[np.float64]], NDArray[np.float64], tuple[str, ...]]:
-    """Validate the arguments of :func:`run_nodes` as a whole; return them as arrays."""
+    """Validate the nodes, grid and outputs of :func:`run_nodes` as a whole; return them as
+    arrays (the execution settings come validated, :class:`Execution`)."""
     problems: list[ConfigProblem] = []
-
-    def integer_at_least(value: object, minimum: int) -> bool:
-        return (
-            isinstance(value, int | np.integer)
-            and not isinstance(value, bool)
-            and (value >= minimum)
-        )
-
     arrays: dict[str, NDArray[np.float64]] = {}
     if not isinstance(params, Mapping) or not params:
         problems.append(ConfigProblem("params", "must map at least one input name to an array"))
@@ -547,30 +551,6 @@ def _check_arguments(
         problems.append(
             ConfigProblem("outputs", f"must be a sequence of distinct names, got {outputs!r}")
         )
-    if jobs is not None and not integer_at_least(jobs, 1):
-        problems.append(ConfigProblem("jobs", f"must be a positive integer, got {jobs!r}"))
-    if backend not in BACKENDS:
-        problems.append(
-            ConfigProblem("backend", f"must be one of {', '.join(BACKENDS)}, got {backend!r}")
-        )
-    elif address is not None and backend != "dask":
-        problems.append(ConfigProblem("address", "is only used with backend 'dask'"))
-    if chunk_size is not None and not integer_at_least(chunk_size, 1):
-        problems.append(
-            ConfigProblem("chunk_size", f"must be a positive integer, got {chunk_size!r}")
-        )
-    if not integer_at_least(retries, 0):
-        problems.append(ConfigProblem("retries", f"must be an integer >= 0, got {retries!r}"))
-    if timeout is not None and not (
-        isinstance(timeout, int | float)
-        and not isinstance(timeout, bool)
-        and 0 < timeout < math.inf
-    ):
-        problems.append(ConfigProblem("timeout", f"must be a positive number, got {timeout!r}"))
-    elif timeout is not None and backend in BACKENDS and not BACKENDS[backend].kills:
-        problems.append(
-            ConfigProblem("timeout", f"needs workers pcmb can kill (backend loky), not {backend}")
-        )
     if problems:
         raise UsageError(problems, source="run_nodes")
     return arrays, time_grid, tuple(outputs)
@@ -608,18 +588,17 @@ def run_nodes(
     times: ArrayLike,
     outputs: Sequence[str],
     *,
-    jobs: int | None = None,
-    backend: str = "loky",
-    address: str | None = None,
+    execution: Execution,
+    address: Any = None,
     chunk_size: int | None = None,
     retries: int = 0,
-    timeout: float | None = None,
     journal: Journal | None = None,
     progress: bool | None = None,
     stop_on_failure: bool = False,
     pool: Pool | None = None,
     facts: ModelFacts | None = None,
     proven: bool = False,
+    keep_values: bool = True,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -634,24 +613,20 @@ def run_nodes(
         (T,) output time grid, passed to the model.
     outputs:
         Names of the outputs to keep.
-    jobs:
-        Worker processes (slots); default: all cores (for dask with ``address``: all threads
-        of the cluster).
-    backend:
-        ``"loky"`` (child processes), ``"dask"``, or ``"inprocess"`` (this process: no
-        isolation, for debugging).
+    execution:
+        The validated ``execution:`` settings (:class:`Execution`): workers (``jobs``), where
+        they run (``backend``, ``address``), nodes per chunk (``chunk_size``; default ``min(256,
+        max(1, ceil(N / 16)))``; results depend on it, so a journal fingerprint includes an
+        explicit one) and the seconds a node may take (``timeout``: a chunk of B nodes B times
+        that, plus the time a fresh worker takes to start and build the model; a node past it
+        is a failed run and its worker is killed).
     address:
-        Scheduler address of a dask cluster; with ``backend="dask"`` and no address a local
-        cluster of ``jobs`` processes is started and closed.
+        Overrides ``execution.address``: a dask scheduler's address, or a
+        ``distributed.Client`` or ``Cluster`` of the caller's.
     chunk_size:
-        Nodes per chunk; default ``min(256, max(1, ceil(N / 16)))``. Results depend on it
-        (batched integrators), so a journal fingerprint must include an explicit chunk size.
+        Overrides ``execution.chunk_size``.
     retries:
         How many more times a failed node is tried before it is reported.
-    timeout:
-        Seconds a node may take (a chunk of B nodes: B times that, plus the time a fresh
-        worker takes to start and build the model); a node past it is a failed run and its
-        worker is killed. Needs a backend whose workers pcmb can kill (``loky``).
     journal:
         Persists every finished chunk; its successful nodes are taken instead of being run.
     progress:
@@ -669,6 +644,9 @@ def run_nodes(
         The model is known to work (it ran at other nodes: a study's later rounds, held-out
         and nominal runs), so that a node where it breaks the protocol is a failed node,
         never a :class:`~pcmb.errors.ModelDefinitionError`.
+    keep_values:
+        False: the values go to the ``journal`` only (a streamed study reads them from it
+        block by block) and the result's arrays have no rows.
 
     Returns
     -------
@@ -689,27 +667,32 @@ def run_nodes(
         failure of each of those nodes, like any other.
     """
     start = time.perf_counter()
-    arrays, time_grid, names = _check_arguments(
-        params, times, outputs, jobs, backend, address, chunk_size, retries, timeout
-    )
+    arrays, time_grid, names = _check_arguments(params, times, outputs)
     n_nodes = len(next(iter(arrays.values())))
     factory = _factory(model_factory)
+    chunk_size = chunk_size or execution.chunk_size
+    timeout = execution.timeout
     if pool is None:
-        with open_pool(backend, jobs, address, tasks=len(chunk_bounds(n_nodes, chunk_size))) as own:
+        tasks = len(chunk_bounds(n_nodes, chunk_size))
+        where = execution.address if address is None else address
+        with open_pool(execution.backend, execution.jobs, where, tasks=tasks) as own:
             return run_nodes(
                 model_factory,
                 arrays,
                 time_grid,
                 names,
+                execution=execution,
                 chunk_size=chunk_size,
                 retries=retries,
-                timeout=timeout,
                 journal=journal,
                 progress=progress,
                 stop_on_failure=stop_on_failure,
                 pool=own,
                 proven=proven,
+                keep_values=keep_values,
             )
+    if keep_values is False and journal is None:
+        raise UsageError("values not kept in memory must go to a journal", source="run_nodes")
     if timeout is not None and not pool.kills:
         raise UsageError(
             [
@@ -725,7 +708,15 @@ def run_nodes(
     if journal is not None:
         _check_journal(journal, n_nodes, Layout.of(names, time_grid, facts.axes))
     campaign = _Campaign(
-        factory, arrays, time_grid, names, retries, journal, facts.axes, proven=proven
+        factory,
+        arrays,
+        time_grid,
+        names,
+        retries,
+        journal,
+        facts.axes,
+        proven=proven,
+        keep_values=keep_values,
     )
     if journal is not None:
         campaign.resume(journal)
@@ -786,9 +777,7 @@ def start_run(
         For invalid arguments, or a model without a requested output.
     """
     started = time.perf_counter()
-    arrays, time_grid, names = _check_arguments(
-        params, times, outputs, jobs=None, backend="loky", address=None, chunk_size=None, retries=0
-    )
+    arrays, time_grid, names = _check_arguments(params, times, outputs)
     _check_outputs(facts, names)
     campaign = _Campaign(
         _factory(model_factory), arrays, time_grid, names, 0, None, facts.axes, proven=True

@@ -8,9 +8,11 @@ import os
 import re
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
-__all__ = ["remove_stale_temporaries", "replace_durably", "write_durably"]
+__all__ = ["durable_temporary", "remove_stale_temporaries", "replace_durably", "write_durably"]
 
 
 def write_durably(path: Path, data: bytes) -> None:
@@ -26,6 +28,16 @@ def write_durably(path: Path, data: bytes) -> None:
     OSError
         As the file system reports it; the temporary file is removed.
     """
+    with durable_temporary(path) as (file, _):
+        file.write(data)
+        file.flush()
+
+
+@contextlib.contextmanager
+def durable_temporary(path: Path) -> Iterator[tuple[BinaryIO, Path]]:
+    """The temporary file of :func:`write_durably` (its open handle and path), moved onto
+    ``path`` when the block ends without an error and removed when it raises: for a writer
+    that fills the file piece by piece (a streamed result file, by its path)."""
     temporary: Path | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -38,7 +50,7 @@ def write_durably(path: Path, data: bytes) -> None:
             umask = os.umask(0)
             os.umask(umask)
             os.fchmod(file.fileno(), 0o666 & ~umask)
-            file.write(data)
+            yield file, temporary
             file.flush()
             replace_durably(temporary, path)
     except BaseException:

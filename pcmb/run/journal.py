@@ -16,7 +16,7 @@ import re
 import shutil
 import time
 import zipfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -37,8 +37,9 @@ _META = "journal.json"
 _LOCK = "lock"
 _RECORD = re.compile(r"record-(\d{6,})\.npz")
 _TEMP_PREFIX = ".tmp-"
-#: The folders of a journal's later parts (an adaptive design's rounds, the held-out runs).
-_PART = re.compile(r"round-\d+|validation")
+#: The folders of a journal's later parts (an adaptive design's rounds, the held-out runs'
+#: batches).
+_PART = re.compile(r"round-\d+|validation(-\d+)?")
 #: How to start over when a journal cannot be continued (the flag of pcmb run and sweep).
 FRESH = "start over with --fresh"
 
@@ -384,23 +385,77 @@ class Journal:
 
     # -- reading -------------------------------------------------------------------------------
 
+    def _read(self, path: Path, keys: Sequence[str]) -> list[NDArray]:
+        """Arrays ``keys`` of record ``path`` (only those are read), checked against the
+        journal's shape."""
+        try:
+            # Opened here, not by np.load, so that a damaged file is closed on error too.
+            with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
+                found = [data[key] for key in keys]
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+            raise ResultFileError(
+                f"journal record {path} is unreadable ({exc}); delete the journal or {FRESH}"
+            ) from exc
+        named = dict(zip(keys, found, strict=True))
+        idx = named["indices"]
+        shapes = {"status": idx.shape, "values": (idx.size, sum(self.widths))}
+        if any(named[key].shape != shape for key, shape in shapes.items() if key in named):
+            raise ResultFileError(f"journal record {path} does not match the journal's shape")
+        return found
+
+    def _owners(self) -> tuple[list[Path], NDArray[np.int64], NDArray[np.int8]]:
+        """The record paths, and per node the position of its latest record among them (-1:
+        none) and its latest status; reads no values."""
+        paths = self._record_paths()
+        owner = np.full(self.n_nodes, -1, dtype=np.int64)
+        status = np.zeros(self.n_nodes, dtype=np.int8)
+        for k, path in enumerate(paths):
+            idx, codes = self._read(path, ("indices", "status"))
+            owner[idx], status[idx] = k, codes
+        return paths, owner, status
+
+    def statuses(self) -> tuple[NDArray[np.int64], NDArray[np.int8]]:
+        """:meth:`completed` without the values: (K,) sorted node indices, (K,) statuses."""
+        _, owner, status = self._owners()
+        indices = np.flatnonzero(owner >= 0)
+        return indices, status[indices]
+
+    def chunks(
+        self,
+    ) -> Iterator[tuple[NDArray[np.int64], dict[str, NDArray[np.float64]], NDArray[np.int8]]]:
+        """Every journaled node once, with its latest values and status, in increasing node
+        order, a run of consecutive nodes of one record at a time: a pass that never holds
+        more than two records (a chunk, and the nodes re-run alone within it on a resume).
+
+        Yields
+        ------
+        indices, values, status
+            (B,) consecutive node indices, output name -> (B, T) values, (B,) statuses.
+        """
+        paths, owner, status = self._owners()
+        known = np.flatnonzero(owner >= 0)
+        breaks = np.flatnonzero((np.diff(owner[known]) != 0) | (np.diff(known) != 1)) + 1
+        ends = np.cumsum([0, *self.widths]).tolist()
+        held: dict[int, tuple[NDArray[np.int64], NDArray[np.float64]]] = {}
+        for segment in np.split(known, breaks) if known.size else ():
+            k = int(owner[segment[0]])
+            if k not in held:
+                if len(held) == 2:
+                    del held[next(iter(held))]
+                idx, values = self._read(paths[k], ("indices", "values"))
+                order = np.argsort(idx)
+                held[k] = (idx[order], values[order])
+            idx, values = held[k]
+            rows = values[np.searchsorted(idx, segment)]
+            bounds = zip(self.outputs, ends, ends[1:], strict=False)
+            yield segment, {name: rows[:, a:b] for name, a, b in bounds}, status[segment]
+
     def _latest(self) -> dict[int, tuple[int, NDArray[np.float64], str]]:
         """Node index -> (status, (W,) values of every output side by side, message), later
         records winning."""
         latest: dict[int, tuple[int, NDArray[np.float64], str]] = {}
-        shape = (sum(self.widths),)
         for path in self._record_paths():
-            try:
-                # Opened here, not by np.load, so that a damaged file is closed on error too.
-                with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
-                    idx, codes = data["indices"], data["status"]
-                    values, text = data["values"], data["messages"]
-            except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-                raise ResultFileError(
-                    f"journal record {path} is unreadable ({exc}); delete the journal or {FRESH}"
-                ) from exc
-            if values.shape != (idx.size, *shape) or codes.shape != idx.shape:
-                raise ResultFileError(f"journal record {path} does not match the journal's shape")
+            idx, codes, values, text = self._read(path, ("indices", "status", "values", "messages"))
             for i, code, row, message in zip(idx, codes, values, text, strict=True):
                 latest[int(i)] = (int(code), row, str(message))
         return latest

@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING, Any
 from pydantic import ValidationError
 
 from pcmb.config.checks import config_design, cross_check
-from pcmb.designs import MethodSettings, NodeDesign, design_key
+from pcmb.designs import MethodSection, MethodSpec, NodeDesign, method_section, section_key
 
 if TYPE_CHECKING:
-    from pcmb.config.schema import MethodSpec, StudyConfig
+    from pcmb.config.schema import StudyConfig
 
 __all__ = [
     "SWEPT_DEFAULTS",
@@ -65,7 +65,7 @@ class Setting:
     method: str
     setting: str
     replicate: int
-    spec: MethodSpec
+    spec: MethodSection
 
     @property
     def stem(self) -> str:
@@ -92,18 +92,10 @@ def _swept_key(entry: Mapping[str, Any]) -> list[str]:
     return [key for key, value in entry.items() if isinstance(value, list)]
 
 
-def _key_of(spec: MethodSpec) -> str:
-    """The method's design key, e.g. ``collocation:smolyak``."""
-    orders = "auto" if spec.order == "auto" else None
-    return design_key(
-        MethodSettings(kind=spec.kind, grid=spec.grid, elements=spec.elements, orders=orders)
-    )
-
-
-def _labels(entries: list[tuple[Mapping[str, Any], MethodSpec, str]]) -> list[str]:
+def _labels(entries: list[tuple[Mapping[str, Any], MethodSection, str]]) -> list[str]:
     """One label per entry: its design key, followed, where entries share a key, by the
     fixed keys that tell them apart (``collocation basis=total``)."""
-    keys = [_key_of(spec) for _, spec, _ in entries]
+    keys = [section_key(spec) for _, spec, _ in entries]
     labels = []
     for (entry, _, swept), key in zip(entries, keys, strict=True):
         twins = [e for (e, _, w), k in zip(entries, keys, strict=True) if k == key]
@@ -160,12 +152,7 @@ def _first(entry: Mapping[str, Any], index: int) -> tuple[str, int, dict[str, An
     raise ValueError(f"sweep.methods[{index}] varies more than one key")
 
 
-def _method_spec(config: StudyConfig) -> type[MethodSpec]:
-    """The class of a ``method:`` section (:mod:`pcmb.config.schema` imports this module)."""
-    return type(config.method)
-
-
-def _design(config: StudyConfig, spec: MethodSpec) -> NodeDesign:
+def _design(config: StudyConfig, spec: MethodSection) -> NodeDesign:
     """The design of a method block on the config's inputs."""
     return config_design(config.model_copy(update={"method": spec}))
 
@@ -173,14 +160,12 @@ def _design(config: StudyConfig, spec: MethodSpec) -> NodeDesign:
 def _settings_of(
     config: StudyConfig, entry: Mapping[str, Any], index: int, label: str, replicates: int
 ) -> Iterator[Setting]:
-    method_spec = _method_spec(config)
-
     for key, _, data in _expand(entry):
-        spec = method_spec.model_validate(data)
+        spec = method_section(data)
         copies = replicates if _design(config, spec).record().seed is not None else 1
         text = f"{key}={_text(data[key])}" if key else _fixed(entry)
         for replicate in range(copies):
-            seeded = spec.model_copy(update={"seed": spec.seed + replicate})
+            seeded = spec.model_copy(update={"seed": spec.seed + replicate}) if replicate else spec
             yield Setting(index, label, text, replicate, seeded)
 
 
@@ -209,18 +194,7 @@ def _finer(value: Any, key: str) -> Any:
     return value * 16
 
 
-def _cost_key(method: Mapping[str, Any]) -> str:
-    if method.get("kind") == "regression":
-        return "samples"
-    if method.get("kind") == "adaptive" or method.get("tolerance") is not None:
-        return "tolerance"
-    for key in ("level", "samples", "order"):
-        if method.get(key) is not None and method.get(key) != "auto":
-            return key
-    return "max_runs"
-
-
-def default_sweep(method: Mapping[str, Any], runs: int) -> dict[str, Any]:
+def default_sweep(section: MethodSection, runs: int) -> dict[str, Any]:
     """The ``sweep:`` section used when a config has none.
 
     Its own method at a rising cost (order 1 to its order, levels up to its level, samples
@@ -229,8 +203,16 @@ def default_sweep(method: Mapping[str, Any], runs: int) -> dict[str, Any]:
     itself; and the same method at a finer cost as the reference (order + 2, level + 2,
     samples × 16, tolerance / 100).
     """
-    method = dict(method)
-    key = _cost_key(method)
+    method = section.model_dump(exclude_defaults=True)
+    key = section.cost_key
+    top = max(64, 2 * runs)
+    monte_carlo = {
+        "kind": "montecarlo",
+        "samples": [16 * 4**k for k in range(_DEFAULT_STEPS) if 16 * 4**k <= top],
+        "seed": 1,
+    }
+    if key is None:  # a method without a cost to raise (statistical linearization)
+        return {"methods": [method, monte_carlo], "reference": method}
     if key == "samples":  # a fixed sample at each cost: adding samples is what is swept
         method = {k: v for k, v in method.items() if k not in ("tolerance", "max_samples")}
     value = method.get(key)
@@ -238,9 +220,7 @@ def default_sweep(method: Mapping[str, Any], runs: int) -> dict[str, Any]:
         value = 1000
     methods = [{**method, key: _rising(value, key)}]
     if key != "samples":
-        top = max(64, 2 * runs)
-        samples = [16 * 4**k for k in range(_DEFAULT_STEPS) if 16 * 4**k <= top]
-        methods.append({"kind": "montecarlo", "samples": samples, "seed": 1})
+        methods.append(monte_carlo)
     return {"methods": methods, "reference": {**method, key: _finer(value, key)}}
 
 
@@ -249,12 +229,10 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
 
     The config must have passed :func:`sweep_problems` (``load_config`` checks it).
     """
-    method_spec = _method_spec(config)
-
     section = config.sweep
     if section is None:
         runs = _design(config, config.method).runs
-        found = default_sweep(config.method.model_dump(exclude_defaults=True), runs)
+        found = default_sweep(config.method, runs)
         methods, outputs, replicates = found["methods"], config.diagnostics.outputs, 1
         reference_data = {**SWEPT_DEFAULTS, **found["reference"]}
     else:
@@ -264,7 +242,7 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
             None if section.reference is None else {**SWEPT_DEFAULTS, **section.reference}
         )
     firsts = [(entry, *_first(entry, index)) for index, entry in enumerate(methods)]
-    labels = _labels([(e, method_spec.model_validate(data), key) for e, key, _, data in firsts])
+    labels = _labels([(e, method_section(data), key) for e, key, _, data in firsts])
     settings = tuple(
         setting
         for index, (entry, label) in enumerate(zip(methods, labels, strict=True))
@@ -272,15 +250,15 @@ def plan_sweep(config: StudyConfig) -> SweepPlan:
     )
     reference = None
     if reference_data is not None:
-        spec = method_spec.model_validate(reference_data)
+        spec = method_section(reference_data)
         fixed = " ".join(
             f"{k}={_text(v)}" for k, v in reference_data.items() if k not in _UNLABELLED
         )
-        reference = Setting(-1, _key_of(spec), fixed, 0, spec)
+        reference = Setting(-1, section_key(spec), fixed, 0, spec)
     return SweepPlan(settings, reference, None if outputs is None else tuple(outputs))
 
 
-def swept_methods(config: StudyConfig) -> Iterator[tuple[str, MethodSpec]]:
+def swept_methods(config: StudyConfig) -> Iterator[tuple[str, MethodSection]]:
     """(key path, method) of every setting of the sweep and of its reference, when the sweep
     itself is valid (:func:`sweep_problems` reports it otherwise); none without ``sweep:``."""
     if config.sweep is None:
@@ -295,7 +273,7 @@ def swept_methods(config: StudyConfig) -> Iterator[tuple[str, MethodSpec]]:
 
 
 def _design_problems(
-    config: StudyConfig, spec: MethodSpec, prefix: str, swept: str | None, index: int
+    config: StudyConfig, spec: MethodSection, prefix: str, swept: str | None, index: int
 ) -> Iterator[tuple[str, str]]:
     for path, message in cross_check(config.model_copy(update={"method": spec})):
         key = path.removeprefix("method").lstrip(".")
@@ -311,8 +289,6 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
     an entry that varies no key or more than one, a setting the schema or its design
     refuses (named down to the list item, e.g. ``sweep.methods[1].order[2]``)."""
     from pcmb.config.messages import schema_problems
-
-    method_spec = _method_spec(config)
 
     section = config.sweep
     if section is None:
@@ -330,9 +306,9 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
             continue
         for key, position, data in _expand(entry):
             try:
-                spec = method_spec.model_validate(data)
+                spec = method_section(data)
             except ValidationError as error:
-                problems = schema_problems(error, method_spec, prefix=("sweep", "methods", index))
+                problems = schema_problems(error, MethodSpec, prefix=("sweep", "methods", index))
                 found = [
                     (
                         f"{p.path}[{position}]" if p.path == f"{prefix}.{key}" else p.path,
@@ -349,9 +325,9 @@ def sweep_problems(config: StudyConfig) -> Iterator[tuple[str, str]]:
     if section.reference is not None:
         data = {**SWEPT_DEFAULTS, **section.reference}
         try:
-            spec = method_spec.model_validate(data)
+            spec = method_section(data)
         except ValidationError as error:
-            for p in schema_problems(error, method_spec, prefix=("sweep", "reference")):
+            for p in schema_problems(error, MethodSpec, prefix=("sweep", "reference")):
                 yield p.path, p.message
         else:
             yield from _design_problems(config, spec, "sweep.reference", None, 0)
