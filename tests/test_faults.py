@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import pcmb_cli, pcmb_here
 from executor_models import edges
 
 import pcmb
@@ -48,6 +49,8 @@ class Faulty:
     ``how``: "exit" (sys.exit(code)), "os_exit" (os._exit(code)), "segfault", "hang" (an
     endless loop), or "segfault-on-build" (in the constructor, whatever the nodes). Each call
     sleeps ``sleep`` s per node; the process that misbehaves writes its pid to ``marker``.
+    With ``BLOCK_ABOVE`` in the run's environment, a call with a node above it waits until
+    the run is stopped.
     """
 
     outputs = ("y",)
@@ -62,6 +65,9 @@ class Faulty:
     def simulate(self, params, times):
         a = np.asarray(params["a"], dtype=float)
         time.sleep(self.sleep * a.size)
+        block = os.environ.get("BLOCK_ABOVE")
+        if block is not None and np.any(a > float(block)):
+            time.sleep(3600)
         if np.any((a > self.low) & (a < self.high)):
             with open(self.marker, "a") as marker:
                 marker.write(f"{os.getpid()}\\n")
@@ -82,8 +88,10 @@ NODES = pcmb.TensorGrid([pcmb.Uniform(0.0, 1.0)], (ORDER,)).params[:, 0]
 #: Node 0 runs first, node 4 is a middle one; NOMINAL (a = 0.3, no node) is the nominal run.
 FIRST, MIDDLE, NOMINAL = 0, 4, -1
 NOMINAL_A = 0.3
-#: Seconds per node of the tests that stop a run midway.
-SLEEP = 0.45
+#: The runs of the tests that stop a run midway wait at the nodes above 0.4 (BLOCK_ABOVE),
+#: so that the stop lands at a known point: the nominal run and the STOPPED nodes below done.
+BLOCKED = {**os.environ, "BLOCK_ABOVE": "0.4"}
+STOPPED = int(np.sum(NODES < 0.4))
 
 
 def _window(index: int | None) -> tuple[float, float]:
@@ -166,15 +174,17 @@ def test_sys_exit_in_the_model_aborts_with_exit_3(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
     config = _study(tmp_path, index, code, jobs, "abort")
-    returncode, stderr, pid = _run(config)
-    assert returncode == 3, stderr
+    # In this process: a model's sys.exit run here by mistake would fail the test, not end it.
+    done = pcmb_here("run", str(config), "--quiet")
+    stderr = done.stderr
+    assert done.returncode == 3, stderr
     assert "the model failed at 1 of 9 node(s) (on_failure: abort)" in stderr
     assert f"  node {index} (a={NODES[index]:.6g}): SystemExit: {code} at faulty.py:" in stderr
     # The model's traceback is shown, not one of pcmb's own.
     assert "unexpected error" not in stderr and "pcmb/run/" not in stderr, stderr
     # No result, not even half of one: only the journal of the finished nodes is left.
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
-    _check_where_it_ran(tmp_path, pid)
+    _check_where_it_ran(tmp_path, os.getpid())
 
 
 @pytest.mark.slow
@@ -183,8 +193,9 @@ def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
     config = _study(tmp_path, index, code, jobs, "regress")
-    returncode, stderr, pid = _run(config)
-    assert returncode == 0, stderr
+    done = pcmb_here("run", str(config), "--quiet")
+    stderr = done.stderr
+    assert done.returncode == 0, stderr
     assert f"node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
     assert "pcmb: wrote" in stderr
     # A complete file and nothing else: no journal, no temporary file.
@@ -200,7 +211,7 @@ def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     # y = a t with a ~ U[0, 1]: the refit on the 8 surviving nodes is exact.
     np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
     np.testing.assert_allclose(result.std("y"), result.times / np.sqrt(12.0), atol=1e-12)
-    _check_where_it_ran(tmp_path, pid)
+    _check_where_it_ran(tmp_path, os.getpid())
 
 
 # -- crashes and hangs: the worker dies, pcmb goes on ----------------------------------------
@@ -304,6 +315,28 @@ def _no_survivors(session: int) -> None:
     assert alive == [], f"processes of the run still alive: {alive}"
 
 
+def _blocked_run(config: Path) -> subprocess.Popen[str]:
+    """``pcmb run CONFIG`` started in a session of its own, waiting at the nodes above 0.4."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=BLOCKED,
+        start_new_session=True,  # its own session: the test finds every process it started
+    )
+
+
+def _wait_until_blocked(process: subprocess.Popen[str], journal: Path) -> None:
+    """Wait until the STOPPED nodes below 0.4 are journaled: the run is then waiting at the
+    next nodes, and cannot finish before it is stopped."""
+    deadline = time.monotonic() + 120
+    while len(list(journal.glob("record-*.npz"))) < STOPPED:
+        # Not its stderr: the workers hold that pipe open while they live.
+        assert process.poll() is None, f"the run ended early (exit {process.returncode})"
+        assert time.monotonic() < deadline, "the nodes below 0.4 did not finish in time"
+        time.sleep(0.02)
+
+
 STOPS = {
     "sigint-group": (signal.SIGINT, True, 130, "interrupted (SIGINT)"),
     "sigterm": (signal.SIGTERM, False, 143, "stopped by SIGTERM"),
@@ -320,22 +353,12 @@ def test_a_stopped_run_leaves_nothing_behind_and_resumes_to_the_same_bits(
 ) -> None:
     number, group, code, words = STOPS[stop]
     (tmp_path / "whole").mkdir()
-    reference = _study(tmp_path / "whole", None, 0, 2, "abort", sleep=0.0)
-    assert _run(reference)[0] == 0
-    config = _study(tmp_path, None, 0, 2, "abort", sleep=SLEEP)
-    process = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,  # its own session: the test finds every process it started
-    )
-    journal = tmp_path / "out" / "result.h5.journal"
+    reference = _study(tmp_path / "whole", None, 0, 2, "abort")
+    assert pcmb_here("run", str(reference), "--quiet").returncode == 0
+    config = _study(tmp_path, None, 0, 2, "abort")
+    process = _blocked_run(config)
     try:
-        deadline = time.monotonic() + 120
-        while len(list(journal.glob("record-*.npz"))) < 2:
-            assert process.poll() is None, process.stderr.read()
-            assert time.monotonic() < deadline, "no node finished in time"
-            time.sleep(0.02)
+        _wait_until_blocked(process, tmp_path / "out" / "result.h5.journal")
         (os.killpg if group else os.kill)(process.pid, number)
         _, stderr = process.communicate(timeout=60)
         assert process.returncode == code, stderr
@@ -346,12 +369,7 @@ def test_a_stopped_run_leaves_nothing_behind_and_resumes_to_the_same_bits(
             os.killpg(process.pid, signal.SIGKILL)
         process.wait()
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
-    resumed = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet", "--resume"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    resumed = pcmb_cli("run", str(config), "--quiet", "--resume")
     assert resumed.returncode == 0, resumed.stderr
     whole = pcmb.load(tmp_path / "whole" / "out" / "result.h5")
     again = pcmb.load(tmp_path / "out" / "result.h5")
@@ -391,20 +409,10 @@ def test_sigint_to_pcmb_alone_stops_it_despite_a_stuck_worker(tmp_path: Path) ->
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_the_users_ctrl_c_still_interrupts_the_run(tmp_path: Path, jobs: int) -> None:
     # A terminal sends SIGINT to its whole foreground process group: pcmb and its workers.
-    config = _study(tmp_path, None, 0, jobs, "abort", sleep=SLEEP)
-    process = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    journal = tmp_path / "out" / "result.h5.journal"
+    config = _study(tmp_path, None, 0, jobs, "abort")
+    process = _blocked_run(config)
     try:
-        deadline = time.monotonic() + 120
-        while len(list(journal.glob("record-*.npz"))) < jobs:
-            assert process.poll() is None, process.stderr.read()
-            assert time.monotonic() < deadline, "no node finished in time"
-            time.sleep(0.02)
+        _wait_until_blocked(process, tmp_path / "out" / "result.h5.journal")
         os.killpg(process.pid, signal.SIGINT)
         _, stderr = process.communicate(timeout=120)
     finally:

@@ -15,6 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from cli_process import pcmb_cli
 
 import pcmb
 from pcmb.cli import main
@@ -79,16 +80,6 @@ def _growth_sweep(folder: Path) -> Path:
     return config
 
 
-def _pcmb(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args],
-        cwd=folder,
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-
-
 # -- 10: one sweep at a time in a folder ------------------------------------------------------
 
 
@@ -121,7 +112,7 @@ def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Pa
             assert time.monotonic() < deadline
             time.sleep(0.02)
         before = _stamps(tmp_path / "out")
-        second = _pcmb(tmp_path, "sweep", "study.yaml", "-o", "out", "--resume", "--quiet")
+        second = pcmb_cli("sweep", "study.yaml", "-o", "out", "--resume", "--quiet", cwd=tmp_path)
         assert second.returncode == 2, second.stderr
         assert _stamps(tmp_path / "out") == before  # nothing written, not even the ledger
         assert f"(PID {first.pid}) is writing the sweep folder out;" in second.stderr
@@ -316,7 +307,7 @@ def test_quiet_silences_dask_logging(tmp_path, local_cluster_starts) -> None:
             """
         )
     )
-    done = _pcmb(tmp_path, "run", "study.yaml", "--backend", "dask", "--quiet")
+    done = pcmb_cli("run", "study.yaml", "--backend", "dask", "--quiet", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert "distributed" not in done.stderr, done.stderr
     assert "worker process died" in done.stderr  # pcmb's own report of the node stays

@@ -8,12 +8,11 @@ grid resolves is refused at its ``covariance.length``, saying so.
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from cli_process import pcmb_here
 
 MODEL = """
 import pcmb
@@ -50,13 +49,6 @@ def _config(folder: Path, inputs: str, params: str = "a: 0.0") -> Path:
     return config
 
 
-def _pcmb(*args: str) -> tuple[int, str]:
-    process = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args], capture_output=True, text=True, timeout=300
-    )
-    return process.returncode, process.stderr
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("command", ["validate", "run"])
 @pytest.mark.parametrize(
@@ -73,8 +65,9 @@ def test_an_input_too_wide_for_floats_is_refused_at_the_input(
     tmp_path: Path, command: str, law: str, said: str
 ) -> None:
     config = _config(tmp_path, f"a: {law}")
-    code, stderr = _pcmb(command, str(config))
-    assert code == 2, stderr
+    done = pcmb_here(command, str(config))
+    stderr = done.stderr
+    assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.a: " in stderr and "run_nodes" not in stderr, stderr
     assert said in stderr, stderr
     assert not (tmp_path / "result.h5.journal").exists()
@@ -97,8 +90,9 @@ def test_a_correlation_length_no_term_resolves_is_named_at_its_key(
         "energy: 0.9}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    code, stderr = _pcmb("validate", str(config))
-    assert code == 2, stderr
+    done = pcmb_here("validate", str(config))
+    stderr = done.stderr
+    assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.r.covariance.length: the correlation length 1e-06" in stderr
     assert "no term of the expansion resolves it" in stderr, stderr
     assert "Traceback" not in stderr and "zero-size array" not in stderr, stderr
@@ -113,8 +107,9 @@ def test_a_process_needing_more_germs_than_grid_points_is_named_at_its_length(
         "grid: {start: 0, stop: 10, points: 11}, energy: 0.9}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    code, stderr = _pcmb("validate", str(config))
-    assert code == 2, stderr
+    done = pcmb_here("validate", str(config))
+    stderr = done.stderr
+    assert done.returncode == 2, stderr
     assert f"{config}:12: inputs.r.covariance.length: the expansion needs " in stderr, stderr
     assert "more than the 11 points of the grid" in stderr and "runs" not in stderr, stderr
 
@@ -126,6 +121,7 @@ def test_a_run_count_beyond_the_floats_is_reported_not_a_crash(tmp_path: Path) -
         "grid: {start: 0, stop: 10, points: 801}, terms: 700}"
     )
     config = _config(tmp_path, process, params="r: 0.0")
-    code, stderr = _pcmb("validate", str(config))
-    assert code == 2, stderr
+    done = pcmb_here("validate", str(config))
+    stderr = done.stderr
+    assert done.returncode == 2, stderr
     assert "method.order: the design asks for ~10^333 runs" in stderr, stderr

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
+from cli_process import pcmb_here
 
 #: Seconds a process may take to die after pcmb does (the issue's allowance).
 GRACE = 5.0
@@ -372,13 +373,7 @@ def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
     ).read_text()
     config = config.replace("points: 3", f"points: {HUGE_POINTS}").replace("jobs: 2", "jobs: 1")
     (tmp_path / "study.yaml").write_text(config)
-    done = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(tmp_path / "study.yaml")]
-        + ["--resume"] * resume,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    done = pcmb_here("run", str(tmp_path / "study.yaml"), *["--resume"] * resume)
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr
     message = done.stderr.lower()
@@ -387,12 +382,7 @@ def test_a_time_grid_too_large_for_memory_is_refused_before_any_run(
     # Nothing was written: no journal, no result, no temporary.
     assert sorted(p.name for p in tmp_path.iterdir()) == ["study.yaml", "wide.py"]
     if not resume:  # pcmb validate checks what a run checks
-        checked = subprocess.run(
-            [sys.executable, "-m", "pcmb.cli", "validate", str(tmp_path / "study.yaml")],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
+        checked = pcmb_here("validate", str(tmp_path / "study.yaml"))
         assert checked.returncode == 2 and "of memory, more than" in checked.stderr
 
 
@@ -404,9 +394,14 @@ def test_the_memory_estimate_of_the_quarter_car_is_small() -> None:
     config = load_config(Path(__file__).parents[1] / "configs" / "quarter_car.yaml")
     study = Study.from_config(config)
     estimate = study.memory_estimate(study.node_set().size, config.model.outputs)
-    # (216 nodes + at most 54 held-out, a quarter) × 301 times × 2 outputs × 8 bytes, 7 times;
-    # 4096 draws, twice.
-    assert estimate.total == 7 * 270 * 301 * 2 * 8 + 2 * 4096 * 301 * 8  # 30 MB
+    # It counts what the config asks for: the (order + 1)^d tensor nodes, the most held-out
+    # runs the study may make, every time, both outputs, and the range check's draws.
+    nodes = (config.method.order + 1) ** len(config.inputs)
+    assert (estimate.nodes, estimate.held_out) == (nodes, study.held_out_runs(nodes)[1])
+    assert (estimate.width, estimate.outputs) == (config.time.points, len(config.model.outputs))
+    assert estimate.draws > 0
+    # A few copies of 270 runs × 301 times × 2 outputs (1.3 MB each): tens of MB, not more.
+    assert estimate.values < estimate.total < 64 * 2**20
 
 
 def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: Path) -> None:

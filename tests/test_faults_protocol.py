@@ -9,13 +9,13 @@ protocol at every node it tried is a model error (exit 3, nothing left behind).
 from __future__ import annotations
 
 import re
-import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import pcmb_here
 
 import pcmb
 from pcmb.result import Status
@@ -81,12 +81,7 @@ def _study(folder: Path, how: str, policy: str, cut: float = CUT) -> Path:
 
 
 def _run(config: Path, *extra: str) -> tuple[int, str]:
-    process = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet", *extra],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    process = pcmb_here("run", str(config), "--quiet", *extra)
     return process.returncode, process.stderr
 
 

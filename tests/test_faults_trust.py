@@ -11,7 +11,6 @@ import hashlib
 import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 import zipfile
@@ -19,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_process import pcmb_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -40,19 +40,6 @@ output: out.h5
 """
 K_INPUT = "  k: {dist: uniform, low: 3.5, high: 4.5}"
 C_INPUT = "  c: {dist: uniform, low: 0.2, high: 0.6}"
-
-
-def pcmb_cli(folder: Path, *args: str, env: dict[str, str] | None = None):
-    """``python -m pcmb.cli ARGS`` in ``folder``, waited for."""
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args],
-        cwd=folder,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-        env=env,
-    )
 
 
 @pytest.fixture
@@ -130,9 +117,7 @@ def interrupted(tmp_path: Path) -> Path:
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "scale.txt").write_text("1.0\n")
     (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
-    stopped = pcmb_cli(
-        tmp_path, "run", "study.yaml", "--quiet", env={**os.environ, "FAIL_ABOVE": "2.0"}
-    )
+    stopped = pcmb_cli("run", "study.yaml", "--quiet", cwd=tmp_path, env={"FAIL_ABOVE": "2.0"})
     assert stopped.returncode == 3, stopped.stderr
     assert (tmp_path / "out.h5.journal").is_dir()
     return tmp_path
@@ -151,14 +136,14 @@ def test_resume_refuses_an_edited_imported_module_or_listed_file(
     changed = folder / edited
     original = changed.read_text()
     changed.write_text(content)
-    refused = pcmb_cli(folder, "run", "study.yaml", "--quiet", "--resume")
+    refused = pcmb_cli("run", "study.yaml", "--quiet", "--resume", cwd=folder)
     assert refused.returncode == 2, refused.stderr
     assert f"model file {changed.resolve()} has changed since" in refused.stderr
     assert not (folder / "out.h5").exists()
     assert sorted((folder / "out.h5.journal").iterdir()) == journal
 
     changed.write_text(original)  # the old content again: resumable, every node the same code
-    resumed = pcmb_cli(folder, "run", "study.yaml", "--quiet", "--resume")
+    resumed = pcmb_cli("run", "study.yaml", "--quiet", "--resume", cwd=folder)
     assert resumed.returncode == 0, resumed.stderr
     import pcmb
 
@@ -171,7 +156,7 @@ def test_a_missing_listed_model_file_is_named_at_its_key(tmp_path: Path) -> None
     (tmp_path / "model.py").write_text(ENTRY)
     (tmp_path / "helper.py").write_text(HELPER)
     (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
-    done = pcmb_cli(tmp_path, "validate", "study.yaml")
+    done = pcmb_cli("validate", "study.yaml", cwd=tmp_path)
     assert done.returncode == 2, done.stdout + done.stderr
     assert "model.files[0]: file " in done.stderr and "scale.txt does not exist" in done.stderr
 
@@ -262,7 +247,7 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
         FMU_CONFIG.format(fmu=aliased, inputs=f"{K_INPUT}\n{C_INPUT}")
     )
     for command in (("validate", "study.yaml"), ("run", "study.yaml", "--quiet")):
-        done = pcmb_cli(tmp_path, *command)
+        done = pcmb_cli(*command, cwd=tmp_path)
         assert done.returncode == 2, done.stdout + done.stderr
         assert re.search(r"inputs\.c: .*inputs\.k", done.stderr), done.stderr
         assert "valueReference 0" in done.stderr
@@ -292,7 +277,7 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
 
 def study_env(cache: Path) -> dict[str, str]:
     """The environment of a run whose per-user cache folder is ``cache``."""
-    return {**os.environ, "XDG_CACHE_HOME": str(cache)}
+    return {"XDG_CACHE_HOME": str(cache)}
 
 
 def plant(archive: Path, folder: Path, marker: Path) -> None:
@@ -332,7 +317,7 @@ def test_a_planted_fmu_cache_entry_never_runs(
         FMU_CONFIG.format(fmu=oscillator_fmu, inputs=f"{K_INPUT}\n{C_INPUT}")
     )
     try:
-        done = pcmb_cli(tmp_path, "run", "study.yaml", "--quiet", env=study_env(cache))
+        done = pcmb_cli("run", "study.yaml", "--quiet", env=study_env(cache), cwd=tmp_path)
     finally:
         shutil.rmtree(shared)
     assert done.returncode == 0, done.stderr
@@ -366,7 +351,7 @@ def test_an_fmu_cache_folder_of_another_user_or_open_to_all_is_refused(
     else:
         spoilt.chmod(0o777)
     (tmp_path / "study.yaml").write_text(FMU_CONFIG.format(fmu=oscillator_fmu, inputs=K_INPUT))
-    done = pcmb_cli(tmp_path, "run", "study.yaml", "--quiet", env=study_env(cache))
+    done = pcmb_cli("run", "study.yaml", "--quiet", env=study_env(cache), cwd=tmp_path)
     assert done.returncode == 2, done.stdout + done.stderr
     assert f"model.fmu: the FMU cache folder {spoilt} is {spoiled}" in done.stderr
     assert "Traceback" not in done.stderr

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cli_process import pcmb_here
 from model_loading import GLOBAL_FACTOR, model_class
 from test_multi_element import JUMP_INPUTS, C
 from test_multi_element import _jump as jump
@@ -33,16 +34,6 @@ DoubleWell = model_class("double_well", "DoubleWell")
 MODEL_ERROR = GLOBAL_FACTOR * 1e-10
 #: Round-off of statistics summed over a few dozen terms and elements.
 ROUND_OFF = 1e-12
-
-
-def _pcmb(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
 
 
 def _mean_error(result) -> float:
@@ -91,7 +82,7 @@ def test_the_held_out_verdict_calls_one_element_failing_and_two_fixed_at_equal_c
 @pytest.mark.slow
 def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     out = tmp_path / "dw.h5"
-    run = _pcmb("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
+    run = pcmb_here("run", str(CONFIG), "-o", str(out), "--backend", "inprocess", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     result = pcmb.load(out)
     # The pipeline is the design applied to the model: the same numbers as the design on
@@ -118,9 +109,9 @@ def test_the_yaml_config_runs_stores_and_reports_its_elements(tmp_path):
     # is in the left well (x near -1) and every x0 > 0 in the right one.
     bands = result.analysis.outputs["x"].quantiles
     assert bands[0, -1] == pytest.approx(-1.0, abs=0.02) and bands[-1, -1] > 0.9
-    inspect = _pcmb("inspect", str(out), cwd=tmp_path)
+    inspect = pcmb_here("inspect", str(out), cwd=tmp_path)
     assert "elements 2 elements, split at x0 = 0" in inspect.stdout
-    report = _pcmb("report", str(out), "-o", str(tmp_path / "report"), cwd=tmp_path)
+    report = pcmb_here("report", str(out), "-o", str(tmp_path / "report"), cwd=tmp_path)
     assert report.returncode == 0, report.stderr
     page = (tmp_path / "report" / "index.html").read_text()
     assert "2 elements, split at x0 = 0" in page
@@ -191,7 +182,7 @@ def _auto_config(tmp_path: Path, model: str = "DoubleWell") -> Path:
 
 @pytest.mark.slow
 def test_validate_prints_the_first_round_and_the_budget(tmp_path):
-    validate = _pcmb("validate", str(_auto_config(tmp_path)), cwd=tmp_path)
+    validate = pcmb_here("validate", str(_auto_config(tmp_path)), cwd=tmp_path)
     assert validate.returncode == 0, validate.stderr
     assert "4 model runs in the first round, at most 60 in all" in validate.stdout
 
@@ -216,16 +207,12 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     data["model"]["entry"] = "slow_well.py:SlowWell"
     data["method"].update(order=2, max_elements=4)  # rounds of 3, 6 and 12 runs
     config.write_text(yaml.safe_dump(data))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "models"), str(ROOT)])}
-    whole = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "-o", "whole.h5"],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    # The uninterrupted run, in this process, of DoubleWell itself: SlowWell's values.
+    data["model"]["entry"] = f"{ROOT / 'models' / 'double_well.py'}:DoubleWell"
+    (tmp_path / "whole.yaml").write_text(yaml.safe_dump(data))
+    whole = pcmb_here("run", "whole.yaml", "-o", "whole.h5", cwd=tmp_path)
     assert whole.returncode == 0, whole.stderr
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "models"), str(ROOT)])}
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", str(config), "-o", "cut.h5"],
         cwd=tmp_path,
@@ -279,7 +266,7 @@ def test_the_chaotic_lorenz_case_is_not_reported_as_fixed(tmp_path):
     data.pop("analysis")
     config = tmp_path / "lorenz.yaml"
     config.write_text(yaml.safe_dump(data))
-    run = _pcmb("run", str(config), "-o", "lorenz.h5", cwd=tmp_path)
+    run = pcmb_here("run", str(config), "-o", "lorenz.h5", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "[element-budget]" in run.stderr
     result = pcmb.load(tmp_path / "lorenz.h5")

@@ -224,8 +224,10 @@ def test_a_normal_run_fits_and_shows_its_inputs_runs_and_verdict(browser, charge
     _fits_and_loads(seen)
     text = seen["text"]
     # Every input's law with its parameters, mean and std.
-    assert "uniform(low=900, high=1100)" in text and "normal(mean=1e-07, std=5e-09)" in text
-    assert "1000" in text and "57.74" in text  # R: mean 1000, std 200 / √12
+    assert "normal(mean=1e-07, std=5e-09)" in text
+    # R's row, cell by cell: U[900, 1100] has mean 1000 and std 200 / √12.
+    row = ("R", "uniform(low=900, high=1100)", "900 .. 1100", "1000", f"{200 / 12**0.5:.4g}")
+    assert "\t".join(row) in text, text
     # The runs made: 25 design nodes, 8 held-out runs, the nominal run.
     assert "25 design nodes" in text and "8 held-out" in text and "nominal" in text
     assert "reliable" in text and "error up to" in text

@@ -21,6 +21,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from cli_process import pcmb_here
 
 from pcmb.result import StudyResult
 from pcmb.store import load
@@ -158,11 +159,11 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
 
 def resume_and_rerun(folder: Path) -> tuple[StudyResult, StudyResult]:
     """Finish an interrupted run with ``--resume`` (its journal then gone) and run the same
-    study afresh into ``clean.h5``: both results, resumed first."""
+    study afresh into ``clean.h5`` (in this process): both results, resumed first."""
     resumed = pcmb_run(folder, "--resume")
     assert resumed.returncode == 0, resumed.stderr
     assert not (folder / "out.h5.journal").exists()
-    clean = pcmb_run(folder, "-o", "clean.h5")
+    clean = pcmb_here("run", "study.yaml", "--quiet", "-o", "clean.h5", cwd=folder)
     assert clean.returncode == 0, clean.stderr
     return load(folder / "out.h5"), load(folder / "clean.h5")
 

@@ -3,12 +3,11 @@ against closed forms (Ishigami) and the tensor grid of order 9 of the same model
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import warnings
 
 import numpy as np
 import pytest
+from cli_process import pcmb_here
 from model_loading import CONFIGS_DIR
 from test_resume import (
     PYTHON_CONFIG,
@@ -164,26 +163,15 @@ def test_unusable_config_settings_are_located_at_their_key_exit_2(tmp_path, meth
     with pytest.raises(ConfigError) as caught:
         load_config(path)
     assert [problem.path for problem in caught.value.problems] == [key]
-    found = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "validate", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    found = pcmb_here("validate", str(path))
     assert found.returncode == 2 and f"{key}:" in found.stderr, found.stderr
 
 
 @pytest.mark.slow
 def test_validate_prints_the_first_round_and_the_budget(tmp_path):
     path = _write_config(tmp_path, ROUNDS_METHOD)
-    shown = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "validate", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=True,
-    )
+    shown = pcmb_here("validate", str(path))
+    assert shown.returncode == 0, shown.stderr
     assert "LARS on total order 6, 16 samples (to 0.0001, at most 256)" in shown.stdout
     assert "16 model runs in the first round, at most 256 in all" in shown.stdout
 
@@ -206,19 +194,10 @@ def reference():
 def _run_config(stem: str, folder) -> pcmb.StudyResult:
     """``pcmb run configs/<stem>.yaml`` into ``folder``, then ``pcmb inspect``; the result."""
     output = folder / f"{stem}.h5"
-    command = [sys.executable, "-m", "pcmb.cli"]
-    config = CONFIGS_DIR / f"{stem}.yaml"
-    ran = subprocess.run(
-        [*command, "run", str(config), "-o", str(output), "--quiet"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    ran = pcmb_here("run", str(CONFIGS_DIR / f"{stem}.yaml"), "-o", str(output), "--quiet")
     assert ran.returncode == 0, ran.stderr
-    shown = subprocess.run(
-        [*command, "inspect", str(output)], capture_output=True, text=True, timeout=60, check=True
-    )
+    shown = pcmb_here("inspect", str(output))
+    assert shown.returncode == 0, shown.stderr
     result = load(output)
     assert result.design.label in shown.stdout
     for name, fit in result.regression.items():

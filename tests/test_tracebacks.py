@@ -19,9 +19,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from cli_process import pcmb_cli, pcmb_here
 
 import pcmb
 from pcmb.config.schema import ExecutionSpec
+from pcmb.result import NodeFailure
 from pcmb.run.executor import run_nodes
 
 PCMB = Path(pcmb.__file__).resolve().parent
@@ -88,14 +90,11 @@ def _study(folder: Path, *, limit: float, order: int, on_failure: str, chunk: st
     return config
 
 
-def _pcmb(*args: str, stdin: str = "") -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args],
-        capture_output=True,
-        text=True,
-        input=stdin,
-        timeout=300,
-    )
+def _node(order: int, index: int) -> str:
+    """How a failure names node ``index`` of ``_study``'s collocation of ``order``: the
+    Gauss–Legendre point on k ~ U[0.5, 1.5], ``node 3 (k=...)``."""
+    points, _ = np.polynomial.legendre.leggauss(order + 1)
+    return NodeFailure(index, {"k": 1.0 + 0.5 * points[index]}, "").node
 
 
 def _frame(folder: Path) -> str:
@@ -105,18 +104,18 @@ def _frame(folder: Path) -> str:
 @pytest.mark.slow
 def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
-    done = _pcmb("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     stderr = done.stderr
     assert done.returncode == 3, stderr
     assert "the model failed at 6 of 6 node(s)" in stderr, stderr
-    assert f"node 0 (k=0.533765): KeyError: 'omega' at helpers.py:{LINE} in rate()" in stderr
+    assert f"{_node(5, 0)}: KeyError: 'omega' at helpers.py:{LINE} in rate()" in stderr
     # One traceback, of the model's frames only: the entry's, then the helper's two.
     assert stderr.count("Traceback (most recent call last):") == 1, stderr
     assert stderr.count(_frame(tmp_path)) == 1 and stderr.count(CODE) == 1, stderr
     assert f'File "{tmp_path / "model.py"}", line 13, in simulate' in stderr, stderr
     assert f'File "{tmp_path / "helpers.py"}", line 12, in response' in stderr, stderr
     assert str(PCMB) not in stderr, stderr
-    more = "and 5 more nodes with the same error: node 1 (k=0.669395), node 2 (k=0.88069), "
+    more = f"and 5 more nodes with the same error: {_node(5, 1)}, {_node(5, 2)}, "
     assert more in stderr, stderr
     assert stderr.count("KeyError") == 2, stderr  # the first node's line and its traceback
     # The journal kept for --resume holds the traceback with the failure.
@@ -128,12 +127,12 @@ def test_six_nodes_failing_in_a_helper_show_one_traceback_of_the_models_frames(t
 @pytest.mark.slow
 def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
-    done = _pcmb("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     assert done.returncode == 0, done.stderr
     where = f"KeyError: 'omega' at helpers.py:{LINE} in rate()"
     assert where in done.stderr and _frame(tmp_path) in done.stderr, done.stderr
     assert done.stderr.count(CODE) == 1, done.stderr
-    assert "and 1 more node with the same error: node 7 (k=1.48014)" in done.stderr
+    assert f"and 1 more node with the same error: {_node(7, 7)}" in done.stderr
 
     result = pcmb.load(tmp_path / "out.h5")
     assert [f.index for f in result.failures] == [6, 7]
@@ -141,9 +140,9 @@ def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path)
         assert failure.traceback is not None and _frame(tmp_path) in failure.traceback.text
         assert failure.traceback.text.rstrip().endswith("KeyError: 'omega'")
         assert where in str(failure)
-    inspected = _pcmb("inspect", str(tmp_path / "out.h5"))
+    inspected = pcmb_here("inspect", str(tmp_path / "out.h5"))
     assert inspected.returncode == 0, inspected.stderr
-    assert f"failed   node 6 (k=1.39833): {where}" in inspected.stdout, inspected.stdout
+    assert f"failed   {_node(7, 6)}: {where}" in inspected.stdout, inspected.stdout
     assert _frame(tmp_path) in inspected.stdout and CODE in inspected.stdout
     assert "failed   and 1 more node with the same error: node 7" in inspected.stdout
 
@@ -151,26 +150,28 @@ def test_regress_stores_the_traceback_in_the_file_and_inspect_shows_it(tmp_path)
 @pytest.mark.slow
 def test_a_file_without_tracebacks_still_loads(tmp_path):
     config = _study(tmp_path, limit=1.35, order=7, on_failure="regress")
-    assert _pcmb("run", str(config), "--quiet").returncode == 0
+    assert pcmb_here("run", str(config), "--quiet").returncode == 0
     with h5py.File(tmp_path / "out.h5", "a") as file:  # as a file of before tracebacks
         del file.attrs["failure_tracebacks"]
     result = pcmb.load(tmp_path / "out.h5")
     assert [(f.index, f.traceback) for f in result.failures] == [(6, None), (7, None)]
-    assert str(result.failures[0]) == "node 6 (k=1.39833): KeyError: 'omega'"
+    assert str(result.failures[0]) == f"{_node(7, 6)}: KeyError: 'omega'"
 
 
+@pytest.mark.slow  # a pcmb process of its own
 def test_inprocess_shows_the_whole_traceback(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
-    done = _pcmb("run", str(config), "--quiet", "--backend", "inprocess")
+    done = pcmb_cli("run", str(config), "--quiet", "--backend", "inprocess")
     assert done.returncode == 3, done.stderr
     assert done.stderr.count("Traceback (most recent call last):") == 1, done.stderr
     assert _frame(tmp_path) in done.stderr
     assert f'File "{PCMB / "run" / "worker.py"}"' in done.stderr, done.stderr
 
 
+@pytest.mark.slow  # a pcmb process of its own
 def test_pdb_opens_the_debugger_at_the_first_model_exception(tmp_path):
     config = _study(tmp_path, limit=0.0, order=5, on_failure="abort", chunk=", chunk_size: 6")
-    done = _pcmb("run", str(config), "--pdb", stdin="p table\nq\n")
+    done = pcmb_cli("run", str(config), "--pdb", stdin="p table\nq\n")
     assert done.returncode == 3, done.stderr
     # Once, at the helper's line, with its locals: the other five failures run on.
     assert done.stdout.count(f"> {tmp_path / 'helpers.py'}({LINE})rate()") == 1, done.stdout
@@ -180,7 +181,7 @@ def test_pdb_opens_the_debugger_at_the_first_model_exception(tmp_path):
 
 def test_pdb_refuses_a_backend_with_workers(tmp_path):
     config = _study(tmp_path, limit=0.0, order=1, on_failure="abort")
-    done = _pcmb("run", str(config), "--pdb", "--backend", "loky")
+    done = pcmb_here("run", str(config), "--pdb", "--backend", "loky")
     assert done.returncode == 2, done.stderr
     assert "--pdb" in done.stderr and "inprocess" in done.stderr, done.stderr
     assert not (tmp_path / "out.h5.journal").exists()
@@ -271,12 +272,12 @@ def test_a_failed_command_keeps_its_stderr_tail_and_has_no_traceback(tmp_path):
             """
         )
     )
-    done = _pcmb("run", str(config), "--quiet")
+    done = pcmb_here("run", str(config), "--quiet")
     assert done.returncode == 3, done.stderr
     assert "last lines of stderr.txt: 'solver diverged at step 12'" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr, done.stderr
     # Nor does --pdb open a debugger in pcmb's own code for it.
-    debugged = _pcmb("run", str(config), "--fresh", "--pdb", stdin="q\n")
+    debugged = pcmb_cli("run", str(config), "--fresh", "--pdb", stdin="q\n")
     assert debugged.returncode == 3, debugged.stderr
     assert "(Pdb)" not in debugged.stdout and "Traceback" not in debugged.stderr
 

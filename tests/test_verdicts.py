@@ -5,14 +5,13 @@ remedies that fit the cause."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from cli_process import pcmb_cli
 from model_loading import model_class
 from scipy.integrate import solve_ivp
 
@@ -164,12 +163,6 @@ def test_regression_stopped_by_max_samples_names_it_with_the_numbers():
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _pcmb(*args: str, cwd: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", *args], cwd=cwd, capture_output=True, text=True
-    )
-
-
 def _small_double_well(tmp_path: Path, config_name: str = "double_well_elements") -> Path:
     """configs/<config_name>.yaml on 41 times, in process."""
     config = yaml.safe_load((ROOT / "configs" / f"{config_name}.yaml").read_text())
@@ -184,9 +177,9 @@ def _small_double_well(tmp_path: Path, config_name: str = "double_well_elements"
 
 @pytest.mark.slow
 def test_a_reliable_multi_element_result_is_never_called_not_converged(tmp_path):
-    run = _pcmb("run", str(_small_double_well(tmp_path)), "--quiet", cwd=tmp_path)
+    run = pcmb_cli("run", str(_small_double_well(tmp_path)), "--quiet", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
-    inspect = _pcmb("inspect", "dw.h5", cwd=tmp_path)
+    inspect = pcmb_cli("inspect", "dw.h5", cwd=tmp_path)
     assert inspect.returncode == 0, inspect.stderr
     assert "checked  x: reliable at every time" in inspect.stdout
     said = run.stderr + inspect.stdout
@@ -213,10 +206,10 @@ def test_a_zero_variance_at_a_fixed_initial_state_is_recorded_not_warned(tmp_pat
     for section in ("analysis", "sweep"):
         config.pop(section, None)
     (tmp_path / "qc.yaml").write_text(yaml.safe_dump(config))
-    run = _pcmb("run", "qc.yaml", "--quiet", cwd=tmp_path)
+    run = pcmb_cli("run", "qc.yaml", "--quiet", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     assert "sobol-undefined" not in run.stderr
-    inspect = _pcmb("inspect", "qc.h5", cwd=tmp_path)
+    inspect = pcmb_cli("inspect", "qc.h5", cwd=tmp_path)
     listed = [line for line in inspect.stdout.splitlines() if "[sobol-undefined]" in line]
     assert listed and all(line.startswith("note ") for line in listed)
     assert "t in [0, 0]" in listed[0]
@@ -341,15 +334,15 @@ def test_the_surrogate_is_cautioned_where_its_statistics_hold_and_its_pdf_leaves
 
 @pytest.mark.slow
 def test_the_surrogate_cautions_reach_the_file_inspect_and_the_report(tmp_path):
-    run = _pcmb("run", str(_small_double_well(tmp_path, "double_well")), "--quiet", cwd=tmp_path)
+    run = pcmb_cli("run", str(_small_double_well(tmp_path, "double_well")), "--quiet", cwd=tmp_path)
     assert run.returncode == 0, run.stderr
     codes = {w.code for w in pcmb.load(tmp_path / "dw.h5").warnings}
     assert {"surrogate-inaccurate", "pdf-outside-runs"} <= codes
-    inspect = _pcmb("inspect", "dw.h5", cwd=tmp_path)
+    inspect = pcmb_cli("inspect", "dw.h5", cwd=tmp_path)
     for code in ("surrogate-inaccurate", "pdf-outside-runs"):
         (listed,) = [line for line in inspect.stdout.splitlines() if f"[{code}]" in line]
         assert listed.startswith("note")
-    report = _pcmb("report", "dw.h5", "-o", "report", cwd=tmp_path)
+    report = pcmb_cli("report", "dw.h5", "-o", "report", cwd=tmp_path)
     assert report.returncode == 0, report.stderr
     page = (tmp_path / "report" / "index.html").read_text()
     (caution,) = [line for line in page.splitlines() if line.startswith('<p class="caution">')]
