@@ -240,7 +240,7 @@ def test_study_hands_the_model_the_field_and_stores_the_process(tmp_path):
         {"kind": "collocation", "grid": "smolyak", "level": 1},
         {"kind": "regression", "samples": 60, "order": 1, "selection": "none", "q": 1.0},
         {"kind": "montecarlo", "samples": 64, "seed": 1},
-        {"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60},
+        {"kind": "adaptive", "tolerance": 1e-3, "max_runs": 200},
     ],
 )
 def test_process_germs_are_ordinary_inputs_for_every_method(tmp_path, method):

@@ -69,10 +69,10 @@ DESIGNS: dict[str, type[NodeDesign] | type[IntrusiveDesign]] = {
     "montecarlo": Sampling,
     "lhs": Sampling,
     "sobol": Sampling,
-    "halton": HaltonSampling,
     "regression": SparseRegression,
     "adaptive": AdaptiveCollocation,
     "adaptive:tensor": AnisotropicTensor,
+    "halton": HaltonSampling,
     # Intrusive methods (pcmb.designs.base.IntrusiveDesign): no nodes; solved from the
     # model's polynomial form in a worker.
     "galerkin": Galerkin,
