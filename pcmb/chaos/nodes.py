@@ -193,8 +193,10 @@ def overflowing_inputs(
     """``(name, what is wrong)`` for each input (``names`` in germ order) whose value is not
     a finite number at some node: a distribution too wide for floating point (a normal of
     std 1e307) overflows in its map from the germ."""
+    with np.errstate(over="ignore", invalid="ignore"):  # the overflow is what this reports
+        params = nodes.params
     for k, name in enumerate(names):
-        values = nodes.params[:, k]
+        values = params[:, k]
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
             i = bad[0]
