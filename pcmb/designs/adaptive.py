@@ -43,7 +43,7 @@ from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.config.types import PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery
-from pcmb.designs.smolyak import sparse_recovery
+from pcmb.designs.smolyak import GrowingGrid
 from pcmb.result import AdaptiveFit, Design, DesignReport, ReportFile, StudyResult, WarningRecord
 
 __all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings", "estimated_error"]
@@ -83,7 +83,7 @@ class AdaptiveSettings(MethodSection):
         return "tolerance"
 
 
-class AdaptiveCollocation:
+class AdaptiveCollocation(GrowingGrid):
     """``method: {kind: adaptive, tolerance, max_runs, rule}``: a dimension-adaptive sparse grid
     on the nested ``rule`` (``auto``: Gauss–Patterson for uniform inputs, Genz–Keister for
     normal ones, Leja otherwise; one rule per input for all levels, so an input stops at its
@@ -151,20 +151,6 @@ class AdaptiveCollocation:
 
     def nodes(self) -> NodeSet:
         return NodeSet(self.distributions, self._first.nodes, self._first.params)
-
-    def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
-        """Row of every grid node among ``nodes`` (in run order)."""
-        if nodes.size != self._grid.size:
-            raise ValueError(
-                f"{nodes.size} nodes given, the adaptive grid so far has {self._grid.size}"
-            )
-        return find_rows(self._ids, self._grid.node_ids)
-
-    def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
-        """(N,) the sparse quadrature weights, in run order: they sum to one, some negative."""
-        weights = np.empty(nodes.size)
-        weights[self._order(nodes)] = self._grid.weights
-        return weights
 
     def record(self) -> Design:
         return Design(
@@ -362,10 +348,7 @@ class AdaptiveCollocation:
         """Add indices to the set; the nodes they bring."""
         self._index += added
         self._indicators = np.append(self._indicators, np.full(len(added), np.nan))
-        self._grid = SparseGrid(self.distributions, np.array(self._index), self.rules)
-        new = find_rows(self._ids, self._grid.node_ids) < 0
-        self._ids = np.vstack([self._ids, self._grid.node_ids[new]])
-        return NodeSet(self.distributions, self._grid.nodes[new], self._grid.params[new])
+        return self._adopt(SparseGrid(self.distributions, np.array(self._index), self.rules))
 
     # -- recovery ----------------------------------------------------------------------------
 
@@ -376,9 +359,7 @@ class AdaptiveCollocation:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        order = self._order(nodes)
-        on_grid = {name: y[order] for name, y in values.items()}
-        recovery = sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
+        recovery = self._grid_recovery(nodes, values, ok, times)
         fit = AdaptiveFit(
             index_set=np.array(self._index, dtype=np.int64),
             indicators=self._indicators.copy(),

@@ -37,7 +37,7 @@ from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
-from pcmb.designs.smolyak import sparse_recovery
+from pcmb.designs.smolyak import GrowingGrid
 from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
 
 __all__ = [
@@ -77,7 +77,7 @@ def extrapolated_error(changes: list[float], degrees: list[int]) -> float:
     return changes[-1] * rate ** (degrees[-1] - degrees[-2])
 
 
-class OrderRefinement:
+class OrderRefinement(GrowingGrid):
     """``method: {kind: collocation, order: auto, rule, max_runs}``: tensor grids of nested
     rules, one level more in every input per round, until the estimated error meets
     ``diagnostics_tolerance`` (see the module); ``max_runs`` (default 1000) bounds the runs."""
@@ -147,18 +147,6 @@ class OrderRefinement:
     def nodes(self) -> NodeSet:
         return NodeSet(self.distributions, self._first.nodes, self._first.params)
 
-    def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
-        """Row of every grid node among ``nodes`` (in run order)."""
-        if nodes.size != self._grid.size:
-            raise ValueError(f"{nodes.size} nodes given, the grid so far has {self._grid.size}")
-        return find_rows(self._ids, self._grid.node_ids)
-
-    def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
-        """(N,) the quadrature weights of the last grid, in run order."""
-        weights = np.empty(nodes.size)
-        weights[self._order(nodes)] = self._grid.weights
-        return weights
-
     def record(self) -> Design:
         orders = self._orders(self._grid)
         return Design(
@@ -220,10 +208,7 @@ class OrderRefinement:
                 "may not converge for a steep, discontinuous or chaotic response)"
             )
             return None
-        self._grid = grid
-        new = find_rows(self._ids, grid.node_ids) < 0
-        self._ids = np.vstack([self._ids, grid.node_ids[new]])
-        return NodeSet(self.distributions, grid.nodes[new], grid.params[new])
+        return self._adopt(grid)
 
     def _statistics_on(
         self, grid: SparseGrid, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]]
@@ -237,17 +222,6 @@ class OrderRefinement:
             statistics[name] = (expansion.mean(), expansion.std())
         return statistics
 
-    def _recover(
-        self,
-        nodes: NodeSet,
-        values: Mapping[str, NDArray[np.float64]],
-        ok: NDArray[np.bool_],
-        times: NDArray[np.float64] | None = None,
-    ) -> Recovery:
-        order = self._order(nodes)
-        on_grid = {name: y[order] for name, y in values.items()}
-        return sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
-
     def recover(
         self,
         nodes: NodeSet,
@@ -255,7 +229,7 @@ class OrderRefinement:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        recovery = self._recover(nodes, values, ok, times)
+        recovery = self._grid_recovery(nodes, values, ok, times)
         history = self._history
         refinement = Refinement(
             orders=np.array([h[0] for h in history], dtype=np.int64).reshape(

@@ -13,7 +13,7 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import nested_rule
 from pcmb.chaos.nodes import NodeSet
-from pcmb.chaos.sparse import SparseGrid
+from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.designs.base import (
     MethodSettings,
     Recovery,
@@ -105,6 +105,48 @@ class SparseCollocation:
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         return sparse_recovery(self.grid, self.names, values, ok, times)
+
+
+class GrowingGrid:
+    """What the designs that grow a nested sparse grid round by round share (``adaptive``,
+    ``order: auto``): the grid so far, its node ids in run order (``_ids``), the new nodes a
+    larger grid brings, its weights and its recovery in run order."""
+
+    distributions: tuple[Distribution, ...]
+    names: tuple[str, ...]
+    _grid: SparseGrid
+    _ids: NDArray[np.float64]
+
+    def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
+        """Row of every grid node among ``nodes`` (in run order)."""
+        if nodes.size != self._grid.size:
+            raise ValueError(f"{nodes.size} nodes given, the grid so far has {self._grid.size}")
+        return find_rows(self._ids, self._grid.node_ids)
+
+    def _adopt(self, grid: SparseGrid) -> NodeSet:
+        """Make ``grid`` (holding the one so far) the grid; the nodes it adds."""
+        self._grid = grid
+        new = find_rows(self._ids, grid.node_ids) < 0
+        self._ids = np.vstack([self._ids, grid.node_ids[new]])
+        return NodeSet(self.distributions, grid.nodes[new], grid.params[new])
+
+    def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
+        """(N,) the grid's quadrature weights, in run order (they sum to one, some negative)."""
+        weights = np.empty(nodes.size)
+        weights[self._order(nodes)] = self._grid.weights
+        return weights
+
+    def _grid_recovery(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        """:func:`sparse_recovery` on the grid so far, of values given in run order."""
+        order = self._order(nodes)
+        on_grid = {name: y[order] for name, y in values.items()}
+        return sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
 
 
 def sparse_recovery(
