@@ -26,6 +26,7 @@ __all__ = [
     "IshigamiMoments",
     "borehole",
     "borehole_bounds",
+    "bouncing_ball",
     "cosine_covariance",
     "cosine_covariance_kl",
     "damped_oscillator",
@@ -35,6 +36,7 @@ __all__ = [
     "ishigami",
     "ishigami_moments",
     "jacobi_moment",
+    "lognormal_moments",
     "lorenz_equilibria",
     "normal_moment",
     "pendulum_angle",
@@ -93,6 +95,29 @@ def pendulum_angle(
     k = _outer(np.sin(theta0 / 2), t)
     phase = ellipk(k**2) - _outer(np.sqrt(g / length), t) * t
     return 2 * np.arcsin(k * ellipj(phase, k**2)[0])
+
+
+def bouncing_ball(
+    h0: ArrayLike, t: ArrayLike, gravity: float = 9.81, restitution: float = 0.8
+) -> Array:
+    """(N, T) height of balls dropped at rest from heights ``h0`` (N,) onto a floor that
+    returns ``restitution`` of the speed at each bounce; at rest on it once the bounces,
+    ever shorter, have all happened."""
+    h0 = np.asarray(h0, dtype=float)[:, None]
+    t = np.asarray(t, dtype=float)[None, :]
+    height = h0 - gravity * t**2 / 2
+    start, speed = np.sqrt(2 * h0 / gravity), restitution * np.sqrt(2 * gravity * h0)
+    for _ in range(80):  # at 0.8 per bounce the speed is 1e-8 of the first after 80
+        since = t - start
+        height = np.where(since >= 0, speed * since - gravity * since**2 / 2, height)
+        start, speed = start + 2 * speed / gravity, speed * restitution
+    return np.where(t >= start, 0.0, height)
+
+
+def lognormal_moments(a: ArrayLike) -> tuple[Array, Array]:
+    """Mean and std of exp(a z), z ~ N(0, 1): e^{a²/2} and √(e^{a²} (e^{a²} - 1))."""
+    a2 = np.asarray(a, dtype=float) ** 2
+    return np.exp(a2 / 2), np.sqrt(np.exp(a2) * np.expm1(a2))
 
 
 def double_well(t: ArrayLike, x0: ArrayLike) -> Array:

@@ -45,7 +45,7 @@ from pcmb import Study
 from pcmb.analysis.diagnostics import TOLERANCE, diagnose, verdict
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.config import load_config
-from pcmb.references import double_well, double_well_moments
+from pcmb.references import bouncing_ball, double_well, double_well_moments, lognormal_moments
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Config -> the reference study's changes (a much finer run).
@@ -127,8 +127,6 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
 
 # -- the cases of issue 23: closed forms ---------------------------------------------------------
 
-#: Gravity and restitution of the bouncing ball.
-GRAVITY, RESTITUTION = 9.81, 0.8
 #: Rates of the smooth 4-input response exp(-t Σ c_i x_i), x_i ~ U[0, 1].
 RATES = np.array([0.3, 0.5, 0.7, 0.9])
 
@@ -139,39 +137,21 @@ def lognormal(params, times):
     return {"x": np.exp(0.5 * np.outer(params["z"], times))}
 
 
-def lognormal_moments(times):
-    a2 = (0.5 * times) ** 2
-    return np.exp(a2 / 2), np.sqrt(np.exp(a2) * np.expm1(a2))
-
-
 @pcmb.batched(outputs=("x",))
 def well(params, times):
     """x' = x - x³ from x0: a jump in the initial condition as t grows."""
     return {"x": double_well(times, np.asarray(params["x0"]))}
 
 
-def ball_height(h0, times):
-    """(N, T) height of balls dropped at rest from h0, bouncing with ``RESTITUTION``."""
-    h0 = np.asarray(h0, dtype=float)[:, None]
-    t = np.asarray(times, dtype=float)[None, :]
-    height = h0 - GRAVITY * t**2 / 2
-    start, speed = np.sqrt(2 * h0 / GRAVITY), RESTITUTION * np.sqrt(2 * GRAVITY * h0)
-    for _ in range(80):
-        since = t - start
-        height = np.where(since >= 0, speed * since - GRAVITY * since**2 / 2, height)
-        start, speed = start + 2 * speed / GRAVITY, speed * RESTITUTION
-    return np.where(t >= start, 0.0, height)
-
-
 @pcmb.batched(outputs=("h",))
 def ball(params, times):
     """A bouncing ball dropped from h0: its contacts are kinks and jumps in h0."""
-    return {"h": ball_height(params["h0"], times)}
+    return {"h": bouncing_ball(params["h0"], times)}
 
 
 def ball_moments(times, low=0.5, high=1.5):
     fine = TensorGrid((pcmb.Uniform(low, high),), (3999,))
-    values = ball_height(fine.params[:, 0], times)
+    values = bouncing_ball(fine.params[:, 0], times)
     mean = fine.weights @ values
     return mean, np.sqrt(fine.weights @ (values - mean) ** 2)
 
@@ -213,7 +193,7 @@ CASES = {
         lognormal,
         {"z": pcmb.Normal(0.0, 1.0)},
         np.linspace(0.0, 5.0, 201),
-        lognormal_moments,
+        lambda t: lognormal_moments(0.5 * t),
         {"order 4": {"order": 4}, "order 4, elements auto": {"order": 4, "elements": "auto"}},
     ),
     "jump": (

@@ -17,10 +17,9 @@ import pcmb
 from pcmb.analysis.diagnostics import held_out_draws, holdout_error, verdict
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
-from pcmb.references import double_well
+from pcmb.references import bouncing_ball, double_well, lognormal_moments
 
 #: Gravity and the ball's restitution.
-GRAVITY, RESTITUTION = 9.81, 0.8
 
 
 @pcmb.batched(outputs=("x",))
@@ -29,35 +28,16 @@ def lognormal(params, times):
     return {"x": np.exp(0.5 * np.outer(params["z"], times))}
 
 
-def lognormal_moments(times):
-    """Mean and std of exp(a z), a = t / 2: e^{a²/2} and √(e^{a²} (e^{a²} - 1))."""
-    a2 = (0.5 * np.asarray(times)) ** 2
-    return np.exp(a2 / 2), np.sqrt(np.exp(a2) * np.expm1(a2))
-
-
 @pcmb.batched(outputs=("x",))
 def well(params, times):
     """The double well x' = x - x³ in closed form: a jump at x0 = 0 as t grows."""
     return {"x": double_well(times, np.asarray(params["x0"]))}
 
 
-def ball_height(h0, times):
-    """(N, T) height of balls dropped at rest from h0 (N,), bouncing with ``RESTITUTION``."""
-    h0 = np.asarray(h0, dtype=float)[:, None]
-    t = np.asarray(times, dtype=float)[None, :]
-    height = h0 - GRAVITY * t**2 / 2
-    start, speed = np.sqrt(2 * h0 / GRAVITY), RESTITUTION * np.sqrt(2 * GRAVITY * h0)
-    for _ in range(80):  # speed falls by 0.8 per bounce: 1e-8 of the first after 80
-        since = t - start
-        height = np.where(since >= 0, speed * since - GRAVITY * since**2 / 2, height)
-        start, speed = start + 2 * speed / GRAVITY, speed * RESTITUTION
-    return np.where(t >= start, 0.0, height)
-
-
 @pcmb.batched(outputs=("h",))
 def ball(params, times):
     """A ball dropped from h0: its contacts are kinks and jumps in h0."""
-    return {"h": ball_height(params["h0"], times)}
+    return {"h": bouncing_ball(params["h0"], times)}
 
 
 def _run(model, inputs, times, **settings) -> pcmb.StudyResult:
@@ -118,7 +98,7 @@ def test_the_held_out_runs_correct_the_mean_and_std_within_their_standard_error(
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
         study.run(tmp_path / "out.h5")
     result = pcmb.load(tmp_path / "out.h5")  # what the file holds
-    mean, std = lognormal_moments(times)
+    mean, std = lognormal_moments(0.5 * times)
     checked = result.diagnostics["x"].holdout
     # Order 2 misses most of the spread late: the corrected values are closer to the truth
     # and, at 3 standard errors, cover it.
@@ -169,7 +149,7 @@ def test_a_repaired_result_is_not_flagged_on_noise(model, inputs, stop, truth):
     times = np.linspace(0.0, stop, 101)
     fine = TensorGrid(tuple(inputs.values()), (3999,))
     (name,) = model.outputs
-    exact = truth(times, fine.params[:, 0]) if truth else ball_height(fine.params[:, 0], times)
+    exact = truth(times, fine.params[:, 0]) if truth else bouncing_ball(fine.params[:, 0], times)
     mean = fine.weights @ exact
     std = np.sqrt(fine.weights @ (exact - mean) ** 2)
     for seed in range(10):
@@ -221,7 +201,7 @@ def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
     # t = 3.60 (closed form). Its 8 held-out runs, drawn into the tails and weighted back,
     # flag it or call it undecided from then on (within 5 % of the horizon), with every seed.
     times = np.linspace(0.0, 5.0, 201)
-    mean, std = lognormal_moments(times)
+    mean, std = lognormal_moments(0.5 * times)
     for seed in range(10):
         result = _run(lognormal, {"z": pcmb.Normal(0.0, 1.0)}, times, order=4, seed=seed)
         found = result.diagnostics["x"]
