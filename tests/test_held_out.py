@@ -76,6 +76,16 @@ def test_method_validation_fixes_the_count():
     assert result.held_out.germ.shape[0] == 5
 
 
+def test_one_held_out_run_leaves_the_verdict_undecided_without_failing():
+    """One run has no spread: its noise is infinite, every time undecided, and the runs
+    that would decide are the first batch's, not an overflow."""
+    times = np.linspace(0.0, 4.0, 41)
+    result = _run(well, {"x0": pcmb.Uniform(-0.625, 0.375)}, times, order=3, validation=1)
+    assert result.held_out.germ.shape[0] == 1
+    (record,) = [w for w in result.warnings if w.code == "chaos-undecided"]
+    assert "about 7 more held-out runs would decide (method.validation: 8)" in record.message
+
+
 def test_a_second_batch_is_drawn_only_where_the_first_leaves_the_verdict_undecided():
     times = np.linspace(0.0, 5.0, 101)
     # Two inputs the response ignores: 125 runs, at most 32 held-out.

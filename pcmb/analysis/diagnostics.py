@@ -825,7 +825,11 @@ def diagnose(
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.statistics
-    noise = np.zeros(times.size) if checked is None else np.nan_to_num(checked.noise, nan=np.inf)
+    noise = (
+        np.zeros(times.size)
+        if checked is None
+        else np.where(np.isnan(checked.noise), np.inf, checked.noise)
+    )
     failing_from = verdict(times, estimate, tolerance, noise)
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
@@ -887,14 +891,18 @@ def diagnose(
 def more_runs(found: OutputDiagnostics) -> int:
     """How many held-out runs, beyond those made, would decide every undecided time of
     ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
-    undecided): the noise falls as 1/√K."""
+    undecided): the noise falls as 1/√K. Too few runs to measure any noise (one): the
+    first batch."""
     undecided = found.undecided
-    if found.holdout is None or not undecided.any():
+    if not undecided.any():
         return 0
+    count = found.holdout.count  # a time is undecided only by a held-out check's noise
     margin = np.abs(found.estimate - found.tolerance)[undecided]
     margin = np.maximum(margin, found.tolerance / 10)
-    needed = found.holdout.count * np.max(found.noise[undecided] / margin) ** 2
-    return max(int(np.ceil(needed)) - found.holdout.count, 1)
+    needed = count * np.max(found.noise[undecided] / margin) ** 2
+    if not np.isfinite(needed):
+        return max(FIRST_BATCH - count, 1)
+    return max(int(np.ceil(needed)) - count, 1)
 
 
 def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) -> WarningRecord:
@@ -904,14 +912,14 @@ def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) 
     worst = int(np.flatnonzero(undecided)[np.argmax(found.estimate[undecided])])
     holdout = found.holdout
     where = f" at {axis} = {times[worst]:.4g}" if axis else ""
-    count = 0 if holdout is None else holdout.count
+    count = holdout.count
     more = more_runs(found)
     return WarningRecord(
         "chaos-undecided",
         f"the held-out check cannot tell whether mean and std hold within the tolerance "
         f"{_percent(found.tolerance)} of the largest std at {_count(undecided)}: estimated "
         f"error {_percent(found.estimate[worst])} ± {_percent(found.noise[worst])}{where} "
-        f"({_percent(holdout.confidence if holdout else CONFIDENCE)} confidence, {count} "
+        f"({_percent(holdout.confidence)} confidence, {count} "
         f"held-out runs); about {more} more held-out runs would decide (method.validation: "
         f"{count + more})",
         found.output,
