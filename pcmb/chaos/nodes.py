@@ -14,13 +14,20 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.basis import tensor_index_set
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.polynomials import GaussRule
 
-__all__ = ["NodeSet", "TensorGrid", "draw_germs", "overflowing_inputs", "random_nodes"]
+__all__ = [
+    "NodeSet",
+    "TensorGrid",
+    "draw_germs",
+    "overflowing_inputs",
+    "random_nodes",
+    "unit_nodes",
+]
 
 SamplingMethod = Literal["montecarlo", "lhs", "sobol"]
 
@@ -181,9 +188,18 @@ def random_nodes(
                     "ignore", message=".*balance properties", category=UserWarning
                 )
                 u = qmc.Sobol(d=n, scramble=True, rng=rng).random(samples)
-        germ = np.column_stack([d.family.quantile(u[:, k]) for k, d in enumerate(distributions)])
+        return unit_nodes(distributions, u)
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
+    return NodeSet(distributions, germ, _physical(distributions, germ))
+
+
+def unit_nodes(distributions: Sequence[Distribution], u: ArrayLike) -> NodeSet:
+    """The nodes of points ``u`` (N, n) in the unit cube, mapped through each input's germ
+    quantile (how quasi-random and stratified designs reach the inputs)."""
+    u = np.asarray(u, dtype=float)
+    distributions = tuple(distributions)
+    germ = np.column_stack([d.family.quantile(u[:, k]) for k, d in enumerate(distributions)])
     return NodeSet(distributions, germ, _physical(distributions, germ))
 
 

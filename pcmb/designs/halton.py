@@ -9,7 +9,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.nodes import NodeSet, unit_nodes
 from pcmb.designs.sampling import Sampling, SamplingSettings
 from pcmb.result import Design
 
@@ -33,16 +33,8 @@ class HaltonSampling(Sampling):
         from scipy.stats import qmc  # deferred: scipy.stats is slow to import
 
         n = len(self.distributions)
-        u = qmc.Halton(d=n, scramble=True, rng=np.random.default_rng(self.seed)).random(
-            self.samples
-        )
-        germ = np.column_stack(
-            [d.family.quantile(u[:, k]) for k, d in enumerate(self.distributions)]
-        )
-        params = np.column_stack(
-            [d.to_physical(germ[:, k]) for k, d in enumerate(self.distributions)]
-        )
-        return NodeSet(self.distributions, germ, params)
+        halton = qmc.Halton(d=n, scramble=True, rng=np.random.default_rng(self.seed))
+        return unit_nodes(self.distributions, halton.random(self.samples))
 
     def record(self) -> Design:
         return dataclasses.replace(super().record(), grid="halton")
