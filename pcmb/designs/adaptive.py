@@ -38,12 +38,12 @@ from pydantic import Field
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import RULES, nested_rule
+from pcmb.chaos.nested import RULES
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.config.types import PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery
-from pcmb.designs.smolyak import GrowingGrid
+from pcmb.designs.smolyak import GrowingGrid, nested_rules
 from pcmb.result import AdaptiveFit, Design, DesignReport, ReportFile, StudyResult, WarningRecord
 
 __all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings", "estimated_error"]
@@ -102,13 +102,7 @@ class AdaptiveCollocation(GrowingGrid):
         if tolerance is None:
             raise ValueError("method.tolerance: required key is missing (needed by kind adaptive)")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
-        rules = []
-        for name, dist in inputs.items():
-            try:
-                rules.append(nested_rule(dist.family, rule))
-            except ValueError as error:
-                raise ValueError(f"method.rule: input {name!r}: {error}") from None
-        self.rules = tuple(rules)
+        self.rules = nested_rules(inputs, rule)
         self.tolerance = float(tolerance)
         self._first = SparseGrid(self.distributions, self._first_indices(), self.rules)
         self.max_runs = DEFAULT_MAX_RUNS if max_runs is None else int(max_runs)

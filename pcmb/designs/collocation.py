@@ -68,11 +68,7 @@ class CollocationSettings(MethodSection):
             return self.budget_key
         return "level" if self.level is not None else "order"
 
-    @property
-    def cost_key(self) -> str:
-        if self.order == "auto":
-            return self.budget_key
-        return "level" if self.level is not None else "order"
+    cost_key = size_key  # a sweep raises what sets the size
 
 
 class TensorCollocation:

@@ -161,9 +161,7 @@ class GalerkinSettings(MethodSection):
     def size_key(self) -> str:
         return "order"
 
-    @property
-    def cost_key(self) -> str:
-        return "order"
+    cost_key = size_key  # a sweep raises what sets the size
 
 
 class Galerkin(WithoutNodes):

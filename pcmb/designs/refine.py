@@ -31,13 +31,12 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
 from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
-from pcmb.designs.smolyak import GrowingGrid
+from pcmb.designs.smolyak import GrowingGrid, nested_rules
 from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
 
 __all__ = [
@@ -99,13 +98,7 @@ class OrderRefinement(GrowingGrid):
                 f"{settings.basis!r}"
             )
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
-        rules = []
-        for name, dist in inputs.items():
-            try:
-                rules.append(nested_rule(dist.family, settings.rule))
-            except ValueError as error:
-                raise ValueError(f"method.rule: input {name!r}: {error}") from None
-        self.rules = tuple(rules)
+        self.rules = nested_rules(inputs, settings.rule)
         self.tolerance = float(settings.diagnostics_tolerance)
         self.max_runs = DEFAULT_MAX_RUNS if settings.max_runs is None else int(settings.max_runs)
         self._first = self._level(1)

@@ -51,9 +51,7 @@ class SamplingSettings(MethodSection):
     def size_key(self) -> str:
         return "samples"
 
-    @property
-    def cost_key(self) -> str:
-        return "samples"
+    cost_key = size_key  # a sweep raises what sets the size
 
 
 class Sampling:

@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import nested_rule
+from pcmb.chaos.nested import NestedRule, nested_rule
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.designs.base import (
@@ -58,11 +58,7 @@ class SparseCollocation:
                 f"method.level: level {level} in {n} inputs combines more than {MAX_TENSORS} "
                 "tensor rules: use a lower level"
             )
-        for name, dist in inputs.items():
-            try:
-                nested_rule(dist.family, rule)
-            except ValueError as error:
-                raise ValueError(f"method.rule: input {name!r}: {error}") from None
+        nested_rules(inputs, rule)  # each input's rule exists
         try:
             self.grid = SparseGrid.smolyak(self.distributions, self.level, rule)
         except ValueError as error:
@@ -105,6 +101,23 @@ class SparseCollocation:
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         return sparse_recovery(self.grid, self.names, values, ok, times)
+
+
+def nested_rules(inputs: Mapping[str, Distribution], rule: str) -> tuple[NestedRule, ...]:
+    """The nested 1-D rule ``rule`` (``method.rule``) of every input, in order.
+
+    Raises
+    ------
+    ValueError
+        At ``method.rule``, naming the input it has no rule for.
+    """
+    rules = []
+    for name, dist in inputs.items():
+        try:
+            rules.append(nested_rule(dist.family, rule))
+        except ValueError as error:
+            raise ValueError(f"method.rule: input {name!r}: {error}") from None
+    return tuple(rules)
 
 
 class GrowingGrid:
