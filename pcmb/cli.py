@@ -459,8 +459,6 @@ def _runs_made(result) -> str:
 
 
 def _inspect(path: str) -> str:
-    import dataclasses
-
     import numpy as np
 
     from pcmb.run.status import failure_report

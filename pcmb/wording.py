@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import difflib
 import re
+import signal
 from collections.abc import Iterable
 
-__all__ = ["did_you_mean", "markdown", "plural"]
+__all__ = ["did_you_mean", "markdown", "plural", "signal_name"]
 
 
 def did_you_mean(name: str, choices: Iterable[str]) -> str:
@@ -29,3 +30,11 @@ def markdown(doc: str | None) -> str:
     text = re.sub(r":[a-z]+:`([^`]+)`", r"`\1`", text)
     text = re.sub(r"``([^`]+)``", r"`\1`", text)
     return " ".join(text.split())
+
+
+def signal_name(number: int) -> str:
+    """``SIGSEGV`` for 11; ``SIGRT35`` and the like for a signal Python has no name for."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"SIGRT{number}" if signal.SIGRTMIN <= number <= signal.SIGRTMAX else "unnamed"

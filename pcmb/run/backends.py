@@ -14,7 +14,6 @@ import atexit
 import logging
 import os
 import re
-import signal
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -26,7 +25,7 @@ from typing import Any, Protocol, TypeVar
 from pcmb.errors import ClusterError, ConfigProblem, MissingDependencyError, UsageError
 from pcmb.run.lifeline import die_with_parent, tag
 from pcmb.run.threads import THREAD_LIMITS, one_thread_here
-from pcmb.wording import plural
+from pcmb.wording import plural, signal_name
 
 __all__ = [
     "BACKENDS",
@@ -155,18 +154,10 @@ class LokyPool:
         self._executor.shutdown(wait=not kill, kill_workers=kill)
 
 
-def _signal_name(number: int) -> str:
-    """``SIGSEGV`` for 11; ``SIGRT35`` and the like for a signal Python has no name for."""
-    try:
-        return signal.Signals(number).name
-    except ValueError:
-        return f"SIGRT{number}" if signal.SIGRTMIN <= number <= signal.SIGRTMAX else "unnamed"
-
-
 def _died(codes: Iterable[int]) -> str:
     """The message of a worker death, from exit codes (negative: the signal that killed it)."""
     causes = [
-        f"signal {-code}, {_signal_name(-code)}" if code < 0 else f"exit code {code}"
+        f"signal {-code}, {signal_name(-code)}" if code < 0 else f"exit code {code}"
         for code in codes
     ]
     return f"worker process died ({'; '.join(causes) or 'cause unknown'})"

@@ -41,6 +41,7 @@ from pcmb.adapters.protocol import (
 from pcmb.axes import OutputAxis
 from pcmb.errors import ConfigError, ConfigProblem, ModelError
 from pcmb.run.lifeline import kernel_kills_orphans
+from pcmb.wording import signal_name
 
 __all__ = [
     "FORMATS",
@@ -484,8 +485,7 @@ class CommandModel(PointwiseModel):
         if not finished:
             raise ModelError(f"timed out after {self.timeout:g} s (process group killed)")
         if code < 0:
-            name = signal.Signals(-code).name if -code in signal.valid_signals() else "?"
-            raise ModelError(f"killed by signal {-code} ({name})")
+            raise ModelError(f"killed by signal {-code} ({signal_name(-code)})")
         if code > 0:
             raise ModelError(f"exited with code {code}")
 
