@@ -17,6 +17,7 @@ from pcmb.analysis.reservoir import Reservoir
 from pcmb.analysis.running_moments import RunningMoments
 from pcmb.analysis.statistics import AnalysisSettings
 from pcmb.analysis.streaming import stream_statistics
+from pcmb.chaos.expansion import sample_std
 from pcmb.chaos.inputs import Uniform
 from pcmb.config.schema import load_config
 from pcmb.errors import ConfigError, ModelRunError, UsageError
@@ -73,6 +74,18 @@ def test_running_moments_equal_the_two_pass_ones_over_uneven_blocks() -> None:
     np.testing.assert_allclose(moments.mean, runs.mean(axis=0), rtol=1e-14)
     np.testing.assert_allclose(moments.std(), runs.std(axis=0, ddof=1), rtol=1e-13)
     assert moments.std()[3] == 0.0  # exactly, as sample_std gives it
+
+
+@pytest.mark.parametrize("size", [1e200, 1e-200])
+def test_running_moments_of_values_near_the_float_limits_equal_sample_std(size) -> None:
+    """Squares of 1e200 overflow and of 1e-200 underflow: kept in power-of-two units, the
+    running std is the in-memory path's (sample_std scales the same way)."""
+    rows = size * np.array([[3.0], [1.0], [1.0], [2.0]])
+    moments = RunningMoments(1)
+    moments.add(rows[:1])
+    moments.add(rows[1:])
+    np.testing.assert_allclose(moments.std(), sample_std(rows), rtol=1e-15)
+    np.testing.assert_allclose(moments.mean, rows.mean(axis=0), rtol=1e-15)
 
 
 def test_running_moments_keep_a_small_spread_on_a_large_offset() -> None:
