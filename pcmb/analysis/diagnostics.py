@@ -61,7 +61,6 @@ __all__ = [
     "CODES",
     "CONFIDENCE",
     "FIRST_BATCH",
-    "SURROGATE_CAUTIONS",
     "TOLERANCE",
     "HeldOut",
     "HeldOutCheck",
@@ -93,9 +92,6 @@ CODES = frozenset(
         "output-constant",
     }
 )
-#: Codes of the records that caution the PDFs, quantiles and Sobol' indices drawn from the
-#: surrogate where its statistics may hold.
-SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
 #: By default the held-out check makes at most this many runs or this share of the design's
 #: runs, the larger (:func:`held_out_budget`; ``method.validation: K`` fixes K instead) ...
 HELD_OUT_FLOOR, HELD_OUT_SHARE = 8, 0.25

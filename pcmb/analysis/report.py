@@ -26,7 +26,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.comparison import LEVEL, Comparison, compare, method_label
-from pcmb.analysis.diagnostics import SURROGATE_CAUTIONS
 from pcmb.analysis.statistics import (
     Analysis,
     AnalysisSettings,
@@ -40,7 +39,7 @@ from pcmb.analysis.statistics import (
 )
 from pcmb.chaos.density import kernel_density
 from pcmb.errors import MissingDependencyError, UsageError
-from pcmb.result import StudyResult
+from pcmb.result import SURROGATE_CAUTIONS, StudyResult
 from pcmb.wording import plural
 
 __all__ = [
