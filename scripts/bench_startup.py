@@ -15,13 +15,14 @@ ratio to the floor. Bytecode is cached by a first, untimed round. Targets: ``run
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from bench_timing import load_average, process_env
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,11 +39,8 @@ def _command(name: str, config: Path, output: Path) -> list[str]:
 
 def _seconds(command: list[str], tree: Path | None, cwd: Path) -> float:
     """Wall time of ``command`` as a whole process, with ``tree`` first on the path."""
-    env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree), env.get("PYTHONPATH")]))
     start = time.perf_counter()
-    subprocess.run(command, cwd=cwd, env=env, check=True, capture_output=True)
+    subprocess.run(command, cwd=cwd, env=process_env(tree), check=True, capture_output=True)
     return time.perf_counter() - start
 
 
@@ -57,6 +55,7 @@ def main() -> None:
     # Each tree runs its own copy of the config (and so of the models it names), as the
     # models follow the package's own layout.
     configs = {tree: tree / config.relative_to(ROOT) for tree in trees.values()}
+    loads = [load_average()]
     with tempfile.TemporaryDirectory() as folder:
         work = Path(folder)
         jobs = {"floor": ([sys.executable, "-c", FLOOR], None)}
@@ -69,8 +68,10 @@ def main() -> None:
                 seconds = _seconds(command, tree, work)
                 if round_:
                     times[label].append(seconds)
+    loads.append(load_average())
     floor = statistics.median(times["floor"])
     print(f"whole processes, median of {args.repeat}, alternating ({config.name}):")
+    print(f"  {loads[0]} before, {loads[1]} after")
     print(f"  {'floor: python -c ' + repr(FLOOR):<52}{floor:6.2f} s")
     for label, seconds in times.items():
         if label == "floor":
