@@ -10,10 +10,12 @@ import functools
 import hashlib
 import json
 import sys
+import threading
 import time
 import typing
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
@@ -59,7 +61,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.result import DesignReport, NodeFailure, Status, StudyResult, WarningRecord
-from pcmb.run.backends import Pool, checking_pool, open_pool
+from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
     RunResult,
@@ -79,6 +81,7 @@ from pcmb.run.worker import Layout, ModelFacts
 from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
+_T = TypeVar("_T")
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -730,8 +733,23 @@ class Study:
                     nodes, runs, facts, outputs, pool, journal_dir, progress
                 )
             first, most = self.held_out_runs(nodes.size)
-            held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress, first
+            # The workers make the held-out runs while this process fits the expansions and
+            # draws the statistics, which do not need them; not in this process's own thread
+            # (in-process runs), nor beside a nominal run sent after them (a timeout).
+            beside = bool(first) and not (
+                isinstance(pool, InProcessPool) or self.execution.timeout is not None
+            )
+            checking = _beside(
+                functools.partial(
+                    self._run_held_out,
+                    facts,
+                    outputs,
+                    pool,
+                    journal_dir,
+                    False if beside else progress,  # no bar beside the phases' lines
+                    first,
+                ),
+                beside,
             )
         except PcmbError:
             if early is not None:
@@ -745,7 +763,7 @@ class Study:
                 nodes, runs, journal, nominal, facts, outputs, streaming, output, provenance, stream
             )
         if not intrusive:
-            runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
+            runs, nominal = self._with_derived(runs), self._with_derived(nominal)
             axes = {
                 **{name: axis for name, axis in facts.axes.items() if name in outputs},
                 **dict.fromkeys(self.derived),
@@ -753,8 +771,16 @@ class Study:
             fitting = f"fitting {plural(len(runs.values), 'output')}"
             with phase(f"{fitting} ({self.design.record().label})", stream):
                 found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        found = self._with_nominal(found, nominal)
+        analysis = None
+        if self.analysis is not None:
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                analysis = analyse(found, self.analysis)
+        with phase(f"{plural(first, 'held-out run')}", stream if beside else None):
+            held_out, held_out_failed = checking.result()
+        if not intrusive:
+            held_out = self._with_derived(held_out)
         with phase("diagnostics", stream):
-            found = self._with_nominal(found, nominal)
             result = self._diagnosed(found, held_out, held_out_failed)
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
             if held_out is not None and min(wanted, most - first) > 0:
@@ -764,12 +790,11 @@ class Study:
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
                 result = self._diagnosed(found, held_out, held_out_failed)
-        if self.analysis is not None:
-            with phase("statistics (quantile bands, PDFs, spectra)", stream):
-                result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
-                result = dataclasses.replace(
-                    result, warnings=(*result.warnings, *pdf_outside_runs(result))
-                )
+        if analysis is not None:
+            result = dataclasses.replace(result, analysis=analysis)
+            result = dataclasses.replace(
+                result, warnings=(*result.warnings, *pdf_outside_runs(result))
+            )
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -1259,3 +1284,22 @@ def _run_settings(config: StudyConfig) -> str:
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
     return None if values is None else tuple(values)
+
+
+def _beside(call: Callable[[], _T], background: bool) -> Future[_T]:
+    """``call()`` in a thread of its own when ``background``, its result or exception kept in
+    the future returned; else now (raising here)."""
+    future: Future[_T] = Future()
+    if not background:
+        future.set_result(call())
+        return future
+
+    def run() -> None:
+        try:
+            future.set_result(call())
+        except BaseException as error:  # the caller's to raise, from future.result()
+            future.set_exception(error)
+
+    # A daemon: an interrupted run does not wait for it at exit (its workers are killed).
+    threading.Thread(target=run, name="pcmb-held-out", daemon=True).start()
+    return future
