@@ -3,8 +3,13 @@ timing asserts; the times are in docs/benchmarks.md."""
 
 import subprocess
 import sys
+import threading
 
+import numpy as np
 import pytest
+
+import pcmb
+from pcmb.study import Study
 
 
 def _loaded(code: str, modules: list[str]) -> dict[str, bool]:
@@ -18,3 +23,33 @@ def _loaded(code: str, modules: list[str]) -> dict[str, bool]:
 @pytest.mark.parametrize("heavy", ["scipy.special", "scipy.linalg", "joblib"])
 def test_reading_the_config_schema_imports_no_scipy_nor_joblib(heavy):
     assert _loaded("import pcmb.config.schema", [heavy]) == {heavy: False}
+
+
+@pcmb.pointwise(outputs=("y",))
+def _line(params, times):
+    return {"y": params["a"] * times + params["b"] ** 2}
+
+
+def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
+    """The workers make the held-out runs while the main process fits and draws the
+    statistics: the held-out runs here wait until the fit has begun (on the code before, which
+    ran them first, they waited in vain, for the guard's 20 s)."""
+    fitting = threading.Event()
+    seen = []
+    run_held_out, recover = Study._run_held_out, Study._recover
+
+    def held_out_after_the_fit_began(self, *args, **kwargs):
+        seen.append(fitting.wait(timeout=20))
+        return run_held_out(self, *args, **kwargs)
+
+    def recover_and_say_so(self, *args, **kwargs):
+        fitting.set()
+        return recover(self, *args, **kwargs)
+
+    monkeypatch.setattr(Study, "_run_held_out", held_out_after_the_fit_began)
+    monkeypatch.setattr(Study, "_recover", recover_and_say_so)
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
+    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), order=2, jobs=1)
+    result = study.run()
+    assert seen == [True]
+    assert result.held_out is not None and result.held_out.ok.all()
