@@ -15,6 +15,7 @@ ratio to the floor. Bytecode is cached by a first, untimed round. Targets: ``run
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import subprocess
 import sys
@@ -37,11 +38,16 @@ def _command(name: str, config: Path, output: Path) -> list[str]:
     return [*command, "-o", str(output), "--quiet"] if name == "run" else command
 
 
-def _seconds(command: list[str], tree: Path | None, cwd: Path) -> float:
-    """Wall time of ``command`` as a whole process, with ``tree`` first on the path."""
+def _seconds(command: list[str], tree: Path | None, cwd: Path) -> tuple[float, float]:
+    """(wall, CPU) seconds of ``command`` as a whole process, with ``tree`` first on the
+    path. CPU is user + system of the process and the children it waited for (its workers):
+    it hardly depends on the load of the machine, the wall does."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     subprocess.run(command, cwd=cwd, env=process_env(tree), check=True, capture_output=True)
-    return time.perf_counter() - start
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
 
 
 def main() -> None:
@@ -63,26 +69,30 @@ def main() -> None:
             for name in TARGETS:
                 jobs[f"{label}{name}"] = (_command(name, configs[tree], work / "out.h5"), tree)
         times: dict[str, list[float]] = {label: [] for label in jobs}
+        cpu: dict[str, list[float]] = {label: [] for label in jobs}
         for round_ in range(args.repeat + 1):  # the first round fills the bytecode caches
             for label, (command, tree) in jobs.items():
-                seconds = _seconds(command, tree, work)
+                seconds, used = _seconds(command, tree, work)
                 if round_:
                     times[label].append(seconds)
+                    cpu[label].append(used)
     loads.append(load_average())
     floor = statistics.median(times["floor"])
     print(f"whole processes, median of {args.repeat}, alternating ({config.name}):")
     print(f"  {loads[0]} before, {loads[1]} after")
-    print(f"  {'floor: python -c ' + repr(FLOOR):<52}{floor:6.2f} s")
+    print(f"  {'':<52}{'wall':>6}    {'ratio':>5}{'':<22}  CPU s")
     for label, seconds in times.items():
-        if label == "floor":
-            continue
         median = statistics.median(seconds)
+        used = statistics.median(cpu[label])
+        if label == "floor":
+            print(f"  {'floor: python -c ' + repr(FLOOR):<52}{floor:6.2f} s{'':<31}{used:5.2f}")
+            continue
         name = label.split()[-1]
         ratio = median / floor
         verdict = "meets" if ratio <= TARGETS[name] else "misses"
         print(
             f"  {'pcmb ' + label:<52}{median:6.2f} s  {ratio:4.2f} x the floor "
-            f"({verdict} {TARGETS[name]:g} x)"
+            f"({verdict} {TARGETS[name]:g} x)  {used:5.2f}"
         )
 
 
