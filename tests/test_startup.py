@@ -4,12 +4,17 @@ timing asserts; the times are in docs/benchmarks.md."""
 import subprocess
 import sys
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import pcmb
+from pcmb.config.schema import load_config
+from pcmb.errors import ConfigError
 from pcmb.study import Study
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _loaded(code: str, modules: list[str]) -> dict[str, bool]:
@@ -53,3 +58,16 @@ def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
     result = study.run()
     assert seen == [True]
     assert result.held_out is not None and result.held_out.ok.all()
+
+
+def test_a_run_leaves_the_sweeps_settings_to_sweep_and_validate():
+    """A plain run ignores ``sweep:`` and so does not build the designs of its settings (the
+    quarter car's sweep: 35 designs, 0.2-0.7 s); validate still refuses a bad one at its
+    key."""
+    path = ROOT / "configs" / "quarter_car.yaml"
+    text = path.read_text().replace("max_runs: 2000", "max_runs: 3")
+    assert "max_runs: 3" in text
+    config = load_config(path, text=text, check_sweep=False)
+    assert config.sweep is not None
+    with pytest.raises(ConfigError, match=r"sweep\.methods\[2\]\.max_runs"):
+        load_config(path, text=text)
