@@ -71,3 +71,18 @@ def test_a_run_leaves_the_sweeps_settings_to_sweep_and_validate():
     assert config.sweep is not None
     with pytest.raises(ConfigError, match=r"sweep\.methods\[2\]\.max_runs"):
         load_config(path, text=text)
+
+
+def test_validate_checks_the_model_in_one_child_without_a_pool():
+    """``pcmb validate`` builds the model in one worker process it starts (the isolation),
+    never a loky pool: joblib stays unimported in its own process."""
+    config = ROOT / "configs" / "quarter_car.yaml"
+    code = (
+        "import contextlib, io\nfrom pcmb.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main(['validate', {str(config)!r}]) == 0"
+    )
+    assert _loaded(code, ["joblib", "pcmb.run.executor"]) == {
+        "joblib": False,
+        "pcmb.run.executor": True,
+    }
