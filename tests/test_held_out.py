@@ -225,3 +225,26 @@ def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
         assert not found.failing_from < crossing - 0.05 * times[-1], seed  # no false alarm
         # The point estimate itself crosses within 5 % of the horizon of the truth.
         assert abs(verdict(times, found.estimate, 0.05) - crossing) <= 0.05 * times[-1], seed
+
+
+# -- a one-input design checked by points placed to extend it -----------------------------------
+
+
+@pytest.mark.parametrize(
+    ("model", "inputs", "order", "stop", "crossing", "within"),
+    [
+        (lognormal, {"z": pcmb.Normal(0.0, 1.0)}, 4, 5.0, 3.60, 0.25),
+        (well, {"x0": pcmb.Uniform(-0.625, 0.375)}, 3, 4.0, 2.16, 0.2),
+    ],
+)
+def test_the_default_check_of_a_one_input_design_flags_on_time(
+    model, inputs, order, stop, crossing, within
+):
+    # The true crossings: the lognormal's std by its closed form (asserted above), the
+    # well's mean by a 4000-point Gauss rule of its closed form (issue 23's table).
+    times = np.linspace(0.0, stop, 201)
+    for seed in range(5):
+        result = _run(model, inputs, times, order=order, seed=seed)
+        found = result.diagnostics[model.outputs[0]]
+        assert abs(found.failing_from - crossing) <= within, seed
+        assert result.held_out.ok.size <= 8
