@@ -195,7 +195,9 @@ def test_a_failing_expansion_is_still_flagged_near_its_true_crossing():
 
 def test_an_undecided_check_says_how_many_runs_would_decide():
     times = np.linspace(0.0, 4.0, 81)
-    result = _run(well, {"x0": pcmb.Uniform(-0.625, 0.375)}, times, order=3)
+    # An input the response ignores: two inputs, so the 8 runs are drawn, not placed.
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375), "u": pcmb.Uniform(0.0, 1.0)}
+    result = _run(well, inputs, times, order=3)
     found = result.diagnostics["x"]
     assert found.reliable and found.undecided.any()
     (record,) = [w for w in result.warnings if w.code == "chaos-undecided"]

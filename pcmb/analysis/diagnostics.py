@@ -525,8 +525,10 @@ def _interpolated(
 ) -> NDArray[np.float64]:
     """(M, T) coefficients of the polynomial of degree M - 1 through M runs of one input,
     in its orthonormal basis: its mean is the first, its variance the sum of the others'
-    squares."""
-    return np.linalg.solve(family.evaluate(germ, germ.size - 1), values)
+    squares. Each row is scaled by √(germ density), as the weighted Leja points are chosen:
+    the same solution, but well conditioned (at 67 Hermite points: 10, not 10³⁰)."""
+    root = np.sqrt(family.germ.pdf(germ))[:, None]
+    return np.linalg.solve(root * family.evaluate(germ, germ.size - 1), root * values)
 
 
 def placed_check(
