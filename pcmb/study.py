@@ -1043,11 +1043,13 @@ class Study:
         """(first batch, most in all) of the held-out runs that check an expansion of
         ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
         at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
-        in all, the rest drawn only where the verdict is undecided."""
+        in all, the rest drawn only where the verdict is undecided; placed runs
+        (:meth:`places_held_out`) all at once, as half of them can call a wrong result
+        reliable (the double well at order 7 with 4)."""
         if self.method.validation is not None:
             return self.method.validation, self.method.validation
         most = held_out_budget(design_runs)
-        return min(FIRST_BATCH, most), most
+        return (most if self.places_held_out() else min(FIRST_BATCH, most)), most
 
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes

@@ -250,3 +250,14 @@ def test_the_default_check_of_a_one_input_design_flags_on_time(
         found = result.diagnostics[model.outputs[0]]
         assert abs(found.failing_from - crossing) <= within, seed
         assert result.held_out.ok.size <= 8
+
+
+def test_a_one_input_design_places_its_whole_check_at_once():
+    times = np.linspace(0.0, 1.0, 3)
+    one = pcmb.Study(lognormal, {"z": pcmb.Normal(0.0, 1.0)}, times, order=39)
+    assert one.places_held_out() and one.held_out_runs(40) == (10, 10)
+    two = {"z": pcmb.Normal(0.0, 1.0), "u": pcmb.Uniform(0.0, 1.0)}
+    assert pcmb.Study(lognormal, two, times, order=39).held_out_runs(1600) == (8, 400)
+    # The seed moves drawn runs, not placed ones.
+    placed = [_run(well, {"x0": pcmb.Uniform(-1, 1)}, times, order=3, seed=s) for s in (0, 1)]
+    assert np.array_equal(placed[0].held_out.germ, placed[1].held_out.germ)
