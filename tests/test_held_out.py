@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.analysis.diagnostics import held_out_draws, holdout_error, verdict
+from pcmb.analysis.diagnostics import (
+    held_out_draws,
+    held_out_placed,
+    holdout_error,
+    placed_check,
+    verdict,
+)
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
 from pcmb.references import bouncing_ball, double_well, lognormal_moments
@@ -261,3 +267,21 @@ def test_a_one_input_design_places_its_whole_check_at_once():
     # The seed moves drawn runs, not placed ones.
     placed = [_run(well, {"x0": pcmb.Uniform(-1, 1)}, times, order=3, seed=s) for s in (0, 1)]
     assert np.array_equal(placed[0].held_out.germ, placed[1].held_out.germ)
+
+
+def test_placed_runs_make_the_interpolant_exact_for_a_polynomial_of_their_degree():
+    # z⁶ at Hermite order 2 (3 nodes): mean 15 and std √(10395 - 225) (normal moments), which
+    # nodes and 8 placed runs, a polynomial of degree 10, reproduce to round-off.
+    grid = TensorGrid((pcmb.Normal(0.0, 1.0),), (2,))
+    values = grid.nodes**6
+    basis = grid.distributions[0].family.evaluate(grid.nodes[:, 0], 2)
+    expansion = pcmb.ChaosExpansion(
+        basis.T @ (grid.weights[:, None] * values), [[0], [1], [2]], grid.distributions
+    )
+    draws, weights = held_out_placed(grid.distributions[0], grid.nodes, 8)
+    assert np.all(weights == 1) and not np.isin(draws.nodes, grid.nodes).any()
+    found = placed_check(expansion, grid.nodes, values, draws.nodes, draws.nodes**6, 1.0)
+    assert found.corrected_mean[0] == pytest.approx(15.0, rel=1e-9)
+    assert found.corrected_std[0] == pytest.approx(np.sqrt(10395.0 - 225.0), rel=1e-9)
+    assert found.mean_error[0] == pytest.approx(abs(15.0 - expansion.mean()[0]), rel=1e-9)
+    assert found.spread[0] < 1e-6  # nothing moves without the last two: exact already
