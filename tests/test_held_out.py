@@ -216,7 +216,7 @@ def test_an_undecided_check_says_how_many_runs_would_decide():
 
 def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
     # x = exp(z t / 2) at Hermite order 4 (5 runs): its std passes 5 % of the largest at
-    # t = 3.60 (closed form). Its 8 held-out runs, drawn into the tails and weighted back,
+    # t = 3.60 (closed form). Its 8 held-out runs, placed (Leja points reaching the tails),
     # flag it or call it undecided from then on (within 5 % of the horizon), with every seed.
     times = np.linspace(0.0, 5.0, 201)
     mean, std = lognormal_moments(0.5 * times)
