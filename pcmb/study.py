@@ -1053,12 +1053,11 @@ class Study:
 
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
-        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a tensor grid
-        (``order: auto``'s too) of one input, where a random sample wastes the few runs."""
-        return len(self.inputs) == 1 and self.design.record().grid in (
-            "tensor-gauss",
-            "tensor-nested",
-        )
+        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
+        input (tensor, ``order: auto``'s, sparse or adaptive; not multi-element), where a
+        random sample wastes the few runs."""
+        grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
+        return len(self.inputs) == 1 and self.design.record().grid in grids
 
     def _run_held_out(
         self,
