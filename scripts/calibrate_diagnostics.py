@@ -207,6 +207,7 @@ CASES = {
         {
             "order 3": {"order": 3},
             "order 7": {"order": 7},
+            "Smolyak level 3": {"grid": "smolyak", "level": 3},
             "order 3, elements auto (4)": {"order": 3, "elements": "auto", "max_elements": 4},
         },
     ),

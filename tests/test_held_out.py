@@ -23,7 +23,7 @@ from pcmb.analysis.diagnostics import (
 )
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
-from pcmb.references import bouncing_ball, double_well, lognormal_moments
+from pcmb.references import bouncing_ball, double_well, double_well_moments, lognormal_moments
 
 #: Gravity and the ball's restitution.
 
@@ -285,3 +285,22 @@ def test_placed_runs_make_the_interpolant_exact_for_a_polynomial_of_their_degree
     assert found.corrected_std[0] == pytest.approx(np.sqrt(10395.0 - 225.0), rel=1e-9)
     assert found.mean_error[0] == pytest.approx(abs(15.0 - expansion.mean()[0]), rel=1e-9)
     assert found.spread[0] < 1e-6  # nothing moves without the last two: exact already
+
+
+@pytest.mark.parametrize(
+    ("settings", "at"), [({"order": 7}, 3.14), ({"grid": "smolyak", "level": 3}, 4.0)]
+)
+def test_a_placed_check_sees_the_mean_error_of_a_gauss_design_beyond_its_held_out_degrees(
+    settings, at
+):
+    # 8 placed runs beside N >= 8 Gauss (Gauss-Patterson) nodes: the interpolant's mean is the
+    # design's own, so only the tail of the coefficients beyond its degree can tell the mean's
+    # error (the double well's mean: its closed form, 5.1 % and 4.1 % of the largest std).
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375)}
+    times = np.linspace(0.0, 4.0, 201)
+    result = _run(well, inputs, times, **settings)
+    found = result.diagnostics["x"]
+    mean, _ = double_well_moments(times, -0.625, 0.375)
+    k = np.searchsorted(times, at)
+    true = abs(result.mean("x") - mean)[k] / found.scale
+    assert true / 10 <= found.holdout.mean_error[k] <= 10 * true

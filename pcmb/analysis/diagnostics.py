@@ -109,6 +109,9 @@ PAIRED_FROM = 16
 #: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
 #: the centre.
 PLACED_SPARE = 2
+#: A placed check extrapolates its interpolant's spectrum up to this many times its degree
+#: to estimate the mean's error beyond it (:func:`_unseen_mean_error`).
+UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
@@ -522,6 +525,32 @@ def holdout_error(
     )
 
 
+def _unseen_mean_error(
+    family: OrthonormalFamily, nodes: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
+    (M, T) ``coefficients``: the energies of degrees 1 to M - 1 (neighbours averaged) are
+    fitted by a line against p and against log p, each extrapolated up to degree
+    ``UNSEEN_DEGREES`` × M, the larger kept, and weighted by the squared error of the design's
+    rule on each degree (its interpolatory weights on the (N,) germ ``nodes``)."""
+    size, first = nodes.size, coefficients.shape[0]
+    if first < 4:
+        return np.zeros(coefficients.shape[1:])
+    last = UNSEEN_DEGREES * first
+    root = np.sqrt(family.germ.pdf(nodes))
+    basis = family.evaluate(nodes, last)
+    rule = root * np.linalg.solve((root[:, None] * basis[:, :size]).T, np.eye(size)[0])
+    rule_errors = (rule @ basis)[first:, None]
+    energy = coefficients[1:] ** 2
+    paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
+    seen, unseen = np.arange(1.0, first - 1), np.arange(first, last + 1.0)[:, None]
+    tails = []
+    for transform in (np.asarray, np.log):
+        slope, intercept = np.polyfit(transform(seen), paired, 1)
+        tails.append(np.exp(intercept + np.minimum(slope, 0.0) * transform(unseen)))
+    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors**2, axis=0))
+
+
 def _interpolated(
     family: OrthonormalFamily, germ: NDArray[np.float64], values: NDArray[np.float64]
 ) -> NDArray[np.float64]:
@@ -549,9 +578,12 @@ def placed_check(
     orthonormal basis, a far richer surrogate than the expansion (Leja points keep the
     interpolation well conditioned); its mean and std (exact: c_0 and √Σ_{i>=1} c_i²) are
     the corrected mean and std, and their differences from the expansion's the estimated
-    errors. Their standard error is how far the richer surrogate's mean and std move when
-    its last ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than
-    that); the surrogate error is the L2 distance of the two surrogates (their coefficients'
+    errors, the mean's plus the design rule's error on the degrees beyond the interpolant's
+    (:func:`_unseen_mean_error`: with K <= N placed runs beside N Gauss nodes the two means
+    agree exactly). Their standard errors are how far the estimates move when the last
+    ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than that), the
+    spread that of the larger estimate (the corrected mean's adds the unseen error); the
+    surrogate error is the L2 distance of the two surrogates (their coefficients'
     difference), its upper bound that plus how far it moves. Runs that are not finite are
     left out; zeros if the scale is zero.
     """
@@ -570,29 +602,38 @@ def placed_check(
     own = np.zeros((max(points.size, int(index.max()) + 1), values.shape[1]))
     own[index] = expansion.coefficients / scale
 
-    def moments(size: int) -> tuple[NDArray, NDArray, NDArray]:
+    design = int(runs.sum())
+
+    def moments(size: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         coefficients = _interpolated(family, points[:size], values[:size])
         variance = np.sum(coefficients[1:] ** 2, axis=0)
         missed = np.sum((coefficients - own[:size]) ** 2, axis=0)
         error = np.sqrt(missed + np.sum(own[size:] ** 2, axis=0))
-        return coefficients[0], np.sqrt(variance), error
+        unseen = _unseen_mean_error(family, points[:design], coefficients)
+        return coefficients[0], np.sqrt(variance), error, unseen
 
-    rich_mean, rich_std, error = moments(points.size)
+    rich_mean, rich_std, error, unseen = moments(points.size)
+    mean_error, std_error = (
+        np.abs(rich_mean - mean / scale) + unseen,
+        np.abs(rich_std - std / scale),
+    )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error = moments(points.size - PLACED_SPARE)
-        mean_se, std_se = np.abs(rich_mean - fewer_mean), np.abs(rich_std - fewer_std)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(points.size - PLACED_SPARE)
+        fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
+        moved_mean = np.abs(rich_mean - fewer_mean)
+        mean_se, std_se = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
         moved = np.abs(error - fewer_error)
     else:
-        mean_se = std_se = moved = np.full(values.shape[1], np.inf)
+        moved_mean = mean_se = std_se = moved = np.full(values.shape[1], np.inf)
     return HeldOutCheck(
         error,
         error + moved,
-        np.abs(rich_mean - mean / scale),
-        np.abs(rich_std - std / scale),
-        np.fmax(mean_se, std_se),
+        mean_error,
+        std_error,
+        np.where(mean_error >= std_error, mean_se, std_se),
         rich_mean * scale,
         rich_std * scale,
-        mean_se * scale,
+        (moved_mean + unseen) * scale,
         std_se * scale,
         count,
         confidence,
