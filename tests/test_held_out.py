@@ -304,3 +304,15 @@ def test_a_placed_check_sees_the_mean_error_of_a_gauss_design_beyond_its_held_ou
     k = np.searchsorted(times, at)
     true = abs(result.mean("x") - mean)[k] / found.scale
     assert true / 10 <= found.holdout.mean_error[k] <= 10 * true
+
+
+def test_the_file_says_whether_the_check_was_placed_or_drawn(tmp_path, capsys):
+    times = np.linspace(0.0, 1.0, 11)
+    one = {"x0": pcmb.Uniform(-0.625, 0.375)}
+    two = {**one, "u": pcmb.Uniform(0.0, 1.0)}
+    for name, inputs, word in (("one", one, "placed"), ("two", two, "drawn")):
+        pcmb.Study(well, inputs, times, order=3, backend="inprocess").run(tmp_path / f"{name}.h5")
+        held_out = pcmb.load(tmp_path / f"{name}.h5").held_out
+        assert held_out.placed == (word == "placed")
+        assert main(["inspect", str(tmp_path / f"{name}.h5")]) == 0
+        assert f"({held_out.ok.size} {word} held-out runs)" in capsys.readouterr().out
