@@ -51,12 +51,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
-from pcmb.chaos.elements import PiecewiseExpansion
+from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, draw_germs, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, draw_germs, random_nodes
 from pcmb.chaos.polynomials import Hermite, OrthonormalFamily
+from pcmb.chaos.truncated import MAX_TERMS
 from pcmb.result import StudyResult, WarningRecord
 from pcmb.wording import plural
 
@@ -70,9 +71,11 @@ __all__ = [
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
+    "element_importance",
     "held_out_budget",
     "held_out_draws",
     "held_out_placed",
+    "held_out_placed_elements",
     "holdout_error",
     "more_runs",
     "out_of_range",
@@ -268,6 +271,64 @@ def held_out_placed(
     start = np.asarray(design_germ, dtype=float).ravel()
     germ = leja_sequence(distribution.family, tuple(start), start.size + count)[start.size :]
     params = distribution.to_physical(germ)
+    return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
+
+
+def element_importance(
+    partition: Partition, design_germ: ArrayLike, values: Mapping[str, ArrayLike]
+) -> NDArray[np.float64]:
+    """(E,) how much each element of a one-input design may err: its probability times the
+    largest |top coefficient| of the interpolant through its nodes (over outputs and times,
+    each output over its runs' largest spread)."""
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(np.ravel(design_germ))
+    where = partition.locate(physical[:, None])
+    importance = np.zeros(partition.size)
+    for y in values.values():
+        y = np.asarray(y, dtype=float).reshape(physical.size, -1)
+        spread = float(np.nanmax(np.nanstd(y, axis=0), initial=0.0))
+        finite = np.isfinite(y).all(axis=1)
+        for e, (conditional,) in enumerate(partition.inputs):
+            rows = (where == e) & finite
+            if spread > 0 and rows.sum() > 1:
+                local = conditional.to_germ(physical[rows])
+                top = _interpolated(conditional.family, local, y[rows] / spread)[-1]
+                importance[e] = max(importance[e], partition.probability[e] * np.max(abs(top)))
+    return importance
+
+
+def held_out_placed_elements(
+    partition: Partition, design_germ: ArrayLike, importance: ArrayLike, count: int
+) -> tuple[NodeSet, NDArray[np.float64]]:
+    """``count`` held-out inputs of a one-input multi-element design, placed per element: two
+    at a time to the element of the largest ``importance`` (:func:`element_importance`) over
+    one plus its share so far, the odd one to the first, at most a quarter of
+    ``MAX_TERMS`` points (nodes and runs) per element, as a truncated family's Leja points
+    need four times as many recurrence terms; in each element the weighted Leja points
+    extending its nodes in its own coordinate (its conditional density), kept a hair inside
+    its interval so that they stay in it. Element by element; weights 1."""
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(np.ravel(design_germ))
+    where = partition.locate(physical[:, None])
+    room = MAX_TERMS // 4 - np.bincount(where[where >= 0], minlength=partition.size)
+    importance = np.where(room > 1, np.asarray(importance, dtype=float), -np.inf)
+    shares = np.zeros(partition.size, dtype=int)
+    for _ in range(count // 2):
+        chosen = np.argmax(np.where(shares + 2 <= room, importance / (1.0 + shares), -np.inf))
+        shares[chosen] += 2
+    shares[np.argmax(np.where(shares < room, importance, -np.inf))] += count % 2
+    placed = []
+    for e in np.flatnonzero(shares):
+        (conditional,) = partition.inputs[e]
+        start = conditional.to_germ(physical[where == e])
+        local = leja_sequence(conditional.family, tuple(start), start.size + shares[e])
+        low, high = conditional.family.support
+        hair = 1e-9 * np.where(np.isfinite(high - low), high - low, 1.0)
+        placed.append(
+            conditional.to_physical(np.clip(local[start.size :], low + hair, high - hair))
+        )
+    params = np.concatenate(placed)
+    germ = distribution.to_germ(params)
     return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
 
 
@@ -563,7 +624,7 @@ def _interpolated(
 
 
 def placed_check(
-    expansion: ChaosExpansion,
+    expansion: ChaosExpansion | PiecewiseExpansion,
     node_germ: ArrayLike,
     node_values: ArrayLike,
     germ: ArrayLike,
@@ -572,20 +633,21 @@ def placed_check(
     confidence: float = CONFIDENCE,
 ) -> HeldOutCheck:
     """The held-out check of a one-input expansion by K runs placed to extend its N nodes
-    (:func:`held_out_placed`).
+    (:func:`held_out_placed`; per element, :func:`held_out_placed_elements`).
 
     Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
-    orthonormal basis, a far richer surrogate than the expansion (Leja points keep the
-    interpolation well conditioned); its mean and std (exact: c_0 and √Σ_{i>=1} c_i²) are
-    the corrected mean and std, and their differences from the expansion's the estimated
+    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than
+    the expansion (Leja points keep the interpolation well conditioned); its mean and std
+    (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
+    corrected mean and std, and their differences from the expansion's the estimated
     errors, the mean's plus the design rule's error on the degrees beyond the interpolant's
     (:func:`_unseen_mean_error`: with K <= N placed runs beside N Gauss nodes the two means
     agree exactly). Their standard errors are how far the estimates move when the last
-    ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than that), the
-    spread that of the larger estimate (the corrected mean's adds the unseen error); the
-    surrogate error is the L2 distance of the two surrogates (their coefficients'
-    difference), its upper bound that plus how far it moves. Runs that are not finite are
-    left out; zeros if the scale is zero.
+    ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
+    than that), the spread that of the larger estimate (the corrected mean's adds the unseen
+    error); the surrogate error is the L2 distance of the two surrogates (their
+    coefficients' difference), its upper bound that plus how far it moves. Runs that are not
+    finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
     kept = np.isfinite(observed).all(axis=1)
@@ -594,37 +656,41 @@ def placed_check(
     if not scale > 0 or not np.isfinite(scale):
         zeros = np.zeros(observed.shape[1:])
         return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
-    runs = np.isfinite(np.asarray(node_values, dtype=float)).all(axis=1)
-    points = np.concatenate([np.ravel(node_germ)[runs], np.ravel(germ)[kept]])
-    values = np.vstack([np.asarray(node_values, dtype=float)[runs], observed[kept]]) / scale
-    family = expansion.distributions[0].family
-    index = expansion.multi_index[:, 0]
-    own = np.zeros((max(points.size, int(index.max()) + 1), values.shape[1]))
-    own[index] = expansion.coefficients / scale
+    node_values = np.asarray(node_values, dtype=float)
+    runs = np.isfinite(node_values).all(axis=1)
+    probability, pieces = _placed_pieces(
+        expansion,
+        np.ravel(node_germ)[runs],
+        node_values[runs],
+        np.ravel(germ)[kept],
+        observed[kept],
+    )
 
-    design = int(runs.sum())
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        found = [_placed_moments(*piece, scale, spare) for piece in pieces]
+        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
+        rich_mean = np.sum(probability * means, axis=0)
+        variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
+        return (
+            rich_mean,
+            np.sqrt(variance),
+            np.sqrt(np.sum(probability * errors**2, axis=0)),
+            np.sum(probability * unseen, axis=0),
+        )
 
-    def moments(size: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-        coefficients = _interpolated(family, points[:size], values[:size])
-        variance = np.sum(coefficients[1:] ** 2, axis=0)
-        missed = np.sum((coefficients - own[:size]) ** 2, axis=0)
-        error = np.sqrt(missed + np.sum(own[size:] ** 2, axis=0))
-        unseen = _unseen_mean_error(family, points[:design], coefficients)
-        return coefficients[0], np.sqrt(variance), error, unseen
-
-    rich_mean, rich_std, error, unseen = moments(points.size)
+    rich_mean, rich_std, error, unseen = moments(0)
     mean_error, std_error = (
         np.abs(rich_mean - mean / scale) + unseen,
         np.abs(rich_std - std / scale),
     )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(points.size - PLACED_SPARE)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         moved_mean = np.abs(rich_mean - fewer_mean)
         mean_se, std_se = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
         moved = np.abs(error - fewer_error)
     else:
-        moved_mean = mean_se = std_se = moved = np.full(values.shape[1], np.inf)
+        moved_mean = mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return HeldOutCheck(
         error,
         error + moved,
@@ -637,6 +703,71 @@ def placed_check(
         std_se * scale,
         count,
         confidence,
+    )
+
+
+def _placed_pieces(
+    expansion: ChaosExpansion | PiecewiseExpansion,
+    node_germ: NDArray[np.float64],
+    node_values: NDArray[np.float64],
+    germ: NDArray[np.float64],
+    observed: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
+    """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
+    element its family, points (its nodes, then its held-out runs, in its own coordinate),
+    their values, its node count and its own (S, T) coefficients by degree. An element's
+    nodes are its own Gauss nodes, their values its expansion's there (which interpolates
+    them): the design's runs also hold the nodes of the elements split on the way."""
+    degrees = expansion.multi_index[:, 0]
+    order = int(degrees.max())
+
+    def own(coefficients: NDArray[np.float64], size: int) -> NDArray[np.float64]:
+        padded = np.zeros((max(size, order + 1), *coefficients.shape[1:]))
+        padded[degrees] = coefficients
+        return padded
+
+    if isinstance(expansion, ChaosExpansion):
+        family = expansion.distributions[0].family
+        points = np.concatenate([node_germ, germ])
+        values = np.vstack([node_values, observed])
+        coefficients = own(expansion.coefficients, points.size)
+        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
+    partition = expansion.partition
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(germ)
+    where = partition.locate(physical[:, None])
+    pieces = []
+    for e, (conditional,) in enumerate(partition.inputs):
+        nodes = TensorGrid((conditional,), (order,)).nodes[:, 0]
+        basis = conditional.family.evaluate(nodes, order)[:, degrees]
+        points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
+        values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
+        coefficients = own(expansion.coefficients[e], points.size)
+        pieces.append((conditional.family, points, values, nodes.size, coefficients))
+    return partition.probability[:, None], pieces
+
+
+def _placed_moments(
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    values: NDArray[np.float64],
+    size: int,
+    own: NDArray[np.float64],
+    scale: float,
+    spare: int,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
+    mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
+    and held-out runs without its last ``spare`` held-out runs, over the scale."""
+    kept = max(size, points.size - spare)
+    own = own / scale
+    coefficients = _interpolated(family, points[:kept], values[:kept] / scale)
+    missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
+    return (
+        coefficients[0],
+        np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
+        np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
+        _unseen_mean_error(family, points[:size], coefficients),
     )
 
 
