@@ -26,6 +26,7 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
+    ELEMENT_POINTS,
     FIRST_BATCH,
     HELD_OUT_SEED,
     RANGE_DRAWS,
@@ -1057,10 +1058,20 @@ class Study:
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
         (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
-        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element), where a random
-        sample wastes the few runs."""
+        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
+        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
+        wastes the few runs."""
         grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
-        return len(self.inputs) == 1 and self.design.record().grid in (*grids, "element-gauss")
+        grid = self.design.record().grid
+        if len(self.inputs) != 1 or grid not in (*grids, "element-gauss"):
+            return False
+        if grid != "element-gauss":
+            return True
+        count = self.method.validation
+        if count is None:
+            count = held_out_budget(self.design.node_elements.size)
+        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
+        return count <= np.sum(ELEMENT_POINTS - own)
 
     def _run_held_out(
         self,

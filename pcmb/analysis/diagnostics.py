@@ -64,6 +64,7 @@ from pcmb.wording import plural
 __all__ = [
     "CODES",
     "CONFIDENCE",
+    "ELEMENT_POINTS",
     "FIRST_BATCH",
     "TOLERANCE",
     "HeldOut",
@@ -118,6 +119,10 @@ UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
+#: Most points (nodes and placed held-out runs) in one element of a one-input multi-element
+#: design (:func:`held_out_placed_elements`): a truncated family's Leja points need four
+#: times as many recurrence terms as points.
+ELEMENT_POINTS = MAX_TERMS // 4
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
 #: design's own first nodes.
 HELD_OUT_SEED = 7919
@@ -301,22 +306,23 @@ def held_out_placed_elements(
     partition: Partition, design_germ: ArrayLike, importance: ArrayLike, count: int
 ) -> tuple[NodeSet, NDArray[np.float64]]:
     """``count`` held-out inputs of a one-input multi-element design, placed per element: two
-    at a time to the element of the largest ``importance`` (:func:`element_importance`) over
-    one plus its share so far, the odd one to the first, at most a quarter of
-    ``MAX_TERMS`` points (nodes and runs) per element, as a truncated family's Leja points
-    need four times as many recurrence terms; in each element the weighted Leja points
+    at a time (one where two do not fit) to the element of the largest ``importance``
+    (:func:`element_importance`) over one plus its share so far, at most ``ELEMENT_POINTS``
+    points (nodes and runs) per element; in each element the weighted Leja points
     extending its nodes in its own coordinate (its conditional density), kept a hair inside
     its interval so that they stay in it. Element by element; weights 1."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
     where = partition.locate(physical[:, None])
-    room = MAX_TERMS // 4 - np.bincount(where[where >= 0], minlength=partition.size)
-    importance = np.where(room > 1, np.asarray(importance, dtype=float), -np.inf)
+    room = ELEMENT_POINTS - np.bincount(where[where >= 0], minlength=partition.size)
+    importance = np.asarray(importance, dtype=float)
     shares = np.zeros(partition.size, dtype=int)
-    for _ in range(count // 2):
-        chosen = np.argmax(np.where(shares + 2 <= room, importance / (1.0 + shares), -np.inf))
-        shares[chosen] += 2
-    shares[np.argmax(np.where(shares < room, importance, -np.inf))] += count % 2
+    while (left := count - shares.sum()) > 0:
+        step = 2 if left > 1 and np.any(shares + 2 <= room) else 1
+        fits = shares + step <= room
+        if not fits.any():
+            raise ValueError(f"{count} held-out runs do not fit in {partition.size} elements")
+        shares[np.argmax(np.where(fits, importance / (1.0 + shares), -np.inf))] += step
     placed = []
     for e in np.flatnonzero(shares):
         (conditional,) = partition.inputs[e]
