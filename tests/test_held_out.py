@@ -330,3 +330,14 @@ def test_a_multi_element_design_places_its_check_per_element_and_flags_on_time()
     assert crossing == pytest.approx(4.78, abs=0.03)
     assert abs(result.diagnostics["x"].failing_from - crossing) <= 0.25
     assert result.held_out.placed and result.held_out.ok.size <= held_out_budget(result.n_nodes)
+
+
+def test_the_verdict_weighs_the_noise_of_the_larger_estimate():
+    # 64 runs of f = sign(s) √(s² + 0.44) about the surrogate s = z ~ N(0, 1) (mean 0, std
+    # 1): f² - s² = 0.44 at every run, so the std's error (√1.44 - 1 = 0.2) is known without
+    # noise, while the mean's correction Σ (f - s) / K is right (0) but noisy. The verdict
+    # judges the std's error, with the std's noise.
+    z = np.random.default_rng(3).standard_normal((64, 1))
+    found = holdout_error(z, np.sign(z) * np.sqrt(z**2 + 0.44), np.zeros(1), np.ones(1), 1.0)
+    assert found.std_error[0] == pytest.approx(0.2, abs=0.01) and found.mean_error[0] < 0.1
+    assert found.spread[0] == pytest.approx(found.corrected_std_se[0])

@@ -354,8 +354,8 @@ class HeldOutCheck:
         (T,) estimated errors of the expansion's mean and standard deviation, over the scale
         (:func:`statistics_error`).
     spread:
-        (T,) standard error of the two estimates (the larger of theirs), over the scale: how
-        finely K runs resolve the statistics' errors.
+        (T,) standard error of the larger of the two estimates (:attr:`statistics`), over the
+        scale: how finely K runs resolve the error the verdict judges.
     corrected_mean, corrected_std:
         (T,) the mean and std corrected by the held-out runs (the surrogate as a control
         variate), in the output's units.
@@ -502,8 +502,8 @@ def statistics_error(
     Returns
     -------
     mean_error, std_error, spread:
-        (T,) |estimated error of the mean|, |estimated error of the std| and the larger of
-        their standard errors, all over the scale (scaled before squaring: no overflow).
+        (T,) |estimated error of the mean|, |estimated error of the std| and the standard
+        error of the larger of them, all over the scale (scaled before squaring: no overflow).
     """
     found = holdout_error(predicted, observed, mean, std, scale, weights=weights, germ=germ)
     return found.mean_error, found.std_error, found.spread
@@ -577,11 +577,9 @@ def holdout_error(
         )
         corrected = (found.mean * scale, found.std * scale)
         corrected += (found.mean_se * scale, found.std_se * scale)
-        errors = (
-            np.abs(found.mean - mean / scale),
-            np.abs(found.std - std / scale),
-            np.fmax(found.mean_se, found.std_se),
-        )
+        mean_error, std_error = np.abs(found.mean - mean / scale), np.abs(found.std - std / scale)
+        larger = np.where(mean_error >= std_error, found.mean_se, found.std_se)
+        errors = (mean_error, std_error, larger)
     return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
