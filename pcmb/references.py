@@ -23,6 +23,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "PISTON_BOUNDS",
+    "WING_WEIGHT_BOUNDS",
     "IshigamiMoments",
     "borehole",
     "borehole_bounds",
@@ -40,9 +42,11 @@ __all__ = [
     "lorenz_equilibria",
     "normal_moment",
     "pendulum_angle",
+    "piston",
     "quarter_car_linear",
     "statistical_linearization",
     "uniform_moment",
+    "wing_weight",
 ]
 
 Array = NDArray[np.float64]
@@ -552,6 +556,53 @@ def borehole(x: ArrayLike) -> Array:
     rw, r, tu, hu, tl, hl, length, kw = np.asarray(x, dtype=float).T
     log = np.log(r / rw)
     return 2 * np.pi * tu * (hu - hl) / (log * (1 + 2 * length * tu / (log * rw**2 * kw) + tu / tl))
+
+
+# --------------------------------------------------------------------------- Piston, Wing weight
+
+
+#: The Piston function's uniform inputs and their ranges, in order (Kenett & Zacks, 1998).
+PISTON_BOUNDS = {
+    "m": (30.0, 60.0),
+    "s": (0.005, 0.020),
+    "v0": (0.002, 0.010),
+    "k": (1000.0, 5000.0),
+    "p0": (90_000.0, 110_000.0),
+    "ta": (290.0, 296.0),
+    "t0": (340.0, 360.0),
+}
+
+
+def piston(x: ArrayLike) -> Array:
+    """A piston's cycle time, s: x (N, 7) in the order of :data:`PISTON_BOUNDS`; (N,)."""
+    m, s, v0, k, p0, ta, t0 = np.asarray(x, dtype=float).T
+    a = p0 * s + 19.62 * m - k * v0 / s
+    v = s / (2 * k) * (np.sqrt(a**2 + 4 * k * p0 * v0 * ta / t0) - a)
+    return 2 * np.pi * np.sqrt(m / (k + s**2 * p0 * v0 * ta / (t0 * v**2)))
+
+
+#: The Wing weight function's uniform inputs and their ranges, in order (Forrester et al., 2008).
+WING_WEIGHT_BOUNDS = {
+    "sw": (150.0, 200.0),
+    "wfw": (220.0, 300.0),
+    "a": (6.0, 10.0),
+    "sweep": (-10.0, 10.0),
+    "q": (16.0, 45.0),
+    "taper": (0.5, 1.0),
+    "tc": (0.08, 0.18),
+    "nz": (2.5, 6.0),
+    "wdg": (1700.0, 2500.0),
+    "wp": (0.025, 0.08),
+}
+
+
+def wing_weight(x: ArrayLike) -> Array:
+    """A light aircraft's wing weight, lb: x (N, 10) in the order of
+    :data:`WING_WEIGHT_BOUNDS`; (N,)."""
+    sw, wfw, a, sweep, q, taper, tc, nz, wdg, wp = np.asarray(x, dtype=float).T
+    cos = np.cos(np.deg2rad(sweep))
+    structure = (a / cos**2) ** 0.6 * q**0.006 * taper**0.04 * (100 * tc / cos) ** -0.3
+    return 0.036 * sw**0.758 * wfw**0.0035 * structure * (nz * wdg) ** 0.49 + sw * wp
 
 
 # --------------------------------------------------------------------------- Ishigami

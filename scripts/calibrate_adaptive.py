@@ -36,7 +36,14 @@ import pcmb
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.regression import loo_statistics_error
-from pcmb.references import ishigami, ishigami_moments
+from pcmb.references import (
+    PISTON_BOUNDS,
+    WING_WEIGHT_BOUNDS,
+    ishigami,
+    ishigami_moments,
+)
+from pcmb.references import piston as piston_time
+from pcmb.references import wing_weight as wing_weight_lb
 
 Case = tuple[dict, Callable[[np.ndarray], np.ndarray], float, float]
 
@@ -128,47 +135,12 @@ def otl_circuit() -> Case:
 
 def piston() -> Case:
     """The piston's cycle time, 7 uniform inputs."""
-    bounds = {
-        "m": (30, 60),
-        "s": (0.005, 0.020),
-        "v0": (0.002, 0.010),
-        "k": (1000, 5000),
-        "p0": (90000, 110000),
-        "ta": (290, 296),
-        "t0": (340, 360),
-    }
-
-    def cycle(x: np.ndarray) -> np.ndarray:
-        m, s, v0, k, p0, ta, t0 = x.T
-        a = p0 * s + 19.62 * m - k * v0 / s
-        v = s / (2 * k) * (np.sqrt(a**2 + 4 * k * p0 * v0 * ta / t0) - a)
-        return 2 * np.pi * np.sqrt(m / (k + s**2 * p0 * v0 * ta / (t0 * v**2)))
-
-    return _box(bounds), cycle, 0.462496236201101, 0.139500546566524
+    return _box(PISTON_BOUNDS), piston_time, 0.462496236201101, 0.139500546566524
 
 
 def wing_weight() -> Case:
     """A light aircraft's wing weight, 10 uniform inputs."""
-    bounds = {
-        "sw": (150, 200),
-        "wfw": (220, 300),
-        "a": (6, 10),
-        "sweep": (-10, 10),
-        "q": (16, 45),
-        "taper": (0.5, 1),
-        "tc": (0.08, 0.18),
-        "nz": (2.5, 6),
-        "wdg": (1700, 2500),
-        "wp": (0.025, 0.08),
-    }
-
-    def weight(x: np.ndarray) -> np.ndarray:
-        sw, wfw, a, sweep, q, taper, tc, nz, wdg, wp = x.T
-        cos = np.cos(np.deg2rad(sweep))
-        structure = (a / cos**2) ** 0.6 * q**0.006 * taper**0.04 * (100 * tc / cos) ** -0.3
-        return 0.036 * sw**0.758 * wfw**0.0035 * structure * (nz * wdg) ** 0.49 + sw * wp
-
-    return _box(bounds), weight, 268.075236831743, 48.082494458102
+    return _box(WING_WEIGHT_BOUNDS), wing_weight_lb, 268.075236831743, 48.082494458102
 
 
 def ishigami3() -> Case:

@@ -54,6 +54,11 @@ BULK = 0.5
 BLIND = 1e-12
 #: Indicator below which a surplus is too near round-off to tell how it decays.
 ROUND_OFF = 1e-10
+#: Steepest algebraic decay p^-a of the axis surpluses that a kink or jump gives: the
+#: surpluses' norm falls like p^-1/2 across a jump, p^-3/2 across a kink (the G-function's
+#: measured 1.45); an analytic response not yet in its geometric regime may also fall steadily
+#: over three levels, but steeper (Piston p^-3.9, Wing weight p^-6 and steeper).
+NONSMOOTH_DECAY = 2.5
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 
@@ -283,7 +288,8 @@ class AdaptiveCollocation(GrowingGrid):
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
         spectrum) rather than geometrically (like e^-cp, an analytic response's), with a: over
-        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c."""
+        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c and at most
+        :data:`NONSMOOTH_DECAY`."""
         position = {level: k for k, level in enumerate(self._index)}
         found = []
         for k, (name, rule) in enumerate(zip(self.names, self.rules, strict=True)):
@@ -300,7 +306,11 @@ class AdaptiveCollocation(GrowingGrid):
             degree, norm = np.log(np.array(points, dtype=float)).T
             algebraic = -np.diff(norm) / np.diff(degree)
             geometric = -np.diff(norm) / np.diff(np.exp(degree))
-            if np.all(algebraic > 0) and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric)):
+            if (
+                np.all(algebraic > 0)
+                and algebraic[-1] <= NONSMOOTH_DECAY
+                and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric))
+            ):
                 found.append((name, float(algebraic[-1])))
         return found
 
