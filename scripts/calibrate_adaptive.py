@@ -38,7 +38,9 @@ from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import (
     PISTON_BOUNDS,
+    PISTON_MOMENTS,
     WING_WEIGHT_BOUNDS,
+    WING_WEIGHT_MOMENTS,
     ishigami,
     ishigami_moments,
 )
@@ -135,12 +137,12 @@ def otl_circuit() -> Case:
 
 def piston() -> Case:
     """The piston's cycle time, 7 uniform inputs."""
-    return _box(PISTON_BOUNDS), piston_time, 0.462496236201101, 0.139500546566524
+    return _box(PISTON_BOUNDS), piston_time, *PISTON_MOMENTS
 
 
 def wing_weight() -> Case:
     """A light aircraft's wing weight, 10 uniform inputs."""
-    return _box(WING_WEIGHT_BOUNDS), wing_weight_lb, 268.075236831743, 48.082494458102
+    return _box(WING_WEIGHT_BOUNDS), wing_weight_lb, *WING_WEIGHT_MOMENTS
 
 
 def ishigami3() -> Case:

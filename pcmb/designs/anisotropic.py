@@ -2,11 +2,14 @@
 
 The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set is always a
 box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
-(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the indicator of input
-k is the sum of the surplus indicators on the box's top face in k (the indices at level L_k
-there): what the last level of k added. The estimated error is the adaptive driver's: the
-change of the mean and std the top faces make. While it exceeds the tolerance, the input with
-the largest face indicator is raised by one level — one input direction at a time — within the
+(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round, d_k(L_k) is the change
+of the mean and std (relative to the output's largest std) between the box and the box one
+level lower in input k alone: the error of that lower box in input k. The error left in input
+k is extrapolated as ``order: auto`` does along its levels
+(:func:`pcmb.designs.refine.extrapolated_error`: the decay per degree of its last two changes,
+carried to the box's degree in k; one change alone is taken as it is), and the estimated
+error is the largest over the inputs. While it exceeds the tolerance, the input with the
+largest estimated error is raised by one level — one input direction at a time — within the
 budget of runs. The nested rules reuse every run; the result is the tensor projection on the
 box reached.
 """
@@ -21,8 +24,8 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
-from pcmb.chaos.sparse import SparseGrid, box_index_set
-from pcmb.designs.adaptive import AdaptiveCollocation
+from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
+from pcmb.designs.adaptive import BLIND, AdaptiveCollocation
 from pcmb.designs.base import MethodSettings
 from pcmb.result import Design
 
@@ -31,8 +34,8 @@ __all__ = ["AnisotropicTensor"]
 
 class AnisotropicTensor(AdaptiveCollocation):
     """``method: {kind: adaptive, basis: tensor, tolerance, max_runs, rule}``: a tensor grid
-    of nested rules raised one input at a time where the top-face surpluses say it pays
-    (see the module)."""
+    of nested rules raised one input at a time where the estimated error is largest (see the
+    module)."""
 
     _FIRST = "the tensor grid of level 1 in every input"
 
@@ -46,6 +49,8 @@ class AnisotropicTensor(AdaptiveCollocation):
         super()._reset()
         self._levels = (1,) * len(self.distributions)
         self._refined = set(self._index)
+        #: Per input, d_k at each of its levels 1..L_k (the last one as of the last round).
+        self._input_changes: list[list[float]] = [[] for _ in self.distributions]
 
     def record(self) -> Design:
         return dataclasses.replace(super().record(), basis="tensor", grid="adaptive tensor")
@@ -55,15 +60,45 @@ class AnisotropicTensor(AdaptiveCollocation):
         index = np.array(self._index)
         return np.any(index == np.array(self._levels), axis=1)
 
-    def _faces(self) -> NDArray[np.float64]:
-        """(n,) per input, the sum of the indicators on the box's top face in that input."""
-        index = np.array(self._index)
-        return np.array(
-            [
-                self._indicators[index[:, k] == top].sum() if top > 0 else 0.0
-                for k, top in enumerate(self._levels)
-            ]
-        )
+    def _measure(self, values: NDArray[np.float64]) -> None:
+        """The adaptive driver's indicators, and per input the change d_k its top level
+        makes."""
+        super()._measure(values)
+        mean, std = self._statistics(self._grid, values)
+        spread = std.max(axis=-1)
+        for k, top in enumerate(self._levels):
+            lower = tuple(level - (j == k) for j, level in enumerate(self._levels))
+            box = SparseGrid(self.distributions, box_index_set(lower), self.rules)
+            low_mean, low_std = self._statistics(
+                box, values[find_rows(self._grid.node_ids, box.node_ids)]
+            )
+            change = np.maximum(np.abs(mean - low_mean), np.abs(std - low_std)).max(axis=-1)
+            relative = np.divide(change, spread, out=np.zeros_like(change), where=spread > 0)
+            del self._input_changes[k][top - 1 :]
+            self._input_changes[k].append(float(relative.max()))
+        coefficients = self._grid.project(values)
+        degree = self._grid.multi_index
+        self._rates = [
+            _decay(
+                [
+                    float(np.sqrt(np.sum(coefficients[degree[:, k] == p] ** 2, axis=0)).max())
+                    for p in range(int(degree[:, k].max()) + 1)
+                ]
+            )
+            for k in range(len(self._levels))
+        ]
+
+    def _errors(self) -> NDArray[np.float64]:
+        """(n,) the estimated error left in each input (see the module)."""
+        errors = []
+        for changes, rule, rate in zip(self._input_changes, self.rules, self._rates, strict=True):
+            top = len(changes)
+            step = rule.projection_degree(top) - rule.projection_degree(top - 1)
+            errors.append(changes[-1] * rate ** (2 * step))
+        return np.array(errors)
+
+    def _estimate(self) -> float:
+        return float(self._errors().max())
 
     def more(
         self,
@@ -75,8 +110,7 @@ class AnisotropicTensor(AdaptiveCollocation):
         tolerance and the budget allows, else ``None``."""
         if not self._measure_round(nodes, values, ok) or self._estimate() <= self.tolerance:
             return None
-        faces = self._faces()
-        for k in np.argsort(-faces, kind="stable"):
+        for k in np.argsort(-self._errors(), kind="stable"):
             rule = self.rules[k]
             if rule.max_level is not None and self._levels[k] >= rule.max_level:
                 continue
@@ -95,3 +129,17 @@ class AnisotropicTensor(AdaptiveCollocation):
             return self._grow(added)
         self._stopped = "every input is at its rule's last level: use rule leja"
         return None
+
+
+def _decay(norms: list[float]) -> float:
+    """The decay per degree of the coefficients along an input, from the norms of those of
+    degree 0, 1, ..., p in it: the largest of n_p / n_(p-1), √(n_p / n_(p-2)) and
+    √(n_(p-1) / n_(p-3)) (two degrees apart where a symmetry zeroes every other degree) over
+    degrees >= 1 whose norms are both above round-off (:data:`BLIND` of the larger), at most
+    1; 1 when none are (the decay cannot be told)."""
+    top = len(norms) - 1
+    rates = []
+    for high, low in ((top, top - 1), (top, top - 2), (top - 1, top - 3)):
+        if low >= 1 and min(norms[high], norms[low]) > BLIND * max(norms[high], norms[low]):
+            rates.append((norms[high] / norms[low]) ** (1 / (high - low)))
+    return min(1.0, max(rates, default=1.0))
