@@ -2,12 +2,12 @@
 
 The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set is always a
 box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
-(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round, d_k(L_k) is the change
-of the mean and std (relative to the output's largest std) between the box and the box one
-level lower in input k alone: the error of that lower box in input k. The error left in input
-k is extrapolated as ``order: auto`` does along its levels
-(:func:`pcmb.designs.refine.extrapolated_error`: the decay per degree of its last two changes,
-carried to the box's degree in k; one change alone is taken as it is), and the estimated
+(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round, d_k is the change of
+the mean and std (relative to the output's largest std) between the box and the box one level
+lower in input k alone: the error of that lower box in input k. The std's error is quadratic
+in the coefficients left out, so the error left in input k is d_k ρ_k^(2 Δp_k), with Δp_k the
+degrees the last level of k added and ρ_k the decay per degree of the coefficients along k at
+the box's top degrees (:func:`_decay`; 1, careful, where it cannot be told); the estimated
 error is the largest over the inputs. While it exceeds the tolerance, the input with the
 largest estimated error is raised by one level — one input direction at a time — within the
 budget of runs. The nested rules reuse every run; the result is the tensor projection on the
@@ -49,8 +49,9 @@ class AnisotropicTensor(AdaptiveCollocation):
         super()._reset()
         self._levels = (1,) * len(self.distributions)
         self._refined = set(self._index)
-        #: Per input, d_k at each of its levels 1..L_k (the last one as of the last round).
-        self._input_changes: list[list[float]] = [[] for _ in self.distributions]
+        #: Per input k, d_k and the decay per degree of the coefficients along it.
+        self._input_changes = np.ones(len(self.distributions))
+        self._rates = np.ones(len(self.distributions))
 
     def record(self) -> Design:
         return dataclasses.replace(super().record(), basis="tensor", grid="adaptive tensor")
@@ -66,7 +67,7 @@ class AnisotropicTensor(AdaptiveCollocation):
         super()._measure(values)
         mean, std = self._statistics(self._grid, values)
         spread = std.max(axis=-1)
-        for k, top in enumerate(self._levels):
+        for k in range(len(self._levels)):
             lower = tuple(level - (j == k) for j, level in enumerate(self._levels))
             box = SparseGrid(self.distributions, box_index_set(lower), self.rules)
             low_mean, low_std = self._statistics(
@@ -74,28 +75,28 @@ class AnisotropicTensor(AdaptiveCollocation):
             )
             change = np.maximum(np.abs(mean - low_mean), np.abs(std - low_std)).max(axis=-1)
             relative = np.divide(change, spread, out=np.zeros_like(change), where=spread > 0)
-            del self._input_changes[k][top - 1 :]
-            self._input_changes[k].append(float(relative.max()))
+            self._input_changes[k] = relative.max()
         coefficients = self._grid.project(values)
         degree = self._grid.multi_index
-        self._rates = [
-            _decay(
-                [
-                    float(np.sqrt(np.sum(coefficients[degree[:, k] == p] ** 2, axis=0)).max())
-                    for p in range(int(degree[:, k].max()) + 1)
-                ]
-            )
-            for k in range(len(self._levels))
-        ]
+        self._rates = np.array(
+            [
+                _decay(
+                    [
+                        float(np.sqrt(np.sum(coefficients[degree[:, k] == p] ** 2, axis=0)).max())
+                        for p in range(int(degree[:, k].max()) + 1)
+                    ]
+                )
+                for k in range(len(self._levels))
+            ]
+        )
 
     def _errors(self) -> NDArray[np.float64]:
         """(n,) the estimated error left in each input (see the module)."""
-        errors = []
-        for changes, rule, rate in zip(self._input_changes, self.rules, self._rates, strict=True):
-            top = len(changes)
-            step = rule.projection_degree(top) - rule.projection_degree(top - 1)
-            errors.append(changes[-1] * rate ** (2 * step))
-        return np.array(errors)
+        steps = [
+            rule.projection_degree(top) - rule.projection_degree(top - 1)
+            for rule, top in zip(self.rules, self._levels, strict=True)
+        ]
+        return self._input_changes * self._rates ** (2 * np.array(steps))
 
     def _estimate(self) -> float:
         return float(self._errors().max())
