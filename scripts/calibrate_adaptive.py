@@ -16,12 +16,13 @@ The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on the rounds 
 genz_oscillatory, otl_circuit, piston, wing_weight and lognormal6; ishigami3 and genz_gaussian
 validate it (g_function is not smooth: the estimate cannot see its kink, the warnings must).
 
+``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
 corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
 then ``max_samples``).
 
     python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--max-runs 6000]
-        [--method adaptive|regression]
+        [--method adaptive|tensor|regression]
 """
 
 from __future__ import annotations
@@ -173,10 +174,11 @@ CHAOSPY_RUNS = 60000
 
 
 def settings(method: str, inputs: dict, tolerance: float, max_runs: int) -> MethodSettings:
-    """``method``'s settings: kind adaptive, or LARS from 32 Sobol' points on the hyperbolic
-    set of order :data:`REGRESSION_ORDER`, q = 0.75."""
-    if method == "adaptive":
-        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs)
+    """``method``'s settings: kind adaptive (``tensor``: with basis tensor), or LARS from 32
+    Sobol' points on the hyperbolic set of order :data:`REGRESSION_ORDER`, q = 0.75."""
+    if method in ("adaptive", "tensor"):
+        basis = "tensor" if method == "tensor" else None
+        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs, basis=basis)
     orders = (REGRESSION_ORDER,) * len(inputs)
     return MethodSettings(
         "regression", orders=orders, samples=32, q=0.75, tolerance=tolerance, max_samples=max_runs
@@ -204,7 +206,7 @@ def run(
     expansion = recovery.expansions["y"]
     error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
     nonsmooth = [w.message for w in recovery.warnings if w.code == "adaptive-nonsmooth"]
-    if method == "adaptive":
+    if method in ("adaptive", "tensor"):
         estimate = recovery.adaptive.estimate
     else:
         fit = recovery.regression["y"]
@@ -251,7 +253,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="?", default=",".join(CASES))
     parser.add_argument("--max-runs", type=int, default=6000)
-    parser.add_argument("--method", choices=("adaptive", "regression"), default="adaptive")
+    parser.add_argument(
+        "--method", choices=("adaptive", "tensor", "regression"), default="adaptive"
+    )
     args = parser.parse_args()
     print(
         "| function | tolerance | runs | estimate | true error | estimate/true | true/tolerance |"
