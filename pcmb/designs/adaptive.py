@@ -16,13 +16,14 @@ statistics' on smooth functions, so they only mark. After round k, d_k is the la
 over outputs and times, of the mean and std that the active indices make (the whole grid
 against the grid of the refined indices, whose nodes it holds), relative to the largest std:
 the error of the coarser grid. A lucky small change is not believed, g_k = max(d_k, the
-median of d_{k-2}, d_{k-1}, d_k), and the whole grid is a round ahead of the refined one, so
-the estimate is g_k ρ_k with ρ_k = min(1, √(g_k / g_{k-2})) the observed reduction per round
-(:func:`estimated_error`). Measured by ``scripts/calibrate_adaptive.py`` (chosen on the
-rounds of exp8, genz_oscillatory, OTL circuit, Piston, Wing weight and lognormal6), it lies
-within 10x of the true error on smooth functions but where the true error itself dips by
-luck. It assumes a smooth response: where an input's axis surpluses fall like a power of the
-degree (a kink, or a peak not yet resolved) an ``adaptive-nonsmooth`` warning names it.
+median of d_{k-2}, d_{k-1}, d_k), and the whole grid is about :data:`ROUNDS_AHEAD` rounds
+ahead of the refined one, so the estimate is g_k ρ_k² with ρ_k = min(1, √(g_k / g_{k-2})) the
+observed reduction per round (:func:`estimated_error`). Chosen once on the stopping rounds of
+OTL circuit, Piston, Wing weight, lognormal6, exp8 and genz_oscillatory together
+(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), it lies within 10x of the true
+error there but where the true error wanders by luck. It assumes a smooth response: where an
+input's axis surpluses fall like a power of the degree no faster than a kink's (a jump or a
+kink) an ``adaptive-nonsmooth`` warning names it.
 """
 
 from __future__ import annotations
