@@ -38,12 +38,12 @@ from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import (
-    PISTON_BOUNDS,
-    PISTON_MOMENTS,
-    WING_WEIGHT_BOUNDS,
-    WING_WEIGHT_MOMENTS,
     ishigami,
     ishigami_moments,
+    piston_bounds,
+    piston_moments,
+    wing_weight_bounds,
+    wing_weight_moments,
 )
 from pcmb.references import piston as piston_time
 from pcmb.references import wing_weight as wing_weight_lb
@@ -138,12 +138,12 @@ def otl_circuit() -> Case:
 
 def piston() -> Case:
     """The piston's cycle time, 7 uniform inputs."""
-    return _box(PISTON_BOUNDS), piston_time, *PISTON_MOMENTS
+    return _box(piston_bounds()), piston_time, *piston_moments()
 
 
 def wing_weight() -> Case:
     """A light aircraft's wing weight, 10 uniform inputs."""
-    return _box(WING_WEIGHT_BOUNDS), wing_weight_lb, *WING_WEIGHT_MOMENTS
+    return _box(wing_weight_bounds()), wing_weight_lb, *wing_weight_moments()
 
 
 def ishigami3() -> Case:
