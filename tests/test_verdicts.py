@@ -444,22 +444,26 @@ def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
 
 
 def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
+    # The double well, order 3, to 1 %: the elements' tails still indicate 2.6 % at
+    # max_elements 4 (28 runs), where the true error is 0.08 % (docs/multi_element.md: their
+    # estimate is careful where the pieces are smooth); 32 held-out runs decide it holds.
     study = pcmb.Study(
-        jump,
-        KINK_INPUTS,
-        G_TIMES,
+        model_class("double_well", "DoubleWell"),
+        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        np.linspace(0.0, 4.0, 41),
         order=3,
         elements="auto",
-        max_elements=6,
+        max_elements=4,
+        diagnostics_tolerance=0.01,
         backend="inprocess",
-        # 3 elements and 128 held-out runs: a 6 % error; 6 elements hold within 0.3 %, which
-        # 32 runs decide (8 leave it undecided: not vouched for).
         validation=32,
     )
     result = study.run()  # no warning: the suite turns warnings into errors
-    assert result.diagnostics["y"].reliable
-    (record,) = [w for w in result.warnings if w.code == "element-budget"]
-    assert result.is_note(record) and record not in result.alerts
+    assert result.diagnostics["x"].vouched
+    for code in ("element-budget", "element-decay"):
+        (record,) = [w for w in result.warnings if w.code == code]
+        assert result.is_note(record) and record not in result.alerts
+        assert "not converged" not in record.message
 
 
 @pcmb.batched(outputs=("y",))
