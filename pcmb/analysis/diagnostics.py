@@ -130,8 +130,8 @@ _ROUND_OFF = 1e-12
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
 _GROWTH = 2.0
-#: A tail holding between this share and all of the energy of the two layers before it
-#: decays algebraically, as the spectrum of a jump: the response is steep there.
+#: A tail holding at least this share of the energy of the two layers before it does not
+#: decay as an analytic response's does, over the degrees the expansion has.
 _FLAT = 0.5
 #: The remedy reads the decay along every input holding at least this share of the tail.
 _SHARED = 0.25
@@ -1189,14 +1189,19 @@ def _cause_remedy(
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
-      around a jump or kink; else steep or discontinuous when the spectrum decays slowly (the
-      outer two layers hold between half and all of the energy of the two before them) or,
-      below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
-      higher order. The message says that the order was too low to tell.
+      around a jump or kink; else, with the error over the range, steep, oscillating or
+      discontinuous when the spectrum does not decay (the outer two layers hold at least
+      half the energy of the layers before them, the linear ones at order 3, the response's
+      structure still rising at the top degree when they hold more) or, below order 3, the
+      surrogate overshoots the runs — multi-element chaos; otherwise a higher order. The
+      message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
-    before = tail_terms(index, 4) & ~tail
+    # The two layers before the tail, the linear terms among them up to order 4 (at order 3
+    # they are the only layer before it).
+    linear = (index.sum(axis=1) == 1) & (index.max(axis=0)[np.argmax(index, axis=1)] <= 4)
+    before = (tail_terms(index, 4) | linear) & ~tail
     # Each failing time weighs the same: its energies as shares of its own variance.
     energies = _energies(expansion)[:, failing]
     variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
@@ -1243,7 +1248,6 @@ def _cause_remedy(
         f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
         "to tell a jump or kink from a slowly converging smooth response by it"
     )
-    cause = f"the response is steep or discontinuous in {name}{unknown}"
     previous = energy[before].sum()
     if place and ends[top] >= _AT_ENDS:
         return (
@@ -1260,12 +1264,23 @@ def _cause_remedy(
             f"jump, kink or steep front there{unknown}",
         )
     if previous > 0:
-        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        ratio = energy[tail].sum() / previous
+        steep = ratio >= _FLAT
+        read = (
+            f"the outer two layers of its spectrum hold {ratio:.2g} times the energy of the "
+            "layers before them"
+        )
+    else:  # order 2: no layer before the tail, the overshoot tells
         steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+        read = "the surrogate overshoots the runs" if steep else "the surrogate stays in range"
     if not steep:
-        return "order", name, f"its spectrum decays slowly{unknown}"
-    return "elements", name, cause
+        return "order", name, f"{read}, a decaying spectrum{unknown}"
+    return (
+        "elements",
+        name,
+        f"the response is steep, oscillating or discontinuous in {name}: {read}, with the "
+        f"surrogate's error over the range, not at its ends{unknown}",
+    )
 
 
 @dataclass(frozen=True)
