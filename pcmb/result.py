@@ -234,6 +234,16 @@ class ReportFile(Protocol):
         """A dataset written by :meth:`points`, with its last axis back for a scalar output."""
         ...
 
+    def shape(self, path: str) -> tuple[int, ...] | None:
+        """The shape of the dataset at ``path``, without reading it (``None``: none)."""
+        ...
+
+    @property
+    def runs(self) -> bool:
+        """Whether the runs' values are read with the result (not when they exceed the
+        memory available: a streamed study's statistics are then the stored ones)."""
+        ...
+
 
 class DesignReport(ABC):
     """What a design concluded beyond its expansions (a sparse regression's fits, an adaptive

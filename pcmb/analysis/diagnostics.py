@@ -18,7 +18,9 @@ raises false alarms.
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
-  bars show, and the mean and std those runs correct.
+  bars show, and the mean and std those runs correct. A tensor grid of one input places its
+  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes) and
+  compares its mean and std with those of the interpolant through both (:func:`placed_check`).
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
@@ -52,8 +54,9 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nested import leja_sequence
 from pcmb.chaos.nodes import NodeSet, draw_germs, random_nodes
-from pcmb.chaos.polynomials import Hermite
+from pcmb.chaos.polynomials import Hermite, OrthonormalFamily
 from pcmb.result import StudyResult, WarningRecord
 from pcmb.wording import plural
 
@@ -69,10 +72,12 @@ __all__ = [
     "diagnose_all",
     "held_out_budget",
     "held_out_draws",
+    "held_out_placed",
     "holdout_error",
     "more_runs",
     "out_of_range",
     "pdf_outside_runs",
+    "placed_check",
     "range_checks",
     "spectral_decay",
     "statistics_error",
@@ -100,6 +105,10 @@ FIRST_BATCH = 8
 #: The fewest held-out runs whose standard error is read from neighbouring pairs
 #: (:func:`_standard_error`); fewer are taken as independent draws.
 PAIRED_FROM = 16
+#: A placed check's noise: how far its richer surrogate's statistics move without its last
+#: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
+#: the centre.
+PLACED_SPARE = 2
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
@@ -243,6 +252,20 @@ def held_out_draws(
     z = germ[:, normal]
     log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
     return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+
+
+def held_out_placed(
+    distribution: Distribution, design_germ: ArrayLike, count: int
+) -> tuple[NodeSet, NDArray[np.float64]]:
+    """``count`` held-out inputs of a one-input design placed, not drawn: the weighted Leja
+    points that extend its (N,) germ nodes (``design_germ``; with earlier held-out points
+    after them, the points that extend those), so that nodes and held-out runs together
+    interpolate the response far better than the nodes alone (:func:`placed_check`). The
+    weights are 1: the points are not a sample."""
+    start = np.asarray(design_germ, dtype=float).ravel()
+    germ = leja_sequence(distribution.family, tuple(start), start.size + count)[start.size :]
+    params = distribution.to_physical(germ)
+    return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
 
 
 @dataclass(frozen=True)
@@ -494,6 +517,83 @@ def holdout_error(
         _rms_over_scale(differences, scale, quantile),
         *errors,
         *corrected,
+        count,
+        confidence,
+    )
+
+
+def _interpolated(
+    family: OrthonormalFamily, germ: NDArray[np.float64], values: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M, T) coefficients of the polynomial of degree M - 1 through M runs of one input,
+    in its orthonormal basis: its mean is the first, its variance the sum of the others'
+    squares. Each row is scaled by √(germ density), as the weighted Leja points are chosen:
+    the same solution, but well conditioned (at 67 Hermite points: 10, not 10³⁰)."""
+    root = np.sqrt(family.germ.pdf(germ))[:, None]
+    return np.linalg.solve(root * family.evaluate(germ, germ.size - 1), root * values)
+
+
+def placed_check(
+    expansion: ChaosExpansion,
+    node_germ: ArrayLike,
+    node_values: ArrayLike,
+    germ: ArrayLike,
+    observed: ArrayLike,
+    scale: float,
+    confidence: float = CONFIDENCE,
+) -> HeldOutCheck:
+    """The held-out check of a one-input expansion by K runs placed to extend its N nodes
+    (:func:`held_out_placed`).
+
+    Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
+    orthonormal basis, a far richer surrogate than the expansion (Leja points keep the
+    interpolation well conditioned); its mean and std (exact: c_0 and √Σ_{i>=1} c_i²) are
+    the corrected mean and std, and their differences from the expansion's the estimated
+    errors. Their standard error is how far the richer surrogate's mean and std move when
+    its last ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than
+    that); the surrogate error is the L2 distance of the two surrogates (their coefficients'
+    difference), its upper bound that plus how far it moves. Runs that are not finite are
+    left out; zeros if the scale is zero.
+    """
+    observed = np.atleast_2d(np.asarray(observed, dtype=float))
+    kept = np.isfinite(observed).all(axis=1)
+    count = int(kept.sum())
+    mean, std = expansion.mean(), expansion.std()
+    if not scale > 0 or not np.isfinite(scale):
+        zeros = np.zeros(observed.shape[1:])
+        return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
+    runs = np.isfinite(np.asarray(node_values, dtype=float)).all(axis=1)
+    points = np.concatenate([np.ravel(node_germ)[runs], np.ravel(germ)[kept]])
+    values = np.vstack([np.asarray(node_values, dtype=float)[runs], observed[kept]]) / scale
+    family = expansion.distributions[0].family
+    index = expansion.multi_index[:, 0]
+    own = np.zeros((max(points.size, int(index.max()) + 1), values.shape[1]))
+    own[index] = expansion.coefficients / scale
+
+    def moments(size: int) -> tuple[NDArray, NDArray, NDArray]:
+        coefficients = _interpolated(family, points[:size], values[:size])
+        variance = np.sum(coefficients[1:] ** 2, axis=0)
+        missed = np.sum((coefficients - own[:size]) ** 2, axis=0)
+        error = np.sqrt(missed + np.sum(own[size:] ** 2, axis=0))
+        return coefficients[0], np.sqrt(variance), error
+
+    rich_mean, rich_std, error = moments(points.size)
+    if count > PLACED_SPARE:
+        fewer_mean, fewer_std, fewer_error = moments(points.size - PLACED_SPARE)
+        mean_se, std_se = np.abs(rich_mean - fewer_mean), np.abs(rich_std - fewer_std)
+        moved = np.abs(error - fewer_error)
+    else:
+        mean_se = std_se = moved = np.full(values.shape[1], np.inf)
+    return HeldOutCheck(
+        error,
+        error + moved,
+        np.abs(rich_mean - mean / scale),
+        np.abs(rich_std - std / scale),
+        np.fmax(mean_se, std_se),
+        rich_mean * scale,
+        rich_std * scale,
+        mean_se * scale,
+        std_se * scale,
         count,
         confidence,
     )
@@ -779,6 +879,7 @@ def diagnose(
     budgets: Collection[str] = (),
     holdout_germ: ArrayLike | None = None,
     weights: ArrayLike | None = None,
+    placed: bool = False,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -818,6 +919,9 @@ def diagnose(
         standard errors (:func:`_standard_error`; default: taken as independent draws).
     weights:
         (K,) importance weights of the held-out runs (:func:`held_out_draws`; default: 1).
+    placed:
+        Whether the held-out runs extend the nodes of a one-input expansion
+        (:func:`held_out_placed`): judged by :func:`placed_check` instead.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -836,7 +940,9 @@ def diagnose(
             scale = size * float(np.max(np.std(observed / size, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
-    if holdout is not None:
+    if holdout is not None and placed:
+        checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
+    elif holdout is not None:
         checked = holdout_error(
             *holdout, expansion.mean(), std, scale, weights=weights, germ=holdout_germ
         )
@@ -1298,7 +1404,10 @@ class HeldOut:
     ok:
         (K,) which runs succeeded.
     weights:
-        (K,) importance weights of the draws (:func:`held_out_draws`).
+        (K,) importance weights of the draws (:func:`held_out_draws`; 1 when placed).
+    placed:
+        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`) rather
+        than being drawn: the check is then :func:`placed_check`.
     """
 
     seed: int
@@ -1307,6 +1416,7 @@ class HeldOut:
     values: dict[str, NDArray[np.float64]]
     ok: NDArray[np.bool_]
     weights: NDArray[np.float64]
+    placed: bool = False
 
     def joined(self, more: HeldOut) -> HeldOut:
         """These runs followed by ``more`` (a later batch of the same check; the seed is the
@@ -1318,6 +1428,7 @@ class HeldOut:
             {name: np.concatenate([v, more.values[name]]) for name, v in self.values.items()},
             np.concatenate([self.ok, more.ok]),
             np.concatenate([self.weights, more.weights]),
+            self.placed,
         )
 
 
@@ -1367,5 +1478,6 @@ def diagnose_all(
             budgets,
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
+            held_out is not None and held_out.placed,
         )
     return found
