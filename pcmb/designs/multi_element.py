@@ -10,17 +10,15 @@
   expansions are :class:`~pcmb.chaos.elements.PiecewiseExpansion` s.
 
 ``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
-std relative to the output's largest std (:func:`element_errors`): an element's energy in the
-outer two degree layers of its basis (two, because a response even about the element's
-centre has zero odd coefficients) stands for what its truncation misses, and the elements'
-energies, weighted by their probability, convert to an error of the mean and std as a
-least-squares fit's corrected LOO error does
-(:func:`~pcmb.designs.regression.loo_statistics_error`). ``auto`` starts from one element
-and, after each round, while the estimate exceeds the tolerance, splits the elements of
-largest share, the fewest whose shares leave the rest within the tolerance, along the inputs
-that hold at least half the largest per-input share of their tail energy, while the
-partition stays within ``max_elements``; the split elements' nodes leave the recovery
-(``/nodes/element`` -1) and the children's nodes are the next round.
+std relative to the output's largest std, as estimated from the elements' tails
+(:func:`element_errors`: the energy of each element's outer two degree layers, continued
+geometrically, converts to the error of its mean and of the std; ``docs/multi_element.md``
+has the derivation and its calibration). ``auto`` starts from one element and, after each
+round, while the estimate exceeds the tolerance, splits the elements of largest share, the
+fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
+half the largest per-input share of their tail energy, while the partition stays within
+``max_elements``; the split elements' nodes leave the recovery (``/nodes/element`` -1) and
+the children's nodes are the next round.
 :meth:`MultiElementCollocation.recover` records (``element-decay``) every output whose
 estimate is left above the tolerance, and (``element-budget``) that ``max_elements``
 stopped the refinement. A response chaotic in its inputs (the Lorenz attractor) has no
@@ -192,7 +190,7 @@ class MultiElementCollocation:
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
             return None
-        size, chosen = self.partition.size, {}
+        size, chosen, refused = self.partition.size, {}, False
         left = np.ones(size, dtype=bool)
         each = errors.of_each()
         for e in np.argsort(-np.nan_to_num(each, nan=-1.0)):
@@ -203,7 +201,9 @@ class MultiElementCollocation:
                 chosen[int(e)] = cut.tolist()
                 size += 2**cut.size - 1
                 left[e] = False
-        self.exhausted = not chosen
+            else:
+                refused = True
+        self.exhausted = refused and not chosen
         if not chosen:
             return None
         # Children replace their parent in place; the others keep their nodes.
