@@ -228,6 +228,7 @@ class MultiElementCollocation:
         return weights
 
     def record(self) -> Design:
+        auto = self.elements == "auto"
         return Design(
             kind=self.settings.kind,
             grid="element-gauss",
@@ -235,7 +236,9 @@ class MultiElementCollocation:
             orders=self.orders,
             elements=self.partition.size,
             fit="projection",
-            label=f"chaos {order_words(self.orders, self.basis)}",
+            tolerance=self.tolerance if auto else None,
+            label=f"chaos {order_words(self.orders, self.basis)}"
+            + (f" (elements auto to {self.tolerance:g})" if auto else ""),
         )
 
     # -- recovery ---------------------------------------------------------------------------
