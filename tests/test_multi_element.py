@@ -342,6 +342,20 @@ def test_auto_stops_on_the_error_diagnostics_tolerance_names(case):
         assert estimate >= error / 10  # never 10x over-confident
 
 
+@pytest.mark.parametrize("t", [0.5, 0.7])
+@pytest.mark.parametrize("order", [3, 5, 7])
+def test_the_estimate_is_within_10x_of_the_error_on_an_analytic_response(t, order):
+    # The Legendre generating function 1 / √(1 - 2 x t + t²), x ~ U[-1, 1]: mean 1 and
+    # variance atanh(t) / t - 1 (its orthonormal coefficients t^k / √(2k + 1)).
+    design = _design({"x": pcmb.Uniform(-1.0, 1.0)}, (order,), elements={})
+    nodes = design.nodes()
+    values = {"y": 1 / np.sqrt(1 - 2 * t * nodes.params + t * t)}
+    expansion = design.recover(nodes, values, np.ones(nodes.size, dtype=bool)).expansions["y"]
+    std = np.sqrt(np.arctanh(t) / t - 1)
+    error = max(abs(expansion.mean()[0] - 1), abs(expansion.std()[0] - std)) / std
+    assert error / 10 <= design.estimate <= 10 * error
+
+
 def test_the_chaotic_lorenz_case_stays_flagged():
     # configs/lorenz_chaotic.yaml (looser tolerances, a coarser grid): the ensemble spreads
     # over the attractor, no element of a usable size holds a smooth piece, and splitting only
