@@ -285,6 +285,7 @@ def test_an_analytic_response_is_told_to_raise_the_order():
     assert "along mu fall geometrically" in remedy and "smooth" in remedy
 
 
+@pytest.mark.slow
 def test_a_response_oscillating_across_its_range_is_told_to_use_elements():
     # configs/mr_damper.yaml at the paper's order 3: x1 has up to 13 extrema in I
     # (docs/paper_cases.md), the order-3 spectrum rises to its top degree and the held-out
