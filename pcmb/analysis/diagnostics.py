@@ -1378,14 +1378,14 @@ def _cause_remedy(
         )
     else:  # order 2: no layer before the tail, the overshoot tells
         steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-        read = "the surrogate overshoots the runs" if steep else "the surrogate stays in range"
+        read = f"the surrogate {'leaves' if steep else 'stays within'} the runs' range"
     if not steep:
-        return "order", name, f"{read}, a decaying spectrum{unknown}"
+        return "order", name, f"{read}: a smooth response converging slowly{unknown}"
+    spread = ", with the surrogate's error over the range, not at its ends" if place else ""
     return (
         "elements",
         name,
-        f"the response is steep, oscillating or discontinuous in {name}: {read}, with the "
-        f"surrogate's error over the range, not at its ends{unknown}",
+        f"the response is steep, oscillating or discontinuous in {name}: {read}{spread}{unknown}",
     )
 
 
