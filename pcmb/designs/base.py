@@ -90,9 +90,9 @@ class MethodSection(Section):
     kind: str  # each section narrows it to its Literal (kept first in listings)
     validation: NonNegativeInt | None = Field(
         default=None,
-        description="held-out runs at random inputs that check a chaos expansion (0: none; "
-        "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
-        "batches while the verdict is undecided)",
+        description="held-out runs that check a chaos expansion (0: none; default: sized to "
+        "the design, at most max(8, a quarter of its runs)): placed to extend a grid of one "
+        "input, else drawn at random, in batches while the verdict is undecided",
     )
     seed: NonNegativeInt = Field(
         default=0, description="seed of the design's random nodes and of the held-out runs"
