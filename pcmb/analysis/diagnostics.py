@@ -150,8 +150,8 @@ _ROUND_OFF = 1e-12
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
 _GROWTH = 2.0
-#: A tail holding between this share and all of the energy of the two layers before it
-#: decays algebraically, as the spectrum of a jump: the response is steep there.
+#: A tail holding at least this share of the energy of the two layers before it does not
+#: decay as an analytic response's does, over the degrees the expansion has.
 _FLAT = 0.5
 #: The remedy reads the decay along every input holding at least this share of the tail.
 _SHARED = 0.25
@@ -799,6 +799,18 @@ def out_of_range(
     also held to be non-negative: draws below 0 by more than ``RANGE_BELOW_ZERO`` times the
     range count too.
     """
+    return _outside_sides(expansion, node_values, draws, seed, node_germ, margin).sum(axis=0)
+
+
+def _outside_sides(
+    expansion: Expansion,
+    node_values: ArrayLike,
+    draws: int,
+    seed: int,
+    node_germ: ArrayLike | None,
+    margin: float,
+) -> NDArray[np.float64]:
+    """(2, T) the shares of :func:`out_of_range` below and above the runs' range."""
     values = np.asarray(node_values, dtype=float)
     low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
     reach = margin * (high - low)
@@ -810,17 +822,17 @@ def out_of_range(
         box = np.asarray(node_germ, dtype=float)
         germ = germ[np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)]
     if germ.shape[0] == 0:
-        return np.zeros(values.shape[1])
+        return np.zeros((2, values.shape[1]))
     samples = expansion.evaluate_germ(germ)
-    outside = (samples < floor) | (samples > high + reach)
-    return np.where(expansion.varies() & (high > low), outside.mean(axis=0), 0.0)
+    sides = np.stack([(samples < floor).mean(axis=0), (samples > high + reach).mean(axis=0)])
+    return np.where(expansion.varies() & (high > low), sides, 0.0)
 
 
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
     """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate at one of
-    ``analysis.pdf_times`` with more than ``RANGE_SHARE`` of its mass beyond the range of
-    every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range,
-    among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
+    ``analysis.pdf_times`` with more of its mass than :func:`_pdf_allowance` on one side beyond
+    the range of every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of
+    that range, among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
     analysis, ok = result.analysis, result.ok
     if analysis is None or not ok.any():
         return ()
@@ -836,11 +848,15 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         made = _finite_rows(np.vstack(runs))
         at = analysis.outputs[name].pdf.at
         points = nearest_indices(result.grid(name), at)
-        share = out_of_range(expansion, made, node_germ=result.germ[ok], margin=PDF_MARGIN)
+        sides = _outside_sides(
+            expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
+        )
+        share = sides.sum(axis=0)
+        allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
         where = "" if axis is None else f"{axis.name} = "
         for t, k in zip(at, points, strict=True):
-            if share[k] <= RANGE_SHARE:
+            if sides[:, k].max() <= allowed:
                 continue
             records.append(
                 WarningRecord(
@@ -855,6 +871,13 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                 )
             )
     return tuple(records)
+
+
+def _pdf_allowance(runs: int) -> float:
+    """The share of a PDF's mass on one side beyond the range of ``runs`` runs that is not
+    noted: ``RANGE_SHARE`` plus 1/(runs + 1), the mass a correct PDF leaves beyond the largest
+    of ``runs`` exchangeable draws of its output on average."""
+    return RANGE_SHARE + 1.0 / (runs + 1)
 
 
 def range_checks(
@@ -1448,14 +1471,19 @@ def _cause_remedy(
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
-      around a jump or kink; else steep or discontinuous when the spectrum decays slowly (the
-      outer two layers hold between half and all of the energy of the two before them) or,
-      below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
-      higher order. The message says that the order was too low to tell.
+      around a jump or kink; else, with the error over the range, steep, oscillating or
+      discontinuous when the spectrum does not decay (the outer two layers hold at least
+      half the energy of the layers before them, the linear ones at order 3, the response's
+      structure still rising at the top degree when they hold more) or, below order 3, the
+      surrogate overshoots the runs — multi-element chaos; otherwise a higher order. The
+      message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
-    before = tail_terms(index, 4) & ~tail
+    # The two layers before the tail, the linear terms among them up to order 4 (at order 3
+    # they are the only layer before it).
+    linear = (index.sum(axis=1) == 1) & (index.max(axis=0)[np.argmax(index, axis=1)] <= 4)
+    before = (tail_terms(index, 4) | linear) & ~tail
     # Each failing time weighs the same: its energies as shares of its own variance.
     energies = _energies(expansion)[:, failing]
     variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
@@ -1502,7 +1530,6 @@ def _cause_remedy(
         f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
         "to tell a jump or kink from a slowly converging smooth response by it"
     )
-    cause = f"the response is steep or discontinuous in {name}{unknown}"
     previous = energy[before].sum()
     if place and ends[top] >= _AT_ENDS:
         return (
@@ -1519,12 +1546,23 @@ def _cause_remedy(
             f"jump, kink or steep front there{unknown}",
         )
     if previous > 0:
-        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        ratio = energy[tail].sum() / previous
+        steep = ratio >= _FLAT
+        read = (
+            f"the outer two layers of its spectrum hold {ratio:.2g} times the energy of the "
+            "layers before them"
+        )
+    else:  # order 2: no layer before the tail, the overshoot tells
         steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+        read = f"the surrogate {'leaves' if steep else 'stays within'} the runs' range"
     if not steep:
-        return "order", name, f"its spectrum decays slowly{unknown}"
-    return "elements", name, cause
+        return "order", name, f"{read}: a smooth response converging slowly{unknown}"
+    spread = ", with the surrogate's error over the range, not at its ends" if place else ""
+    return (
+        "elements",
+        name,
+        f"the response is steep, oscillating or discontinuous in {name}: {read}{spread}{unknown}",
+    )
 
 
 @dataclass(frozen=True)
