@@ -320,15 +320,16 @@ def test_the_file_says_whether_the_check_was_placed_or_drawn(tmp_path, capsys):
 
 
 def test_a_multi_element_design_places_its_check_per_element_and_flags_on_time():
-    # exp(z t / 2) at order 4 with elements: auto (31 elements, 155 runs): its std passes 5 %
-    # of the largest std at t = 4.78 (the lognormal moments); 39 drawn runs missed it.
+    # exp(z t / 2) at order 4 with elements: auto held to 8 elements (75 runs): its std
+    # passes 5 % of the largest std at t = 4.78 (the lognormal moments); drawn runs missed it.
     times = np.linspace(0.0, 5.0, 201)
     inputs = {"z": pcmb.Normal(0.0, 1.0)}
-    result = _run(lognormal, inputs, times, order=4, elements="auto")
     mean, std = lognormal_moments(0.5 * times)
-    crossing = verdict(times, _true_error(result, "x", mean, std), 0.05)
-    assert crossing == pytest.approx(4.78, abs=0.03)
-    assert abs(result.diagnostics["x"].failing_from - crossing) <= 0.25
+    for seed in range(5):  # drawn, 19 runs flagged it with 1 seed of these 5
+        result = _run(lognormal, inputs, times, order=4, elements="auto", max_elements=8, seed=seed)
+        crossing = verdict(times, _true_error(result, "x", mean, std), 0.05)
+        assert crossing == pytest.approx(4.78, abs=0.03)
+        assert abs(result.diagnostics["x"].failing_from - crossing) <= 0.25, seed
     assert result.held_out.placed and result.held_out.ok.size <= held_out_budget(result.n_nodes)
 
 
