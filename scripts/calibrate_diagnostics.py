@@ -199,7 +199,11 @@ CASES = {
         {"z": pcmb.Normal(0.0, 1.0)},
         np.linspace(0.0, 5.0, 201),
         lambda t: lognormal_moments(0.5 * t),
-        {"order 4": {"order": 4}, "order 4, elements auto": {"order": 4, "elements": "auto"}},
+        {
+            "order 4": {"order": 4},
+            "order 4, elements auto": {"order": 4, "elements": "auto"},
+            "order 4, elements auto (8)": {"order": 4, "elements": "auto", "max_elements": 8},
+        },
     ),
     "jump": (
         well,
