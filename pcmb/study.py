@@ -735,7 +735,14 @@ class Study:
                 )
             first, most = self.held_out_runs(nodes.size)
             held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress, first, nodes.nodes, runs.values
+                facts,
+                outputs,
+                pool,
+                journal_dir,
+                progress,
+                first,
+                nodes.nodes,
+                None if intrusive else runs.values,
             )
         except PcmbError:
             if early is not None:
@@ -770,8 +777,7 @@ class Study:
                     progress,
                     min(wanted, most - first),
                     np.concatenate([nodes.nodes, held_out.germ]),
-                    runs.values,
-                    1,
+                    batch=1,  # drawn: a placed check makes its runs at once
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
@@ -1082,7 +1088,7 @@ class Study:
         progress: bool | None,
         count: int,
         design: NDArray[np.float64],
-        values: Mapping[str, NDArray[np.float64]],
+        values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling),
@@ -1101,7 +1107,7 @@ class Study:
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).
             own = self.design.node_elements >= 0
-            design, values = design[own], {name: y[own] for name, y in values.items()}
+            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
             importance = element_importance(partition, design, values)
             draws, weights = held_out_placed_elements(partition, design, importance, count)
         elif placed:
