@@ -1582,8 +1582,9 @@ class HeldOut:
     weights:
         (K,) importance weights of the draws (:func:`held_out_draws`; 1 when placed).
     placed:
-        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`) rather
-        than being drawn: the check is then :func:`placed_check`.
+        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`, per
+        element :func:`held_out_placed_elements`) rather than being drawn: the check is then
+        :func:`placed_check` (``/validation`` attribute ``placed``).
     """
 
     seed: int
