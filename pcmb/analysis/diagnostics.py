@@ -18,9 +18,10 @@ raises false alarms.
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
-  bars show, and the mean and std those runs correct. A tensor grid of one input places its
-  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes) and
-  compares its mean and std with those of the interpolant through both (:func:`placed_check`).
+  bars show, and the mean and std those runs correct. A grid of one input places its
+  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes; per
+  element, :func:`held_out_placed_elements`) and compares its mean and std with those of the
+  interpolant through both, plus the mean's part beyond its degree (:func:`placed_check`).
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
