@@ -52,6 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
+from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
@@ -86,7 +87,6 @@ __all__ = [
     "range_checks",
     "spectral_decay",
     "statistics_error",
-    "tail_terms",
     "verdict",
 ]
 
@@ -166,25 +166,6 @@ _SHAPE_LAYERS = 3
 
 
 # -- spectral decay ----------------------------------------------------------------------------
-
-
-def tail_terms(multi_index: ArrayLike, depth: int = 2) -> NDArray[np.bool_]:
-    """(S,) the terms of degree >= 2 in the outer ``depth`` layers of an index set.
-
-    α is in the tail when α + depth·e_k leaves the set for some input k that the set varies
-    (largest degree >= 1): for a total set of order P that is |α| >= P - depth + 1, for a
-    tensor set α_k >= P_k - depth + 1 for some k. Terms of total degree 0 and 1 are never in
-    it, so a response linear in its inputs has an empty tail at every order (an order below
-    3 has fewer than two layers above the linear ones).
-    """
-    index = np.asarray(multi_index, dtype=np.int64)
-    present = {tuple(row) for row in index}
-    tail = np.zeros(index.shape[0], dtype=bool)
-    for k in np.flatnonzero(index.max(axis=0) >= 1):
-        shifted = index.copy()
-        shifted[:, k] += depth
-        tail |= np.array([tuple(row) not in present for row in shifted])
-    return tail & (index.sum(axis=1) >= 2)
 
 
 #: The expansions the diagnostics judge: one element, or a multi-element one.
@@ -1483,8 +1464,7 @@ def _cause_remedy(
     tail = tail_terms(index)
     # The two layers before the tail, the linear terms among them up to order 4 (at order 3
     # they are the only layer before it).
-    linear = (index.sum(axis=1) == 1) & (index.max(axis=0)[np.argmax(index, axis=1)] <= 4)
-    before = (tail_terms(index, 4) | linear) & ~tail
+    before = tail_terms(index, 4, lowest=1) & ~tail
     # Each failing time weighs the same: its energies as shares of its own variance.
     energies = _energies(expansion)[:, failing]
     variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
