@@ -501,7 +501,8 @@ def _inspect(path: str) -> str:
         held = (
             f"mean/std error up to {np.nanmax(found.holdout.statistics, initial=0.0):.3g}, "
             f"surrogate error up to {np.nanmax(found.holdout.error, initial=0.0):.3g} "
-            f"({found.holdout.count} held-out runs)"
+            f"({found.holdout.count} {'placed' if result.held_out.placed else 'drawn'} "
+            "held-out runs)"
             if found.holdout is not None
             else "no held-out runs"
         )

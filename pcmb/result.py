@@ -146,8 +146,7 @@ class Refinement:
         (R,) runs made by the end of each round.
     indicator:
         (R,) the estimated error of each round's statistics, relative to the output's largest
-        std (:func:`pcmb.designs.refine.extrapolated_error`; the first round's is its change
-        from the centre run's, at least 1).
+        std (the largest over the inputs of :func:`pcmb.designs.refine.box_errors`).
     """
 
     orders: NDArray[np.int64]

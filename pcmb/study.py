@@ -28,14 +28,17 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
+    ELEMENT_POINTS,
     FIRST_BATCH,
     HELD_OUT_SEED,
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
+    element_importance,
     held_out_budget,
     held_out_draws,
     held_out_placed,
+    held_out_placed_elements,
     more_runs,
     pdf_outside_runs,
 )
@@ -749,7 +752,8 @@ class Study:
                     journal_dir,
                     False if beside else progress,  # no bar beside the phases' lines
                     first,
-                    design=nodes.nodes,
+                    nodes.nodes,
+                    None if intrusive else runs.values,
                 ),
                 beside,
             )
@@ -793,8 +797,8 @@ class Study:
                     journal_dir,
                     progress,
                     min(wanted, most - first),
-                    1,
                     np.concatenate([nodes.nodes, held_out.germ]),
+                    batch=1,  # drawn: a placed check makes its runs at once
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
@@ -1080,10 +1084,20 @@ class Study:
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
         (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
-        input (tensor, ``order: auto``'s, sparse or adaptive; not multi-element), where a
-        random sample wastes the few runs."""
+        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
+        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
+        wastes the few runs."""
         grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
-        return len(self.inputs) == 1 and self.design.record().grid in grids
+        grid = self.design.record().grid
+        if len(self.inputs) != 1 or grid not in (*grids, "element-gauss"):
+            return False
+        if grid != "element-gauss":
+            return True
+        count = self.method.validation
+        if count is None:
+            count = held_out_budget(self.design.node_elements.size)
+        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
+        return count <= np.sum(ELEMENT_POINTS - own)
 
     def _run_held_out(
         self,
@@ -1093,13 +1107,15 @@ class Study:
         journal_dir: Path | None,
         progress: bool | None,
         count: int,
+        design: NDArray[np.float64],
+        values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
-        design: NDArray[np.float64] | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling),
         batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
         germ points ``design`` (the design's nodes, and the earlier batches') where
-        :meth:`places_held_out`, else drawn; journaled in the
+        :meth:`places_held_out` (per element of a multi-element design, where its node
+        ``values`` say it may err most), else drawn; journaled in the
         journal's ``validation`` folder (``validation-<batch>`` after the first), under the
         failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
         leaves them out)."""
@@ -1107,7 +1123,14 @@ class Study:
             return None, ()
         seed = self.method.seed + HELD_OUT_SEED + batch
         placed = self.places_held_out()
-        if placed:
+        partition = getattr(self.design, "partition", None)
+        if placed and partition is not None:
+            # Each element's own nodes (not those of the elements split on the way).
+            own = self.design.node_elements >= 0
+            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
+            importance = element_importance(partition, design, values)
+            draws, weights = held_out_placed_elements(partition, design, importance, count)
+        elif placed:
             # Leja points extending the nodes: with them, a far richer interpolant.
             draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
         else:
