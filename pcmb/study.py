@@ -797,7 +797,7 @@ class Study:
                     journal_dir,
                     progress,
                     min(wanted, most - first),
-                    np.concatenate([nodes.nodes, held_out.germ]),
+                    nodes.nodes,
                     batch=1,  # drawn: a placed check makes its runs at once
                 )
                 held_out = held_out.joined(self._with_derived(more))
@@ -1113,7 +1113,7 @@ class Study:
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling),
         batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
-        germ points ``design`` (the design's nodes, and the earlier batches') where
+        design's nodes ``design`` (germ points) where
         :meth:`places_held_out` (per element of a multi-element design, where its node
         ``values`` say it may err most), else drawn; journaled in the
         journal's ``validation`` folder (``validation-<batch>`` after the first), under the
