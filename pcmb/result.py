@@ -146,8 +146,7 @@ class Refinement:
         (R,) runs made by the end of each round.
     indicator:
         (R,) the estimated error of each round's statistics, relative to the output's largest
-        std (:func:`pcmb.designs.refine.extrapolated_error`; the first round's is its change
-        from the centre run's, at least 1).
+        std (the largest over the inputs of :func:`pcmb.designs.refine.box_errors`).
     """
 
     orders: NDArray[np.int64]
@@ -232,6 +231,16 @@ class ReportFile(Protocol):
 
     def read_points(self, path: str, output: str) -> NDArray[Any] | None:
         """A dataset written by :meth:`points`, with its last axis back for a scalar output."""
+        ...
+
+    def shape(self, path: str) -> tuple[int, ...] | None:
+        """The shape of the dataset at ``path``, without reading it (``None``: none)."""
+        ...
+
+    @property
+    def runs(self) -> bool:
+        """Whether the runs' values are read with the result (not when they exceed the
+        memory available: a streamed study's statistics are then the stored ones)."""
         ...
 
 

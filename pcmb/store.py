@@ -36,6 +36,7 @@ from pcmb.result import (
     WarningRecord,
 )
 from pcmb.run.files import durable_temporary, write_durably
+from pcmb.run.memory import DEFAULT_MEMORY, available_memory, parse_memory
 from pcmb.run.output import write_error
 
 __all__ = [
@@ -355,9 +356,13 @@ class _ReportFile:
     (:class:`pcmb.result.ReportFile`); ``trails``: each output's scale (writing only)."""
 
     def __init__(
-        self, file: h5py.File, trails: Mapping[str, _Trail] | None, scalars: set[str]
+        self,
+        file: h5py.File,
+        trails: Mapping[str, _Trail] | None,
+        scalars: set[str],
+        runs: bool = True,
     ) -> None:
-        self.file, self.trails, self.scalars = file, trails, scalars
+        self.file, self.trails, self.scalars, self.runs = file, trails, scalars, runs
 
     @property
     def outputs(self) -> tuple[str, ...]:
@@ -378,9 +383,22 @@ class _ReportFile:
     def read(self, path: str) -> np.ndarray | None:
         return self.file[path][()] if path in self.file else None
 
+    def shape(self, path: str) -> tuple[int, ...] | None:
+        return self.file[path].shape if path in self.file else None
+
     def read_points(self, path: str, output: str) -> np.ndarray | None:
         found = self.read(path)
         return None if found is None else _columns(found, output in self.scalars)
+
+
+def _runs_fit(file: h5py.File, outputs: Sequence[str]) -> bool:
+    """Whether the runs' values are read with the result: always where an expansion carries
+    the statistics, else while they fit in the default ``execution.memory`` of what is
+    available (a streamed study's may not: its statistics are then the stored ones)."""
+    if any("coefficients" in file["outputs"][name] for name in outputs):
+        return True
+    size = sum(file["outputs"][name]["values"].size for name in outputs) * np.dtype(float).itemsize
+    return size <= parse_memory(DEFAULT_MEMORY).limit(available_memory())
 
 
 def _read_report(file: _ReportFile) -> DesignReport | None:
@@ -729,10 +747,13 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
         outputs = json.loads(_text(file["outputs"].attrs["names"]))
         axes = _read_axes(file, outputs)
         scalars = {name for name, axis in axes.items() if axis is None}
+        runs = _runs_fit(file, outputs)
         for name in outputs:
             group = file["outputs"][name]
             scalar = name in scalars
-            values[name] = _columns(group["values"][()], scalar)
+            stored = group["values"]
+            kept = stored[()] if runs else np.empty((0, *stored.shape[1:]))
+            values[name] = _columns(kept, scalar)
             if "coefficients" in group and index is not None:
                 expansions[name] = _read_expansion(group, index, partition, dists, names, scalar)
             if "nominal" in group:
@@ -762,7 +783,7 @@ def _read(path: str | os.PathLike[str]) -> StudyResult:
             nominal_params=json.loads(_text(file["inputs"].attrs.get("nominal", "{}"))),
             nominal=nominal,
             analysis=_read_analysis(file, outputs, axes),
-            report=_read_report(_ReportFile(file, trails=None, scalars=scalars)),
+            report=_read_report(_ReportFile(file, trails=None, scalars=scalars, runs=runs)),
             diagnostics=diagnostics,
             held_out=held_out,
             processes=_read_processes(file),

@@ -33,6 +33,7 @@ from pcmb.analysis.diagnostics import (
     diagnose_all,
     held_out_budget,
     held_out_draws,
+    held_out_placed,
     more_runs,
     pdf_outside_runs,
 )
@@ -731,7 +732,7 @@ class Study:
                 )
             first, most = self.held_out_runs(nodes.size)
             held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress, first
+                facts, outputs, pool, journal_dir, progress, first, design=nodes.nodes
             )
         except PcmbError:
             if early is not None:
@@ -759,7 +760,14 @@ class Study:
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
             if held_out is not None and min(wanted, most - first) > 0:
                 more, more_failed = self._run_held_out(
-                    facts, outputs, pool, journal_dir, progress, min(wanted, most - first), 1
+                    facts,
+                    outputs,
+                    pool,
+                    journal_dir,
+                    progress,
+                    min(wanted, most - first),
+                    1,
+                    np.concatenate([nodes.nodes, held_out.germ]),
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
@@ -1035,11 +1043,21 @@ class Study:
         """(first batch, most in all) of the held-out runs that check an expansion of
         ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
         at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
-        in all, the rest drawn only where the verdict is undecided."""
+        in all, the rest drawn only where the verdict is undecided; placed runs
+        (:meth:`places_held_out`) all at once, as half of them can call a wrong result
+        reliable (the double well at order 7 with 4)."""
         if self.method.validation is not None:
             return self.method.validation, self.method.validation
         most = held_out_budget(design_runs)
-        return min(FIRST_BATCH, most), most
+        return (most if self.places_held_out() else min(FIRST_BATCH, most)), most
+
+    def places_held_out(self) -> bool:
+        """Whether the held-out runs are placed to extend the design's nodes
+        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
+        input (tensor, ``order: auto``'s, sparse or adaptive; not multi-element), where a
+        random sample wastes the few runs."""
+        grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
+        return len(self.inputs) == 1 and self.design.record().grid in grids
 
     def _run_held_out(
         self,
@@ -1050,19 +1068,27 @@ class Study:
         progress: bool | None,
         count: int,
         batch: int = 0,
+        design: NDArray[np.float64] | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling),
-        batch ``batch`` of the check (seed ``seed + 7919 + batch``), journaled in the
+        batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
+        germ points ``design`` (the design's nodes, and the earlier batches') where
+        :meth:`places_held_out`, else drawn; journaled in the
         journal's ``validation`` folder (``validation-<batch>`` after the first), under the
         failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
         leaves them out)."""
         if not count or self.design.record().basis is None:
             return None, ()
         seed = self.method.seed + HELD_OUT_SEED + batch
-        # A Latin hypercube, normal inputs widened into their tails (weighted back): each
-        # input's range is met evenly, which steadies the estimated errors of the statistics
-        # against a few runs missing where the error sits.
-        draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+        placed = self.places_held_out()
+        if placed:
+            # Leja points extending the nodes: with them, a far richer interpolant.
+            draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
+        else:
+            # A Latin hypercube, normal inputs widened into their tails (weighted back): each
+            # input's range is met evenly, which steadies the estimated errors of the
+            # statistics against a few runs missing where the error sits.
+            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
         folder = None
         if journal_dir is not None:
             folder = journal_dir / ("validation" if batch == 0 else f"validation-{batch}")
@@ -1076,7 +1102,7 @@ class Study:
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         ok = found.status == Status.OK
-        held_out = HeldOut(seed, draws.nodes, draws.params, found.values, ok, weights)
+        held_out = HeldOut(seed, draws.nodes, draws.params, found.values, ok, weights, placed)
         if not found.failures:
             return held_out, ()
         failed = WarningRecord(

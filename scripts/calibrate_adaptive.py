@@ -16,12 +16,13 @@ The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on the rounds 
 genz_oscillatory, otl_circuit, piston, wing_weight and lognormal6; ishigami3 and genz_gaussian
 validate it (g_function is not smooth: the estimate cannot see its kink, the warnings must).
 
+``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
 corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
 then ``max_samples``).
 
     python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--max-runs 6000]
-        [--method adaptive|regression]
+        [--method adaptive|tensor|regression]
 """
 
 from __future__ import annotations
@@ -36,7 +37,16 @@ import pcmb
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.regression import loo_statistics_error
-from pcmb.references import ishigami, ishigami_moments
+from pcmb.references import (
+    ishigami,
+    ishigami_moments,
+    piston_bounds,
+    piston_moments,
+    wing_weight_bounds,
+    wing_weight_moments,
+)
+from pcmb.references import piston as piston_time
+from pcmb.references import wing_weight as wing_weight_lb
 
 Case = tuple[dict, Callable[[np.ndarray], np.ndarray], float, float]
 
@@ -128,47 +138,12 @@ def otl_circuit() -> Case:
 
 def piston() -> Case:
     """The piston's cycle time, 7 uniform inputs."""
-    bounds = {
-        "m": (30, 60),
-        "s": (0.005, 0.020),
-        "v0": (0.002, 0.010),
-        "k": (1000, 5000),
-        "p0": (90000, 110000),
-        "ta": (290, 296),
-        "t0": (340, 360),
-    }
-
-    def cycle(x: np.ndarray) -> np.ndarray:
-        m, s, v0, k, p0, ta, t0 = x.T
-        a = p0 * s + 19.62 * m - k * v0 / s
-        v = s / (2 * k) * (np.sqrt(a**2 + 4 * k * p0 * v0 * ta / t0) - a)
-        return 2 * np.pi * np.sqrt(m / (k + s**2 * p0 * v0 * ta / (t0 * v**2)))
-
-    return _box(bounds), cycle, 0.462496236201101, 0.139500546566524
+    return _box(piston_bounds()), piston_time, *piston_moments()
 
 
 def wing_weight() -> Case:
     """A light aircraft's wing weight, 10 uniform inputs."""
-    bounds = {
-        "sw": (150, 200),
-        "wfw": (220, 300),
-        "a": (6, 10),
-        "sweep": (-10, 10),
-        "q": (16, 45),
-        "taper": (0.5, 1),
-        "tc": (0.08, 0.18),
-        "nz": (2.5, 6),
-        "wdg": (1700, 2500),
-        "wp": (0.025, 0.08),
-    }
-
-    def weight(x: np.ndarray) -> np.ndarray:
-        sw, wfw, a, sweep, q, taper, tc, nz, wdg, wp = x.T
-        cos = np.cos(np.deg2rad(sweep))
-        structure = (a / cos**2) ** 0.6 * q**0.006 * taper**0.04 * (100 * tc / cos) ** -0.3
-        return 0.036 * sw**0.758 * wfw**0.0035 * structure * (nz * wdg) ** 0.49 + sw * wp
-
-    return _box(bounds), weight, 268.075236831743, 48.082494458102
+    return _box(wing_weight_bounds()), wing_weight_lb, *wing_weight_moments()
 
 
 def ishigami3() -> Case:
@@ -199,10 +174,11 @@ CHAOSPY_RUNS = 60000
 
 
 def settings(method: str, inputs: dict, tolerance: float, max_runs: int) -> MethodSettings:
-    """``method``'s settings: kind adaptive, or LARS from 32 Sobol' points on the hyperbolic
-    set of order :data:`REGRESSION_ORDER`, q = 0.75."""
-    if method == "adaptive":
-        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs)
+    """``method``'s settings: kind adaptive (``tensor``: with basis tensor), or LARS from 32
+    Sobol' points on the hyperbolic set of order :data:`REGRESSION_ORDER`, q = 0.75."""
+    if method in ("adaptive", "tensor"):
+        basis = "tensor" if method == "tensor" else None
+        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs, basis=basis)
     orders = (REGRESSION_ORDER,) * len(inputs)
     return MethodSettings(
         "regression", orders=orders, samples=32, q=0.75, tolerance=tolerance, max_samples=max_runs
@@ -230,7 +206,7 @@ def run(
     expansion = recovery.expansions["y"]
     error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
     nonsmooth = [w.message for w in recovery.warnings if w.code == "adaptive-nonsmooth"]
-    if method == "adaptive":
+    if method in ("adaptive", "tensor"):
         estimate = recovery.adaptive.estimate
     else:
         fit = recovery.regression["y"]
@@ -277,7 +253,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="?", default=",".join(CASES))
     parser.add_argument("--max-runs", type=int, default=6000)
-    parser.add_argument("--method", choices=("adaptive", "regression"), default="adaptive")
+    parser.add_argument(
+        "--method", choices=("adaptive", "tensor", "regression"), default="adaptive"
+    )
     args = parser.parse_args()
     print(
         "| function | tolerance | runs | estimate | true error | estimate/true | true/tolerance |"

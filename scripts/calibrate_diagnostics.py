@@ -12,7 +12,8 @@ For each config this runs, through pcmb's public API:
    the *true* error is the larger of the errors of the mean and the std against it, over
    the output's largest std: what the verdict judges;
 3. ``--seeds S`` more held-out checks with other seeds, to show how the verdict varies with
-   the K draws (the min and max of their flags);
+   the K draws (the min and max of their flags); none for a one-input design, whose
+   held-out runs are placed, not drawn (``placed``);
 4. a Monte Carlo twin of 400 runs, on which the surrogate's own pointwise RMS error is
    measured (it bounds the errors of mean and std, and is often much larger).
 
@@ -77,11 +78,12 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
     plain = base.replace(validation=0, nominal_run=False)
     reference = plain.replace(**REFERENCES[case]).run(progress=False)
     pointwise = plain.replace(method="montecarlo", samples=twin, seed=TWIN_SEED).run(progress=False)
-    # As many runs as the config's own check may make at most.
+    # As many runs as the config's own check may make at most; a one-input design's
+    # held-out runs are placed, not drawn, so other seeds would give the same check.
     _, most = base.held_out_runs(base.node_set().size)
     checks = [
         plain.replace(method="lhs", samples=most, seed=SEEDS + k).run(progress=False)
-        for k in range(seeds)
+        for k in range(0 if base.places_held_out() else seeds)
     ]
     rows = []
     for order in (None, *ORDERS.get(case, ())):
@@ -115,6 +117,7 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
             shift = 100 * (found.failing_from - true_from) / horizon
             flagged = [f for f in others if not np.isnan(f)]
             span = f"{min(flagged):.3g}–{max(flagged):.3g}" if flagged else "never"
+            span = span if checks else "placed"
             label = result.design.label if order is None else f"order {order}"
             rows.append(
                 f"{case:15s} {label:22s} {name:10s} {found.failing_from:8.4g} {true_from:8.4g} "

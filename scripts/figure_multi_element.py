@@ -47,12 +47,19 @@ def main(path: str) -> None:
         "two elements at 0 (order N/2 - 1)": [
             errors(order=n // 2 - 1, elements={"x0": [0.0]}) for n in range(4, 129, 4)
         ],
-        "auto, order 3 (max_elements 2..32)": [
-            errors(order=3, elements="auto", max_elements=m) for m in (2, 4, 8, 16, 32)
-        ],
-        "auto, order 5 (max_elements 2..16)": [
-            errors(order=5, elements="auto", max_elements=m) for m in (2, 4, 8, 16)
-        ],
+        **{
+            f"auto, order {order} (diagnostics.tolerance 1e-1..1e-6)": [
+                errors(
+                    order=order,
+                    elements="auto",
+                    max_elements=64,
+                    diagnostics_tolerance=10.0**-k,
+                    validation=0,
+                )
+                for k in range(1, 7)
+            ]
+            for order in (3, 5)
+        },
     }
     figure, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for label, rows in cases.items():

@@ -202,6 +202,33 @@ def test_a_package_entry_reports_the_modules_it_loaded_from_its_folder_tree(
     )
 
 
+def test_a_models_files_do_not_include_another_models_loaded_in_the_same_process(
+    tmp_path: Path,
+) -> None:
+    """A notebook or a warm worker that built another model of the same folder first must
+    not count that model's modules: the journal would then differ from a fresh process's,
+    and a resume be refused as "changed"."""
+    from pcmb.adapters.python.model import PythonModelFactory
+
+    stem = f"sibling_{tmp_path.name.replace('-', '_')}"  # fresh module names in this process
+    (tmp_path / f"{stem}_helper.py").write_text("SCALE = 2.0\n")
+    (tmp_path / f"{stem}_other.py").write_text("OFFSET = 1.0\n")
+    (tmp_path / "first.py").write_text(
+        f"import pcmb\nimport {stem}_helper\n\n\n@pcmb.pointwise(outputs=('y',))\n"
+        f"def line(params, times):\n    return {{'y': {stem}_helper.SCALE * times}}\n"
+    )
+    (tmp_path / "second.py").write_text(
+        f"import pcmb\nfrom {stem}_other import OFFSET\n\n\n@pcmb.pointwise(outputs=('y',))\n"
+        "def line(params, times):\n    return {'y': times + OFFSET}\n"
+    )
+    first = PythonModelFactory("first.py:line", tmp_path, {})
+    second = PythonModelFactory("second.py:line", tmp_path, {})
+    first()
+    alone = first.loaded_files()
+    second()
+    assert first.loaded_files() == alone == [tmp_path / "first.py", tmp_path / f"{stem}_helper.py"]
+
+
 @pytest.mark.parametrize("kind", ["python", "command", "mujoco", "fmu"])
 def test_every_adapter_declares_the_files_its_model_reads(
     kind: str, oscillator_fmu: Path, tmp_path: Path

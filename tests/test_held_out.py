@@ -14,7 +14,13 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.analysis.diagnostics import held_out_draws, holdout_error, verdict
+from pcmb.analysis.diagnostics import (
+    held_out_draws,
+    held_out_placed,
+    holdout_error,
+    placed_check,
+    verdict,
+)
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
 from pcmb.references import bouncing_ball, double_well, lognormal_moments
@@ -195,7 +201,9 @@ def test_a_failing_expansion_is_still_flagged_near_its_true_crossing():
 
 def test_an_undecided_check_says_how_many_runs_would_decide():
     times = np.linspace(0.0, 4.0, 81)
-    result = _run(well, {"x0": pcmb.Uniform(-0.625, 0.375)}, times, order=3)
+    # An input the response ignores: two inputs, so the 8 runs are drawn, not placed.
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375), "u": pcmb.Uniform(0.0, 1.0)}
+    result = _run(well, inputs, times, order=3)
     found = result.diagnostics["x"]
     assert found.reliable and found.undecided.any()
     (record,) = [w for w in result.warnings if w.code == "chaos-undecided"]
@@ -208,7 +216,7 @@ def test_an_undecided_check_says_how_many_runs_would_decide():
 
 def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
     # x = exp(z t / 2) at Hermite order 4 (5 runs): its std passes 5 % of the largest at
-    # t = 3.60 (closed form). Its 8 held-out runs, drawn into the tails and weighted back,
+    # t = 3.60 (closed form). Its 8 held-out runs, placed (Leja points reaching the tails),
     # flag it or call it undecided from then on (within 5 % of the horizon), with every seed.
     times = np.linspace(0.0, 5.0, 201)
     mean, std = lognormal_moments(0.5 * times)
@@ -225,3 +233,55 @@ def test_a_lognormal_response_is_never_called_reliable_past_its_true_crossing():
         assert not found.failing_from < crossing - 0.05 * times[-1], seed  # no false alarm
         # The point estimate itself crosses within 5 % of the horizon of the truth.
         assert abs(verdict(times, found.estimate, 0.05) - crossing) <= 0.05 * times[-1], seed
+
+
+# -- a one-input design checked by points placed to extend it -----------------------------------
+
+
+@pytest.mark.parametrize(
+    ("model", "inputs", "order", "stop", "crossing", "within"),
+    [
+        (lognormal, {"z": pcmb.Normal(0.0, 1.0)}, 4, 5.0, 3.60, 0.25),
+        (well, {"x0": pcmb.Uniform(-0.625, 0.375)}, 3, 4.0, 2.16, 0.2),
+    ],
+)
+def test_the_default_check_of_a_one_input_design_flags_on_time(
+    model, inputs, order, stop, crossing, within
+):
+    # The true crossings: the lognormal's std by its closed form (asserted above), the
+    # well's mean by a 4000-point Gauss rule of its closed form (issue 23's table).
+    times = np.linspace(0.0, stop, 201)
+    for seed in range(5):
+        result = _run(model, inputs, times, order=order, seed=seed)
+        found = result.diagnostics[model.outputs[0]]
+        assert abs(found.failing_from - crossing) <= within, seed
+        assert result.held_out.ok.size <= 8
+
+
+def test_a_one_input_design_places_its_whole_check_at_once():
+    times = np.linspace(0.0, 1.0, 3)
+    one = pcmb.Study(lognormal, {"z": pcmb.Normal(0.0, 1.0)}, times, order=39)
+    assert one.places_held_out() and one.held_out_runs(40) == (10, 10)
+    two = {"z": pcmb.Normal(0.0, 1.0), "u": pcmb.Uniform(0.0, 1.0)}
+    assert pcmb.Study(lognormal, two, times, order=39).held_out_runs(1600) == (8, 400)
+    # The seed moves drawn runs, not placed ones.
+    placed = [_run(well, {"x0": pcmb.Uniform(-1, 1)}, times, order=3, seed=s) for s in (0, 1)]
+    assert np.array_equal(placed[0].held_out.germ, placed[1].held_out.germ)
+
+
+def test_placed_runs_make_the_interpolant_exact_for_a_polynomial_of_their_degree():
+    # z⁶ at Hermite order 2 (3 nodes): mean 15 and std √(10395 - 225) (normal moments), which
+    # nodes and 8 placed runs, a polynomial of degree 10, reproduce to round-off.
+    grid = TensorGrid((pcmb.Normal(0.0, 1.0),), (2,))
+    values = grid.nodes**6
+    basis = grid.distributions[0].family.evaluate(grid.nodes[:, 0], 2)
+    expansion = pcmb.ChaosExpansion(
+        basis.T @ (grid.weights[:, None] * values), [[0], [1], [2]], grid.distributions
+    )
+    draws, weights = held_out_placed(grid.distributions[0], grid.nodes, 8)
+    assert np.all(weights == 1) and not np.isin(draws.nodes, grid.nodes).any()
+    found = placed_check(expansion, grid.nodes, values, draws.nodes, draws.nodes**6, 1.0)
+    assert found.corrected_mean[0] == pytest.approx(15.0, rel=1e-9)
+    assert found.corrected_std[0] == pytest.approx(np.sqrt(10395.0 - 225.0), rel=1e-9)
+    assert found.mean_error[0] == pytest.approx(abs(15.0 - expansion.mean()[0]), rel=1e-9)
+    assert found.spread[0] < 1e-6  # nothing moves without the last two: exact already

@@ -229,7 +229,8 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
     the square root of the runs: at 1000 the smallest (the distribution's) is about 6.5.
 
     The paper's order 3 (4 runs) is far outside them: x1(6 s) has 13 extrema in I, which a
-    cubic cannot follow. The remedy the tool leads to, ``elements: auto`` at order 5, agrees
+    cubic cannot follow. The remedy the tool leads to, ``elements: auto`` at order 3, asked
+    for 1 % of the largest std (below the 1.7 % by which 2000 Monte Carlo runs err), agrees
     within 3 standard errors for the mean and the std and within the 99 % two-sample
     Kolmogorov–Smirnov distance for the distribution.
     """
@@ -243,7 +244,7 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
         # All runs in one stacked solve: its per-step overhead once, not once per 128 runs.
         carlo = study.replace(method="montecarlo", samples=runs, seed=1, chunk_size=runs).run()
         paper = study.run()
-        remedy = study.replace(order=5, elements="auto").run()
+        remedy = study.replace(elements="auto", diagnostics_tolerance=0.01).run()
     sampled = carlo.values["x1"][carlo.ok][:, -1]
     std = sampled.std(ddof=1)
     kurtosis = np.mean((sampled - sampled.mean()) ** 4) / sampled.var() ** 2

@@ -123,7 +123,14 @@ def test_auto_finds_the_split_near_zero_and_beats_one_element():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
         auto = pcmb.Study(
-            DoubleWell, X0, TIMES, backend="inprocess", order=3, elements="auto", max_elements=8
+            DoubleWell,
+            X0,
+            TIMES,
+            backend="inprocess",
+            order=3,
+            elements="auto",
+            max_elements=8,
+            diagnostics_tolerance=1e-3,  # 0.05 is met by 3 elements (true error 1.4 %)
         ).run()
         one = pcmb.Study(
             DoubleWell, X0, TIMES, backend="inprocess", order=auto.n_nodes - 1, elements={}

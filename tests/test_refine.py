@@ -58,7 +58,7 @@ def _error(result, mean, std) -> float:
 
 @pytest.mark.parametrize(
     ("high", "c", "tolerance", "rounds"),
-    [(1.0, 0.2, 0.05, 2), (6.0, 0.5, 0.05, 2), (6.0, 0.5, 1e-3, 3)],
+    [(1.0, 0.2, 0.05, 1), (6.0, 0.5, 0.05, 2), (6.0, 0.5, 1e-6, 3)],
 )
 def test_smooth_responses_stop_once_the_estimate_meets_the_tolerance(
     tmp_path, high, c, tolerance, rounds
@@ -79,12 +79,19 @@ def test_smooth_responses_stop_once_the_estimate_meets_the_tolerance(
     points = {1: (3, 3), 2: (7, 9), 3: (15, 19)}
     degrees = {1: (2, 2), 2: (5, 7), 3: (11, 14)}
     assert result.design.orders == degrees[rounds]
-    label = f"chaos orders {'x'.join(map(str, degrees[rounds]))} (order auto to {tolerance:g}, "
-    assert result.design.label == label + f"{result.n_nodes} runs)"
+    label = f" (order auto to {tolerance:g}, {result.n_nodes} runs)"
+    assert result.design.label.startswith("chaos order") and result.design.label.endswith(label)
     np.testing.assert_array_equal(history.orders, [degrees[k] for k in range(1, rounds + 1)])
     assert history.indicator[-1] < tolerance and np.all(history.indicator[1:-1] >= tolerance)
     assert not [w for w in result.warnings if w.code == "order-budget"]
-    assert _error(result, mean, std) < tolerance
+    # Honest: the estimate is never 10x below the true error, and the first round may stop
+    # (9 runs where it never did: 63 runs for an error of 2e-13 at tolerance 0.05). Within
+    # 10x of it but where exp(6 a t)'s coefficients fall faster than geometrically, which the
+    # estimate, carrying the observed decay on, does not assume: 50x careful at level 2.
+    error = _error(result, mean, std)
+    assert error < tolerance and error <= 10 * history.indicator[-1]
+    if high == 1.0:
+        assert history.indicator[-1] <= 10 * error
     # The grids are nested: each round runs only its new nodes, and every run is used.
     np.testing.assert_array_equal(history.runs, [np.prod(points[k]) for k in range(1, rounds + 1)])
     assert result.n_nodes == history.runs[-1] == result.design.samples
@@ -133,7 +140,7 @@ def test_max_runs_ends_the_rounds():
         max_runs=100,
         backend="inprocess",
         validation=0,
-        diagnostics_tolerance=1e-3,
+        diagnostics_tolerance=1e-6,
     )
     with pytest.warns(pcmb.PcmbWarning, match="order-budget"):
         result = study.run()
@@ -148,13 +155,28 @@ def test_max_runs_ends_the_rounds():
     [
         ({"kind": "regression", "samples": 32}, "method.order"),
         ({"kind": "collocation", "elements": {"a": [0.5]}}, "method.order"),
-        ({"kind": "collocation", "max_runs": 62}, "method.max_runs"),  # levels 1, 2: 63 runs
+        ({"kind": "collocation", "max_runs": 8}, "method.max_runs"),  # level 1: 9 runs
         ({"kind": "collocation", "tolerance": 0.01}, "method.tolerance"),
     ],
 )
 def test_unusable_settings_name_their_key(settings, key):
     with pytest.raises(ValueError, match=rf"^{key}:"):
         make_design(INPUTS, MethodSettings(orders="auto", diagnostics_tolerance=0.05, **settings))
+
+
+@pytest.mark.parametrize(("inputs", "allowed"), [(3, True), (5, False)])
+def test_the_smallest_budget_is_the_first_round(inputs, allowed):
+    """max_runs 125 (a sweep's first value) allows 3 inputs (level 1: 27 runs; levels 1 and 2,
+    343 runs, were required), not 5 (243 runs), refused at the key."""
+    names = {f"x{k}": pcmb.Uniform(0.0, 1.0) for k in range(inputs)}
+    settings = MethodSettings(
+        "collocation", orders="auto", diagnostics_tolerance=0.05, max_runs=125
+    )
+    if allowed:
+        assert make_design(names, settings).runs == 27
+    else:
+        with pytest.raises(ValueError, match=r"^method.max_runs: .*level 1 .* 243 runs"):
+            make_design(names, settings)
 
 
 def test_a_study_with_an_unknown_order_names_it():

@@ -227,6 +227,25 @@ def test_a_study_over_its_memory_streams_and_gives_the_same_statistics(
     np.testing.assert_array_equal(written.status, held.status)
 
 
+def test_a_file_whose_runs_exceed_the_memory_is_read_without_them(
+    tmp_path: Path, held: pcmb.StudyResult, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A streamed file read back on a machine with less memory than its runs take: the
+    statistics from the file, as the streamed result had them, and no run held."""
+    output = tmp_path / "streamed.h5"
+    streamed = _study(memory=ALL_IN_RESERVOIR).run(output)
+    runs_bytes = SAMPLES * TIMES.size * 2 * 8
+    monkeypatch.setattr("pcmb.store.available_memory", lambda: runs_bytes)  # 80 %: too little
+    read = load(output)
+    for name in ("x", "v"):
+        assert read.values[name].shape == (0, TIMES.size)
+        np.testing.assert_array_equal(read.mean(name), streamed.mean(name))
+        np.testing.assert_array_equal(read.std(name), streamed.std(name))
+    np.testing.assert_array_equal(read.status, held.status)
+    monkeypatch.setattr("pcmb.store.available_memory", lambda: 2 * runs_bytes)  # it fits
+    np.testing.assert_array_equal(load(output).values["x"], held.values["x"])
+
+
 def test_a_streamed_study_with_a_small_reservoir_keeps_quantiles_within_their_accuracy(
     tmp_path: Path, held: pcmb.StudyResult
 ) -> None:

@@ -429,3 +429,11 @@ def test_the_default_sweep_of_every_method_is_made_of_valid_method_blocks(method
     for block in [*found["methods"], found["reference"]]:
         values = {k: v[0] if isinstance(v, list) else v for k, v in block.items()}
         method_section(values)
+
+
+def test_the_default_sweep_of_order_auto_starts_at_its_first_round():
+    """order: auto's budgets rise from 1/8 of max_runs, but never below its first round (3^5 =
+    243 runs for 5 inputs): a budget below it is refused."""
+    found = default_sweep(method_section({"kind": "collocation", "order": "auto"}), 243)
+    (swept,) = [block for block in found["methods"] if block["kind"] == "collocation"]
+    assert min(swept["max_runs"]) == 243 and max(swept["max_runs"]) == 1000

@@ -18,7 +18,9 @@ raises false alarms.
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
-  bars show, and the mean and std those runs correct.
+  bars show, and the mean and std those runs correct. A tensor grid of one input places its
+  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes) and
+  compares its mean and std with those of the interpolant through both (:func:`placed_check`).
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
@@ -52,8 +54,9 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nested import leja_sequence
 from pcmb.chaos.nodes import NodeSet, draw_germs, random_nodes
-from pcmb.chaos.polynomials import Hermite
+from pcmb.chaos.polynomials import Hermite, OrthonormalFamily
 from pcmb.result import StudyResult, WarningRecord
 from pcmb.wording import plural
 
@@ -69,10 +72,12 @@ __all__ = [
     "diagnose_all",
     "held_out_budget",
     "held_out_draws",
+    "held_out_placed",
     "holdout_error",
     "more_runs",
     "out_of_range",
     "pdf_outside_runs",
+    "placed_check",
     "range_checks",
     "spectral_decay",
     "statistics_error",
@@ -100,6 +105,10 @@ FIRST_BATCH = 8
 #: The fewest held-out runs whose standard error is read from neighbouring pairs
 #: (:func:`_standard_error`); fewer are taken as independent draws.
 PAIRED_FROM = 16
+#: A placed check's noise: how far its richer surrogate's statistics move without its last
+#: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
+#: the centre.
+PLACED_SPARE = 2
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
@@ -130,8 +139,8 @@ _ROUND_OFF = 1e-12
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
 _GROWTH = 2.0
-#: A tail holding between this share and all of the energy of the two layers before it
-#: decays algebraically, as the spectrum of a jump: the response is steep there.
+#: A tail holding at least this share of the energy of the two layers before it does not
+#: decay as an analytic response's does, over the degrees the expansion has.
 _FLAT = 0.5
 #: The remedy reads the decay along every input holding at least this share of the tail.
 _SHARED = 0.25
@@ -243,6 +252,20 @@ def held_out_draws(
     z = germ[:, normal]
     log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
     return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+
+
+def held_out_placed(
+    distribution: Distribution, design_germ: ArrayLike, count: int
+) -> tuple[NodeSet, NDArray[np.float64]]:
+    """``count`` held-out inputs of a one-input design placed, not drawn: the weighted Leja
+    points that extend its (N,) germ nodes (``design_germ``; with earlier held-out points
+    after them, the points that extend those), so that nodes and held-out runs together
+    interpolate the response far better than the nodes alone (:func:`placed_check`). The
+    weights are 1: the points are not a sample."""
+    start = np.asarray(design_germ, dtype=float).ravel()
+    germ = leja_sequence(distribution.family, tuple(start), start.size + count)[start.size :]
+    params = distribution.to_physical(germ)
+    return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
 
 
 @dataclass(frozen=True)
@@ -499,6 +522,83 @@ def holdout_error(
     )
 
 
+def _interpolated(
+    family: OrthonormalFamily, germ: NDArray[np.float64], values: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M, T) coefficients of the polynomial of degree M - 1 through M runs of one input,
+    in its orthonormal basis: its mean is the first, its variance the sum of the others'
+    squares. Each row is scaled by √(germ density), as the weighted Leja points are chosen:
+    the same solution, but well conditioned (at 67 Hermite points: 10, not 10³⁰)."""
+    root = np.sqrt(family.germ.pdf(germ))[:, None]
+    return np.linalg.solve(root * family.evaluate(germ, germ.size - 1), root * values)
+
+
+def placed_check(
+    expansion: ChaosExpansion,
+    node_germ: ArrayLike,
+    node_values: ArrayLike,
+    germ: ArrayLike,
+    observed: ArrayLike,
+    scale: float,
+    confidence: float = CONFIDENCE,
+) -> HeldOutCheck:
+    """The held-out check of a one-input expansion by K runs placed to extend its N nodes
+    (:func:`held_out_placed`).
+
+    Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
+    orthonormal basis, a far richer surrogate than the expansion (Leja points keep the
+    interpolation well conditioned); its mean and std (exact: c_0 and √Σ_{i>=1} c_i²) are
+    the corrected mean and std, and their differences from the expansion's the estimated
+    errors. Their standard error is how far the richer surrogate's mean and std move when
+    its last ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than
+    that); the surrogate error is the L2 distance of the two surrogates (their coefficients'
+    difference), its upper bound that plus how far it moves. Runs that are not finite are
+    left out; zeros if the scale is zero.
+    """
+    observed = np.atleast_2d(np.asarray(observed, dtype=float))
+    kept = np.isfinite(observed).all(axis=1)
+    count = int(kept.sum())
+    mean, std = expansion.mean(), expansion.std()
+    if not scale > 0 or not np.isfinite(scale):
+        zeros = np.zeros(observed.shape[1:])
+        return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
+    runs = np.isfinite(np.asarray(node_values, dtype=float)).all(axis=1)
+    points = np.concatenate([np.ravel(node_germ)[runs], np.ravel(germ)[kept]])
+    values = np.vstack([np.asarray(node_values, dtype=float)[runs], observed[kept]]) / scale
+    family = expansion.distributions[0].family
+    index = expansion.multi_index[:, 0]
+    own = np.zeros((max(points.size, int(index.max()) + 1), values.shape[1]))
+    own[index] = expansion.coefficients / scale
+
+    def moments(size: int) -> tuple[NDArray, NDArray, NDArray]:
+        coefficients = _interpolated(family, points[:size], values[:size])
+        variance = np.sum(coefficients[1:] ** 2, axis=0)
+        missed = np.sum((coefficients - own[:size]) ** 2, axis=0)
+        error = np.sqrt(missed + np.sum(own[size:] ** 2, axis=0))
+        return coefficients[0], np.sqrt(variance), error
+
+    rich_mean, rich_std, error = moments(points.size)
+    if count > PLACED_SPARE:
+        fewer_mean, fewer_std, fewer_error = moments(points.size - PLACED_SPARE)
+        mean_se, std_se = np.abs(rich_mean - fewer_mean), np.abs(rich_std - fewer_std)
+        moved = np.abs(error - fewer_error)
+    else:
+        mean_se = std_se = moved = np.full(values.shape[1], np.inf)
+    return HeldOutCheck(
+        error,
+        error + moved,
+        np.abs(rich_mean - mean / scale),
+        np.abs(rich_std - std / scale),
+        np.fmax(mean_se, std_se),
+        rich_mean * scale,
+        rich_std * scale,
+        mean_se * scale,
+        std_se * scale,
+        count,
+        confidence,
+    )
+
+
 # -- range checks ------------------------------------------------------------------------------
 
 
@@ -523,6 +623,18 @@ def out_of_range(
     also held to be non-negative: draws below 0 by more than ``RANGE_BELOW_ZERO`` times the
     range count too.
     """
+    return _outside_sides(expansion, node_values, draws, seed, node_germ, margin).sum(axis=0)
+
+
+def _outside_sides(
+    expansion: Expansion,
+    node_values: ArrayLike,
+    draws: int,
+    seed: int,
+    node_germ: ArrayLike | None,
+    margin: float,
+) -> NDArray[np.float64]:
+    """(2, T) the shares of :func:`out_of_range` below and above the runs' range."""
     values = np.asarray(node_values, dtype=float)
     low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
     reach = margin * (high - low)
@@ -534,17 +646,17 @@ def out_of_range(
         box = np.asarray(node_germ, dtype=float)
         germ = germ[np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)]
     if germ.shape[0] == 0:
-        return np.zeros(values.shape[1])
+        return np.zeros((2, values.shape[1]))
     samples = expansion.evaluate_germ(germ)
-    outside = (samples < floor) | (samples > high + reach)
-    return np.where(expansion.varies() & (high > low), outside.mean(axis=0), 0.0)
+    sides = np.stack([(samples < floor).mean(axis=0), (samples > high + reach).mean(axis=0)])
+    return np.where(expansion.varies() & (high > low), sides, 0.0)
 
 
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
     """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate at one of
-    ``analysis.pdf_times`` with more than ``RANGE_SHARE`` of its mass beyond the range of
-    every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range,
-    among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
+    ``analysis.pdf_times`` with more of its mass than :func:`_pdf_allowance` on one side beyond
+    the range of every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of
+    that range, among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
     analysis, ok = result.analysis, result.ok
     if analysis is None or not ok.any():
         return ()
@@ -560,11 +672,15 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         made = _finite_rows(np.vstack(runs))
         at = analysis.outputs[name].pdf.at
         points = nearest_indices(result.grid(name), at)
-        share = out_of_range(expansion, made, node_germ=result.germ[ok], margin=PDF_MARGIN)
+        sides = _outside_sides(
+            expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
+        )
+        share = sides.sum(axis=0)
+        allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
         where = "" if axis is None else f"{axis.name} = "
         for t, k in zip(at, points, strict=True):
-            if share[k] <= RANGE_SHARE:
+            if sides[:, k].max() <= allowed:
                 continue
             records.append(
                 WarningRecord(
@@ -579,6 +695,13 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                 )
             )
     return tuple(records)
+
+
+def _pdf_allowance(runs: int) -> float:
+    """The share of a PDF's mass on one side beyond the range of ``runs`` runs that is not
+    noted: ``RANGE_SHARE`` plus 1/(runs + 1), the mass a correct PDF leaves beyond the largest
+    of ``runs`` exchangeable draws of its output on average."""
+    return RANGE_SHARE + 1.0 / (runs + 1)
 
 
 def range_checks(
@@ -756,6 +879,7 @@ def diagnose(
     budgets: Collection[str] = (),
     holdout_germ: ArrayLike | None = None,
     weights: ArrayLike | None = None,
+    placed: bool = False,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -795,6 +919,9 @@ def diagnose(
         standard errors (:func:`_standard_error`; default: taken as independent draws).
     weights:
         (K,) importance weights of the held-out runs (:func:`held_out_draws`; default: 1).
+    placed:
+        Whether the held-out runs extend the nodes of a one-input expansion
+        (:func:`held_out_placed`): judged by :func:`placed_check` instead.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -813,7 +940,9 @@ def diagnose(
             scale = size * float(np.max(np.std(observed / size, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
-    if holdout is not None:
+    if holdout is not None and placed:
+        checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
+    elif holdout is not None:
         checked = holdout_error(
             *holdout, expansion.mean(), std, scale, weights=weights, germ=holdout_germ
         )
@@ -1166,14 +1295,19 @@ def _cause_remedy(
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`_error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
-      around a jump or kink; else steep or discontinuous when the spectrum decays slowly (the
-      outer two layers hold between half and all of the energy of the two before them) or,
-      below order 4, the surrogate overshoots the runs — multi-element chaos; otherwise a
-      higher order. The message says that the order was too low to tell.
+      around a jump or kink; else, with the error over the range, steep, oscillating or
+      discontinuous when the spectrum does not decay (the outer two layers hold at least
+      half the energy of the layers before them, the linear ones at order 3, the response's
+      structure still rising at the top degree when they hold more) or, below order 3, the
+      surrogate overshoots the runs — multi-element chaos; otherwise a higher order. The
+      message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
-    before = tail_terms(index, 4) & ~tail
+    # The two layers before the tail, the linear terms among them up to order 4 (at order 3
+    # they are the only layer before it).
+    linear = (index.sum(axis=1) == 1) & (index.max(axis=0)[np.argmax(index, axis=1)] <= 4)
+    before = (tail_terms(index, 4) | linear) & ~tail
     # Each failing time weighs the same: its energies as shares of its own variance.
     energies = _energies(expansion)[:, failing]
     variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
@@ -1220,7 +1354,6 @@ def _cause_remedy(
         f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
         "to tell a jump or kink from a slowly converging smooth response by it"
     )
-    cause = f"the response is steep or discontinuous in {name}{unknown}"
     previous = energy[before].sum()
     if place and ends[top] >= _AT_ENDS:
         return (
@@ -1237,12 +1370,23 @@ def _cause_remedy(
             f"jump, kink or steep front there{unknown}",
         )
     if previous > 0:
-        steep = _FLAT <= energy[tail].sum() / previous <= 1.0
-    else:  # an order below 4: too few layers to see a decay, the overshoot tells
+        ratio = energy[tail].sum() / previous
+        steep = ratio >= _FLAT
+        read = (
+            f"the outer two layers of its spectrum hold {ratio:.2g} times the energy of the "
+            "layers before them"
+        )
+    else:  # order 2: no layer before the tail, the overshoot tells
         steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
+        read = f"the surrogate {'leaves' if steep else 'stays within'} the runs' range"
     if not steep:
-        return "order", name, f"its spectrum decays slowly{unknown}"
-    return "elements", name, cause
+        return "order", name, f"{read}: a smooth response converging slowly{unknown}"
+    spread = ", with the surrogate's error over the range, not at its ends" if place else ""
+    return (
+        "elements",
+        name,
+        f"the response is steep, oscillating or discontinuous in {name}: {read}{spread}{unknown}",
+    )
 
 
 @dataclass(frozen=True)
@@ -1260,7 +1404,10 @@ class HeldOut:
     ok:
         (K,) which runs succeeded.
     weights:
-        (K,) importance weights of the draws (:func:`held_out_draws`).
+        (K,) importance weights of the draws (:func:`held_out_draws`; 1 when placed).
+    placed:
+        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`) rather
+        than being drawn: the check is then :func:`placed_check`.
     """
 
     seed: int
@@ -1269,6 +1416,7 @@ class HeldOut:
     values: dict[str, NDArray[np.float64]]
     ok: NDArray[np.bool_]
     weights: NDArray[np.float64]
+    placed: bool = False
 
     def joined(self, more: HeldOut) -> HeldOut:
         """These runs followed by ``more`` (a later batch of the same check; the seed is the
@@ -1280,6 +1428,7 @@ class HeldOut:
             {name: np.concatenate([v, more.values[name]]) for name, v in self.values.items()},
             np.concatenate([self.ok, more.ok]),
             np.concatenate([self.weights, more.weights]),
+            self.placed,
         )
 
 
@@ -1329,5 +1478,6 @@ def diagnose_all(
             budgets,
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
+            held_out is not None and held_out.placed,
         )
     return found

@@ -65,6 +65,7 @@ __all__ = [
     "NestedRule",
     "gauss_patterson",
     "genz_keister",
+    "leja_sequence",
     "nested_rule",
 ]
 
@@ -273,7 +274,7 @@ class LejaContinued(NestedRule):
         if count <= base.size:
             return base[:count]
         total = self.size(self.max_level)
-        return _leja_sequence(self.family, tuple(base), total)[:count]
+        return leja_sequence(self.family, tuple(base), total)[:count]
 
 
 @dataclass(frozen=True)
@@ -298,7 +299,7 @@ class Leja(NestedRule):
         return 2 * level
 
     def _sequence(self, count: int) -> NDArray[np.float64]:
-        return _leja_sequence(self.family, (), LEJA_POINTS)[:count]
+        return leja_sequence(self.family, (), LEJA_POINTS)[:count]
 
 
 def nested_rule(family: OrthonormalFamily, rule: str = "auto", level: int = 0) -> NestedRule:
@@ -429,7 +430,7 @@ def _polish(
 
 
 @cache
-def _leja_sequence(
+def leja_sequence(
     family: OrthonormalFamily, start: tuple[float, ...], count: int
 ) -> NDArray[np.float64]:
     """``count`` weighted Leja points of a family (see the module notes): ``start``, then the

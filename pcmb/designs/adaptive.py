@@ -16,13 +16,14 @@ statistics' on smooth functions, so they only mark. After round k, d_k is the la
 over outputs and times, of the mean and std that the active indices make (the whole grid
 against the grid of the refined indices, whose nodes it holds), relative to the largest std:
 the error of the coarser grid. A lucky small change is not believed, g_k = max(d_k, the
-median of d_{k-2}, d_{k-1}, d_k), and the whole grid is a round ahead of the refined one, so
-the estimate is g_k ρ_k with ρ_k = min(1, √(g_k / g_{k-2})) the observed reduction per round
-(:func:`estimated_error`). Measured by ``scripts/calibrate_adaptive.py`` (chosen on the
-rounds of exp8, genz_oscillatory, OTL circuit, Piston, Wing weight and lognormal6), it lies
-within 10x of the true error on smooth functions but where the true error itself dips by
-luck. It assumes a smooth response: where an input's axis surpluses fall like a power of the
-degree (a kink, or a peak not yet resolved) an ``adaptive-nonsmooth`` warning names it.
+median of d_{k-2}, d_{k-1}, d_k), and the whole grid is about :data:`ROUNDS_AHEAD` rounds
+ahead of the refined one, so the estimate is g_k ρ_k² with ρ_k = min(1, √(g_k / g_{k-2})) the
+observed reduction per round (:func:`estimated_error`). Chosen once on the stopping rounds of
+OTL circuit, Piston, Wing weight, lognormal6, exp8 and genz_oscillatory together
+(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), it lies within 10x of the true
+error there but where the true error wanders by luck. It assumes a smooth response: where an
+input's axis surpluses fall like a power of the degree no faster than a kink's (a jump or a
+kink) an ``adaptive-nonsmooth`` warning names it.
 """
 
 from __future__ import annotations
@@ -54,6 +55,15 @@ BULK = 0.5
 BLIND = 1e-12
 #: Indicator below which a surplus is too near round-off to tell how it decays.
 ROUND_OFF = 1e-10
+#: Steepest algebraic decay p^-a of the axis surpluses that a kink or jump gives: the
+#: surpluses' norm falls like p^-1/2 across a jump, p^-3/2 across a kink (the G-function's
+#: measured 1.45); an analytic response not yet in its geometric regime may also fall steadily
+#: over three levels, but steeper (Piston p^-3.9, Wing weight p^-6 and steeper).
+NONSMOOTH_DECAY = 2.5
+#: Rounds the whole grid is ahead of the grid of its refined indices, whose difference the
+#: estimate extrapolates: measured (``scripts/calibrate_adaptive.py``), the true error of the
+#: whole grid is about d_k ρ² on the smooth functions there.
+ROUNDS_AHEAD = 2
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 
@@ -283,7 +293,8 @@ class AdaptiveCollocation(GrowingGrid):
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
         spectrum) rather than geometrically (like e^-cp, an analytic response's), with a: over
-        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c."""
+        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c and at most
+        :data:`NONSMOOTH_DECAY`."""
         position = {level: k for k, level in enumerate(self._index)}
         found = []
         for k, (name, rule) in enumerate(zip(self.names, self.rules, strict=True)):
@@ -300,7 +311,11 @@ class AdaptiveCollocation(GrowingGrid):
             degree, norm = np.log(np.array(points, dtype=float)).T
             algebraic = -np.diff(norm) / np.diff(degree)
             geometric = -np.diff(norm) / np.diff(np.exp(degree))
-            if np.all(algebraic > 0) and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric)):
+            if (
+                np.all(algebraic > 0)
+                and algebraic[-1] <= NONSMOOTH_DECAY
+                and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric))
+            ):
                 found.append((name, float(algebraic[-1])))
         return found
 
@@ -396,7 +411,7 @@ def estimated_error(changes: list[float]) -> float:
     rate = 1.0
     if len(guarded) > 2 and guarded[-3] > 0:
         rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
-    return guarded[-1] * rate
+    return guarded[-1] * rate**ROUNDS_AHEAD
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:

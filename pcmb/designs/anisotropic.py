@@ -2,11 +2,11 @@
 
 The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set is always a
 box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
-(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the indicator of input
-k is the sum of the surplus indicators on the box's top face in k (the indices at level L_k
-there): what the last level of k added. The estimated error is the adaptive driver's: the
-change of the mean and std the top faces make. While it exceeds the tolerance, the input with
-the largest face indicator is raised by one level — one input direction at a time — within the
+(3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the error left in each
+input is ``order: auto``'s (:func:`pcmb.designs.refine.box_errors`: the change its last level
+makes, carried to the box's degree by the coefficients' decay along it, squared), and the
+estimated error is the largest over the inputs. While it exceeds the tolerance, the input with the
+largest estimated error is raised by one level — one input direction at a time — within the
 budget of runs. The nested rules reuse every run; the result is the tensor projection on the
 box reached.
 """
@@ -24,6 +24,7 @@ from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set
 from pcmb.designs.adaptive import AdaptiveCollocation
 from pcmb.designs.base import MethodSettings
+from pcmb.designs.refine import box_errors
 from pcmb.result import Design
 
 __all__ = ["AnisotropicTensor"]
@@ -31,8 +32,8 @@ __all__ = ["AnisotropicTensor"]
 
 class AnisotropicTensor(AdaptiveCollocation):
     """``method: {kind: adaptive, basis: tensor, tolerance, max_runs, rule}``: a tensor grid
-    of nested rules raised one input at a time where the top-face surpluses say it pays
-    (see the module)."""
+    of nested rules raised one input at a time where the estimated error is largest (see the
+    module)."""
 
     _FIRST = "the tensor grid of level 1 in every input"
 
@@ -46,6 +47,7 @@ class AnisotropicTensor(AdaptiveCollocation):
         super()._reset()
         self._levels = (1,) * len(self.distributions)
         self._refined = set(self._index)
+        self._errors = np.ones(len(self.distributions))
 
     def record(self) -> Design:
         return dataclasses.replace(super().record(), basis="tensor", grid="adaptive tensor")
@@ -55,15 +57,13 @@ class AnisotropicTensor(AdaptiveCollocation):
         index = np.array(self._index)
         return np.any(index == np.array(self._levels), axis=1)
 
-    def _faces(self) -> NDArray[np.float64]:
-        """(n,) per input, the sum of the indicators on the box's top face in that input."""
-        index = np.array(self._index)
-        return np.array(
-            [
-                self._indicators[index[:, k] == top].sum() if top > 0 else 0.0
-                for k, top in enumerate(self._levels)
-            ]
-        )
+    def _measure(self, values: NDArray[np.float64]) -> None:
+        """The adaptive driver's indicators, and the error left in each input."""
+        super()._measure(values)
+        self._errors = box_errors(self._grid, values)
+
+    def _estimate(self) -> float:
+        return float(self._errors.max())
 
     def more(
         self,
@@ -75,8 +75,7 @@ class AnisotropicTensor(AdaptiveCollocation):
         tolerance and the budget allows, else ``None``."""
         if not self._measure_round(nodes, values, ok) or self._estimate() <= self.tolerance:
             return None
-        faces = self._faces()
-        for k in np.argsort(-faces, kind="stable"):
+        for k in np.argsort(-self._errors, kind="stable"):
             rule = self.rules[k]
             if rule.max_level is not None and self._levels[k] >= rule.max_level:
                 continue

@@ -90,9 +90,9 @@ class MethodSection(Section):
     kind: str  # each section narrows it to its Literal (kept first in listings)
     validation: NonNegativeInt | None = Field(
         default=None,
-        description="held-out runs at random inputs that check a chaos expansion (0: none; "
-        "default: sized to the design, at most max(8, a quarter of its runs), drawn in "
-        "batches while the verdict is undecided)",
+        description="held-out runs that check a chaos expansion (0: none; default: sized to "
+        "the design, at most max(8, a quarter of its runs)): placed to extend a grid of one "
+        "input, else drawn at random, in batches while the verdict is undecided",
     )
     seed: NonNegativeInt = Field(
         default=0, description="seed of the design's random nodes and of the held-out runs"
@@ -135,8 +135,9 @@ class Recovery(ReportedByDesign):
 class MomentReport(DesignReport):
     """The mean and std of each output, (2, T), computed without an expansion and without
     the runs at hand (statistical linearization; a streamed study's running moments): they are
-    the ``mean`` and ``std`` every output stores, so nothing more is written; read back from a
-    file without nodes whose outputs have no coefficients (a streamed file has its runs)."""
+    the ``mean`` and ``std`` every output stores, so nothing more is written; read back, for
+    the outputs without coefficients, from a file without nodes or whose runs are not read
+    (:attr:`~pcmb.result.ReportFile.runs`: more than the memory holds)."""
 
     key: ClassVar[str] = "moments"
 
@@ -147,8 +148,8 @@ class MomentReport(DesignReport):
 
     @classmethod
     def read(cls, file: ReportFile) -> MomentReport | None:
-        germ = file.read("nodes/germ")
-        if germ is None or germ.shape[0]:
+        germ = file.shape("nodes/germ")
+        if germ is None or (germ[0] and file.runs):
             return None
         moments = {
             name: np.stack([file.read(f"outputs/{name}/mean"), file.read(f"outputs/{name}/std")])

@@ -55,7 +55,8 @@ class CollocationSettings(MethodSection):
     )
     elements: Literal["auto"] | dict[Name, list[Real]] | None = Field(
         default=None,
-        description="multi-element collocation: input -> split points (physical units), or auto",
+        description="multi-element collocation: input -> split points (physical units), or "
+        "auto: elements halved until diagnostics.tolerance is met",
     )
     max_elements: PositiveInt = Field(default=16, description="most elements of elements: auto")
     max_runs: PositiveInt | None = Field(

@@ -9,18 +9,20 @@
   recovered by projection (least squares over its survivors when some failed); the
   expansions are :class:`~pcmb.chaos.elements.PiecewiseExpansion` s.
 
-The decay indicator of an element (Wan & Karniadakis, J. Comput. Phys. 209 (2005)) is the
-share η_e of its variance in the outer two degree layers of its basis (two, because a
-response even about the element's centre has zero odd coefficients), at the worst time and
-output; weighted by the element's probability, P_e η_e above :data:`THRESHOLD` marks an
-element whose chaos has not converged. ``auto`` starts from one element and, after each
-round, splits such elements, along the inputs that hold at least half the largest per-input
-share of that energy, while the partition stays within ``max_elements``; the split
-elements' nodes leave the recovery (``/nodes/element`` -1) and the children's nodes are the
-next round. :meth:`MultiElementCollocation.recover` warns (``element-decay``) about every
-output left above the threshold, and (``element-budget``) when ``max_elements`` stopped the
-refinement. A response chaotic in its inputs (the Lorenz attractor) has no smooth piece to
-find: splitting only exhausts the budget, and the warnings stay.
+``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
+std relative to the output's largest std, as estimated from the elements' tails
+(:func:`element_errors`: the energy of each element's outer two degree layers, continued
+geometrically, converts to the error of its mean and of the std; ``docs/multi_element.md``
+has the derivation and its calibration). ``auto`` starts from one element and, after each
+round, while the estimate exceeds the tolerance, splits the elements of largest share, the
+fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
+half the largest per-input share of their tail energy, while the partition stays within
+``max_elements``; the split elements' nodes leave the recovery (``/nodes/element`` -1) and
+the children's nodes are the next round.
+:meth:`MultiElementCollocation.recover` records (``element-decay``) every output whose
+estimate is left above the tolerance, and (``element-budget``) that ``max_elements``
+stopped the refinement. A response chaotic in its inputs (the Lorenz attractor) has no
+smooth piece to find: splitting only exhausts the budget, and the records stay.
 """
 
 from __future__ import annotations
@@ -47,14 +49,11 @@ from pcmb.designs.base import (
 from pcmb.designs.collocation import CollocationSettings, TensorCollocation
 from pcmb.result import Design, DesignReport, ReportFile, StudyResult, WarningRecord
 
-__all__ = ["ElementReport", "MultiElementCollocation", "decay_scores"]
+__all__ = ["ElementReport", "MultiElementCollocation", "TailErrors", "element_errors"]
 
-#: Largest weighted decay indicator P_e η_e accepted.
-THRESHOLD = 1e-4
-#: Tail energies below this fraction squared of the mean square are round-off.
-_RELATIVE_NOISE = 1e-12
-
-#: A batch runner: (B, n) physical inputs -> output name -> (B, ...) values.
+#: Largest decay per two degrees read from an element's tail (at it, the energy beyond the
+#: tail is taken to be the tail's own: no decay seen).
+DECAY_CAP = 0.5
 
 
 class MultiElementCollocation:
@@ -96,11 +95,14 @@ class MultiElementCollocation:
         self.orders, self.basis = self._collocation.orders, self._collocation.basis
         self.elements = settings.elements
         self.max_elements = settings.max_elements
+        self.tolerance = settings.diagnostics_tolerance
         if self.elements == "auto" and max(self.orders) < 2:
             raise ValueError(
-                "method.order: elements: auto needs order >= 2 (its decay indicator reads the "
+                "method.order: elements: auto needs order >= 2 (its error estimate reads the "
                 "top two degrees)"
             )
+        if self.elements == "auto" and self.tolerance is None:
+            raise ValueError("diagnostics.tolerance: required by method.elements auto")
         self.start = partition if partition is not None else self._partition()
         self.multi_index = self._collocation._index(TensorGrid(self.distributions, self.orders))
         self.nodes()  # the state of the first round
@@ -150,7 +152,7 @@ class MultiElementCollocation:
         """The first round: every starting element's nodes, element by element (a run starts
         here, so this forgets the refinement of an earlier run); ``.nodes`` in the inputs' own
         germs."""
-        self.exhausted = False
+        self.exhausted, self.estimate = False, math.nan
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
@@ -172,7 +174,7 @@ class MultiElementCollocation:
     ) -> NodeSet | None:
         """The next round of ``elements: auto``: the nodes of the children of every element
         split (see the module), or ``None`` when none is. Elements with failed nodes are not
-        split (their scores are NaN); :meth:`recover` fits them from their survivors."""
+        split (their estimates are NaN); :meth:`recover` fits them from their survivors."""
         if self.elements != "auto":
             return None
         coefficients = {}
@@ -184,15 +186,24 @@ class MultiElementCollocation:
                     for e, grid in enumerate(self.grids)
                 ]
             )
-        scores, shares = decay_scores(self.partition, coefficients, self.multi_index)
-        above = [int(e) for e in np.argsort(-np.nan_to_num(scores)) if scores[e] > THRESHOLD]
-        size, chosen = self.partition.size, {}
-        for e in above:
-            along = np.flatnonzero(shares[e] >= 0.5 * shares[e].max())
-            if size + 2**along.size - 1 <= self.max_elements:
-                chosen[e] = along.tolist()
-                size += 2**along.size - 1
-        self.exhausted = bool(above) and not chosen
+        errors = element_errors(self.partition, coefficients, self.multi_index)
+        self.estimate = errors.estimate()
+        if not self.estimate > self.tolerance:
+            return None
+        size, chosen, refused = self.partition.size, {}, False
+        left = np.ones(size, dtype=bool)
+        each = errors.of_each()
+        for e in np.argsort(-np.nan_to_num(each, nan=-1.0)):
+            if not errors.estimate(left) > self.tolerance or not each[e] > 0:
+                break
+            cut = np.flatnonzero(errors.along[e] >= 0.5 * errors.along[e].max())
+            if size + 2**cut.size - 1 <= self.max_elements:
+                chosen[int(e)] = cut.tolist()
+                size += 2**cut.size - 1
+                left[e] = False
+            else:
+                refused = True
+        self.exhausted = refused and not chosen
         if not chosen:
             return None
         # Children replace their parent in place; the others keep their nodes.
@@ -217,6 +228,7 @@ class MultiElementCollocation:
         return weights
 
     def record(self) -> Design:
+        auto = self.elements == "auto"
         return Design(
             kind=self.settings.kind,
             grid="element-gauss",
@@ -224,7 +236,9 @@ class MultiElementCollocation:
             orders=self.orders,
             elements=self.partition.size,
             fit="projection",
-            label=f"chaos {order_words(self.orders, self.basis)}",
+            tolerance=self.tolerance if auto else None,
+            label=f"chaos {order_words(self.orders, self.basis)}"
+            + (f" (elements auto to {self.tolerance:g})" if auto else ""),
         )
 
     # -- recovery ---------------------------------------------------------------------------
@@ -278,59 +292,112 @@ class MultiElementCollocation:
                 WarningRecord(
                     "element-budget",
                     f"elements: auto stopped at {self.partition.size} of {self.max_elements} "
-                    f"elements (method.max_elements) after {nodes.size} runs, with elements "
-                    "still above the decay threshold: splitting them would pass "
+                    f"elements (method.max_elements) after {nodes.size} runs, with an estimated "
+                    f"error {self.estimate:.3g} above the tolerance {self.tolerance:g} "
+                    "(diagnostics.tolerance): splitting the elements that hold it would pass "
                     "method.max_elements; raise it or the order, unless an output is chaotic in "
                     "its inputs",
                 )
             )
-        warnings += self._decay_warnings(expansions)
+        if self.tolerance is not None:
+            warnings += self._decay_warnings(expansions)
         warnings += statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
 
     def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
-        records = []
+        """``element-decay`` for every output whose estimated error (:func:`element_errors`)
+        is above the tolerance; sets :attr:`estimate` to the largest over outputs."""
+        records, self.estimate = [], 0.0
         for name, expansion in expansions.items():
-            scores, _ = decay_scores(
+            errors = element_errors(
                 self.partition, {name: expansion.coefficients}, self.multi_index
             )
-            above = np.flatnonzero(scores > THRESHOLD)
-            if above.size:
-                worst = int(np.argmax(scores))
+            estimate, each = errors.estimate(), errors.of_each()
+            self.estimate = max(self.estimate, estimate)
+            if estimate > self.tolerance:
+                worst = int(np.nanargmax(each))
                 records.append(
                     WarningRecord(
                         "element-decay",
-                        f"the elements' decay indicator is above its threshold "
-                        f"{THRESHOLD:g} in {above.size} of {scores.size} element(s): "
-                        f"P_e·η_e up to {scores[worst]:.3g} (element {worst}), the share of "
-                        "an element's variance in its top two degrees, which elements: auto "
-                        "splits on; an indicator, not a verdict: the held-out check judges the "
-                        "mean and std",
+                        f"the error of the mean and std that the elements' outer two degree "
+                        f"layers indicate is {estimate:.3g} of the largest std, above the "
+                        f"tolerance {self.tolerance:g} (diagnostics.tolerance; most of it in "
+                        f"element {worst}, {each[worst]:.3g} alone); elements: auto splits on "
+                        "it; an indicator, not a verdict: the held-out check judges the mean "
+                        "and std",
                         name,
                     )
                 )
         return records
 
 
-def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:
-    """(n, S) the terms in input k's outer two degree layers: α_k >= 1 and α + 2 e_k outside
-    the set."""
+def _tails(multi_index: NDArray[np.int64], depth: int = 2) -> NDArray[np.bool_]:
+    """(n, S) the terms in input k's outer ``depth`` degree layers: α_k >= 1 and
+    α + depth e_k outside the set."""
     present = {tuple(row) for row in multi_index}
     tails = np.zeros(multi_index.T.shape, dtype=bool)
     for k in range(multi_index.shape[1]):
         shifted = multi_index.copy()
-        shifted[:, k] += 2
+        shifted[:, k] += depth
         outside = np.array([tuple(row) not in present for row in shifted])
         tails[k] = outside & (multi_index[:, k] >= 1)
     return tails
 
 
-def decay_scores(
+@dataclass(frozen=True)
+class TailErrors:
+    """The error of the mean and std that the elements' tails indicate (:func:`element_errors`).
+
+    Attributes
+    ----------
+    mean, std:
+        Per output, (E, P) each element's contribution to the error of the mean and of the
+        std at every time, over the output's largest std (NaN where the element's
+        coefficients are not finite).
+    along:
+        (E, n) each element's tail energy along each input, at its worst output and time.
+    """
+
+    mean: tuple[NDArray[np.float64], ...]
+    std: tuple[NDArray[np.float64], ...]
+    along: NDArray[np.float64]
+
+    def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
+        """The estimated error of the mean and std, the largest over outputs and times, from
+        the tails of the elements ``among`` (all by default; the others' taken as resolved)."""
+        return max(
+            (
+                float(np.max(np.fmax(np.nansum(m[among], axis=0), np.nansum(s[among], axis=0))))
+                for m, s in zip(self.mean, self.std, strict=True)
+            ),
+            default=0.0,
+        )
+
+    def of_each(self) -> NDArray[np.float64]:
+        """(E,) the estimate from each element's tail alone (NaN: not finite)."""
+        size = self.along.shape[0]
+        broken = np.zeros(size, dtype=bool)
+        for part in self.mean:
+            broken |= np.isnan(part).any(axis=1)
+        each = [self.estimate(np.arange(size) == e) for e in range(size)]
+        return np.where(broken, np.nan, each)
+
+
+def element_errors(
     partition: Partition,
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The weighted decay indicator of every element and where its tail energy lies.
+) -> TailErrors:
+    """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
+
+    In element e of probability P_e, at every time, the energy T of the outer two degree
+    layers (:func:`_tails`) over that of the two layers before them is the decay ρ per two
+    degrees (at most :data:`DECAY_CAP`). Continued geometrically, the element's variance
+    misses the energy beyond its degree p, M = T ρ / (1 - ρ), and its mean errs by the
+    coefficients aliased onto it, of energy A = T ρ² / (1 - ρ) (from degree p + 3 on: a
+    Gauss rule integrates below degree 2p + 2 exactly, but the first degrees of a kink mimic
+    a fast decay, so the decay is carried two layers, not p/2). With σ the piecewise
+    surrogate's std: mean error Σ_e P_e √A_e, std error Σ_e P_e M_e / (2σ).
 
     Parameters
     ----------
@@ -340,33 +407,35 @@ def decay_scores(
         Output name -> (E, S, ...) coefficients.
     multi_index:
         (S, n) their terms.
-
-    Returns
-    -------
-    scores, shares
-        (E,) P_e η_e, η_e the largest share (over outputs and times) of the element's
-        variance in its tail terms; (E, n) the tail energy of each input at that output and
-        time. NaN where coefficients are not finite.
     """
     tails = _tails(multi_index)
     anywhere = tails.any(axis=0)
-    zero = ~multi_index.any(axis=1)
+    before = _tails(multi_index, 4).any(axis=0) & ~anywhere
     size, n = partition.size, multi_index.shape[1]
-    eta, shares = np.zeros(size), np.zeros((size, n))
+    means, stds, along = [], [], np.zeros((size, n))
     for c in coefficients.values():
-        squares = c.reshape(*c.shape[:2], -1) ** 2  # (E, S, P)
-        variance = squares[:, ~zero].sum(axis=1)
-        floor = _RELATIVE_NOISE**2 * (variance + squares[:, zero].sum(axis=1))
+        flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
+        sigma = PiecewiseExpansion(partition, flat, multi_index).std()
+        scale = float(np.max(sigma[np.isfinite(sigma)], initial=0.0))
+        if not scale > 0:
+            continue
+        squares = (flat / scale) ** 2
+        tail = squares[:, anywhere].sum(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = squares[:, anywhere].sum(axis=1) / (variance + floor)
-        ratio = np.where(variance + floor > 0, ratio, 0.0)
-        worst = np.argmax(np.nan_to_num(ratio, nan=np.inf), axis=1)
-        top = ratio[np.arange(size), worst]
-        better = (top > eta) | np.isnan(top)  # a NaN stays
-        eta = np.where(better, top, eta)
+            decay = np.minimum(tail / squares[:, before].sum(axis=1), DECAY_CAP)
+        decay = np.where(tail > 0, np.nan_to_num(decay, nan=DECAY_CAP), 0.0)
+        decay = np.where(np.isfinite(tail), decay, np.nan)
+        missing = tail * decay / (1 - decay)
+        aliased = tail * decay**2 / (1 - decay)
+        weight = partition.probability[:, None]
+        means.append(weight * np.sqrt(aliased))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            stds.append(np.where(sigma > 0, weight * missing * scale / (2 * sigma), 0.0))
+        worst = np.argmax(np.nan_to_num(tail, nan=np.inf), axis=1)
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
-        shares = np.where(better[:, None], energy, shares)
-    return partition.probability * eta, shares
+        larger = energy.sum(axis=1) > along.sum(axis=1)
+        along = np.where(larger[:, None], energy, along)
+    return TailErrors(tuple(means), tuple(stds), along)
 
 
 @dataclass(frozen=True)

@@ -4,24 +4,23 @@ Round l runs the tensor grid of level l in every input of the nested ``rule`` (`
 Gauss–Patterson for uniform inputs, Genz–Keister for normal ones, Leja otherwise;
 :mod:`pcmb.chaos.nested`), from level 1, and projects on the tensor basis of the degrees that
 grid integrates exactly (its orders). The rules are nested, so each grid holds every node of
-the one before: a round runs only the new nodes and no run is discarded. From the second
-round on, d_l is the largest difference, over outputs and times, of the mean and std from the
-previous round's (the first round's from the centre run's, level 0, std 0), relative to the
-output's largest std over time (the diagnostics' scale, ``docs/diagnostics.md``): the error
-of the coarser grid. A round doubles the points per input, so the finer grid's error is far
-smaller: :func:`extrapolated_error` carries the decay per degree observed over the last two
-changes to the finer grid's degree (the smallest over inputs).
+the one before: a round runs only the new nodes and no run is discarded. After each round the
+estimated error of the mean and std, relative to the output's largest std over time (the
+diagnostics' scale, ``docs/diagnostics.md``), is :func:`box_errors`' largest over the inputs:
+the change d_k the grid's last level in input k makes (the grid against the grid one level
+lower in k alone), carried to the grid's degree by the decay per degree of the coefficients
+along k, squared, as the std's error is quadratic in the coefficients left out. The first
+round (level 1) can so stop on its own.
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` or its grid
 ``method.max_runs``, or a node failed.
 
-All inputs are raised together: the estimate compares whole levels and does not say which
-input holds the error (kind ``adaptive`` with ``basis: tensor`` raises one input at a time).
+All inputs are raised together (kind ``adaptive`` with ``basis: tensor`` raises the one with
+the largest estimated error, one at a time).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
@@ -33,47 +32,72 @@ from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
-from pcmb.designs.adaptive import DEFAULT_MAX_RUNS
+from pcmb.designs.adaptive import BLIND, DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
 from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
 
-__all__ = [
-    "MAX_ORDER",
-    "OrderRefinement",
-    "RefinementReport",
-    "extrapolated_error",
-    "order_indicator",
-]
+__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
 
-Statistics = dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n,) the estimated error of the mean and std left in each input of a tensor ``grid``
+    (a box of levels L_k) from its (N, outputs, T) ``values``, relative to each output's
+    largest std over time: d_k ρ_k^(2 Δp_k), with d_k the largest change of the mean and std
+    between the box and the box one level lower in input k, Δp_k the degrees that level
+    added and ρ_k the decay per degree of the coefficients along k (:func:`coefficient_decay`).
+    """
+    distributions, rules = grid.distributions, grid.rules
+    coefficients = grid.project(values)
+    degree = grid.multi_index
+    mean, std = _moments(coefficients, grid)
+    spread = std.max(axis=-1)
+    levels = grid.index_set.max(axis=0)
+    errors = np.zeros(levels.size)
+    for k, (rule, top) in enumerate(zip(rules, levels, strict=True)):
+        lower = SparseGrid(
+            distributions, box_index_set(levels - np.eye(levels.size, dtype=int)[k]), rules
+        )
+        low_mean, low_std = _moments(
+            lower.project(values[find_rows(grid.node_ids, lower.node_ids)]), lower
+        )
+        change = np.maximum(np.abs(mean - low_mean), np.abs(std - low_std)).max(axis=-1)
+        relative = np.divide(change, spread, out=np.zeros_like(change), where=spread > 0)
+        norms = [
+            float(np.sqrt(np.sum(coefficients[degree[:, k] == p] ** 2, axis=0)).max())
+            for p in range(int(degree[:, k].max()) + 1)
+        ]
+        step = rule.projection_degree(int(top)) - rule.projection_degree(int(top) - 1)
+        errors[k] = relative.max() * coefficient_decay(norms) ** (2 * step)
+    return errors
 
 
-def order_indicator(lower: Statistics, higher: Statistics) -> float:
-    """The largest difference over outputs and times of the (mean, std) of two orders,
-    relative to each output's largest std over time at the higher order."""
-    worst = 0.0
-    for name, (mean, std) in higher.items():
-        low_mean, low_std = lower[name]
-        gap = float(np.max(np.maximum(np.abs(mean - low_mean), np.abs(std - low_std))))
-        scale = float(np.max(std))
-        worst = max(worst, gap / scale if scale > 0 else (0.0 if gap == 0 else math.inf))
-    return worst
+def coefficient_decay(norms: list[float]) -> float:
+    """The decay per degree of the coefficients along an input, from the norms n_0..n_p of
+    those of degree 0..p in it: exp of the least-squares slope of log n_q over the upper
+    half of the degrees, p/2 <= q <= p (q >= 1; a symmetry that zeroes every other degree, or
+    one lucky small norm, does not fool it), over the norms above round-off (:data:`BLIND`
+    of the largest); at most 1, and 1 with fewer than two such norms (it cannot be told)."""
+    top = len(norms) - 1
+    degrees = np.arange(max(1, top // 2), top + 1)
+    found = np.array(norms)[degrees]
+    kept = found > BLIND * found.max()
+    if np.count_nonzero(kept) < 2:
+        return 1.0
+    slope = np.polyfit(degrees[kept], np.log(found[kept]), 1)[0]
+    return float(min(1.0, np.exp(slope)))
 
 
-def extrapolated_error(changes: list[float], degrees: list[int]) -> float:
-    """The estimated error of the last grid from the changes d_1..d_l of the mean and std
-    between successive grids (levels 0..l) of degrees 0 = p_0 < p_1 < ... < p_l: the error
-    falls geometrically in the degree, by ρ = min(1, d_l / d_{l-1})^(1 / (p_{l-1} - p_{l-2}))
-    per degree as observed last, so the last grid's is d_l ρ^(p_l - p_{l-1}) (d_1 alone)."""
-    if len(changes) < 2 or changes[-2] <= 0:
-        return changes[-1]
-    rate = min(1.0, changes[-1] / changes[-2]) ** (1.0 / (degrees[-2] - degrees[-3]))
-    return changes[-1] * rate ** (degrees[-1] - degrees[-2])
+def _moments(
+    coefficients: NDArray[np.float64], grid: SparseGrid
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(outputs, T) the mean and std of the expansion of ``coefficients`` on ``grid``."""
+    expansion = ChaosExpansion(coefficients, grid.multi_index, grid.distributions)
+    return expansion.mean(), expansion.std()
 
 
 class OrderRefinement(GrowingGrid):
@@ -102,11 +126,10 @@ class OrderRefinement(GrowingGrid):
         self.tolerance = float(settings.diagnostics_tolerance)
         self.max_runs = DEFAULT_MAX_RUNS if settings.max_runs is None else int(settings.max_runs)
         self._first = self._level(1)
-        two = self._level(2).size
-        if self.max_runs < two:
+        if self.max_runs < self._first.size:
             raise ValueError(
-                f"method.max_runs: {self.max_runs} runs do not allow one comparison: levels 1 "
-                f"and 2 take {two} runs"
+                f"method.max_runs: {self.max_runs} runs do not allow one round: level 1 in "
+                f"every input takes {self._first.size} runs"
             )
         self._reset()
 
@@ -121,9 +144,6 @@ class OrderRefinement(GrowingGrid):
         """The state of the first round: the grid of level 1."""
         self._grid = self._first
         self._ids = self._first.node_ids
-        self._statistics: Statistics | None = None
-        self._changes: list[float] = []
-        self._degrees = [0]
         self._history: list[tuple[tuple[int, ...], int, float]] = []
         self._stopped: str | None = None
 
@@ -174,13 +194,8 @@ class OrderRefinement(GrowingGrid):
                 "needs every node: see the failures"
             )
             return None
-        if self._statistics is None:  # level 0: the centre run, in every grid
-            self._statistics = self._statistics_on(self._level(0), nodes, values)
-        statistics = self._statistics_on(self._grid, nodes, values)
-        self._changes.append(order_indicator(self._statistics, statistics))
-        self._degrees.append(min(self._orders(self._grid)))
-        estimate = extrapolated_error(self._changes, self._degrees)
-        self._statistics = statistics
+        on_grid = np.stack([y[order] for y in values.values()], axis=1)
+        estimate = float(box_errors(self._grid, on_grid).max())
         self._history.append((self._orders(self._grid), nodes.size, estimate))
         if estimate < self.tolerance:
             return None
@@ -202,18 +217,6 @@ class OrderRefinement(GrowingGrid):
             )
             return None
         return self._adopt(grid)
-
-    def _statistics_on(
-        self, grid: SparseGrid, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]]
-    ) -> Statistics:
-        """The mean and std of every output on ``grid``, whose nodes have all run."""
-        rows = find_rows(self._ids, grid.node_ids)
-        projected = grid.project(np.stack([y[rows] for y in values.values()], axis=1))
-        statistics = {}
-        for k, name in enumerate(values):
-            expansion = ChaosExpansion(projected[:, k], grid.multi_index, self.distributions)
-            statistics[name] = (expansion.mean(), expansion.std())
-        return statistics
 
     def recover(
         self,

@@ -212,10 +212,11 @@ def default_sweep(section: MethodSection, runs: int) -> dict[str, Any]:
         return {"methods": [method, comparator], "reference": method}
     if key == "samples":  # a fixed sample at each cost: adding samples is what is swept
         method = {k: v for k, v in method.items() if k not in ("tolerance", "max_samples")}
-    value = method.get(key)
-    if value is None:  # order: auto within max_runs: its budget is the cost
-        value = 1000
-    methods = [{**method, key: _rising(value, key)}]
+    value = method.get(key, 1000)  # order: auto within max_runs: its budget is the cost
+    rising = _rising(value, key)
+    if key == section.budget_key:  # no budget below the first round, which it refuses
+        rising = sorted({max(runs, budget) for budget in rising})
+    methods = [{**method, key: rising}]
     if key != "samples":
         methods.append(comparator)
     return {"methods": methods, "reference": {**method, key: _finer(value, key)}}

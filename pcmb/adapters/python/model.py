@@ -14,7 +14,7 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
-import os
+import modulefinder
 import re
 import sys
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -279,26 +279,27 @@ def python_entry_files(entry: str, base_dir: str | Path) -> list[Path]:
     return [] if origin is None else [Path(origin).resolve()]
 
 
-def local_modules(root: Path) -> list[Path]:
-    """The files of the loaded modules (``sys.modules``) under the folder ``root``, outside
-    the installed environment (the standard library, site-packages, pcmb); none when
-    ``root`` itself is installed."""
+def local_modules(root: Path, script: Path | None = None, module: str | None = None) -> list[Path]:
+    """The files of the modules under the folder ``root`` that the entry imports, directly
+    or through its local modules, outside the installed environment (the standard library,
+    site-packages, pcmb); none when ``root`` itself is installed.
+
+    Read from the code (:mod:`modulefinder`, imports in function bodies included), not from
+    ``sys.modules``: another model built earlier in the same process must not count, or a
+    journal would differ from a fresh process's. Give the entry as a ``script`` file or a
+    ``module`` name found on ``root``."""
     root = root.resolve()
     environment = installed_folders()
     if installed(root, environment):
         return []
-    found = set()
-    folders: dict[str, Path] = {}  # each folder resolved once: modules share few folders
-    for module in list(sys.modules.values()):
-        name = getattr(module, "__file__", None)
-        if isinstance(name, str):
-            head, tail = os.path.split(name)
-            if head not in folders:
-                folders[head] = Path(head).resolve()
-            path = folders[head] / tail
-            if path.is_relative_to(root) and not installed(path, environment):
-                found.add(path)
-    return sorted(found)
+    finder = modulefinder.ModuleFinder(path=[str(root)], excludes=["pcmb"])
+    with contextlib.suppress(ImportError, SyntaxError):  # as the import itself reported
+        if script is not None:
+            finder.run_script(str(script))
+        else:
+            finder.import_hook(module)
+    found = {Path(found.__file__).resolve() for found in finder.modules.values() if found.__file__}
+    return sorted(p for p in found if p.is_relative_to(root) and not installed(p, environment))
 
 
 # --------------------------------------------------------------------------- as_model
@@ -633,16 +634,16 @@ class PythonModelFactory(ModelFactory):
         return [*python_entry_files(self.entry, self.base_dir), *self._listed()]
 
     def loaded_files(self) -> list[Path]:
-        """The modules loaded from the entry's folder tree (:func:`local_modules`): the
-        entry file's folder, or the folder holding a ``package.module`` entry's top package."""
+        """The modules of the entry's folder tree that the entry imports (:func:`local_modules`):
+        the entry file's folder, or the folder holding a ``package.module`` entry's top package."""
         target = self.entry.rpartition(":")[0]
         found = python_entry_files(self.entry, self.base_dir)
         if not found:
             return []
         if target.endswith(".py"):
-            return local_modules(found[0].parent)
+            return local_modules(found[0].parent, script=found[0])
         depth = target.count(".") + (found[0].name == "__init__.py")
-        return local_modules(found[0].parents[depth])
+        return local_modules(found[0].parents[depth], module=target)
 
 
 # How as_model's config keys read for a Python caller (Study's arguments).

@@ -1,0 +1,132 @@
+"""How honest ``elements: auto``'s error estimate is: its estimate against the true error of
+the mean and std, on responses with a jump, a kink or heavy tails whose moments are known.
+
+For each case and ``diagnostics.tolerance`` the multi-element design runs in this process (no
+workers, no held-out check) with ``max_elements`` 64; the true error is the largest over time
+of max(|Δmean|, |Δstd|) over the largest std, against the closed form (double well:
+:func:`pcmb.references.double_well_moments`; |x - 0.3| and the step at 0.3 on U[-1, 1];
+exp(z t / 2): :func:`pcmb.references.lognormal_moments`) or, for the bouncing ball, a
+4000-point Gauss–Legendre rule over its closed-form heights. ``estimate/true`` > 1 is a
+careful estimate, < 1 an over-confident one.
+
+    python scripts/calibrate_elements.py [--order 3] [--tolerances 1e-1,1e-2,1e-3,1e-4]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+
+import numpy as np
+
+import pcmb
+from pcmb.chaos.nodes import TensorGrid, join_nodes
+from pcmb.designs import MethodSettings, make_design
+from pcmb.references import bouncing_ball, double_well, double_well_moments, lognormal_moments
+
+Case = tuple[dict, np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray], tuple]
+
+KINK, STEP = 0.3, 0.3
+
+
+def well() -> Case:
+    times = np.linspace(0.0, 4.0, 41)
+    return (
+        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        times,
+        lambda x, t: double_well(t, x[:, 0]),
+        double_well_moments(times, -0.625, 0.375),
+    )
+
+
+def kink() -> Case:
+    mean = (1 + KINK**2) / 2
+    return (
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        lambda x, t: np.abs(x[:, :1] - KINK),
+        (np.array([mean]), np.sqrt(np.array([1 / 3 + KINK**2 - mean**2]))),
+    )
+
+
+def step() -> Case:
+    p = (1 - STEP) / 2
+    return (
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        lambda x, t: (x[:, :1] > STEP) + 0.0,
+        (np.array([p]), np.sqrt(np.array([p * (1 - p)]))),
+    )
+
+
+def ball() -> Case:
+    inputs, times = {"h0": pcmb.Uniform(0.5, 1.5)}, np.linspace(0.0, 3.0, 61)
+    fine = TensorGrid(tuple(inputs.values()), (3999,))
+    exact = bouncing_ball(fine.params[:, 0], times)
+    mean = fine.weights @ exact
+    return (
+        inputs,
+        times,
+        lambda x, t: bouncing_ball(x[:, 0], t),
+        (mean, np.sqrt(fine.weights @ (exact - mean) ** 2)),
+    )
+
+
+def lognormal() -> Case:
+    times = np.linspace(0.0, 3.0, 31)
+    return (
+        {"z": pcmb.Normal(0.0, 1.0)},
+        times,
+        lambda x, t: np.exp(0.5 * np.outer(x[:, 0], t)),
+        lognormal_moments(0.5 * times),
+    )
+
+
+CASES = {f.__name__: f for f in (well, kink, step, ball, lognormal)}
+
+
+def run(
+    case: str, order: int, tolerance: float, max_elements: int
+) -> tuple[int, int, float, float]:
+    """(runs, elements, the design's final estimate (NaN before it had one), true error)."""
+    inputs, times, function, (mean, std) = CASES[case]()
+    settings = MethodSettings(
+        "collocation",
+        orders=(order,) * len(inputs),
+        elements="auto",
+        max_elements=max_elements,
+        diagnostics_tolerance=tolerance,
+    )
+    design = make_design(inputs, settings)
+    nodes = design.nodes()
+    values = {"y": function(nodes.params, times)}
+    while (batch := design.more(nodes, values, np.ones(nodes.size, bool))) is not None:
+        nodes = join_nodes(nodes, batch)
+        values = {"y": np.concatenate([values["y"], function(batch.params, times)])}
+    recovery = design.recover(nodes, values, np.ones(nodes.size, bool), times)
+    expansion = recovery.expansions["y"]
+    error = np.fmax(abs(expansion.mean() - mean), abs(expansion.std() - std)).max() / std.max()
+    estimate = float(getattr(design, "estimate", np.nan))
+    return nodes.size, design.partition.size, estimate, float(error)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("cases", nargs="?", default=",".join(CASES))
+    parser.add_argument("--order", type=int, default=3)
+    parser.add_argument("--tolerances", default="1e-1,1e-2,1e-3,1e-4")
+    parser.add_argument("--max-elements", type=int, default=64)
+    args = parser.parse_args()
+    print("| case | tolerance | runs | elements | estimate | true error | estimate/true |")
+    print("|---|---|---|---|---|---|---|")
+    for case in args.cases.split(","):
+        for tolerance in map(float, args.tolerances.split(",")):
+            runs, size, estimate, error = run(case, args.order, tolerance, args.max_elements)
+            print(
+                f"| {case} | {tolerance:g} | {runs} | {size} | {estimate:.2g} | {error:.2g} | "
+                f"{estimate / error:.2g} |"
+            )
+
+
+if __name__ == "__main__":
+    main()
