@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import os
 import shlex
@@ -297,6 +298,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from pcmb.run.worker import post_mortem
     from pcmb.study import Study
 
+    # scipy.special (the Gauss rules of the nodes, 0.15 s or more) is imported in a thread
+    # meanwhile: this one reads the config, then waits for a worker to build the model.
+    threading.Thread(target=importlib.import_module, args=("scipy.special",), daemon=True).start()
     config = _load_config(args.config, check_sweep=False)  # a run ignores sweep:
     output = args.output or config.output
     if output is None:
@@ -497,7 +501,8 @@ def _inspect(path: str) -> str:
         held = (
             f"mean/std error up to {np.nanmax(found.holdout.statistics, initial=0.0):.3g}, "
             f"surrogate error up to {np.nanmax(found.holdout.error, initial=0.0):.3g} "
-            f"({found.holdout.count} held-out runs)"
+            f"({found.holdout.count} {'placed' if result.held_out.placed else 'drawn'} "
+            "held-out runs)"
             if found.holdout is not None
             else "no held-out runs"
         )

@@ -488,6 +488,7 @@ def _write_diagnostics(
         return
     group = file.create_group("validation")
     group.attrs["seed"] = held_out.seed
+    group.attrs["placed"] = held_out.placed
     run = _scale(file, "validation_run", np.arange(held_out.germ.shape[0]))
     _attach(group.create_dataset("germ", data=held_out.germ), run, input_)
     _attach(group.create_dataset("params", data=held_out.params), run, input_)
@@ -548,6 +549,7 @@ def _read_diagnostics(
         },
         ok=group["status"][()] == Status.OK,
         weights=group["weights"][()] if "weights" in group else np.ones(len(group["status"])),
+        placed=bool(group.attrs.get("placed", False)),  # older files drew theirs
     )
     return found, held_out
 

@@ -10,10 +10,12 @@ import functools
 import hashlib
 import json
 import sys
+import threading
 import time
 import typing
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
@@ -26,14 +28,17 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
+    ELEMENT_POINTS,
     FIRST_BATCH,
     HELD_OUT_SEED,
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
+    element_importance,
     held_out_budget,
     held_out_draws,
     held_out_placed,
+    held_out_placed_elements,
     more_runs,
     pdf_outside_runs,
 )
@@ -60,7 +65,7 @@ from pcmb.errors import (
     UsageError,
 )
 from pcmb.result import DesignReport, NodeFailure, Status, StudyResult, WarningRecord
-from pcmb.run.backends import Pool, checking_pool, open_pool
+from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
     RunResult,
@@ -80,6 +85,7 @@ from pcmb.run.worker import Layout, ModelFacts
 from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
+_T = TypeVar("_T")
 
 if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
@@ -731,8 +737,25 @@ class Study:
                     nodes, runs, facts, outputs, pool, journal_dir, progress
                 )
             first, most = self.held_out_runs(nodes.size)
-            held_out, held_out_failed = self._run_held_out(
-                facts, outputs, pool, journal_dir, progress, first, design=nodes.nodes
+            # The workers make the held-out runs while this process fits the expansions and
+            # draws the statistics, which do not need them; not in this process's own thread
+            # (in-process runs), nor beside a nominal run sent after them (a timeout).
+            beside = bool(first) and not (
+                isinstance(pool, InProcessPool) or self.execution.timeout is not None
+            )
+            checking = _beside(
+                functools.partial(
+                    self._run_held_out,
+                    facts,
+                    outputs,
+                    pool,
+                    journal_dir,
+                    False if beside else progress,  # no bar beside the phases' lines
+                    first,
+                    nodes.nodes,
+                    None if intrusive else runs.values,
+                ),
+                beside,
             )
         except PcmbError:
             if early is not None:
@@ -746,7 +769,7 @@ class Study:
                 nodes, runs, journal, nominal, facts, outputs, streaming, output, provenance, stream
             )
         if not intrusive:
-            runs, held_out, nominal = (self._with_derived(r) for r in (runs, held_out, nominal))
+            runs, nominal = self._with_derived(runs), self._with_derived(nominal)
             axes = {
                 **{name: axis for name, axis in facts.axes.items() if name in outputs},
                 **dict.fromkeys(self.derived),
@@ -754,8 +777,16 @@ class Study:
             fitting = f"fitting {plural(len(runs.values), 'output')}"
             with phase(f"{fitting} ({self.design.record().label})", stream):
                 found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+        found = self._with_nominal(found, nominal)
+        analysis = None
+        if self.analysis is not None:
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                analysis = analyse(found, self.analysis)
+        with phase(f"{plural(first, 'held-out run')}", stream if beside else None):
+            held_out, held_out_failed = checking.result()
+        if not intrusive:
+            held_out = self._with_derived(held_out)
         with phase("diagnostics", stream):
-            found = self._with_nominal(found, nominal)
             result = self._diagnosed(found, held_out, held_out_failed)
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
             if held_out is not None and min(wanted, most - first) > 0:
@@ -766,18 +797,17 @@ class Study:
                     journal_dir,
                     progress,
                     min(wanted, most - first),
-                    1,
-                    np.concatenate([nodes.nodes, held_out.germ]),
+                    nodes.nodes,
+                    batch=1,  # drawn: a placed check makes its runs at once
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
                 result = self._diagnosed(found, held_out, held_out_failed)
-        if self.analysis is not None:
-            with phase("statistics (quantile bands, PDFs, spectra)", stream):
-                result = dataclasses.replace(result, analysis=analyse(result, self.analysis))
-                result = dataclasses.replace(
-                    result, warnings=(*result.warnings, *pdf_outside_runs(result))
-                )
+        if analysis is not None:
+            result = dataclasses.replace(result, analysis=analysis)
+            result = dataclasses.replace(
+                result, warnings=(*result.warnings, *pdf_outside_runs(result))
+            )
         if output is not None:
             from pcmb.store import write_result  # h5py only when a file is written
 
@@ -1054,10 +1084,20 @@ class Study:
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
         (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
-        input (tensor, ``order: auto``'s, sparse or adaptive; not multi-element), where a
-        random sample wastes the few runs."""
+        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
+        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
+        wastes the few runs."""
         grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
-        return len(self.inputs) == 1 and self.design.record().grid in grids
+        grid = self.design.record().grid
+        if len(self.inputs) != 1 or grid not in (*grids, "element-gauss"):
+            return False
+        if grid != "element-gauss":
+            return True
+        count = self.method.validation
+        if count is None:
+            count = held_out_budget(self.design.node_elements.size)
+        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
+        return count <= np.sum(ELEMENT_POINTS - own)
 
     def _run_held_out(
         self,
@@ -1067,13 +1107,15 @@ class Study:
         journal_dir: Path | None,
         progress: bool | None,
         count: int,
+        design: NDArray[np.float64],
+        values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
-        design: NDArray[np.float64] | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling),
         batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
-        germ points ``design`` (the design's nodes, and the earlier batches') where
-        :meth:`places_held_out`, else drawn; journaled in the
+        design's nodes ``design`` (germ points) where
+        :meth:`places_held_out` (per element of a multi-element design, where its node
+        ``values`` say it may err most), else drawn; journaled in the
         journal's ``validation`` folder (``validation-<batch>`` after the first), under the
         failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
         leaves them out)."""
@@ -1081,7 +1123,14 @@ class Study:
             return None, ()
         seed = self.method.seed + HELD_OUT_SEED + batch
         placed = self.places_held_out()
-        if placed:
+        partition = getattr(self.design, "partition", None)
+        if placed and partition is not None:
+            # Each element's own nodes (not those of the elements split on the way).
+            own = self.design.node_elements >= 0
+            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
+            importance = element_importance(partition, design, values)
+            draws, weights = held_out_placed_elements(partition, design, importance, count)
+        elif placed:
             # Leja points extending the nodes: with them, a far richer interpolant.
             draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
         else:
@@ -1285,3 +1334,22 @@ def _run_settings(config: StudyConfig) -> str:
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
     return None if values is None else tuple(values)
+
+
+def _beside(call: Callable[[], _T], background: bool) -> Future[_T]:
+    """``call()`` in a thread of its own when ``background``, its result or exception kept in
+    the future returned; else now (raising here)."""
+    future: Future[_T] = Future()
+    if not background:
+        future.set_result(call())
+        return future
+
+    def run() -> None:
+        try:
+            future.set_result(call())
+        except BaseException as error:  # the caller's to raise, from future.result()
+            future.set_exception(error)
+
+    # A daemon: an interrupted run does not wait for it at exit (its workers are killed).
+    threading.Thread(target=run, name="pcmb-held-out", daemon=True).start()
+    return future

@@ -15,13 +15,15 @@ ratio to the floor. Bytecode is cached by a first, untimed round. Targets: ``run
 from __future__ import annotations
 
 import argparse
-import os
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from bench_timing import load_average, process_env
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -36,14 +38,16 @@ def _command(name: str, config: Path, output: Path) -> list[str]:
     return [*command, "-o", str(output), "--quiet"] if name == "run" else command
 
 
-def _seconds(command: list[str], tree: Path | None, cwd: Path) -> float:
-    """Wall time of ``command`` as a whole process, with ``tree`` first on the path."""
-    env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree), env.get("PYTHONPATH")]))
+def _seconds(command: list[str], tree: Path | None, cwd: Path) -> tuple[float, float]:
+    """(wall, CPU) seconds of ``command`` as a whole process, with ``tree`` first on the
+    path. CPU is user + system of the process and the children it waited for (its workers):
+    it hardly depends on the load of the machine, the wall does."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    subprocess.run(command, cwd=cwd, env=env, check=True, capture_output=True)
-    return time.perf_counter() - start
+    subprocess.run(command, cwd=cwd, env=process_env(tree), check=True, capture_output=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
 
 
 def main() -> None:
@@ -57,6 +61,7 @@ def main() -> None:
     # Each tree runs its own copy of the config (and so of the models it names), as the
     # models follow the package's own layout.
     configs = {tree: tree / config.relative_to(ROOT) for tree in trees.values()}
+    loads = [load_average()]
     with tempfile.TemporaryDirectory() as folder:
         work = Path(folder)
         jobs = {"floor": ([sys.executable, "-c", FLOOR], None)}
@@ -64,24 +69,30 @@ def main() -> None:
             for name in TARGETS:
                 jobs[f"{label}{name}"] = (_command(name, configs[tree], work / "out.h5"), tree)
         times: dict[str, list[float]] = {label: [] for label in jobs}
+        cpu: dict[str, list[float]] = {label: [] for label in jobs}
         for round_ in range(args.repeat + 1):  # the first round fills the bytecode caches
             for label, (command, tree) in jobs.items():
-                seconds = _seconds(command, tree, work)
+                seconds, used = _seconds(command, tree, work)
                 if round_:
                     times[label].append(seconds)
+                    cpu[label].append(used)
+    loads.append(load_average())
     floor = statistics.median(times["floor"])
     print(f"whole processes, median of {args.repeat}, alternating ({config.name}):")
-    print(f"  {'floor: python -c ' + repr(FLOOR):<52}{floor:6.2f} s")
+    print(f"  {loads[0]} before, {loads[1]} after")
+    print(f"  {'':<52}{'wall':>6}    {'ratio':>5}{'':<22}  CPU s")
     for label, seconds in times.items():
-        if label == "floor":
-            continue
         median = statistics.median(seconds)
+        used = statistics.median(cpu[label])
+        if label == "floor":
+            print(f"  {'floor: python -c ' + repr(FLOOR):<52}{floor:6.2f} s{'':<31}{used:5.2f}")
+            continue
         name = label.split()[-1]
         ratio = median / floor
         verdict = "meets" if ratio <= TARGETS[name] else "misses"
         print(
             f"  {'pcmb ' + label:<52}{median:6.2f} s  {ratio:4.2f} x the floor "
-            f"({verdict} {TARGETS[name]:g} x)"
+            f"({verdict} {TARGETS[name]:g} x)  {used:5.2f}"
         )
 
 

@@ -12,7 +12,8 @@ For each config this runs, through pcmb's public API:
    the *true* error is the larger of the errors of the mean and the std against it, over
    the output's largest std: what the verdict judges;
 3. ``--seeds S`` more held-out checks with other seeds, to show how the verdict varies with
-   the K draws (the min and max of their flags); none for a one-input design, whose
+   the K draws (the min and max of their flags; each a Latin hypercube of the check's most
+   runs, judged as the study judges its own); none for a one-input design, whose
    held-out runs are placed, not drawn (``placed``);
 4. a Monte Carlo twin of 400 runs, on which the surrogate's own pointwise RMS error is
    measured (it bounds the errors of mean and std, and is often much larger).
@@ -109,6 +110,7 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
                     times,
                     (expansion.evaluate_germ(c.germ), c.values[name]),
                     tolerance,
+                    holdout_germ=c.germ,  # a Latin hypercube, as the study's own check
                 ).failing_from
                 for c in checks
             ]
@@ -197,7 +199,11 @@ CASES = {
         {"z": pcmb.Normal(0.0, 1.0)},
         np.linspace(0.0, 5.0, 201),
         lambda t: lognormal_moments(0.5 * t),
-        {"order 4": {"order": 4}, "order 4, elements auto": {"order": 4, "elements": "auto"}},
+        {
+            "order 4": {"order": 4},
+            "order 4, elements auto": {"order": 4, "elements": "auto"},
+            "order 4, elements auto (8)": {"order": 4, "elements": "auto", "max_elements": 8},
+        },
     ),
     "jump": (
         well,
@@ -207,6 +213,7 @@ CASES = {
         {
             "order 3": {"order": 3},
             "order 7": {"order": 7},
+            "Smolyak level 3": {"grid": "smolyak", "level": 3},
             "order 3, elements auto (4)": {"order": 3, "elements": "auto", "max_elements": 4},
         },
     ),

@@ -94,9 +94,10 @@ def test_regress_names_every_kept_directory_in_a_warning_record(tmp_path, capsys
     records = [w for w in result.warnings if w.code == "nodes-failed"]
     assert len(records) == 2  # the collocation nodes, and the held-out runs
     assert str(failure) in records[0].message
-    # mode in [1, 1.4) fails: 0.4 / 1.4 of the held-out draws, 4 or 5 of a Latin hypercube.
+    # mode in [1, 1.4) fails: exactly the held-out runs placed there (Leja points of one
+    # input, docs/diagnostics.md), some but not all of them.
     failed = int(np.sum(result.held_out.params[:, 0] >= 1.0))
-    assert failed in (4, 5) and int(np.sum(~result.held_out.ok)) == failed
+    assert 0 < failed < 16 and int(np.sum(~result.held_out.ok)) == failed
     assert records[1].message.startswith(f"{failed} of 16 held-out run(s) failed and were left")
     kept = kept_directories(run_dir)
     assert len(kept) == 1 + failed  # one node, and the failed held-out runs

@@ -26,10 +26,9 @@ from pcmb.analysis.diagnostics import (
     range_checks,
     spectral_decay,
     statistics_error,
-    tail_terms,
     verdict,
 )
-from pcmb.chaos.basis import tensor_index_set, total_index_set
+from pcmb.chaos.basis import tail_terms, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Uniform
 from pcmb.chaos.nodes import TensorGrid, random_nodes

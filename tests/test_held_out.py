@@ -15,6 +15,7 @@ import pytest
 
 import pcmb
 from pcmb.analysis.diagnostics import (
+    held_out_budget,
     held_out_draws,
     held_out_placed,
     holdout_error,
@@ -23,7 +24,7 @@ from pcmb.analysis.diagnostics import (
 )
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
-from pcmb.references import bouncing_ball, double_well, lognormal_moments
+from pcmb.references import bouncing_ball, double_well, double_well_moments, lognormal_moments
 
 #: Gravity and the ball's restitution.
 
@@ -255,7 +256,7 @@ def test_the_default_check_of_a_one_input_design_flags_on_time(
         result = _run(model, inputs, times, order=order, seed=seed)
         found = result.diagnostics[model.outputs[0]]
         assert abs(found.failing_from - crossing) <= within, seed
-        assert result.held_out.ok.size <= 8
+        assert result.held_out.ok.size == held_out_budget(result.n_nodes) == 8
 
 
 def test_a_one_input_design_places_its_whole_check_at_once():
@@ -285,3 +286,59 @@ def test_placed_runs_make_the_interpolant_exact_for_a_polynomial_of_their_degree
     assert found.corrected_std[0] == pytest.approx(np.sqrt(10395.0 - 225.0), rel=1e-9)
     assert found.mean_error[0] == pytest.approx(abs(15.0 - expansion.mean()[0]), rel=1e-9)
     assert found.spread[0] < 1e-6  # nothing moves without the last two: exact already
+
+
+@pytest.mark.parametrize(
+    ("settings", "at"), [({"order": 7}, 3.14), ({"grid": "smolyak", "level": 3}, 4.0)]
+)
+def test_a_placed_check_sees_the_mean_error_of_a_gauss_design_beyond_its_held_out_degrees(
+    settings, at
+):
+    # 8 placed runs beside N >= 8 Gauss (Gauss-Patterson) nodes: the interpolant's mean is the
+    # design's own, so only the tail of the coefficients beyond its degree can tell the mean's
+    # error (the double well's mean: its closed form, 5.1 % and 4.1 % of the largest std).
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375)}
+    times = np.linspace(0.0, 4.0, 201)
+    result = _run(well, inputs, times, **settings)
+    found = result.diagnostics["x"]
+    mean, _ = double_well_moments(times, -0.625, 0.375)
+    k = np.searchsorted(times, at)
+    true = abs(result.mean("x") - mean)[k] / found.scale
+    assert true / 10 <= found.holdout.mean_error[k] <= 10 * true
+
+
+def test_the_file_says_whether_the_check_was_placed_or_drawn(tmp_path, capsys):
+    times = np.linspace(0.0, 1.0, 11)
+    one = {"x0": pcmb.Uniform(-0.625, 0.375)}
+    two = {**one, "u": pcmb.Uniform(0.0, 1.0)}
+    for name, inputs, word in (("one", one, "placed"), ("two", two, "drawn")):
+        pcmb.Study(well, inputs, times, order=3, backend="inprocess").run(tmp_path / f"{name}.h5")
+        held_out = pcmb.load(tmp_path / f"{name}.h5").held_out
+        assert held_out.placed == (word == "placed")
+        assert main(["inspect", str(tmp_path / f"{name}.h5")]) == 0
+        assert f"({held_out.ok.size} {word} held-out runs)" in capsys.readouterr().out
+
+
+def test_a_multi_element_design_places_its_check_per_element_and_flags_on_time():
+    # exp(z t / 2) at order 4 with elements: auto held to 8 elements (75 runs): its std
+    # passes 5 % of the largest std at t = 4.78 (the lognormal moments); drawn runs missed it.
+    times = np.linspace(0.0, 5.0, 201)
+    inputs = {"z": pcmb.Normal(0.0, 1.0)}
+    mean, std = lognormal_moments(0.5 * times)
+    for seed in range(5):  # drawn, 19 runs flagged it with 1 seed of these 5
+        result = _run(lognormal, inputs, times, order=4, elements="auto", max_elements=8, seed=seed)
+        crossing = verdict(times, _true_error(result, "x", mean, std), 0.05)
+        assert crossing == pytest.approx(4.78, abs=0.03)
+        assert abs(result.diagnostics["x"].failing_from - crossing) <= 0.25, seed
+    assert result.held_out.placed and result.held_out.ok.size <= held_out_budget(result.n_nodes)
+
+
+def test_the_verdict_weighs_the_noise_of_the_larger_estimate():
+    # 64 runs of f = sign(s) √(s² + 0.44) about the surrogate s = z ~ N(0, 1) (mean 0, std
+    # 1): f² - s² = 0.44 at every run, so the std's error (√1.44 - 1 = 0.2) is known without
+    # noise, while the mean's correction Σ (f - s) / K is right (0) but noisy. The verdict
+    # judges the std's error, with the std's noise.
+    z = np.random.default_rng(3).standard_normal((64, 1))
+    found = holdout_error(z, np.sign(z) * np.sqrt(z**2 + 0.44), np.zeros(1), np.ones(1), 1.0)
+    assert found.std_error[0] == pytest.approx(0.2, abs=0.01) and found.mean_error[0] < 0.1
+    assert found.spread[0] == pytest.approx(found.corrected_std_se[0])

@@ -18,9 +18,10 @@ raises false alarms.
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
-  bars show, and the mean and std those runs correct. A tensor grid of one input places its
-  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes) and
-  compares its mean and std with those of the interpolant through both (:func:`placed_check`).
+  bars show, and the mean and std those runs correct. A grid of one input places its
+  held-out runs instead (:func:`held_out_placed`: Leja points extending its nodes; per
+  element, :func:`held_out_placed_elements`) and compares its mean and std with those of the
+  interpolant through both, plus the mean's part beyond its degree (:func:`placed_check`).
 - **Range checks** (:func:`range_checks`): a variance from the coefficients that is zero
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
@@ -51,18 +52,21 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.statistics import draws_are_runs, nearest_indices
 from pcmb.axes import OutputAxis
-from pcmb.chaos.elements import PiecewiseExpansion
+from pcmb.chaos.basis import tail_terms
+from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, draw_germs, random_nodes
+from pcmb.chaos.nodes import NodeSet, TensorGrid, draw_germs, random_nodes
 from pcmb.chaos.polynomials import Hermite, OrthonormalFamily
+from pcmb.chaos.truncated import MAX_TERMS
 from pcmb.result import StudyResult, WarningRecord
 from pcmb.wording import plural
 
 __all__ = [
     "CODES",
     "CONFIDENCE",
+    "ELEMENT_POINTS",
     "FIRST_BATCH",
     "TOLERANCE",
     "HeldOut",
@@ -70,9 +74,11 @@ __all__ = [
     "OutputDiagnostics",
     "diagnose",
     "diagnose_all",
+    "element_importance",
     "held_out_budget",
     "held_out_draws",
     "held_out_placed",
+    "held_out_placed_elements",
     "holdout_error",
     "more_runs",
     "out_of_range",
@@ -81,7 +87,6 @@ __all__ = [
     "range_checks",
     "spectral_decay",
     "statistics_error",
-    "tail_terms",
     "verdict",
 ]
 
@@ -109,9 +114,16 @@ PAIRED_FROM = 16
 #: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
 #: the centre.
 PLACED_SPARE = 2
+#: A placed check extrapolates its interpolant's spectrum up to this many times its degree
+#: to estimate the mean's error beyond it (:func:`_unseen_mean_error`).
+UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
+#: Most points (nodes and placed held-out runs) in one element of a one-input multi-element
+#: design (:func:`held_out_placed_elements`): a truncated family's Leja points need four
+#: times as many recurrence terms as points.
+ELEMENT_POINTS = MAX_TERMS // 4
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
 #: design's own first nodes.
 HELD_OUT_SEED = 7919
@@ -154,25 +166,6 @@ _SHAPE_LAYERS = 3
 
 
 # -- spectral decay ----------------------------------------------------------------------------
-
-
-def tail_terms(multi_index: ArrayLike, depth: int = 2) -> NDArray[np.bool_]:
-    """(S,) the terms of degree >= 2 in the outer ``depth`` layers of an index set.
-
-    α is in the tail when α + depth·e_k leaves the set for some input k that the set varies
-    (largest degree >= 1): for a total set of order P that is |α| >= P - depth + 1, for a
-    tensor set α_k >= P_k - depth + 1 for some k. Terms of total degree 0 and 1 are never in
-    it, so a response linear in its inputs has an empty tail at every order (an order below
-    3 has fewer than two layers above the linear ones).
-    """
-    index = np.asarray(multi_index, dtype=np.int64)
-    present = {tuple(row) for row in index}
-    tail = np.zeros(index.shape[0], dtype=bool)
-    for k in np.flatnonzero(index.max(axis=0) >= 1):
-        shifted = index.copy()
-        shifted[:, k] += depth
-        tail |= np.array([tuple(row) not in present for row in shifted])
-    return tail & (index.sum(axis=1) >= 2)
 
 
 #: The expansions the diagnostics judge: one element, or a multi-element one.
@@ -268,6 +261,65 @@ def held_out_placed(
     return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
 
 
+def element_importance(
+    partition: Partition, design_germ: ArrayLike, values: Mapping[str, ArrayLike]
+) -> NDArray[np.float64]:
+    """(E,) how much each element of a one-input design may err: its probability times the
+    largest |top coefficient| of the interpolant through its nodes (over outputs and times,
+    each output over its runs' largest spread)."""
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(np.ravel(design_germ))
+    where = partition.locate(physical[:, None])
+    importance = np.zeros(partition.size)
+    for y in values.values():
+        y = np.asarray(y, dtype=float).reshape(physical.size, -1)
+        spread = float(np.nanmax(np.nanstd(y, axis=0), initial=0.0))
+        finite = np.isfinite(y).all(axis=1)
+        for e, (conditional,) in enumerate(partition.inputs):
+            rows = (where == e) & finite
+            if spread > 0 and rows.sum() > 1:
+                local = conditional.to_germ(physical[rows])
+                top = _interpolated(conditional.family, local, y[rows] / spread)[-1]
+                importance[e] = max(importance[e], partition.probability[e] * np.max(abs(top)))
+    return importance
+
+
+def held_out_placed_elements(
+    partition: Partition, design_germ: ArrayLike, importance: ArrayLike, count: int
+) -> tuple[NodeSet, NDArray[np.float64]]:
+    """``count`` held-out inputs of a one-input multi-element design, placed per element: two
+    at a time (one where two do not fit) to the element of the largest ``importance``
+    (:func:`element_importance`) over one plus its share so far, at most ``ELEMENT_POINTS``
+    points (nodes and runs) per element; in each element the weighted Leja points
+    extending its nodes in its own coordinate (its conditional density), kept a hair inside
+    its interval so that they stay in it. Element by element; weights 1."""
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(np.ravel(design_germ))
+    where = partition.locate(physical[:, None])
+    room = ELEMENT_POINTS - np.bincount(where[where >= 0], minlength=partition.size)
+    importance = np.asarray(importance, dtype=float)
+    shares = np.zeros(partition.size, dtype=int)
+    while (left := count - shares.sum()) > 0:
+        step = 2 if left > 1 and np.any(shares + 2 <= room) else 1
+        fits = shares + step <= room
+        if not fits.any():
+            raise ValueError(f"{count} held-out runs do not fit in {partition.size} elements")
+        shares[np.argmax(np.where(fits, importance / (1.0 + shares), -np.inf))] += step
+    placed = []
+    for e in np.flatnonzero(shares):
+        (conditional,) = partition.inputs[e]
+        start = conditional.to_germ(physical[where == e])
+        local = leja_sequence(conditional.family, tuple(start), start.size + shares[e])
+        low, high = conditional.family.support
+        hair = 1e-9 * np.where(np.isfinite(high - low), high - low, 1.0)
+        placed.append(
+            conditional.to_physical(np.clip(local[start.size :], low + hair, high - hair))
+        )
+    params = np.concatenate(placed)
+    germ = distribution.to_germ(params)
+    return NodeSet((distribution,), germ[:, None], params[:, None]), np.ones(count)
+
+
 @dataclass(frozen=True)
 class HeldOutCheck:
     """The surrogate against K held-out model runs at random inputs.
@@ -284,8 +336,8 @@ class HeldOutCheck:
         (T,) estimated errors of the expansion's mean and standard deviation, over the scale
         (:func:`statistics_error`).
     spread:
-        (T,) standard error of the two estimates (the larger of theirs), over the scale: how
-        finely K runs resolve the statistics' errors.
+        (T,) standard error of the larger of the two estimates (:attr:`statistics`), over the
+        scale: how finely K runs resolve the error the verdict judges.
     corrected_mean, corrected_std:
         (T,) the mean and std corrected by the held-out runs (the surrogate as a control
         variate), in the output's units.
@@ -432,8 +484,8 @@ def statistics_error(
     Returns
     -------
     mean_error, std_error, spread:
-        (T,) |estimated error of the mean|, |estimated error of the std| and the larger of
-        their standard errors, all over the scale (scaled before squaring: no overflow).
+        (T,) |estimated error of the mean|, |estimated error of the std| and the standard
+        error of the larger of them, all over the scale (scaled before squaring: no overflow).
     """
     found = holdout_error(predicted, observed, mean, std, scale, weights=weights, germ=germ)
     return found.mean_error, found.std_error, found.spread
@@ -507,11 +559,9 @@ def holdout_error(
         )
         corrected = (found.mean * scale, found.std * scale)
         corrected += (found.mean_se * scale, found.std_se * scale)
-        errors = (
-            np.abs(found.mean - mean / scale),
-            np.abs(found.std - std / scale),
-            np.fmax(found.mean_se, found.std_se),
-        )
+        mean_error, std_error = np.abs(found.mean - mean / scale), np.abs(found.std - std / scale)
+        larger = np.where(mean_error >= std_error, found.mean_se, found.std_se)
+        errors = (mean_error, std_error, larger)
     return HeldOutCheck(
         _rms_over_scale(differences, scale, count),
         _rms_over_scale(differences, scale, quantile),
@@ -520,6 +570,32 @@ def holdout_error(
         count,
         confidence,
     )
+
+
+def _unseen_mean_error(
+    family: OrthonormalFamily, nodes: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
+    (M, T) ``coefficients``: the energies of degrees 1 to M - 1 (neighbours averaged) are
+    fitted by a line against p and against log p, each extrapolated up to degree
+    ``UNSEEN_DEGREES`` × M, the larger kept, and weighted by the squared error of the design's
+    rule on each degree (its interpolatory weights on the (N,) germ ``nodes``)."""
+    size, first = nodes.size, coefficients.shape[0]
+    if first < 4:
+        return np.zeros(coefficients.shape[1:])
+    last = UNSEEN_DEGREES * first
+    root = np.sqrt(family.germ.pdf(nodes))
+    basis = family.evaluate(nodes, last)
+    rule = root * np.linalg.solve((root[:, None] * basis[:, :size]).T, np.eye(size)[0])
+    rule_errors = (rule @ basis)[first:, None]
+    energy = coefficients[1:] ** 2
+    paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
+    seen, unseen = np.arange(1.0, first - 1), np.arange(first, last + 1.0)[:, None]
+    tails = []
+    for transform in (np.asarray, np.log):
+        slope, intercept = np.polyfit(transform(seen), paired, 1)
+        tails.append(np.exp(intercept + np.minimum(slope, 0.0) * transform(unseen)))
+    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors**2, axis=0))
 
 
 def _interpolated(
@@ -534,7 +610,7 @@ def _interpolated(
 
 
 def placed_check(
-    expansion: ChaosExpansion,
+    expansion: ChaosExpansion | PiecewiseExpansion,
     node_germ: ArrayLike,
     node_values: ArrayLike,
     germ: ArrayLike,
@@ -543,17 +619,21 @@ def placed_check(
     confidence: float = CONFIDENCE,
 ) -> HeldOutCheck:
     """The held-out check of a one-input expansion by K runs placed to extend its N nodes
-    (:func:`held_out_placed`).
+    (:func:`held_out_placed`; per element, :func:`held_out_placed_elements`).
 
     Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
-    orthonormal basis, a far richer surrogate than the expansion (Leja points keep the
-    interpolation well conditioned); its mean and std (exact: c_0 and √Σ_{i>=1} c_i²) are
-    the corrected mean and std, and their differences from the expansion's the estimated
-    errors. Their standard error is how far the richer surrogate's mean and std move when
-    its last ``PLACED_SPARE`` held-out runs are left out (infinite with no more runs than
-    that); the surrogate error is the L2 distance of the two surrogates (their coefficients'
-    difference), its upper bound that plus how far it moves. Runs that are not finite are
-    left out; zeros if the scale is zero.
+    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than
+    the expansion (Leja points keep the interpolation well conditioned); its mean and std
+    (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
+    corrected mean and std, and their differences from the expansion's the estimated
+    errors, the mean's plus the design rule's error on the degrees beyond the interpolant's
+    (:func:`_unseen_mean_error`: with K <= N placed runs beside N Gauss nodes the two means
+    agree exactly). Their standard errors are how far the estimates move when the last
+    ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
+    than that), the spread that of the larger estimate (the corrected mean's adds the unseen
+    error); the surrogate error is the L2 distance of the two surrogates (their
+    coefficients' difference), its upper bound that plus how far it moves. Runs that are not
+    finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
     kept = np.isfinite(observed).all(axis=1)
@@ -562,40 +642,118 @@ def placed_check(
     if not scale > 0 or not np.isfinite(scale):
         zeros = np.zeros(observed.shape[1:])
         return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
-    runs = np.isfinite(np.asarray(node_values, dtype=float)).all(axis=1)
-    points = np.concatenate([np.ravel(node_germ)[runs], np.ravel(germ)[kept]])
-    values = np.vstack([np.asarray(node_values, dtype=float)[runs], observed[kept]]) / scale
-    family = expansion.distributions[0].family
-    index = expansion.multi_index[:, 0]
-    own = np.zeros((max(points.size, int(index.max()) + 1), values.shape[1]))
-    own[index] = expansion.coefficients / scale
+    node_values = np.asarray(node_values, dtype=float)
+    runs = np.isfinite(node_values).all(axis=1)
+    probability, pieces = _placed_pieces(
+        expansion,
+        np.ravel(node_germ)[runs],
+        node_values[runs],
+        np.ravel(germ)[kept],
+        observed[kept],
+    )
 
-    def moments(size: int) -> tuple[NDArray, NDArray, NDArray]:
-        coefficients = _interpolated(family, points[:size], values[:size])
-        variance = np.sum(coefficients[1:] ** 2, axis=0)
-        missed = np.sum((coefficients - own[:size]) ** 2, axis=0)
-        error = np.sqrt(missed + np.sum(own[size:] ** 2, axis=0))
-        return coefficients[0], np.sqrt(variance), error
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        found = [_placed_moments(*piece, scale, spare) for piece in pieces]
+        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
+        rich_mean = np.sum(probability * means, axis=0)
+        variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
+        return (
+            rich_mean,
+            np.sqrt(variance),
+            np.sqrt(np.sum(probability * errors**2, axis=0)),
+            np.sum(probability * unseen, axis=0),
+        )
 
-    rich_mean, rich_std, error = moments(points.size)
+    rich_mean, rich_std, error, unseen = moments(0)
+    mean_error, std_error = (
+        np.abs(rich_mean - mean / scale) + unseen,
+        np.abs(rich_std - std / scale),
+    )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error = moments(points.size - PLACED_SPARE)
-        mean_se, std_se = np.abs(rich_mean - fewer_mean), np.abs(rich_std - fewer_std)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
+        fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
+        moved_mean = np.abs(rich_mean - fewer_mean)
+        mean_se, std_se = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
         moved = np.abs(error - fewer_error)
     else:
-        mean_se = std_se = moved = np.full(values.shape[1], np.inf)
+        moved_mean = mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return HeldOutCheck(
         error,
         error + moved,
-        np.abs(rich_mean - mean / scale),
-        np.abs(rich_std - std / scale),
-        np.fmax(mean_se, std_se),
+        mean_error,
+        std_error,
+        np.where(mean_error >= std_error, mean_se, std_se),
         rich_mean * scale,
         rich_std * scale,
-        mean_se * scale,
+        (moved_mean + unseen) * scale,
         std_se * scale,
         count,
         confidence,
+    )
+
+
+def _placed_pieces(
+    expansion: ChaosExpansion | PiecewiseExpansion,
+    node_germ: NDArray[np.float64],
+    node_values: NDArray[np.float64],
+    germ: NDArray[np.float64],
+    observed: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
+    """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
+    element its family, points (its nodes, then its held-out runs, in its own coordinate),
+    their values, its node count and its own (S, T) coefficients by degree. An element's
+    nodes are its own Gauss nodes, their values its expansion's there (which interpolates
+    them): the design's runs also hold the nodes of the elements split on the way."""
+    degrees = expansion.multi_index[:, 0]
+    order = int(degrees.max())
+
+    def own(coefficients: NDArray[np.float64], size: int) -> NDArray[np.float64]:
+        padded = np.zeros((max(size, order + 1), *coefficients.shape[1:]))
+        padded[degrees] = coefficients
+        return padded
+
+    if isinstance(expansion, ChaosExpansion):
+        family = expansion.distributions[0].family
+        points = np.concatenate([node_germ, germ])
+        values = np.vstack([node_values, observed])
+        coefficients = own(expansion.coefficients, points.size)
+        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
+    partition = expansion.partition
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(germ)
+    where = partition.locate(physical[:, None])
+    pieces = []
+    for e, (conditional,) in enumerate(partition.inputs):
+        nodes = TensorGrid((conditional,), (order,)).nodes[:, 0]
+        basis = conditional.family.evaluate(nodes, order)[:, degrees]
+        points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
+        values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
+        coefficients = own(expansion.coefficients[e], points.size)
+        pieces.append((conditional.family, points, values, nodes.size, coefficients))
+    return partition.probability[:, None], pieces
+
+
+def _placed_moments(
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    values: NDArray[np.float64],
+    size: int,
+    own: NDArray[np.float64],
+    scale: float,
+    spare: int,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
+    mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
+    and held-out runs without its last ``spare`` held-out runs, over the scale."""
+    kept = max(size, points.size - spare)
+    own = own / scale
+    coefficients = _interpolated(family, points[:kept], values[:kept] / scale)
+    missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
+    return (
+        coefficients[0],
+        np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
+        np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
+        _unseen_mean_error(family, points[:size], coefficients),
     )
 
 
@@ -1306,8 +1464,7 @@ def _cause_remedy(
     tail = tail_terms(index)
     # The two layers before the tail, the linear terms among them up to order 4 (at order 3
     # they are the only layer before it).
-    linear = (index.sum(axis=1) == 1) & (index.max(axis=0)[np.argmax(index, axis=1)] <= 4)
-    before = (tail_terms(index, 4) | linear) & ~tail
+    before = tail_terms(index, 4, lowest=1) & ~tail
     # Each failing time weighs the same: its energies as shares of its own variance.
     energies = _energies(expansion)[:, failing]
     variance = energies[np.any(index > 0, axis=1)].sum(axis=0)
@@ -1406,8 +1563,9 @@ class HeldOut:
     weights:
         (K,) importance weights of the draws (:func:`held_out_draws`; 1 when placed).
     placed:
-        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`) rather
-        than being drawn: the check is then :func:`placed_check`.
+        Whether the runs extend a one-input design's nodes (:func:`held_out_placed`, per
+        element :func:`held_out_placed_elements`) rather than being drawn: the check is then
+        :func:`placed_check` (``/validation`` attribute ``placed``).
     """
 
     seed: int

@@ -26,7 +26,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.polynomials import OrthonormalFamily
 
-__all__ = ["PolynomialBasis", "hyperbolic_index_set", "tensor_index_set", "total_index_set"]
+__all__ = [
+    "PolynomialBasis",
+    "hyperbolic_index_set",
+    "tail_terms",
+    "tensor_index_set",
+    "total_index_set",
+]
 
 
 def _check_orders(orders: Sequence[int]) -> tuple[int, ...]:
@@ -189,3 +195,23 @@ class PolynomialBasis:
         if np.array_equal(self.multi_index, tensor_index_set(orders)):
             return orders
         return None
+
+
+def tail_terms(multi_index: ArrayLike, depth: int = 2, lowest: int = 2) -> NDArray[np.bool_]:
+    """(S,) the terms of total degree >= ``lowest`` in the outer ``depth`` layers of an index
+    set.
+
+    α is in the tail when α + depth·e_k leaves the set for some input k that the set varies
+    (largest degree >= 1): for a total set of order P that is |α| >= P - depth + 1, for a
+    tensor set α_k >= P_k - depth + 1 for some k. Terms of total degree 0 and 1 are never in
+    it by default, so a response linear in its inputs has an empty tail at every order (an
+    order below 3 has fewer than two layers above the linear ones).
+    """
+    index = np.asarray(multi_index, dtype=np.int64)
+    present = {tuple(row) for row in index}
+    tail = np.zeros(index.shape[0], dtype=bool)
+    for k in np.flatnonzero(index.max(axis=0) >= 1):
+        shifted = index.copy()
+        shifted[:, k] += depth
+        tail |= np.array([tuple(row) not in present for row in shifted])
+    return tail & (index.sum(axis=1) >= lowest)

@@ -21,7 +21,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["KarhunenLoeve", "Spectrum", "line_covariance", "spectral_covariance"]
@@ -176,7 +175,9 @@ class KarhunenLoeve(Spectrum):
             raise ValueError(f"energy must be in (0, 1], got {energy}")
         if ratio is not None and not 0.0 < ratio <= 1.0:
             raise ValueError(f"ratio must be in (0, 1], got {ratio}")
-        x, w = sp.roots_legendre(points)
+        import scipy.special  # here: reading a config never needs it
+
+        x, w = scipy.special.roots_legendre(points)
         nodes = 0.5 * (b - a) * x + 0.5 * (a + b)
         weights = 0.5 * (b - a) * w
         matrix = np.asarray(kernel(nodes, nodes), dtype=float)

@@ -35,13 +35,20 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
 if TYPE_CHECKING:
     import scipy.stats as st
 
 __all__ = ["GaussRule", "Hermite", "Jacobi", "Laguerre", "Legendre", "OrthonormalFamily"]
+
+
+def _special():
+    """:mod:`scipy.special`, imported on first use: reading a config or starting a worker never
+    needs it."""
+    import scipy.special
+
+    return scipy.special
 
 
 @dataclass(frozen=True)
@@ -160,7 +167,7 @@ class Legendre(OrthonormalFamily):
         return np.zeros(n), b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return sp.roots_legendre(q)
+        return _special().roots_legendre(q)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return -1.0 + 2.0 * rng.uniform(0.0, 1.0, size)
@@ -204,13 +211,13 @@ class Jacobi(OrthonormalFamily):
         return a, b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return sp.roots_jacobi(q, self.alpha, self.beta)
+        return _special().roots_jacobi(q, self.alpha, self.beta)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return -1.0 + 2.0 * rng.beta(self.beta + 1.0, self.alpha + 1.0, size)
 
     def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
-        return -1.0 + 2.0 * sp.betaincinv(self.beta + 1.0, self.alpha + 1.0, u)
+        return -1.0 + 2.0 * _special().betaincinv(self.beta + 1.0, self.alpha + 1.0, u)
 
     @cached_property
     def germ(self) -> st.rv_continuous:
@@ -229,13 +236,13 @@ class Hermite(OrthonormalFamily):
         return np.zeros(n), b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return sp.roots_hermitenorm(q)
+        return _special().roots_hermitenorm(q)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return rng.standard_normal(size)
 
     def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
-        return sp.ndtri(u)
+        return _special().ndtri(u)
 
     @cached_property
     def germ(self) -> st.rv_continuous:
@@ -261,13 +268,13 @@ class Laguerre(OrthonormalFamily):
         return 2.0 * k + self.alpha + 1.0, b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return sp.roots_genlaguerre(q, self.alpha)
+        return _special().roots_genlaguerre(q, self.alpha)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return rng.standard_gamma(self.alpha + 1.0, size)
 
     def quantile(self, u: ArrayLike) -> NDArray[np.float64]:
-        return sp.gammaincinv(self.alpha + 1.0, u)
+        return _special().gammaincinv(self.alpha + 1.0, u)
 
     @cached_property
     def germ(self) -> st.rv_continuous:

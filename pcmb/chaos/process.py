@@ -28,8 +28,6 @@ from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import numpy as np
-import scipy.linalg
-import scipy.special as sp
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.inputs import Distribution, Normal
@@ -145,6 +143,8 @@ def matern(sigma: float, length: float, nu: float) -> Covariance:
     than the correction handles and the eigenvalues converge as h^(1+2ν).
     """
     _positive(sigma=sigma, length=length, nu=nu)
+    import scipy.special as sp  # here: reading a config never needs it
+
     scale = math.sqrt(2 * nu) / length
     factor = sigma**2 * 2 ** (1 - nu) / sp.gamma(nu)
 
@@ -300,6 +300,8 @@ class _Nystrom:
     @functools.cached_property
     def _problems(self) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """(basis (J, n_b), symmetric matrix (n_b, n_b)) of the even and the odd half."""
+        import scipy.linalg  # here: reading a config never needs it
+
         h = (self.stop - self.start) / (self.points - 1)
         root = np.sqrt(_gregory_weights(self.points, h))
         # Stationary on a uniform grid: R(|x_i - x_j|) is a Toeplitz matrix of J lags.
@@ -314,6 +316,8 @@ class _Nystrom:
     @functools.cached_property
     def spectrum(self) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
         """Every eigenvalue (J,), decreasing, and the half (0 even, 1 odd) it belongs to."""
+        import scipy.linalg  # here: reading a config never needs it
+
         found = [scipy.linalg.eigvalsh(block) for _, block in self._problems]
         values = np.concatenate(found)
         half = np.repeat(np.arange(len(found)), [f.size for f in found])
@@ -325,6 +329,8 @@ class _Nystrom:
     def modes(self, count: int) -> NDArray[np.float64]:
         """The leading ``count`` eigenfunctions at the points, (J, count), orthonormal in
         L²(start, stop) under the rule, in the order of :attr:`spectrum`."""
+        import scipy.linalg  # here: reading a config never needs it
+
         _, half = self.spectrum
         h = (self.stop - self.start) / (self.points - 1)
         root = np.sqrt(_gregory_weights(self.points, h))

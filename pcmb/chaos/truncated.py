@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import eigvalsh_tridiagonal
 
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre, OrthonormalFamily
@@ -77,6 +76,8 @@ def _gauss(family: OrthonormalFamily, q: int) -> tuple[NDArray[np.float64], NDAr
     Christoffel weights 1 / Σ_k p_k(x)², which keep their relative accuracy where they are tiny
     (eigenvector weights only have absolute accuracy; scipy's roots_jacobi loses digits for
     hundreds of points). Weights that underflow are 0."""
+    from scipy.linalg import eigvalsh_tridiagonal  # here: reading a config never needs it
+
     a, b = family.recurrence(q)
     nodes = eigvalsh_tridiagonal(a, np.sqrt(b[1:]))
     with np.errstate(over="ignore", invalid="ignore"):

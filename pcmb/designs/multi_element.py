@@ -35,6 +35,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
@@ -331,14 +332,14 @@ class MultiElementCollocation:
         return records
 
 
-def _tails(multi_index: NDArray[np.int64], depth: int = 2) -> NDArray[np.bool_]:
-    """(n, S) the terms in input k's outer ``depth`` degree layers: α_k >= 1 and
-    α + depth e_k outside the set."""
+def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """(n, S) the terms in input k's outer two degree layers: α_k >= 1 and α + 2 e_k
+    outside the set."""
     present = {tuple(row) for row in multi_index}
     tails = np.zeros(multi_index.T.shape, dtype=bool)
     for k in range(multi_index.shape[1]):
         shifted = multi_index.copy()
-        shifted[:, k] += depth
+        shifted[:, k] += 2
         outside = np.array([tuple(row) not in present for row in shifted])
         tails[k] = outside & (multi_index[:, k] >= 1)
     return tails
@@ -375,12 +376,8 @@ class TailErrors:
 
     def of_each(self) -> NDArray[np.float64]:
         """(E,) the estimate from each element's tail alone (NaN: not finite)."""
-        size = self.along.shape[0]
-        broken = np.zeros(size, dtype=bool)
-        for part in self.mean:
-            broken |= np.isnan(part).any(axis=1)
-        each = [self.estimate(np.arange(size) == e) for e in range(size)]
-        return np.where(broken, np.nan, each)
+        each = [np.maximum(m, s).max(axis=1) for m, s in zip(self.mean, self.std, strict=True)]
+        return np.max(each, axis=0) if each else np.zeros(self.along.shape[0])
 
 
 def element_errors(
@@ -410,7 +407,7 @@ def element_errors(
     """
     tails = _tails(multi_index)
     anywhere = tails.any(axis=0)
-    before = _tails(multi_index, 4).any(axis=0) & ~anywhere
+    before = tail_terms(multi_index, 4, lowest=1) & ~anywhere
     size, n = partition.size, multi_index.shape[1]
     means, stds, along = [], [], np.zeros((size, n))
     for c in coefficients.values():

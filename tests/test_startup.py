@@ -1,0 +1,88 @@
+"""What each command imports and starts before its work (issue 24): whole processes, no
+timing asserts; the times are in docs/benchmarks.md."""
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.config.schema import load_config
+from pcmb.errors import ConfigError
+from pcmb.study import Study
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _loaded(code: str, modules: list[str]) -> dict[str, bool]:
+    """Which of ``modules`` are in ``sys.modules`` after running ``code`` in a fresh
+    interpreter."""
+    probe = f"{code}\nimport sys\nprint([m in sys.modules for m in {modules!r}])"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    return dict(zip(modules, eval(out.stdout.strip().splitlines()[-1]), strict=True))
+
+
+@pytest.mark.parametrize("heavy", ["scipy.special", "scipy.linalg", "joblib"])
+def test_reading_the_config_schema_imports_no_scipy_nor_joblib(heavy):
+    assert _loaded("import pcmb.config.schema", [heavy]) == {heavy: False}
+
+
+@pcmb.pointwise(outputs=("y",))
+def _line(params, times):
+    return {"y": params["a"] * times + params["b"] ** 2}
+
+
+def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
+    """The workers make the held-out runs while the main process fits and draws the
+    statistics: the held-out runs here wait until the fit has begun (on the code before, which
+    ran them first, they waited in vain, for the guard's 20 s)."""
+    fitting = threading.Event()
+    seen = []
+    run_held_out, recover = Study._run_held_out, Study._recover
+
+    def held_out_after_the_fit_began(self, *args, **kwargs):
+        seen.append(fitting.wait(timeout=20))
+        return run_held_out(self, *args, **kwargs)
+
+    def recover_and_say_so(self, *args, **kwargs):
+        fitting.set()
+        return recover(self, *args, **kwargs)
+
+    monkeypatch.setattr(Study, "_run_held_out", held_out_after_the_fit_began)
+    monkeypatch.setattr(Study, "_recover", recover_and_say_so)
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
+    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), order=2, jobs=1)
+    result = study.run()
+    assert seen == [True]
+    assert result.held_out is not None and result.held_out.ok.all()
+
+
+def test_a_run_leaves_the_sweeps_settings_to_sweep_and_validate():
+    """A plain run ignores ``sweep:`` and so does not build the designs of its settings (the
+    quarter car's sweep: 35 designs, 0.2-0.7 s); validate still refuses a bad one at its
+    key."""
+    path = ROOT / "configs" / "quarter_car.yaml"
+    text = path.read_text().replace("max_runs: 2000", "max_runs: 3")
+    assert "max_runs: 3" in text
+    config = load_config(path, text=text, check_sweep=False)
+    assert config.sweep is not None
+    with pytest.raises(ConfigError, match=r"sweep\.methods\[2\]\.max_runs"):
+        load_config(path, text=text)
+
+
+def test_validate_checks_the_model_in_one_child_without_a_pool():
+    """``pcmb validate`` builds the model in one worker process it starts (the isolation),
+    never a loky pool: joblib stays unimported in its own process."""
+    config = ROOT / "configs" / "quarter_car.yaml"
+    code = (
+        "import contextlib, io\nfrom pcmb.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    assert main(['validate', {str(config)!r}]) == 0"
+    )
+    assert _loaded(code, ["joblib", "pcmb.run.executor"]) == {
+        "joblib": False,
+        "pcmb.run.executor": True,
+    }
