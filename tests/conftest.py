@@ -3,16 +3,20 @@
 Exact reference solutions live in :mod:`pcmb.references`; helpers that must be importable
 by path stay modules of their own (``executor_models``: model classes worker processes
 unpickle; ``model_loading``: the simulators of ``models/`` loaded at module level).
-``fmu_dir`` builds real FMUs with pythonfmu once per session.
+``fmu_dir`` builds real FMUs with pythonfmu once per session. The test process runs BLAS on
+one thread (``one_blas_thread``): on a 2-core machine whose tests start worker pools, a
+multithreaded eigen-solver in the test process waits for cores (a 1 s test took 50 s under
+load); a test whose subject is the process's threads asks for ``all_blas_threads``.
 """
 
 from __future__ import annotations
 
 import textwrap
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from threadpoolctl import threadpool_limits
 
 ROOT = Path(__file__).resolve().parents[1]
 #: pythonfmu slaves built into FMUs by ``fmu_dir``: the example of configs/ and the tests'.
@@ -51,6 +55,23 @@ class Linear:
             y[a > self.fail_above] = np.nan
         return {"y": y, "z": np.repeat((a * b)[:, None], times.size, axis=1)}
 '''
+
+
+@pytest.fixture(scope="session", autouse=True)
+def one_blas_thread() -> Iterator[threadpool_limits]:
+    """BLAS and OpenMP limited to one thread in the test process for the whole session."""
+    import scipy.linalg  # noqa: F401  (scipy's own OpenBLAS is limited only once loaded)
+
+    with threadpool_limits(limits=1) as limiter:
+        yield limiter
+
+
+@pytest.fixture
+def all_blas_threads(one_blas_thread: threadpool_limits) -> Iterator[None]:
+    """The process's own BLAS and OpenMP thread counts back, for one test."""
+    one_blas_thread.restore_original_limits()
+    yield
+    threadpool_limits(limits=1)
 
 
 @pytest.fixture

@@ -75,6 +75,7 @@ class Marked:
 """
 
 
+@pytest.mark.slow
 def test_validate_builds_the_model_once_in_one_worker_process_without_a_pool(tmp_path):
     """pcmb validate checks the config and the study in one short-lived worker process, where
     the model is built once; pcmb's own process starts no loky pool (never imports joblib)."""

@@ -126,6 +126,7 @@ def test_run_on_the_cluster_matches_the_run_in_process(scheduler, linear_study, 
     _same_result(on_cluster, here)
 
 
+@pytest.mark.slow
 def test_validate_reports_the_workers_of_the_cluster(scheduler, linear_study, capsys):
     config = linear_study(order=2)
     assert main(["validate", str(config), "--address", scheduler]) == 0
@@ -134,6 +135,7 @@ def test_validate_reports_the_workers_of_the_cluster(scheduler, linear_study, ca
     assert " GiB" in summary.partition("\ncluster  ")[2].splitlines()[0]
 
 
+@pytest.mark.slow
 def test_a_worker_address_is_not_a_scheduler_address(scheduler, linear_study, capsys):
     distributed = pytest.importorskip("distributed")
     with distributed.Client(scheduler, timeout=30) as client:
@@ -204,6 +206,7 @@ def _study(**execution) -> pcmb.Study:
     )
 
 
+@pytest.mark.slow
 def test_a_client_from_python_is_used_and_left_open(scheduler):
     distributed = pytest.importorskip("distributed")
     here = _study(backend="inprocess").run()
@@ -214,6 +217,7 @@ def test_a_client_from_python_is_used_and_left_open(scheduler):
     _same_result(on_cluster, here)
 
 
+@pytest.mark.slow
 def test_a_cluster_from_python_is_used_and_left_open():
     distributed = pytest.importorskip("distributed")
     here = _study(backend="inprocess").run()

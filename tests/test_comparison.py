@@ -42,6 +42,7 @@ def test_differences_of_two_chaos_results_match_the_closed_form():
     assert found.verdict() == "beyond tolerance"  # 0.5 t over 1.155: 43 % at t = 1
 
 
+@pytest.mark.slow
 def test_chaos_against_chaos_is_judged_by_the_stored_tolerance():
     # Order 1 is exact for y = a t: the means differ by (high - 3) t / 2, the stds by
     # (high - 3) t / √12, over a scale of 4 / √12 = 1.155. At high = 3.1 the mean gap is

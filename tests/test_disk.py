@@ -153,6 +153,7 @@ def test_an_output_that_is_a_directory_is_refused_before_anything_runs(tmp_path,
     assert nodes_run(tmp_path) == 0 and not Path(f"{out}.journal").exists()
 
 
+@pytest.mark.slow
 def test_an_output_below_a_file_is_refused(tmp_path, capsys):
     (tmp_path / "file").write_text("")
     out = tmp_path / "file" / "sub" / "out.h5"
@@ -180,6 +181,7 @@ def test_an_unwritable_folder_is_refused_before_anything_runs(tmp_path, capsys):
         folder.chmod(0o700)
 
 
+@pytest.mark.slow
 def test_a_read_only_file_system_is_refused_before_anything_runs(tmp_path, tmpfs, capsys):
     out = tmpfs("64k", ro=True) / "results" / "out.h5"
     config = write_config(tmp_path, out)
@@ -190,6 +192,7 @@ def test_a_read_only_file_system_is_refused_before_anything_runs(tmp_path, tmpfs
     assert nodes_run(tmp_path) == 0
 
 
+@pytest.mark.slow
 def test_too_little_space_is_refused_before_anything_runs(tmp_path, tmpfs, capsys):
     out = tmpfs("64k") / "out.h5"
     config = write_config(tmp_path, out)
@@ -201,6 +204,7 @@ def test_too_little_space_is_refused_before_anything_runs(tmp_path, tmpfs, capsy
     assert nodes_run(tmp_path) == 0 and not Path(f"{out}.journal").exists()
 
 
+@pytest.mark.slow
 def test_validate_prints_the_estimated_size(tmp_path, capsys):
     config = write_config(tmp_path, tmp_path / "out.h5")
     assert main(["validate", str(config)]) == 0

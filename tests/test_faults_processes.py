@@ -421,6 +421,7 @@ def test_an_interpreter_gone_after_the_check_is_named_in_the_failure(tmp_path: P
     assert "No such file or directory" not in str(failed.value)
 
 
+@pytest.mark.slow
 def test_pcmb_ends_without_waiting_for_workers_still_starting(tmp_path: Path) -> None:
     """`pcmb run` starts its workers before it reads the config: on a bad config it exits at
     once, killing them, instead of waiting for them to finish starting."""

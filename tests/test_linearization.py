@@ -94,6 +94,7 @@ def test_cubic_oscillator_reaches_the_equivalent_linear_root_and_overestimates_c
     assert gap > 5 * chaos_error
 
 
+@pytest.mark.slow
 def test_linearization_study_stores_mean_and_std_and_warns_about_non_gaussian_inputs(tmp_path):
     times = np.linspace(0.0, 0.5, 26)
     inputs = {"A": Uniform(0.025, 0.075), "c": Normal(1000.0, 100.0)}

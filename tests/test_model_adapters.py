@@ -448,6 +448,7 @@ def test_command_templates_render_exact_floats(tmp_path):
     assert (workdir / "sim_decay.py").is_symlink()
 
 
+@pytest.mark.slow
 def test_command_work_directories_kept_only_for_failures(tmp_path):
     model = command(tmp_path)
     out = model.simulate({"mode": np.array([0.0, 1.0, 0.0])}, TIMES)

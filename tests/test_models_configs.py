@@ -46,6 +46,7 @@ def test_default_job_keeps_the_requested_outputs():
     assert config.times.size == 301
 
 
+@pytest.mark.slow
 def test_the_ishigami_config_gives_its_closed_form_statistics(tmp_path):
     import h5py
     import numpy as np

@@ -224,8 +224,9 @@ def test_eq_10_reconstruction_gives_the_surviving_characters():
 
 @pytest.mark.slow
 def test_mr_damper_fig_11_holds_only_with_the_remedy():
-    """Part II Fig. 11 (x1 at t = 6 s), each method against 2000 Monte Carlo runs, judged by
-    the Monte Carlo's standard errors (docs/paper_cases.md §3).
+    """Part II Fig. 11 (x1 at t = 6 s), each method against 1000 Monte Carlo runs, judged by
+    the Monte Carlo's standard errors (docs/paper_cases.md §3). The paper's departures grow as
+    the square root of the runs: at 1000 the smallest (the distribution's) is about 6.5.
 
     The paper's order 3 (4 runs) is far outside them: x1(6 s) has 13 extrema in I, which a
     cubic cannot follow. The remedy the tool leads to, ``elements: auto`` at order 3, asked
@@ -237,10 +238,11 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
     study = pcmb.Study.from_config(config).replace(
         times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
     )
-    runs = 2000
+    runs = 1000
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        carlo = study.replace(method="montecarlo", samples=runs, seed=1).run()
+        # All runs in one stacked solve: its per-step overhead once, not once per 128 runs.
+        carlo = study.replace(method="montecarlo", samples=runs, seed=1, chunk_size=runs).run()
         paper = study.run()
         remedy = study.replace(elements="auto", diagnostics_tolerance=0.01).run()
     sampled = carlo.values["x1"][carlo.ok][:, -1]

@@ -1,11 +1,13 @@
 """Resuming for real: `pcmb run` processes killed with SIGKILL, edited files, concurrent runs.
 
-Every run is a real ``python -m pcmb.cli`` process. The models of this file block instead of
-sleeping, so that a kill always lands at a known point: ``BLOCK_AFTER=K`` in a run's
-environment makes its model hang (until the run is killed) at its (K+1)-th call; a study's
-first call is its nominal run, so that is after K - 1 journaled chunks of one node each;
-``GATE=path`` makes it wait after the nominal run and the first node for as long as ``path``
-exists.
+A run that is killed, or holds the lock while others try, is a real ``python -m pcmb.cli``
+process; the resumes and refusals that follow run :func:`pcmb.cli.main` in this process
+(``tests/cli_process.py``): the journal a killed process left is their subject, not the
+process. The models of this file block instead of sleeping, so that a kill always lands at a
+known point: ``BLOCK_AFTER=K`` in a run's environment makes its model hang (until the run is
+killed) at its (K+1)-th call; a study's first call is its nominal run, so that is after K - 1
+journaled chunks of one node each; ``GATE=path`` makes it wait after the nominal run and the
+first node for as long as ``path`` exists.
 """
 
 from __future__ import annotations
@@ -113,17 +115,9 @@ output: out.h5
 """
 
 
-def pcmb_run(folder: Path, *args: str, **env: str) -> subprocess.CompletedProcess[str]:
-    """``pcmb run study.yaml --quiet ARGS`` in ``folder``, waited for."""
-    return subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
-        cwd=folder,
-        env={**os.environ, **env},
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+def pcmb_run(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``pcmb run study.yaml --quiet ARGS`` in ``folder``, in this process."""
+    return pcmb_here("run", "study.yaml", "--quiet", *args, cwd=folder)
 
 
 def records(folder: Path) -> list[Path]:
@@ -163,7 +157,7 @@ def resume_and_rerun(folder: Path) -> tuple[StudyResult, StudyResult]:
     resumed = pcmb_run(folder, "--resume")
     assert resumed.returncode == 0, resumed.stderr
     assert not (folder / "out.h5.journal").exists()
-    clean = pcmb_here("run", "study.yaml", "--quiet", "-o", "clean.h5", cwd=folder)
+    clean = pcmb_run(folder, "-o", "clean.h5")
     assert clean.returncode == 0, clean.stderr
     return load(folder / "out.h5"), load(folder / "clean.h5")
 
@@ -181,8 +175,9 @@ def assert_same_runs(folder: Path, first: StudyResult, second: StudyResult) -> N
 
 def inspected(path: Path) -> str:
     """What ``pcmb inspect PATH`` prints."""
-    command = [sys.executable, "-m", "pcmb.cli", "inspect", str(path)]
-    return subprocess.run(command, capture_output=True, text=True, timeout=60, check=True).stdout
+    shown = pcmb_here("inspect", str(path))
+    assert shown.returncode == 0, shown.stderr
+    return shown.stdout
 
 
 def snapshot(directory: Path, *, lock: bool = True) -> dict[str, bytes]:

@@ -285,6 +285,7 @@ def _ramp(params, times):
     return {"y": params["a"] * times + params["b"] ** 2}
 
 
+@pytest.mark.slow
 def test_the_fits_of_outputs_on_other_axes_join_one_report(tmp_path):
     # y on time and its peak, a scalar, are recovered apart; the report holds both fits.
     inputs = {"a": pcmb.Uniform(1.0, 2.0), "b": pcmb.Uniform(-1.0, 1.0)}

@@ -19,7 +19,7 @@ def _most_threads() -> int:
 
 
 @pytest.fixture
-def several_threads():
+def several_threads(all_blas_threads):
     if _most_threads() < 2:
         pytest.skip("this process's BLAS runs one thread already (one core or a limit is set)")
 
