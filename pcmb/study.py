@@ -5,6 +5,7 @@ The command line and the Python API share this one code path; see ``docs/archite
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -761,27 +762,42 @@ class Study:
             if early is not None:
                 early.result()  # the nominal run sent ahead ends too: no run is left half done
             raise
-        nominal = early.result() if early is not None else None
-        if self.execution.nominal_run and nominal is None:
-            nominal = self._run_nominal(facts, outputs, pool)
-        if streaming is not None:
-            return self._finish_streamed(
-                nodes, runs, journal, nominal, facts, outputs, streaming, output, provenance, stream
-            )
-        if not intrusive:
-            runs, nominal = self._with_derived(runs), self._with_derived(nominal)
-            axes = {
-                **{name: axis for name, axis in facts.axes.items() if name in outputs},
-                **dict.fromkeys(self.derived),
-            }
-            fitting = f"fitting {plural(len(runs.values), 'output')}"
-            with phase(f"{fitting} ({self.design.record().label})", stream):
-                found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
-        found = self._with_nominal(found, nominal)
-        analysis = None
-        if self.analysis is not None:
-            with phase("statistics (quantile bands, PDFs, spectra)", stream):
-                analysis = analyse(found, self.analysis)
+        try:
+            nominal = early.result() if early is not None else None
+            if self.execution.nominal_run and nominal is None:
+                nominal = self._run_nominal(facts, outputs, pool)
+            if streaming is not None:
+                return self._finish_streamed(
+                    nodes,
+                    runs,
+                    journal,
+                    nominal,
+                    facts,
+                    outputs,
+                    streaming,
+                    output,
+                    provenance,
+                    stream,
+                )
+            if not intrusive:
+                runs, nominal = self._with_derived(runs), self._with_derived(nominal)
+                axes = {
+                    **{name: axis for name, axis in facts.axes.items() if name in outputs},
+                    **dict.fromkeys(self.derived),
+                }
+                fitting = f"fitting {plural(len(runs.values), 'output')}"
+                with phase(f"{fitting} ({self.design.record().label})", stream):
+                    found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+            found = self._with_nominal(found, nominal)
+            analysis = None
+            if self.analysis is not None:
+                with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                    analysis = analyse(found, self.analysis)
+        except BaseException:
+            # No run left going behind the error: the held-out runs beside it end first.
+            with contextlib.suppress(BaseException):
+                checking.exception()
+            raise
         with phase(f"{plural(first, 'held-out run')}", stream if beside else None):
             held_out, held_out_failed = checking.result()
         if not intrusive:

@@ -4,6 +4,7 @@ timing asserts; the times are in docs/benchmarks.md."""
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +59,31 @@ def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
     result = study.run()
     assert seen == [True]
     assert result.held_out is not None and result.held_out.ok.all()
+
+
+def test_a_run_that_fails_while_its_held_out_runs_go_on_waits_for_them(monkeypatch):
+    """No run is left going behind a failed ``Study.run``: the held-out runs sent beside the
+    fit end before the error reaches the caller (who may own the pool and reuse it)."""
+    ended = []
+    run_held_out = Study._run_held_out
+
+    def slow_held_out(self, *args, **kwargs):
+        time.sleep(1.0)
+        found = run_held_out(self, *args, **kwargs)
+        ended.append(True)
+        return found
+
+    def broken_fit(self, *args, **kwargs):
+        raise RuntimeError("the fit broke")
+
+    monkeypatch.setattr(Study, "_run_held_out", slow_held_out)
+    monkeypatch.setattr(Study, "_recover", broken_fit)
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
+    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), order=2, jobs=1)
+    with pytest.raises(RuntimeError, match="the fit broke"):
+        study.run()
+    assert ended == [True]
+    assert not [t for t in threading.enumerate() if t.name == "pcmb-held-out"]
 
 
 def test_a_run_leaves_the_sweeps_settings_to_sweep_and_validate():
