@@ -51,7 +51,9 @@ RULE_CASES = [
 ]
 
 
-@pytest.mark.parametrize(("rule", "top", "moment"), RULE_CASES, ids=lambda c: repr(c)[:30])
+@pytest.mark.parametrize(
+    ("rule", "top", "moment"), RULE_CASES, ids=[repr(rule)[:30] for rule, _, _ in RULE_CASES]
+)
 def test_nested_rules_are_nested_and_exact_to_their_degree(rule, top, moment):
     """Level l's nodes are the first m_l of level l + 1's; E[p_j] = δ_j0 for j <= e_l (the
     orthonormal basis has E[p_0] = 1 and E[p_j] = 0), and the raw moments E[ξ^m] from the
