@@ -26,8 +26,6 @@ from pcmb.chaos.nodes import TensorGrid
 from pcmb.cli import main
 from pcmb.references import bouncing_ball, double_well, double_well_moments, lognormal_moments
 
-#: Gravity and the ball's restitution.
-
 
 @pcmb.batched(outputs=("x",))
 def lognormal(params, times):
