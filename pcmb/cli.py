@@ -509,8 +509,7 @@ def _inspect(path: str) -> str:
         axis = result.axis(name)
         undecided = found.reliable and found.undecided.any()
         if axis is None:  # a scalar: pass or fail, or too few runs to tell
-            verdict = "reliable" if found.reliable else "UNRELIABLE"
-            verdict = "undecided" if undecided else verdict
+            verdict = "undecided" if undecided else "reliable" if found.reliable else "UNRELIABLE"
         else:
             point = "time" if result.on_time(name) else f"{axis.name} point"
             verdict = (

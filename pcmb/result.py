@@ -335,6 +335,9 @@ class WarningRecord:
         return f"{where}{self.message} [{self.code}]"
 
 
+#: Codes of the cautions on what is drawn from the surrogate (PDFs, quantiles, Sobol'
+#: indices) while its mean and std hold: recorded only, shown beside those figures.
+SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
 #: Codes of warning records that explain a result without questioning it (a Sobol' index that
 #: cannot exist where an output does not vary, e.g. at a fixed initial state; surrogate values
 #: beyond the runs' range, which the verdict of the diagnostics already weighs; a surrogate
@@ -342,11 +345,9 @@ class WarningRecord:
 #: went, which caution what is drawn from the surrogate, not the mean and std; an output whose
 #: runs and nominal run are all equal): kept in the result and its file, listed as
 #: notes by ``pcmb inspect``, never a warning.
-RECORDED_ONLY = frozenset({"sobol-undefined", "surrogate-out-of-range", "output-constant"})
-#: Codes of the cautions on what is drawn from the surrogate (PDFs, quantiles, Sobol'
-#: indices) while its mean and std hold: recorded only, shown beside those figures.
-SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
-RECORDED_ONLY |= SURROGATE_CAUTIONS
+RECORDED_ONLY = (
+    frozenset({"sobol-undefined", "surrogate-out-of-range", "output-constant"}) | SURROGATE_CAUTIONS
+)
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
 #: leave-one-out error) and of the budgets that ended a refinement judged by the same
 #: tolerance as the verdict or by an internal threshold (``order: auto``, ``elements: auto``;

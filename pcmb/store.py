@@ -441,14 +441,8 @@ def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> Non
         owner.attrs["warnings"] = json.dumps(records)
 
 
-#: The per-time arrays of /diagnostics/<output>, by attribute of OutputDiagnostics.
-_DIAGNOSTIC_ARRAYS = {
-    "decay": "decay",
-    "out_of_range": "out_of_range",
-    "estimate": "estimate",
-    "noise": "noise",
-    "undecided": "undecided",
-}
+#: The per-time arrays of /diagnostics/<output>, each named as its OutputDiagnostics field.
+_DIAGNOSTIC_ARRAYS = ("decay", "out_of_range", "estimate", "noise", "undecided")
 #: ... and those of its held-out check: the estimated errors of the mean and the std, the
 #: standard error of the larger, and the mean and std the held-out runs correct with their
 #: standard errors (same names in the file as on HeldOutCheck).
@@ -471,8 +465,8 @@ def _write_diagnostics(
     for name, found in result.diagnostics.items():
         group = file["diagnostics"].require_group(name)
         time_ = trails[name]
-        for key, field in _DIAGNOSTIC_ARRAYS.items():
-            _points(group, key, getattr(found, field), (), time_)
+        for key in _DIAGNOSTIC_ARRAYS:
+            _points(group, key, getattr(found, key), (), time_)
         if found.holdout is not None:
             _points(group, "holdout_error", found.holdout.error, (), time_)
             _points(group, "holdout_upper", found.holdout.upper, (), time_)
@@ -521,9 +515,10 @@ def _read_diagnostics(
                 int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
             )
-        arrays = {  # older files have no noise (nor undecided): their verdict judged the estimate
-            field: _columns(group[key if key in group else "decay"][()] * (key in group), scalar)
-            for key, field in _DIAGNOSTIC_ARRAYS.items()
+        absent = np.zeros(group["decay"].shape)  # older files have no noise (nor undecided)
+        arrays = {
+            key: _columns(group[key][()] if key in group else absent, scalar)
+            for key in _DIAGNOSTIC_ARRAYS
         }
         arrays["undecided"] = arrays["undecided"].astype(bool)
         found[name] = OutputDiagnostics(

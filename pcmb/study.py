@@ -798,7 +798,7 @@ class Study:
             with contextlib.suppress(BaseException):
                 checking.exception()
             raise
-        with phase(f"{plural(first, 'held-out run')}", stream if beside else None):
+        with phase(plural(first, "held-out run"), stream if beside else None):
             held_out, held_out_failed = checking.result()
         if not intrusive:
             held_out = self._with_derived(held_out)
@@ -1092,10 +1092,10 @@ class Study:
         in all, the rest drawn only where the verdict is undecided; placed runs
         (:meth:`places_held_out`) all at once, as half of them can call a wrong result
         reliable (the double well at order 7 with 4)."""
-        if self.method.validation is not None:
-            return self.method.validation, self.method.validation
-        most = held_out_budget(design_runs)
-        return (most if self.places_held_out() else min(FIRST_BATCH, most)), most
+        most = self._held_out_most(design_runs)
+        if self.method.validation is not None or self.places_held_out():
+            return most, most
+        return min(FIRST_BATCH, most), most
 
     def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
@@ -1103,17 +1103,19 @@ class Study:
         input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
         elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
         wastes the few runs."""
-        grids = ("tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor")
         grid = self.design.record().grid
-        if len(self.inputs) != 1 or grid not in (*grids, "element-gauss"):
+        if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
             return False
         if grid != "element-gauss":
             return True
-        count = self.method.validation
-        if count is None:
-            count = held_out_budget(self.design.node_elements.size)
         own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
-        return count <= np.sum(ELEMENT_POINTS - own)
+        return self._held_out_most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
+
+    def _held_out_most(self, design_runs: int) -> int:
+        """The most held-out runs of the check: ``method.validation``, else the budget."""
+        if self.method.validation is not None:
+            return self.method.validation
+        return held_out_budget(design_runs)
 
     def _run_held_out(
         self,
@@ -1346,6 +1348,12 @@ def _run_settings(config: StudyConfig) -> str:
     # The held-out runs have their own journal folder, fingerprinted by their own nodes.
     data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
+
+
+#: The grids of one input whose held-out runs are placed (:meth:`Study.places_held_out`).
+_PLACED_GRIDS = frozenset(
+    {"tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor", "element-gauss"}
+)
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
