@@ -11,6 +11,7 @@ validate``), one short-lived worker process (:class:`OneProcessPool`).
 from __future__ import annotations
 
 import atexit
+import gc
 import logging
 import os
 import re
@@ -151,7 +152,13 @@ class LokyPool:
     def close(self, kill: bool = False) -> None:
         if kill:
             self._settle()
-        self._executor.shutdown(wait=not kill, kill_workers=kill)
+        # Waited for, and its queues collected now, even when killing: else their named
+        # semaphores are freed by loky's daemon threads while the interpreter exits, which can
+        # freeze them between unlinking one and telling the resource tracker, who then warns on
+        # stderr of a leaked semaphore it cannot find.
+        self._executor.shutdown(wait=True, kill_workers=kill)
+        self._executor = None
+        gc.collect()
 
 
 def _died(codes: Iterable[int]) -> str:
