@@ -305,19 +305,14 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     output = args.output or config.output
     if output is None:
         raise UsageError(f"{args.config}: no output file: give -o OUT.h5 or set 'output:'")
-    study = Study.from_config(config)
     changes = {} if args.jobs is None else {"jobs": args.jobs}
     if args.backend is not None:
         # A scheduler address only means something to dask.
         changes |= {"backend": args.backend} | ({} if args.backend == "dask" else {"address": None})
     if args.address is not None:  # every thread of the cluster, not the config's local jobs
         changes |= {"backend": "dask", "address": args.address, "jobs": args.jobs}
-    if changes:
-        execution = study.execution.model_dump(exclude_unset=True) | changes
-        source = study.source
-        if args.address is not None:
-            source = dataclasses.replace(source, address_key="--address")
-        study = study.replace(execution=execution, source=source)
+    address_key = "execution.address" if args.address is None else "--address"
+    study = Study.from_config(config, changes, address_key)
     provenance = {
         "config": config.source_text or "",
         "config_sha256": config.sha256,

@@ -360,14 +360,24 @@ class Study:
     # -- construction from a config -----------------------------------------------------------
 
     @classmethod
-    def from_config(cls, config: StudyConfig) -> Study:
-        """The study a validated config describes (same code path as ``pcmb run``)."""
+    def from_config(
+        cls,
+        config: StudyConfig,
+        execution: Mapping[str, Any] | None = None,
+        address_key: str = "execution.address",
+    ) -> Study:
+        """The study a validated config describes (same code path as ``pcmb run``).
+
+        ``execution``: keys set over the config's ``execution:`` (the command line's
+        ``--jobs``, ``--backend``, ``--address``), checked with it; ``address_key``: where
+        the dask address was given (:class:`StudySource`).
+        """
         return cls(
             config.model_factory(),
             config.study_inputs,
             config.times,
             method=config.method,
-            execution=config.execution,
+            execution=_dump(config.execution) | dict(execution) if execution else config.execution,
             analysis=config.analysis_settings,
             diagnostics=config.diagnostics,
             outputs=config.output_names,
@@ -378,7 +388,7 @@ class Study:
                 if name in config.model.params
             },
             derived=config.derived_outputs,
-            source=StudySource(_run_settings(config), "execution.address"),
+            source=StudySource(_run_settings(config), address_key),
         )
 
     def replace(self, **changes: Any) -> Study:

@@ -143,6 +143,24 @@ def test_bad_jobs_is_a_usage_error(tmp_path, linear_study, capsys):
     assert not (tmp_path / "out.h5").exists()
 
 
+def test_run_builds_one_study_with_the_command_lines_execution(tmp_path, linear_study, monkeypatch):
+    """--jobs and --backend are folded into the config's execution before the one study is
+    built (not a study built, then rebuilt with them)."""
+    built = []
+    real_init = pcmb.Study.__init__
+
+    def counted(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        built.append(self.execution)
+
+    monkeypatch.setattr(pcmb.Study, "__init__", counted)
+    config = linear_study(execution="jobs: 2, on_failure: regress")
+    argv = ["run", str(config), "--jobs", "1", "--backend", "inprocess", "--quiet"]
+    assert main(argv) == 0
+    assert len(built) == 1
+    assert (built[0].jobs, built[0].backend, built[0].on_failure) == (1, "inprocess", "regress")
+
+
 def test_model_failure_exits_3_naming_the_nodes(tmp_path, linear_study, capsys):
     config = linear_study(extra_params=", fail_above: 2.5")
     assert main(["run", str(config), "--quiet"]) == 3

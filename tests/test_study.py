@@ -1,5 +1,6 @@
 """The study pipeline from Python: statistics against closed forms, failure policies."""
 
+import dataclasses
 from typing import ClassVar
 
 import numpy as np
@@ -384,6 +385,12 @@ def test_a_configs_source_is_given_at_construction_and_kept_by_replace():
     assert study.replace(execution={"jobs": 1}).source == study.source
     dask = study.replace(execution={"backend": "dask"})
     assert dask.replace(address="tcp://h:1").source.address_key == "address"
+    flagged = pcmb.Study.from_config(
+        config, {"backend": "dask", "address": "tcp://h:1"}, "--address"
+    )
+    assert flagged.source == dataclasses.replace(study.source, address_key="--address")
+    assert (flagged.execution.backend, flagged.address) == ("dask", "tcp://h:1")
+    assert flagged.execution.on_failure == study.execution.on_failure  # the config's, kept
     nodes = study.node_set()
     plain = study.replace(source=StudySource())
     assert plain.fingerprint(nodes, ["x1"]).digest != study.fingerprint(nodes, ["x1"]).digest
