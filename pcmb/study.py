@@ -65,7 +65,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.result import DesignReport, NodeFailure, Status, StudyResult, WarningRecord
+from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
     PendingRun,
@@ -553,16 +553,18 @@ class Study:
         n_nodes: int,
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
+        record: Design | None = None,
     ) -> MemoryEstimate:
         """Upper estimate of the memory a run needs (:mod:`pcmb.run.memory`): ``n_nodes``
         nodes (an adaptive design: its budget is counted), the held-out runs and the range
         check's draws of a method with an expansion, every output (the derived ones too) as
-        wide as the widest."""
+        wide as the widest (``record``: the design's record, if at hand)."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
-        chaos = self.design.record().basis is not None
+        record = record or self.design.record()
+        chaos = record.basis is not None
         return MemoryEstimate(
             nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
+            held_out=self.held_out_runs(n_nodes, record)[1] if chaos else 0,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
             draws=RANGE_DRAWS if chaos else 0,
@@ -695,6 +697,7 @@ class Study:
                     provenance=provenance,
                     pool=own,
                 )
+        record = self.design.record()  # once, and again after an adaptive design's rounds
         # What the model finds wrong with the inputs or the time grid (an FMU's aliased
         # variables, a grid it cannot step): refused before any node, as `pcmb validate` does.
         facts = describe_model(self.model_factory, pool, self.times, tuple(self.inputs))
@@ -709,10 +712,10 @@ class Study:
         # an output that cannot be written (a folder, a read-only or full file system) are
         # found now.
         _, streaming = check_memory(
-            self.memory_estimate(nodes.size, outputs, facts.axes),
+            self.memory_estimate(nodes.size, outputs, facts.axes, record),
             self.memory,
             inputs=len(self.inputs),
-            streams=self.why_not_streamed(output),
+            streams=self.why_not_streamed(output, record),
         )
         journal_dir = None
         if output is not None:
@@ -739,15 +742,17 @@ class Study:
                 # An intrusive method: one solve in a worker, nothing to journal but the
                 # held-out runs, which are few and run again on a resume.
                 journal, journal_dir = None, None
-                found = self._solve(nodes, outputs, pool)
+                found = self._solve(nodes, outputs, pool, record)
             else:
                 runs, journal = self._run_nodes(
                     nodes, facts, outputs, pool, journal_dir, progress, keep=streaming is None
                 )
-                nodes, runs = self._run_rounds(
-                    nodes, runs, facts, outputs, pool, journal_dir, progress
-                )
-            first, most = self.held_out_runs(nodes.size)
+                if hasattr(self.design, "more"):
+                    nodes, runs = self._run_rounds(
+                        nodes, runs, facts, outputs, pool, journal_dir, progress
+                    )
+                    record = self.design.record()  # with the runs the rounds made
+            first, most = self.held_out_runs(nodes.size, record)
             # The workers make the held-out runs while this process fits the expansions and
             # draws the statistics, which do not need them; not in this process's own thread
             # (in-process runs), nor beside a nominal run sent after them (a timeout).
@@ -762,6 +767,7 @@ class Study:
                     pool,
                     journal_dir,
                     False if beside else progress,  # no bar beside the phases' lines
+                    record,
                     first,
                     nodes.nodes,
                     None if intrusive else runs.values,
@@ -788,6 +794,7 @@ class Study:
                     output,
                     provenance,
                     stream,
+                    record,
                 )
             if not intrusive:
                 runs, nominal = self._with_derived(runs), self._with_derived(nominal)
@@ -796,8 +803,8 @@ class Study:
                     **dict.fromkeys(self.derived),
                 }
                 fitting = f"fitting {plural(len(runs.values), 'output')}"
-                with phase(f"{fitting} ({self.design.record().label})", stream):
-                    found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
+                with phase(f"{fitting} ({record.label})", stream):
+                    found = dataclasses.replace(self._recover(nodes, runs, axes, record), axes=axes)
             found = self._with_nominal(found, nominal)
             analysis = None
             if self.analysis is not None:
@@ -822,6 +829,7 @@ class Study:
                     pool,
                     journal_dir,
                     progress,
+                    record,
                     min(wanted, most - first),
                     nodes.nodes,
                     batch=1,  # drawn: a placed check makes its runs at once
@@ -841,15 +849,17 @@ class Study:
                 write_result(output, result, provenance=provenance or {})
             if journal is not None:
                 journal.remove()
-        for record in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
-            warnings.warn(str(record), PcmbWarning, stacklevel=2)
+        for alert in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
+            warnings.warn(str(alert), PcmbWarning, stacklevel=2)
         return result
 
-    def why_not_streamed(self, output: str | Path | None) -> str | None:
+    def why_not_streamed(
+        self, output: str | Path | None, record: Design | None = None
+    ) -> str | None:
         """Why this study cannot stream its runs (``None``: it can): only a sampling design
         without a fit, writing a file, without derived outputs, has statistics that
-        accumulate run by run."""
-        design = self.design.record()
+        accumulate run by run (``record``: the design's record, if at hand)."""
+        design = record or self.design.record()
         if design.grid != "random" or design.basis is not None:
             fit = "" if design.grid != "random" else " with fit: regression"
             return f"method.kind {design.kind}{fit} needs every run at once"
@@ -871,6 +881,7 @@ class Study:
         output: str | Path,
         provenance: Mapping[str, str] | None,
         stream: Any,
+        record: Design,
     ) -> StudyResult:
         """The end of a streamed study (:meth:`why_not_streamed`): one pass over the journal
         in node order accumulates every output's mean and std block by block
@@ -897,7 +908,7 @@ class Study:
         )
         sample_nodes = NodeSet(nodes.distributions, nodes.nodes[kept], nodes.params[kept])
         sample = self._with_nominal(
-            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes), axes=axes),
+            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes, record), axes=axes),
             nominal,
         )
         result = dataclasses.replace(
@@ -958,11 +969,13 @@ class Study:
         found = derive(self.derived, self.times, runs.values)
         return dataclasses.replace(runs, values={**runs.values, **found})
 
-    def _solve(self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool) -> StudyResult:
+    def _solve(
+        self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool, record: Design
+    ) -> StudyResult:
         """The result of an intrusive design (:class:`~pcmb.designs.base.IntrusiveDesign`),
-        checked and solved in a worker with the model built there."""
+        ``record`` its record, checked and solved in a worker with the model built there."""
         design = self.design
-        kind = design.record().kind
+        kind = record.kind
         problems = run_in_worker(self.model_factory, pool, design.check, outputs)
         if self.derived:
             problems = [
@@ -978,7 +991,7 @@ class Study:
             raise ModelRunError((), f"the {kind} solve failed: {error}") from error
         return StudyResult(
             name=self.name,
-            design=design.record(),
+            design=record,
             times=self.times,
             input_names=self.input_names,
             distributions=tuple(self.inputs.values()),
@@ -1095,25 +1108,26 @@ class Study:
             )
         return runs, journal
 
-    def held_out_runs(self, design_runs: int) -> tuple[int, int]:
+    def held_out_runs(self, design_runs: int, record: Design | None = None) -> tuple[int, int]:
         """(first batch, most in all) of the held-out runs that check an expansion of
         ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
         at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
         in all, the rest drawn only where the verdict is undecided; placed runs
         (:meth:`places_held_out`) all at once, as half of them can call a wrong result
-        reliable (the double well at order 7 with 4)."""
+        reliable (the double well at order 7 with 4). ``record``: the design's record, if at
+        hand."""
         most = self._held_out_most(design_runs)
-        if self.method.validation is not None or self.places_held_out():
+        if self.method.validation is not None or self.places_held_out(record):
             return most, most
         return min(FIRST_BATCH, most), most
 
-    def places_held_out(self) -> bool:
+    def places_held_out(self, record: Design | None = None) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
         (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
         input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
         elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
-        wastes the few runs."""
-        grid = self.design.record().grid
+        wastes the few runs (``record``: the design's record, if at hand)."""
+        grid = (record or self.design.record()).grid
         if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
             return False
         if grid != "element-gauss":
@@ -1134,12 +1148,14 @@ class Study:
         pool: Pool,
         journal_dir: Path | None,
         progress: bool | None,
+        record: Design,
         count: int,
         design: NDArray[np.float64],
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
-        """``count`` held-out runs that check a chaos expansion (none for plain sampling),
+        """``count`` held-out runs that check a chaos expansion (none for plain sampling,
+        by the design's ``record``),
         batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
         design's nodes ``design`` (germ points) where
         :meth:`places_held_out` (per element of a multi-element design, where its node
@@ -1147,10 +1163,10 @@ class Study:
         journal's ``validation`` folder (``validation-<batch>`` after the first), under the
         failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
         leaves them out)."""
-        if not count or self.design.record().basis is None:
+        if not count or record.basis is None:
             return None, ()
         seed = self.method.seed + HELD_OUT_SEED + batch
-        placed = self.places_held_out()
+        placed = self.places_held_out(record)
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).
@@ -1278,9 +1294,10 @@ class Study:
         nodes: TensorGrid | NodeSet,
         runs: RunResult,
         axes: Mapping[str, OutputAxis | None],
+        record: Design,
     ) -> StudyResult:
-        """Expansions of every output: the design recovers the outputs of each axis together
-        (time first, then each own axis, then the scalars)."""
+        """Expansions of every output, with the design's ``record``: the design recovers the
+        outputs of each axis together (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
         warnings = _nodes_failed(runs.failures, nodes.size)
         try:
@@ -1290,7 +1307,7 @@ class Study:
             raise ModelRunError(runs.failures, message) from error
         return StudyResult(
             name=self.name,
-            design=self.design.record(),
+            design=record,
             times=self.times,
             input_names=self.input_names,
             distributions=tuple(self.inputs.values()),

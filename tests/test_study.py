@@ -394,3 +394,23 @@ def test_a_configs_source_is_given_at_construction_and_kept_by_replace():
     nodes = study.node_set()
     plain = study.replace(source=StudySource())
     assert plain.fingerprint(nodes, ["x1"]).digest != study.fingerprint(nodes, ["x1"]).digest
+
+
+@pytest.mark.parametrize(
+    ("method", "records"),
+    [
+        ({"kind": "collocation", "order": 3}, 1),
+        # An adaptive design's record changes with its rounds: once before, once after.
+        ({"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60}, 2),
+    ],
+)
+def test_a_run_asks_its_design_for_its_record_once_per_state(method, records, monkeypatch):
+    study = pcmb.Study(pointwise, INPUTS, TIMES, method=method, execution={"backend": "inprocess"})
+    asked = []
+    real = type(study.design).record
+    monkeypatch.setattr(
+        type(study.design), "record", lambda design: asked.append(1) or real(design)
+    )
+    result = study.run()
+    assert len(asked) == records
+    assert result.design == study.design.record()  # after the rounds: the runs they made
