@@ -679,24 +679,34 @@ class Study:
         if resume and fresh:
             raise _usage("fresh", "resume continues the journal, fresh discards it: give one")
         nodes = self.node_set()
-        if pool is None:
-            tasks = len(chunk_bounds(nodes.size, self.execution.chunk_size)) if nodes.size else 1
-            with open_pool(
-                self.execution.backend,
-                self.execution.jobs,
-                self.address,
-                tasks=tasks,
-                key=self.source.address_key,
-            ) as own:
-                return self.run(
-                    output,
-                    resume=resume,
-                    fresh=fresh,
-                    force=force,
-                    progress=progress,
-                    provenance=provenance,
-                    pool=own,
+        with contextlib.ExitStack() as stack:
+            if pool is None:
+                tasks = (
+                    len(chunk_bounds(nodes.size, self.execution.chunk_size)) if nodes.size else 1
                 )
+                pool = stack.enter_context(
+                    open_pool(
+                        self.execution.backend,
+                        self.execution.jobs,
+                        self.address,
+                        tasks=tasks,
+                        key=self.source.address_key,
+                    )
+                )
+            return self._run_on(nodes, pool, output, resume, fresh, force, progress, provenance)
+
+    def _run_on(
+        self,
+        nodes: TensorGrid | NodeSet,
+        pool: Pool,
+        output: str | Path | None,
+        resume: bool,
+        fresh: bool,
+        force: bool,
+        progress: bool | None,
+        provenance: Mapping[str, str] | None,
+    ) -> StudyResult:
+        """:meth:`run` on ``pool``, from the design's ``nodes`` (made and checked)."""
         record = self.design.record()  # once, and again after an adaptive design's rounds
         # What the model finds wrong with the inputs or the time grid (an FMU's aliased
         # variables, a grid it cannot step): refused before any node, as `pcmb validate` does.
@@ -850,7 +860,7 @@ class Study:
             if journal is not None:
                 journal.remove()
         for alert in result.alerts:  # not the notes, e.g. Sobol' undefined at a fixed state
-            warnings.warn(str(alert), PcmbWarning, stacklevel=2)
+            warnings.warn(str(alert), PcmbWarning, stacklevel=3)
         return result
 
     def why_not_streamed(
@@ -929,7 +939,7 @@ class Study:
             write_streamed(output, result, journal.chunks(), provenance=provenance or {})
         journal.remove()
         for record in result.alerts:
-            warnings.warn(str(record), PcmbWarning, stacklevel=3)
+            warnings.warn(str(record), PcmbWarning, stacklevel=4)
         return result
 
     def _recover_by_axis(
@@ -1027,6 +1037,7 @@ class Study:
             batch = more(nodes, steering, runs.status == Status.OK)
             if batch is None:
                 break
+            self._check_finite(batch)
             round_number += 1
             folder = None if journal_dir is None else journal_dir / f"round-{round_number}"
             found, journal = self._run_nodes(
@@ -1050,12 +1061,12 @@ class Study:
         proven: bool = False,
         keep: bool = True,
     ) -> tuple[RunResult, Journal | None]:
-        """Run every node, journaled in ``journal_dir`` if given (the journal is returned, to
-        be removed once the result is written); raise by the failure policy. ``chunk_size``
-        overrides the study's; ``proven``: the model ran at the study's nodes already (see
-        :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the
-        journal only (a streamed study)."""
-        self._check_finite(nodes)  # the held-out runs' and later rounds' nodes too
+        """Run every node (checked by the caller, :meth:`_check_finite`), journaled in
+        ``journal_dir`` if given (the journal is returned, to be removed once the result is
+        written); raise by the failure policy. ``chunk_size`` overrides the study's;
+        ``proven``: the model ran at the study's nodes already (see
+        :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
+        only (a streamed study)."""
         journal = None
         fresh_journal = False
         if journal_dir is not None:
@@ -1182,6 +1193,7 @@ class Study:
             # input's range is met evenly, which steadies the estimated errors of the
             # statistics against a few runs missing where the error sits.
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+        self._check_finite(draws)
         folder = None
         if journal_dir is not None:
             folder = journal_dir / ("validation" if batch == 0 else f"validation-{batch}")

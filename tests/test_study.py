@@ -414,3 +414,23 @@ def test_a_run_asks_its_design_for_its_record_once_per_state(method, records, mo
     result = study.run()
     assert len(asked) == records
     assert result.design == study.design.record()  # after the rounds: the runs they made
+
+
+def test_a_run_makes_and_checks_its_nodes_once(monkeypatch):
+    """The design's nodes are made once and checked for overflow once; the held-out runs'
+    nodes once too."""
+    study = pcmb.Study(pointwise, INPUTS, TIMES, execution={"backend": "inprocess"})
+    made, checked = [], []
+    real_nodes = type(study.design).nodes
+    monkeypatch.setattr(
+        type(study.design), "nodes", lambda design: made.append(1) or real_nodes(design)
+    )
+    real_check = pcmb.study.overflowing_inputs
+    monkeypatch.setattr(
+        pcmb.study,
+        "overflowing_inputs",
+        lambda nodes, names: checked.append(nodes.size) or real_check(nodes, names),
+    )
+    result = study.run()
+    assert len(made) == 1
+    assert checked == [result.n_nodes, len(result.held_out.ok)]
