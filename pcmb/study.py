@@ -517,6 +517,13 @@ class Study:
         Execution settings that cannot change a node's values (jobs, backend, failure
         policy) and the analysis are left out: changing them keeps the finished work.
         """
+        return self._fingerprint(nodes, outputs, self._file_digests(loaded))
+
+    def _fingerprint(
+        self, nodes: TensorGrid | NodeSet, outputs: Sequence[str], files: Mapping[str, str]
+    ) -> Fingerprint:
+        """:meth:`fingerprint`, with the digests of the model's files taken already
+        (:meth:`_file_digests`)."""
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array).tobytes())
@@ -530,8 +537,12 @@ class Study:
             settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
-        files = digest_files([*model_files(self.model_factory), *loaded])
         return Fingerprint(digest.hexdigest(), files)
+
+    def _file_digests(self, loaded: Sequence[str]) -> dict[str, str]:
+        """The SHA-256 of every file the model depends on, ``loaded`` too (see
+        :meth:`fingerprint`)."""
+        return digest_files([*model_files(self.model_factory), *loaded])
 
     # -- running ------------------------------------------------------------------------------
 
@@ -727,7 +738,7 @@ class Study:
             inputs=len(self.inputs),
             streams=self.why_not_streamed(output, record),
         )
-        journal_dir = None
+        journaling = None
         if output is not None:
             estimate = self.size_estimate(nodes.size, outputs, facts.axes)
             check_output(output, estimate, create=True)
@@ -744,6 +755,7 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     f"continue with --resume, or delete it or {FRESH} (which discards them)"
                 )
+            journaling = _Journaling(journal_dir, self._file_digests(facts.loaded_files))
         early = self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
@@ -751,15 +763,15 @@ class Study:
             if intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
                 # held-out runs, which are few and run again on a resume.
-                journal, journal_dir = None, None
+                journal, journaling = None, None
                 found = self._solve(nodes, outputs, pool, record)
             else:
                 runs, journal = self._run_nodes(
-                    nodes, facts, outputs, pool, journal_dir, progress, keep=streaming is None
+                    nodes, facts, outputs, pool, journaling, progress, keep=streaming is None
                 )
                 if hasattr(self.design, "more"):
                     nodes, runs = self._run_rounds(
-                        nodes, runs, facts, outputs, pool, journal_dir, progress
+                        nodes, runs, facts, outputs, pool, journaling, progress
                     )
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size, record)
@@ -775,7 +787,7 @@ class Study:
                     facts,
                     outputs,
                     pool,
-                    journal_dir,
+                    journaling,
                     False if beside else progress,  # no bar beside the phases' lines
                     record,
                     first,
@@ -837,7 +849,7 @@ class Study:
                     facts,
                     outputs,
                     pool,
-                    journal_dir,
+                    journaling,
                     progress,
                     record,
                     min(wanted, most - first),
@@ -1023,7 +1035,7 @@ class Study:
         facts: ModelFacts,
         outputs: tuple[str, ...],
         pool: Pool,
-        journal_dir: Path | None,
+        journaling: _Journaling | None,
         progress: bool | None,
     ) -> tuple[TensorGrid | NodeSet, RunResult]:
         """Run the further rounds an adaptive design asks for (its ``more`` method, see
@@ -1039,7 +1051,7 @@ class Study:
                 break
             self._check_finite(batch)
             round_number += 1
-            folder = None if journal_dir is None else journal_dir / f"round-{round_number}"
+            folder = None if journaling is None else journaling.folder(f"round-{round_number}")
             found, journal = self._run_nodes(
                 batch, facts, outputs, pool, folder, progress, proven=True
             )
@@ -1054,26 +1066,26 @@ class Study:
         facts: ModelFacts,
         outputs: tuple[str, ...],
         pool: Pool,
-        journal_dir: Path | None,
+        journaling: _Journaling | None,
         progress: bool | None,
         chunk_size: int | None = None,
         *,
         proven: bool = False,
         keep: bool = True,
     ) -> tuple[RunResult, Journal | None]:
-        """Run every node (checked by the caller, :meth:`_check_finite`), journaled in
-        ``journal_dir`` if given (the journal is returned, to be removed once the result is
+        """Run every node (checked by the caller, :meth:`_check_finite`), journaled by
+        ``journaling`` if given (the journal is returned, to be removed once the result is
         written); raise by the failure policy. ``chunk_size`` overrides the study's;
         ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study)."""
         journal = None
         fresh_journal = False
-        if journal_dir is not None:
-            fresh_journal = not Journal.exists(journal_dir)
+        if journaling is not None:
+            fresh_journal = not Journal.exists(journaling.directory)
             widths = Layout.of(outputs, self.times, facts.axes).widths
-            fingerprint = self.fingerprint(nodes, outputs, facts.loaded_files)
-            journal = Journal(journal_dir, fingerprint, nodes.size, outputs, widths)
+            fingerprint = self._fingerprint(nodes, outputs, journaling.files)
+            journal = Journal(journaling.directory, fingerprint, nodes.size, outputs, widths)
         try:
             runs = run_nodes(
                 self.model_factory,
@@ -1157,7 +1169,7 @@ class Study:
         facts: ModelFacts,
         outputs: tuple[str, ...],
         pool: Pool,
-        journal_dir: Path | None,
+        journaling: _Journaling | None,
         progress: bool | None,
         record: Design,
         count: int,
@@ -1194,9 +1206,8 @@ class Study:
             # statistics against a few runs missing where the error sits.
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
         self._check_finite(draws)
-        folder = None
-        if journal_dir is not None:
-            folder = journal_dir / ("validation" if batch == 0 else f"validation-{batch}")
+        name = "validation" if batch == 0 else f"validation-{batch}"
+        folder = None if journaling is None else journaling.folder(name)
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
@@ -1335,6 +1346,20 @@ class Study:
             report=recovery.report,
             processes=self.processes,
         )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Journaling:
+    """Where a run journals (``directory``: ``<output>.journal``) and the digests of the
+    model's files that every journal of the run records (:meth:`Study.fingerprint`), taken
+    once."""
+
+    directory: Path
+    files: Mapping[str, str]
+
+    def folder(self, name: str) -> _Journaling:
+        """The journaling of a folder of this journal (a round's, the held-out runs')."""
+        return dataclasses.replace(self, directory=self.directory / name)
 
 
 def _merged_reports(parts: list[Recovery]) -> DesignReport | None:

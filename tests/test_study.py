@@ -434,3 +434,21 @@ def test_a_run_makes_and_checks_its_nodes_once(monkeypatch):
     result = study.run()
     assert len(made) == 1
     assert checked == [result.n_nodes, len(result.held_out.ok)]
+
+
+def test_a_journaled_run_digests_the_models_files_once_for_all_its_journals(tmp_path, monkeypatch):
+    """Every journal folder of a run (nodes, each round, held-out runs) records the same
+    digests of the model's files, taken once."""
+    study = pcmb.Study(
+        pointwise,
+        INPUTS,
+        TIMES,
+        method={"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60},
+        execution={"backend": "inprocess"},
+    )
+    digested = []
+    real = pcmb.study.digest_files
+    monkeypatch.setattr(pcmb.study, "digest_files", lambda paths: digested.append(1) or real(paths))
+    result = study.run(tmp_path / "r.h5")
+    assert result.design.samples > study.design.nodes().size  # rounds were journaled
+    assert len(digested) == 1
