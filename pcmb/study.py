@@ -526,7 +526,7 @@ class Study:
         (:meth:`_file_digests`)."""
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
-            digest.update(np.ascontiguousarray(array).tobytes())
+            digest.update(np.ascontiguousarray(array))  # its buffer, not a copy of it
         settings = [
             list(outputs),
             self.execution.chunk_size,
