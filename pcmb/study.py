@@ -372,12 +372,13 @@ class Study:
         ``--jobs``, ``--backend``, ``--address``), checked with it; ``address_key``: where
         the dask address was given (:class:`StudySource`).
         """
+        settings = _dump(config.execution) | dict(execution) if execution else config.execution
         return cls(
             config.model_factory(),
             config.study_inputs,
             config.times,
             method=config.method,
-            execution=_dump(config.execution) | dict(execution) if execution else config.execution,
+            execution=settings,
             analysis=config.analysis_settings,
             diagnostics=config.diagnostics,
             outputs=config.output_names,
