@@ -817,7 +817,6 @@ class Study:
                     output,
                     provenance,
                     stream,
-                    record,
                 )
             if not intrusive:
                 runs, nominal = self._with_derived(runs), self._with_derived(nominal)
@@ -827,7 +826,7 @@ class Study:
                 }
                 fitting = f"fitting {plural(len(runs.values), 'output')}"
                 with phase(f"{fitting} ({record.label})", stream):
-                    found = dataclasses.replace(self._recover(nodes, runs, axes, record), axes=axes)
+                    found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
             found = self._with_nominal(found, nominal)
             analysis = None
             if self.analysis is not None:
@@ -904,7 +903,6 @@ class Study:
         output: str | Path,
         provenance: Mapping[str, str] | None,
         stream: Any,
-        record: Design,
     ) -> StudyResult:
         """The end of a streamed study (:meth:`why_not_streamed`): one pass over the journal
         in node order accumulates every output's mean and std block by block
@@ -931,7 +929,7 @@ class Study:
         )
         sample_nodes = NodeSet(nodes.distributions, nodes.nodes[kept], nodes.params[kept])
         sample = self._with_nominal(
-            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes, record), axes=axes),
+            dataclasses.replace(self._recover(sample_nodes, sample_runs, axes), axes=axes),
             nominal,
         )
         result = dataclasses.replace(
@@ -1318,10 +1316,9 @@ class Study:
         nodes: TensorGrid | NodeSet,
         runs: RunResult,
         axes: Mapping[str, OutputAxis | None],
-        record: Design,
     ) -> StudyResult:
-        """Expansions of every output, with the design's ``record``: the design recovers the
-        outputs of each axis together (time first, then each own axis, then the scalars)."""
+        """Expansions of every output: the design recovers the outputs of each axis together
+        (time first, then each own axis, then the scalars)."""
         ok = runs.status == Status.OK
         warnings = _nodes_failed(runs.failures, nodes.size)
         try:
@@ -1331,7 +1328,7 @@ class Study:
             raise ModelRunError(runs.failures, message) from error
         return StudyResult(
             name=self.name,
-            design=record,
+            design=self.design.record(),  # after the recovery, which a design may record
             times=self.times,
             input_names=self.input_names,
             distributions=tuple(self.inputs.values()),

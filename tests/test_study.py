@@ -399,9 +399,12 @@ def test_a_configs_source_is_given_at_construction_and_kept_by_replace():
 @pytest.mark.parametrize(
     ("method", "records"),
     [
-        ({"kind": "collocation", "order": 3}, 1),
-        # An adaptive design's record changes with its rounds: once before, once after.
-        ({"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60}, 2),
+        # Before the runs (what the design is), after the recovery (what the result stores:
+        # a sparse regression records there the runs it fitted).
+        ({"kind": "collocation", "order": 3}, 2),
+        # And after the rounds, which change an adaptive design's record.
+        ({"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60}, 3),
+        ({"kind": "regression", "samples": 16, "order": 3, "tolerance": 1e-3}, 3),
     ],
 )
 def test_a_run_asks_its_design_for_its_record_once_per_state(method, records, monkeypatch):
@@ -413,7 +416,7 @@ def test_a_run_asks_its_design_for_its_record_once_per_state(method, records, mo
     )
     result = study.run()
     assert len(asked) == records
-    assert result.design == study.design.record()  # after the rounds: the runs they made
+    assert result.design == study.design.record()  # the runs its rounds and fits made
 
 
 def test_a_run_makes_and_checks_its_nodes_once(monkeypatch):
