@@ -719,7 +719,8 @@ class Study:
         provenance: Mapping[str, str] | None,
     ) -> StudyResult:
         """:meth:`run` on ``pool``, from the design's ``nodes`` (made and checked)."""
-        record = self.design.record()  # once, and again after an adaptive design's rounds
+        # What the design is; taken again after its rounds, and after the recovery (_recover).
+        record = self.design.record()
         # What the model finds wrong with the inputs or the time grid (an FMU's aliased
         # variables, a grid it cannot step): refused before any node, as `pcmb validate` does.
         facts = describe_model(self.model_factory, pool, self.times, tuple(self.inputs))
