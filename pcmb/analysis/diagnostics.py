@@ -265,14 +265,16 @@ def held_out_placed(
 
 
 def element_importance(
-    partition: Partition, design_germ: ArrayLike, values: Mapping[str, ArrayLike]
+    partition: Partition,
+    design_germ: ArrayLike,
+    where: NDArray[np.intp],
+    values: Mapping[str, ArrayLike],
 ) -> NDArray[np.float64]:
     """(E,) how much each element of a one-input design may err: its probability times the
-    largest |top coefficient| of the interpolant through its nodes (over outputs and times,
-    each output over its runs' largest spread)."""
+    largest |top coefficient| of the interpolant through its nodes (``where``: each node's
+    element; over outputs and times, each output over its runs' largest spread)."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
-    where = partition.locate(physical[:, None])
     importance = np.zeros(partition.size)
     for y in values.values():
         y = np.asarray(y, dtype=float).reshape(physical.size, -1)
@@ -288,17 +290,21 @@ def element_importance(
 
 
 def held_out_placed_elements(
-    partition: Partition, design_germ: ArrayLike, importance: ArrayLike, count: int
+    partition: Partition,
+    design_germ: ArrayLike,
+    where: NDArray[np.intp],
+    importance: ArrayLike,
+    count: int,
 ) -> tuple[NodeSet, NDArray[np.float64]]:
     """``count`` held-out inputs of a one-input multi-element design, placed per element: two
     at a time (one where two do not fit) to the element of the largest ``importance``
     (:func:`element_importance`) over one plus its share so far, at most ``ELEMENT_POINTS``
     points (nodes and runs) per element; in each element the weighted Leja points
     extending its nodes in its own coordinate (its conditional density), kept a hair inside
-    its interval so that they stay in it. Element by element; weights 1."""
+    its interval so that they stay in it. ``where``: each node's element. Element by element;
+    weights 1."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
-    where = partition.locate(physical[:, None])
     room = ELEMENT_POINTS - np.bincount(where[where >= 0], minlength=partition.size)
     importance = np.asarray(importance, dtype=float)
     shares = np.zeros(partition.size, dtype=int)
@@ -672,9 +678,10 @@ def placed_check(
     )
     if count > PLACED_SPARE:
         fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
-        # The unseen mean is an estimate like the rest: its noise is how far it moves (not its
-        # size, a bias the corrected mean leaves out), added, not netted, to the mean's move.
-        mean_se = np.abs(rich_mean - fewer_mean) + np.abs(unseen - fewer_unseen)
+        fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
+        # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
+        # size is a bias, which the corrected mean, leaving it out, adds to that noise).
+        mean_se = np.abs(mean_error - fewer_mean_error)
         std_se, moved = np.abs(rich_std - fewer_std), np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
