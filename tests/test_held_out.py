@@ -324,9 +324,7 @@ def test_an_element_with_fewer_placed_runs_than_the_spare_leaves_out_only_those(
     germ = partition.distributions[0].to_germ(physical)
     draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.5], 3)
     assert np.bincount(partition.locate(draws.params)).tolist() == [2, 1]
-    found = placed_check(
-        expansion, germ, physical[:, None] ** 3, draws.nodes, draws.params**3, 1.0
-    )
+    found = placed_check(expansion, germ, physical[:, None] ** 3, draws.nodes, draws.params**3, 1.0)
     assert found.corrected_mean[0] == pytest.approx(0.0, abs=1e-12)
     assert found.corrected_std[0] == pytest.approx(np.sqrt(1.0 / 7.0), rel=1e-12)
     assert found.corrected_std_se[0] < 1e-12 and found.upper[0] - found.error[0] < 1e-12
