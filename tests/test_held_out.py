@@ -290,14 +290,21 @@ def test_placed_runs_make_the_interpolant_exact_for_a_polynomial_of_their_degree
 
 
 @pytest.mark.parametrize(
-    ("settings", "at"), [({"order": 7}, 3.14), ({"grid": "smolyak", "level": 3}, 4.0)]
+    ("settings", "at", "low"),
+    [({"order": 7}, 3.14, 1 / 2), ({"grid": "smolyak", "level": 3}, 4.0, 1 / 4)],
 )
 def test_a_placed_check_sees_the_mean_error_of_a_gauss_design_beyond_its_held_out_degrees(
-    settings, at
+    settings, at, low
 ):
     # 8 placed runs beside N >= 8 Gauss (Gauss-Patterson) nodes: the interpolant's mean is the
     # design's own, so only the tail of the coefficients beyond its degree can tell the mean's
     # error (the double well's mean: its closed form, 5.1 % and 4.1 % of the largest std).
+    # The tail is extrapolated from the interpolant's coefficients, which an interpolant through
+    # a jump damps to about half the truth at its top degrees (docs/diagnostics.md): a factor 2
+    # low; Smolyak's 23 points fit degrees 0-22 but its rule is exact to 23, so its tail starts
+    # a degree later from coefficients damped once more: a factor 4. High: the larger of the two
+    # fitted shapes (geometric, algebraic) overstates an algebraic tail by at most its halving
+    # undone, a factor 2; a doubled or dropped tail fails.
     inputs = {"x0": pcmb.Uniform(-0.625, 0.375)}
     times = np.linspace(0.0, 4.0, 201)
     result = _run(well, inputs, times, **settings)
@@ -305,7 +312,7 @@ def test_a_placed_check_sees_the_mean_error_of_a_gauss_design_beyond_its_held_ou
     mean, _ = double_well_moments(times, -0.625, 0.375)
     k = np.searchsorted(times, at)
     true = abs(result.mean("x") - mean)[k] / found.scale
-    assert true / 10 <= found.holdout.mean_error[k] <= 10 * true
+    assert low * true <= found.holdout.mean_error[k] <= 2 * true
 
 
 def test_an_element_with_fewer_placed_runs_than_the_spare_leaves_out_only_those():
