@@ -1193,10 +1193,13 @@ class Study:
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).
-            own = self.design.node_elements >= 0
+            where = self.design.node_elements
+            own = where >= 0
             design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
-            importance = element_importance(partition, design, values)
-            draws, weights = held_out_placed_elements(partition, design, importance, count)
+            importance = element_importance(partition, design, where[own], values)
+            draws, weights = held_out_placed_elements(
+                partition, design, where[own], importance, count
+            )
         elif placed:
             # Leja points extending the nodes: with them, a far richer interpolant.
             draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)

@@ -15,8 +15,10 @@ from pcmb.chaos.nested import (
     LejaContinued,
     gauss_patterson,
     genz_keister,
+    interpolatory_weights,
     nested_rule,
 )
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
 from pcmb.chaos.sparse import (
     SparseGrid,
@@ -328,3 +330,11 @@ def test_the_design_follows_the_node_design_protocol():
 def test_unusable_settings_name_their_key(settings, key):
     with pytest.raises(ValueError, match=rf"^{key}:"):
         SparseCollocation(INPUTS, settings)
+
+
+@pytest.mark.parametrize("dist", [Normal(0.0, 1.0), Uniform(-1.0, 1.0), Gamma(2.0, 1.0)])
+def test_interpolatory_weights_on_gauss_nodes_are_the_gauss_weights(dist):
+    # N Gauss nodes carry one interpolatory rule: Gauss's (exact to degree 2N - 1).
+    grid = TensorGrid((dist,), (9,))
+    found = interpolatory_weights(dist.family, grid.nodes[:, 0])
+    np.testing.assert_allclose(found, grid.weights, rtol=1e-10, atol=1e-14)

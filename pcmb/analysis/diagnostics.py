@@ -46,6 +46,7 @@ import dataclasses
 import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,7 +57,7 @@ from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import leja_sequence
+from pcmb.chaos.nested import interpolatory_weights, leja_sequence
 from pcmb.chaos.nodes import NodeSet, TensorGrid, draw_germs, random_nodes
 from pcmb.chaos.polynomials import Hermite, OrthonormalFamily
 from pcmb.chaos.truncated import MAX_TERMS
@@ -127,6 +128,8 @@ ELEMENT_POINTS = MAX_TERMS // 4
 #: Added to ``method.seed`` for the held-out draws, so that they are not a sampling
 #: design's own first nodes.
 HELD_OUT_SEED = 7919
+#: The standard normal distribution, whose quantiles scale standard errors to confidence bounds.
+STANDARD_NORMAL = NormalDist()
 #: Default accepted error, relative to the output's largest standard deviation.
 TOLERANCE = 0.05
 #: Confidence level of the held-out upper bound, and the one-sided level at which the verdict
@@ -262,14 +265,16 @@ def held_out_placed(
 
 
 def element_importance(
-    partition: Partition, design_germ: ArrayLike, values: Mapping[str, ArrayLike]
+    partition: Partition,
+    design_germ: ArrayLike,
+    where: NDArray[np.intp],
+    values: Mapping[str, ArrayLike],
 ) -> NDArray[np.float64]:
     """(E,) how much each element of a one-input design may err: its probability times the
-    largest |top coefficient| of the interpolant through its nodes (over outputs and times,
-    each output over its runs' largest spread)."""
+    largest |top coefficient| of the interpolant through its nodes (``where``: each node's
+    element; over outputs and times, each output over its runs' largest spread)."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
-    where = partition.locate(physical[:, None])
     importance = np.zeros(partition.size)
     for y in values.values():
         y = np.asarray(y, dtype=float).reshape(physical.size, -1)
@@ -285,17 +290,21 @@ def element_importance(
 
 
 def held_out_placed_elements(
-    partition: Partition, design_germ: ArrayLike, importance: ArrayLike, count: int
+    partition: Partition,
+    design_germ: ArrayLike,
+    where: NDArray[np.intp],
+    importance: ArrayLike,
+    count: int,
 ) -> tuple[NodeSet, NDArray[np.float64]]:
     """``count`` held-out inputs of a one-input multi-element design, placed per element: two
     at a time (one where two do not fit) to the element of the largest ``importance``
     (:func:`element_importance`) over one plus its share so far, at most ``ELEMENT_POINTS``
     points (nodes and runs) per element; in each element the weighted Leja points
     extending its nodes in its own coordinate (its conditional density), kept a hair inside
-    its interval so that they stay in it. Element by element; weights 1."""
+    its interval so that they stay in it. ``where``: each node's element. Element by element;
+    weights 1."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
-    where = partition.locate(physical[:, None])
     room = ELEMENT_POINTS - np.bincount(where[where >= 0], minlength=partition.size)
     importance = np.asarray(importance, dtype=float)
     shares = np.zeros(partition.size, dtype=int)
@@ -370,9 +379,7 @@ class HeldOutCheck:
     def noise(self) -> NDArray[np.float64]:
         """(T,) how far :attr:`statistics` may lie from the truth at the one-sided
         ``confidence``: the standard error times its normal quantile (1.28 at 90 %)."""
-        from scipy.special import ndtri
-
-        return float(ndtri(self.confidence)) * self.spread
+        return STANDARD_NORMAL.inv_cdf(self.confidence) * self.spread
 
 
 def _standard_error(
@@ -573,21 +580,21 @@ def holdout_error(
 
 
 def _unseen_mean_error(
-    family: OrthonormalFamily, nodes: NDArray[np.float64], coefficients: NDArray[np.float64]
+    family: OrthonormalFamily,
+    nodes: NDArray[np.float64],
+    rule: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
     (M, T) ``coefficients``: the energies of degrees 1 to M - 1 (neighbours averaged) are
     fitted by a line against p and against log p, each extrapolated up to degree
     ``UNSEEN_DEGREES`` × M, the larger kept, and weighted by the squared error of the design's
-    rule on each degree (its interpolatory weights on the (N,) germ ``nodes``)."""
-    size, first = nodes.size, coefficients.shape[0]
+    ``rule`` (its interpolatory weights on the (N,) germ ``nodes``) on each degree."""
+    first = coefficients.shape[0]
     if first < 4:
         return np.zeros(coefficients.shape[1:])
     last = UNSEEN_DEGREES * first
-    root = np.sqrt(family.germ.pdf(nodes))
-    basis = family.evaluate(nodes, last)
-    rule = root * np.linalg.solve((root[:, None] * basis[:, :size]).T, np.eye(size)[0])
-    rule_errors = (rule @ basis)[first:, None]
+    rule_errors = (rule @ family.evaluate(nodes, last))[first:, None]
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
     seen, unseen = np.arange(1.0, first - 1), np.arange(first, last + 1.0)[:, None]
@@ -672,11 +679,12 @@ def placed_check(
     if count > PLACED_SPARE:
         fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
-        moved_mean = np.abs(rich_mean - fewer_mean)
-        mean_se, std_se = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
-        moved = np.abs(error - fewer_error)
+        # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
+        # size is a bias, which the corrected mean, leaving it out, adds to that noise).
+        mean_se = np.abs(mean_error - fewer_mean_error)
+        std_se, moved = np.abs(rich_std - fewer_std), np.abs(error - fewer_error)
     else:
-        moved_mean = mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
+        mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return HeldOutCheck(
         error,
         error + moved,
@@ -685,7 +693,7 @@ def placed_check(
         np.where(mean_error >= std_error, mean_se, std_se),
         rich_mean * scale,
         rich_std * scale,
-        (moved_mean + unseen) * scale,
+        (mean_se + unseen) * scale,
         std_se * scale,
         count,
         confidence,
@@ -698,10 +706,11 @@ def _placed_pieces(
     node_values: NDArray[np.float64],
     germ: NDArray[np.float64],
     observed: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, NDArray, NDArray]]]:
     """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
     element its family, points (its nodes, then its held-out runs, in its own coordinate),
-    their values, its node count and its own (S, T) coefficients by degree. An element's
+    their values, its nodes' interpolatory rule (:func:`interpolatory_weights`, computed
+    once) and its own (S, T) coefficients by degree. An element's
     nodes are its own Gauss nodes, their values its expansion's there (which interpolates
     them): the design's runs also hold the nodes of the elements split on the way."""
     degrees = expansion.multi_index[:, 0]
@@ -717,7 +726,8 @@ def _placed_pieces(
         points = np.concatenate([node_germ, germ])
         values = np.vstack([node_values, observed])
         coefficients = own(expansion.coefficients, points.size)
-        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
+        rule = interpolatory_weights(family, node_germ)
+        return np.ones((1, 1)), [(family, points, values, rule, coefficients)]
     partition = expansion.partition
     distribution = partition.distributions[0]
     physical = distribution.to_physical(germ)
@@ -729,7 +739,8 @@ def _placed_pieces(
         points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
         values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
         coefficients = own(expansion.coefficients[e], points.size)
-        pieces.append((conditional.family, points, values, nodes.size, coefficients))
+        rule = interpolatory_weights(conditional.family, nodes)
+        pieces.append((conditional.family, points, values, rule, coefficients))
     return partition.probability[:, None], pieces
 
 
@@ -737,7 +748,7 @@ def _placed_moments(
     family: OrthonormalFamily,
     points: NDArray[np.float64],
     values: NDArray[np.float64],
-    size: int,
+    rule: NDArray[np.float64],
     own: NDArray[np.float64],
     scale: float,
     spare: int,
@@ -745,6 +756,7 @@ def _placed_moments(
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
     mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
     and held-out runs without its last ``spare`` held-out runs, over the scale."""
+    size = rule.size
     kept = max(size, points.size - spare)
     own = own / scale
     coefficients = _interpolated(family, points[:kept], values[:kept] / scale)
@@ -753,7 +765,7 @@ def _placed_moments(
         coefficients[0],
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
-        _unseen_mean_error(family, points[:size], coefficients),
+        _unseen_mean_error(family, points[:size], rule, coefficients),
     )
 
 

@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 from functools import cache
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.polynomials import Hermite, Legendre, OrthonormalFamily
 
@@ -137,11 +137,8 @@ class NestedRule(ABC):
         return _difference(self, level)
 
     def _weights(self, level: int) -> NDArray[np.float64]:
-        """Interpolatory weights of a level: they integrate p_0..p_{m-1} exactly, Vᵀ w = e_0."""
-        nodes = self.nodes(level)
-        unit = np.zeros(nodes.size)
-        unit[0] = 1.0
-        return np.linalg.solve(self.family.evaluate(nodes, nodes.size - 1).T, unit)
+        """Interpolatory weights of a level (:func:`interpolatory_weights`)."""
+        return interpolatory_weights(self.family, self.nodes(level))
 
     def _check(self, level: int) -> None:
         if level < 0:
@@ -341,6 +338,16 @@ def _require_family(family: OrthonormalFamily, kind: type, rule: str) -> None:
     if not isinstance(family, kind):
         germ = "uniform" if kind is Legendre else "normal"
         raise ValueError(f"the {rule} rule is for {germ} inputs, not {type(family).__name__}")
+
+
+def interpolatory_weights(family: OrthonormalFamily, nodes: ArrayLike) -> NDArray[np.float64]:
+    """(m,) probability weights of the interpolatory rule on m germ ``nodes``: they integrate
+    p_0..p_{m-1} exactly, Vᵀ w = e_0. Solved for w / √(germ density), as the weighted Leja
+    points are chosen: the same weights, but well conditioned."""
+    nodes = np.asarray(nodes, dtype=float)
+    root = np.sqrt(family.germ.pdf(nodes))
+    basis = root[:, None] * family.evaluate(nodes, nodes.size - 1)
+    return root * np.linalg.solve(basis.T, np.eye(nodes.size)[0])
 
 
 @cache
