@@ -36,7 +36,7 @@ from pcmb.designs.adaptive import BLIND, DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
+from pcmb.result import Design, RecordReport, Refinement, StudyResult, WarningRecord
 
 __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
 
@@ -250,24 +250,20 @@ class OrderRefinement(GrowingGrid):
 
 
 @dataclass(frozen=True)
-class RefinementReport(DesignReport):
+class RefinementReport(RecordReport):
     """The rounds of ``order: auto`` (:class:`~pcmb.result.Refinement`), stored as
     ``/refinement/orders`` (R, n), ``runs`` and ``indicator`` (R,)."""
 
     key: ClassVar[str] = "refinement"
+    GROUP: ClassVar[str] = "refinement"
+    RECORD: ClassVar[type] = Refinement
+    LAYOUT: ClassVar[dict[str, tuple[str | None, ...] | str]] = {
+        "orders": (None, "input"),
+        "runs": (),
+        "indicator": (),
+    }
 
     refinement: Refinement
-
-    def write(self, file: ReportFile) -> None:
-        rounds = self.refinement
-        file.dataset("refinement/orders", rounds.orders, None, "input")
-        file.dataset("refinement/runs", rounds.runs)
-        file.dataset("refinement/indicator", rounds.indicator)
-
-    @classmethod
-    def read(cls, file: ReportFile) -> RefinementReport | None:
-        found = {key: file.read(f"refinement/{key}") for key in ("orders", "runs", "indicator")}
-        return None if found["orders"] is None else cls(Refinement(**found))
 
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: the order and its indicator."""
