@@ -236,7 +236,11 @@ class OrderRefinement(GrowingGrid):
         )
         warnings = recovery.warnings
         if self._stopped is not None:
-            reached = f"{history[-1][2]:.3g}" if history else "unknown"
+            # The last estimate is of the last round that ran whole: a lower order than the
+            # grid recovered when a node of the next round failed.
+            reached = "unknown"
+            if history:
+                reached = f"of order {max(history[-1][0])} {history[-1][2]:.3g}"
             warnings += (
                 WarningRecord(
                     "order-budget",
