@@ -33,6 +33,7 @@ __all__ = [
     "DesignReport",
     "ModelTraceback",
     "NodeFailure",
+    "Placement",
     "RecordReport",
     "Refinement",
     "RegressionFit",
@@ -280,6 +281,9 @@ class DesignReport(ABC):
 POINTS = "points"
 #: A field of a :class:`RecordReport`'s record stored as an attribute of its group.
 ATTRIBUTE = "attribute"
+#: Where a field of a :class:`RecordReport`'s record goes: the scales of its dataset's leading
+#: axes (``None``: no scale), :data:`POINTS` or :data:`ATTRIBUTE`.
+Placement = tuple[str | None, ...] | str
 
 
 class RecordReport(DesignReport):
@@ -292,9 +296,9 @@ class RecordReport(DesignReport):
     GROUP: ClassVar[str]
     #: The record's dataclass.
     RECORD: ClassVar[type]
-    #: Field -> the scales of its dataset's leading axes, :data:`POINTS` or :data:`ATTRIBUTE`;
-    #: the first is a dataset, whose presence marks the record's (attributes come last).
-    LAYOUT: ClassVar[dict[str, tuple[str | None, ...] | str]]
+    #: Field -> its :data:`Placement`; the first is a dataset, whose presence marks the
+    #: record's (attributes come last).
+    LAYOUT: ClassVar[dict[str, Placement]]
 
     @classmethod
     def _per_output(cls) -> bool:

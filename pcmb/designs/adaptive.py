@@ -45,7 +45,7 @@ from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.config.types import PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import AdaptiveFit, Design, RecordReport, StudyResult, WarningRecord
+from pcmb.result import AdaptiveFit, Design, Placement, RecordReport, StudyResult, WarningRecord
 
 __all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings", "estimated_error"]
 
@@ -428,7 +428,7 @@ class AdaptiveReport(RecordReport):
     key: ClassVar[str] = "adaptive"
     GROUP: ClassVar[str] = "adaptive"
     RECORD: ClassVar[type] = AdaptiveFit
-    LAYOUT: ClassVar[dict[str, tuple[str | None, ...] | str]] = {
+    LAYOUT: ClassVar[dict[str, Placement]] = {
         "index_set": (None, "input"),
         "indicators": (),
         "active": (),

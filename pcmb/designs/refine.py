@@ -36,7 +36,7 @@ from pcmb.designs.adaptive import BLIND, DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import Design, RecordReport, Refinement, StudyResult, WarningRecord
+from pcmb.result import Design, Placement, RecordReport, Refinement, StudyResult, WarningRecord
 
 __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
 
@@ -261,7 +261,7 @@ class RefinementReport(RecordReport):
     key: ClassVar[str] = "refinement"
     GROUP: ClassVar[str] = "refinement"
     RECORD: ClassVar[type] = Refinement
-    LAYOUT: ClassVar[dict[str, tuple[str | None, ...] | str]] = {
+    LAYOUT: ClassVar[dict[str, Placement]] = {
         "orders": (None, "input"),
         "runs": (),
         "indicator": (),

@@ -27,6 +27,7 @@ from pcmb.result import (
     ATTRIBUTE,
     POINTS,
     Design,
+    Placement,
     RecordReport,
     RegressionFit,
     StudyResult,
@@ -353,7 +354,7 @@ class RegressionReport(RecordReport):
     key: ClassVar[str] = "regression"
     GROUP: ClassVar[str] = "outputs/{output}"
     RECORD: ClassVar[type] = RegressionFit
-    LAYOUT: ClassVar[dict[str, tuple[str | None, ...] | str]] = {
+    LAYOUT: ClassVar[dict[str, Placement]] = {
         "loo": POINTS,
         "selected": (None, "input"),
         "condition": ATTRIBUTE,
