@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 from abc import ABC, abstractmethod
 from collections.abc import MutableMapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, Self
 
 import numpy as np
@@ -26,11 +26,15 @@ if TYPE_CHECKING:
     from pcmb.analysis.statistics import Analysis
 
 __all__ = [
+    "ATTRIBUTE",
+    "POINTS",
     "AdaptiveFit",
     "Design",
     "DesignReport",
     "ModelTraceback",
     "NodeFailure",
+    "Placement",
+    "RecordReport",
     "Refinement",
     "RegressionFit",
     "ReportFile",
@@ -270,6 +274,75 @@ class DesignReport(ABC):
         """This report with ``other``'s, of the same design on other outputs (the outputs of
         another axis); a report of the whole study keeps its own."""
         return self
+
+
+#: A field of a :class:`RecordReport`'s record stored as a dataset whose last axis is the
+#: points of the output (dropped for a scalar output).
+POINTS = "points"
+#: A field of a :class:`RecordReport`'s record stored as an attribute of its group.
+ATTRIBUTE = "attribute"
+#: Where a field of a :class:`RecordReport`'s record goes: the scales of its dataset's leading
+#: axes (``None``: no scale), :data:`POINTS` or :data:`ATTRIBUTE`.
+Placement = tuple[str | None, ...] | str
+
+
+class RecordReport(DesignReport):
+    """A report holding records (dataclasses of arrays), each stored as one group of the result
+    file, a field per entry of :attr:`LAYOUT`: the one definition of how a design's record is
+    written and read. A subclass is a dataclass of one field: the record, or output name ->
+    record when :attr:`GROUP` holds ``{output}``."""
+
+    #: The record's group: ``"adaptive"``, or ``"outputs/{output}"`` for a record per output.
+    GROUP: ClassVar[str]
+    #: The record's dataclass.
+    RECORD: ClassVar[type]
+    #: Field -> its :data:`Placement`; the first is a dataset, whose presence marks the
+    #: record's (attributes come last).
+    LAYOUT: ClassVar[dict[str, Placement]]
+
+    @classmethod
+    def _per_output(cls) -> bool:
+        return "{output}" in cls.GROUP
+
+    def _records(self) -> dict[str, Any]:
+        """Output name -> record (``""`` -> the record of the whole study)."""
+        (held,) = (getattr(self, each.name) for each in fields(self))  # type: ignore[arg-type]
+        return held if self._per_output() else {"": held}
+
+    def write(self, file: ReportFile) -> None:
+        for output, record in self._records().items():
+            group = self.GROUP.format(output=output)
+            for name, place in self.LAYOUT.items():
+                value = getattr(record, name)
+                if place == ATTRIBUTE:
+                    file.attrs(group)[name] = value
+                elif place == POINTS:
+                    file.points(f"{group}/{name}", value, output)
+                else:
+                    file.dataset(f"{group}/{name}", value, *place)
+
+    @classmethod
+    def _read_field(cls, file: ReportFile, group: str, name: str, output: str) -> Any:
+        place = cls.LAYOUT[name]
+        if place == ATTRIBUTE:
+            value = file.attrs(group)[name]
+            return value.item() if isinstance(value, np.generic) else value
+        if place == POINTS:
+            return file.read_points(f"{group}/{name}", output)
+        return file.read(f"{group}/{name}")
+
+    @classmethod
+    def read(cls, file: ReportFile) -> Self | None:
+        records = {}
+        first, *rest = cls.LAYOUT
+        for output in file.outputs if cls._per_output() else ("",):
+            group = cls.GROUP.format(output=output)
+            if (marker := cls._read_field(file, group, first, output)) is not None:
+                found = {name: cls._read_field(file, group, name, output) for name in rest}
+                records[output] = cls.RECORD(**{first: marker}, **found)
+        if not records:
+            return None
+        return cls(records if cls._per_output() else records[""])  # type: ignore[call-arg]
 
 
 class ReportedByDesign:

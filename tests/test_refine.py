@@ -17,6 +17,7 @@ from test_resume import (
 )
 
 import pcmb
+from pcmb.chaos.nodes import join_nodes
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design
 from pcmb.errors import ConfigError, UsageError
@@ -232,3 +233,29 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     shown = inspected(tmp_path / "out.h5")
     assert first.design.label in shown
     assert "refined  order: indicator per round 2: " in shown
+
+
+def test_a_failed_node_ends_the_rounds_naming_the_order_its_estimate_belongs_to():
+    # exp(6 a t + 0.5 b): rounds of orders 2, (5, 7), (11, 14); a node of the third fails, so
+    # the last estimate is that of order 7, while the recovery fits the grid of order 14.
+    settings = MethodSettings(kind="collocation", orders="auto", diagnostics_tolerance=1e-6)
+    design = make_design(_inputs(6.0), settings)
+
+    def values_at(nodes, lost=()):
+        found = np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])
+        found[list(lost)] = np.nan
+        return found
+
+    nodes = design.nodes()
+    values, ok = values_at(nodes), np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, {"y": values}, ok)) is not None:
+        lost = [0] if nodes.size == 63 else []
+        nodes, values = join_nodes(nodes, batch), np.vstack([values, values_at(batch, lost)])
+        ok = np.concatenate([ok, ~np.isin(np.arange(batch.size), lost)])
+    recovery = design.recover(nodes, {"y": values}, ok, TIMES)
+    assert nodes.size == 285 and design.record().orders == (11, 14)
+    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    last = recovery.report.refinement
+    assert last.orders[-1].tolist() == [5, 7]
+    assert f"the estimated error of order 7 {last.indicator[-1]:.3g} above" in record.message
+    assert "1 node(s) of level 3 failed" in record.message

@@ -45,7 +45,7 @@ from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.config.types import PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import AdaptiveFit, Design, DesignReport, ReportFile, StudyResult, WarningRecord
+from pcmb.result import AdaptiveFit, Design, Placement, RecordReport, StudyResult, WarningRecord
 
 __all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings", "estimated_error"]
 
@@ -420,28 +420,23 @@ def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
 
 
 @dataclass(frozen=True)
-class AdaptiveReport(DesignReport):
+class AdaptiveReport(RecordReport):
     """What a dimension-adaptive grid concluded (:class:`~pcmb.result.AdaptiveFit`), stored
     as ``/adaptive/index_set`` (K, n), ``indicators`` and ``active`` (K,), ``history`` (R, 2:
     runs, estimated error) and ``orders`` (n,)."""
 
     key: ClassVar[str] = "adaptive"
-    _FIELDS: ClassVar[tuple[str, ...]] = ("index_set", "indicators", "active", "history", "orders")
+    GROUP: ClassVar[str] = "adaptive"
+    RECORD: ClassVar[type] = AdaptiveFit
+    LAYOUT: ClassVar[dict[str, Placement]] = {
+        "index_set": (None, "input"),
+        "indicators": (),
+        "active": (),
+        "history": (),
+        "orders": ("input",),
+    }
 
     adaptive: AdaptiveFit
-
-    def write(self, file: ReportFile) -> None:
-        fit = self.adaptive
-        file.dataset("adaptive/index_set", fit.index_set, None, "input")
-        file.dataset("adaptive/indicators", fit.indicators)
-        file.dataset("adaptive/active", fit.active)
-        file.dataset("adaptive/history", fit.history)
-        file.dataset("adaptive/orders", fit.orders, "input")
-
-    @classmethod
-    def read(cls, file: ReportFile) -> AdaptiveReport | None:
-        found = {key: file.read(f"adaptive/{key}") for key in cls._FIELDS}
-        return None if found["index_set"] is None else cls(AdaptiveFit(**found))
 
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: runs and estimated error; per input: what it reached."""

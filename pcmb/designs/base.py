@@ -154,7 +154,7 @@ class MomentReport(DesignReport):
         moments = {
             name: np.stack([file.read(f"outputs/{name}/mean"), file.read(f"outputs/{name}/std")])
             for name in file.outputs
-            if file.read(f"outputs/{name}/coefficients") is None
+            if file.shape(f"outputs/{name}/coefficients") is None
         }
         return cls(moments) if moments else None
 

@@ -174,19 +174,12 @@ class MultiElementCollocation:
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
         """The next round of ``elements: auto``: the nodes of the children of every element
-        split (see the module), or ``None`` when none is. Elements with failed nodes are not
-        split (their estimates are NaN); :meth:`recover` fits them from their survivors."""
+        split (see the module), or ``None`` when none is. The estimate is that of the
+        coefficients :meth:`recover` makes: an element with failed nodes is judged by the fit
+        of its survivors."""
         if self.elements != "auto":
             return None
-        coefficients = {}
-        for name, y in values.items():
-            kept = np.where(ok.reshape(-1, *(1,) * (np.ndim(y) - 1)), y, np.nan)
-            coefficients[name] = np.stack(
-                [
-                    project_tensor(grid, kept[self.node_elements == e], self.multi_index)
-                    for e, grid in enumerate(self.grids)
-                ]
-            )
+        coefficients, _ = self._coefficients(values, ok)
         errors = element_errors(self.partition, coefficients, self.multi_index)
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
@@ -254,6 +247,33 @@ class MultiElementCollocation:
         """Piecewise expansions of every output from the nodes of the current elements; a
         per-element least-squares fit where nodes of the element failed (reported), and
         ``element-decay`` and ``element-budget`` warnings (see the module)."""
+        coefficients, warnings = self._coefficients(values, ok)
+        expansions = {
+            name: PiecewiseExpansion(self.partition, c, self.multi_index, self.names)
+            for name, c in coefficients.items()
+        }
+        if self.exhausted:
+            warnings.append(
+                WarningRecord(
+                    "element-budget",
+                    f"elements: auto stopped at {self.partition.size} of {self.max_elements} "
+                    f"elements (method.max_elements) after {nodes.size} runs, with an estimated "
+                    f"error {self.estimate:.3g} above the tolerance {self.tolerance:g} "
+                    "(diagnostics.tolerance): splitting the elements that hold it would pass "
+                    "method.max_elements; raise it or the order, unless an output is chaotic in "
+                    "its inputs",
+                )
+            )
+        if self.tolerance is not None:
+            warnings += self._decay_warnings(expansions)
+        warnings += statistics_warnings(expansions, values, ok, times)
+        return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
+
+    def _coefficients(
+        self, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
+    ) -> tuple[dict[str, NDArray[np.float64]], list[WarningRecord]]:
+        """Output name -> (E, S, ...) every current element's coefficients: its projection, or
+        where nodes of it failed a least-squares fit of its survivors (reported)."""
         index = self.multi_index
         position = {tuple(row): s for s, row in enumerate(index)}
         coefficients = {
@@ -284,26 +304,7 @@ class MultiElementCollocation:
                 WarningRecord(w.code, f"element {e}: {w.message}", w.output, w.time_range)
                 for w in fitted.warnings
             ]
-        expansions = {
-            name: PiecewiseExpansion(self.partition, c, index, self.names)
-            for name, c in coefficients.items()
-        }
-        if self.exhausted:
-            warnings.append(
-                WarningRecord(
-                    "element-budget",
-                    f"elements: auto stopped at {self.partition.size} of {self.max_elements} "
-                    f"elements (method.max_elements) after {nodes.size} runs, with an estimated "
-                    f"error {self.estimate:.3g} above the tolerance {self.tolerance:g} "
-                    "(diagnostics.tolerance): splitting the elements that hold it would pass "
-                    "method.max_elements; raise it or the order, unless an output is chaotic in "
-                    "its inputs",
-                )
-            )
-        if self.tolerance is not None:
-            warnings += self._decay_warnings(expansions)
-        warnings += statistics_warnings(expansions, values, ok, times)
-        return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
+        return coefficients, warnings
 
     def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
         """``element-decay`` for every output whose estimated error (:func:`element_errors`)

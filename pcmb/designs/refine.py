@@ -36,7 +36,7 @@ from pcmb.designs.adaptive import BLIND, DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import Design, DesignReport, Refinement, ReportFile, StudyResult, WarningRecord
+from pcmb.result import Design, Placement, RecordReport, Refinement, StudyResult, WarningRecord
 
 __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
 
@@ -236,7 +236,11 @@ class OrderRefinement(GrowingGrid):
         )
         warnings = recovery.warnings
         if self._stopped is not None:
-            reached = f"{history[-1][2]:.3g}" if history else "unknown"
+            # The last estimate is of the last round that ran whole: a lower order than the
+            # grid recovered when a node of the next round failed.
+            reached = "unknown"
+            if history:
+                reached = f"of order {max(history[-1][0])} {history[-1][2]:.3g}"
             warnings += (
                 WarningRecord(
                     "order-budget",
@@ -250,24 +254,20 @@ class OrderRefinement(GrowingGrid):
 
 
 @dataclass(frozen=True)
-class RefinementReport(DesignReport):
+class RefinementReport(RecordReport):
     """The rounds of ``order: auto`` (:class:`~pcmb.result.Refinement`), stored as
     ``/refinement/orders`` (R, n), ``runs`` and ``indicator`` (R,)."""
 
     key: ClassVar[str] = "refinement"
+    GROUP: ClassVar[str] = "refinement"
+    RECORD: ClassVar[type] = Refinement
+    LAYOUT: ClassVar[dict[str, Placement]] = {
+        "orders": (None, "input"),
+        "runs": (),
+        "indicator": (),
+    }
 
     refinement: Refinement
-
-    def write(self, file: ReportFile) -> None:
-        rounds = self.refinement
-        file.dataset("refinement/orders", rounds.orders, None, "input")
-        file.dataset("refinement/runs", rounds.runs)
-        file.dataset("refinement/indicator", rounds.indicator)
-
-    @classmethod
-    def read(cls, file: ReportFile) -> RefinementReport | None:
-        found = {key: file.read(f"refinement/{key}") for key in ("orders", "runs", "indicator")}
-        return None if found["orders"] is None else cls(Refinement(**found))
 
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: the order and its indicator."""

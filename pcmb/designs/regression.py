@@ -23,7 +23,16 @@ from pcmb.chaos.sparse_regression import (
 )
 from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
 from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
-from pcmb.result import Design, DesignReport, RegressionFit, ReportFile, StudyResult, WarningRecord
+from pcmb.result import (
+    ATTRIBUTE,
+    POINTS,
+    Design,
+    Placement,
+    RecordReport,
+    RegressionFit,
+    StudyResult,
+    WarningRecord,
+)
 
 __all__ = [
     "RegressionReport",
@@ -337,30 +346,21 @@ class SparseRegression:
 
 
 @dataclass(frozen=True)
-class RegressionReport(DesignReport):
+class RegressionReport(RecordReport):
     """Each output's sparse regression fit (:class:`~pcmb.result.RegressionFit`), stored
     beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attribute
     ``condition``."""
 
     key: ClassVar[str] = "regression"
+    GROUP: ClassVar[str] = "outputs/{output}"
+    RECORD: ClassVar[type] = RegressionFit
+    LAYOUT: ClassVar[dict[str, Placement]] = {
+        "loo": POINTS,
+        "selected": (None, "input"),
+        "condition": ATTRIBUTE,
+    }
 
     regression: dict[str, RegressionFit]
-
-    def write(self, file: ReportFile) -> None:
-        for name, fit in self.regression.items():
-            file.points(f"outputs/{name}/loo", fit.loo, name)
-            file.dataset(f"outputs/{name}/selected", fit.selected, None, "input")
-            file.attrs(f"outputs/{name}").update(condition=fit.condition)
-
-    @classmethod
-    def read(cls, file: ReportFile) -> RegressionReport | None:
-        fits = {}
-        for name in file.outputs:
-            loo = file.read_points(f"outputs/{name}/loo", name)
-            if loo is not None:
-                condition = float(file.attrs(f"outputs/{name}")["condition"])
-                fits[name] = RegressionFit(file.read(f"outputs/{name}/selected"), loo, condition)
-        return cls(fits) if fits else None
 
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         return [
