@@ -231,8 +231,8 @@ def test_a_degenerate_design_on_the_g_function_is_flagged(tmp_path, validation, 
 @pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
 def test_one_lucky_small_change_does_not_stop_the_grid():
     """Piston's changes per round fall unevenly (1e-4, 1e-4, then 3e-6): believing the small
-    one stopped the grid at 1 167 runs 13x over-confident (7.3e-6 against 9.6e-5); the median
-    of the last three changes keeps it within 10x. Mean and std: a tensor Gauss–Legendre rule
+    one stopped the grid at 1 167 runs 13x over-confident (7.3e-6 against 9.6e-5); starting
+    from the largest of the last three changes keeps it within 10x. Mean and std: a tensor Gauss–Legendre rule
     of 12^7 points."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-5, max_runs=3000)

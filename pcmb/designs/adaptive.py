@@ -292,7 +292,7 @@ class AdaptiveCollocation(GrowingGrid):
 
     def _estimate(self) -> float:
         """The estimated error of the mean and std after the last round (see the module)."""
-        return estimated_error(self._changes)
+        return estimated_error(self._changes, geometric=not self._nonsmooth())
 
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
@@ -403,15 +403,16 @@ class AdaptiveCollocation(GrowingGrid):
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
-def estimated_error(changes: list[float]) -> float:
+def estimated_error(changes: list[float], geometric: bool = True) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
     predecessor's): lucky small changes are not believed, g_k = the largest of the last
     :data:`GUARDED`, scaled by the reduction per round over the last two,
-    min(1, √(g_k / g_{k-2}))."""
+    min(1, √(g_k / g_{k-2})), where the decay is ``geometric`` (an algebraic one, a kink's,
+    falls too slowly for the next rounds to be told from the last: g_k alone)."""
     guarded = [max(changes[max(0, k - GUARDED + 1) : k + 1]) for k in range(len(changes))]
     rate = 1.0
-    if len(guarded) > 2 and guarded[-3] > 0:
+    if geometric and len(guarded) > 2 and guarded[-3] > 0:
         rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
     return guarded[-1] * rate**ROUNDS_AHEAD
 
