@@ -20,10 +20,10 @@ d_{k-1}, d_k), and the whole grid is about :data:`ROUNDS_AHEAD` rounds
 ahead of the refined one, so the estimate is g_k ρ_k² with ρ_k = min(1, √(g_k / g_{k-2})) the
 observed reduction per round (:func:`estimated_error`). Chosen once on the stopping rounds of
 OTL circuit, Piston, Wing weight, lognormal6, exp8 and genz_oscillatory together
-(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), it lies within 10x of the true
-error there but where the true error wanders by luck. It assumes a smooth response: where an
-input's axis surpluses fall like a power of the degree no faster than a kink's (a jump or a
-kink) an ``adaptive-nonsmooth`` warning names it.
+(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), the true error there is at most
+10x the estimate. The extrapolation assumes a smooth response: where an input's axis
+surpluses fall like a power of the degree no faster than a kink's (a jump or a kink) an
+``adaptive-nonsmooth`` warning names it, and the estimate is g_k alone.
 """
 
 from __future__ import annotations
