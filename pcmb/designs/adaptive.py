@@ -403,7 +403,7 @@ class AdaptiveCollocation(GrowingGrid):
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
-def estimated_error(changes: list[float], geometric: bool = True) -> float:
+def estimated_error(changes: list[float], geometric: bool) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
     predecessor's): lucky small changes are not believed, g_k = the largest of the last
