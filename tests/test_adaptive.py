@@ -144,19 +144,20 @@ def _exp8_moments():
 @pytest.mark.parametrize(
     ("function", "inputs", "moments", "tolerance"),
     [
-        (_exp8, EXP8, _exp8_moments(), 1e-5),  # was 12x careful
+        (_exp8, EXP8, _exp8_moments(), 1e-5),
         (wing_weight, WING, wing_weight_moments(), 1e-3),  # ended at ε/130
     ],
 )
 def test_the_tolerance_is_the_error_delivered(function, inputs, moments, tolerance):
     """The calibration's rule (scripts/calibrate_adaptive.py, docs/methods.md): the true error
-    ends between ε/100 and 10 ε, and the estimate within 10x of it."""
+    ends between ε/100 and 10 ε, at most 10x the estimate (not over-confident) and at least
+    1/100 of it (issue 23's band: exp8 at 1e-5 is 12x careful since Piston's fix)."""
     (mean, std), max_runs = moments, 6000
     result = _adaptive(function, inputs, method="adaptive", tolerance=tolerance, max_runs=max_runs)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert tolerance / 100 <= error <= 10 * tolerance, error
-    assert error / 10 <= estimate <= 10 * error, (estimate, error)
+    assert error / 10 <= estimate <= 100 * error, (estimate, error)
 
 
 def test_a_kink_is_reported_as_a_response_the_estimate_cannot_see():
@@ -231,15 +232,30 @@ def test_a_degenerate_design_on_the_g_function_is_flagged(tmp_path, validation, 
 @pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
 def test_one_lucky_small_change_does_not_stop_the_grid():
     """Piston's changes per round fall unevenly (1e-4, 1e-4, then 3e-6): believing the small
-    one stopped the grid at 1 167 runs 13x over-confident (7.3e-6 against 9.6e-5); the median
-    of the last three changes keeps it within 10x. Mean and std: a tensor Gauss–Legendre rule
-    of 12^7 points."""
+    one stopped the grid at 1 167 runs 13x over-confident (7.3e-6 against 9.6e-5); starting
+    from the largest of the last three changes keeps it within 10x. Mean and std: a tensor
+    Gauss–Legendre rule of 12^7 points."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-5, max_runs=3000)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert estimate <= 1e-5 and error <= 1e-4
     assert error / 10 <= estimate <= 10 * error
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+def test_two_lucky_small_changes_in_a_row_do_not_stop_the_grid():
+    """Issue 23's band at Piston, ε = 1e-6: past 2 000 runs its changes per round zig-zag
+    (9.5e-6, then 6.7e-7 and 1.5e-6), the median of the last three believed the two small ones
+    and stopped at 3 599 runs 28x over-confident (2.4e-7 against 6.7e-6). The true error stays
+    within 10 ε and 10x the estimate; the estimate at most 100x the error."""
+    mean, std = piston_moments()
+    result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-6, max_runs=6000)
+    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    estimate = result.adaptive.estimate
+    assert error <= 1e-5
+    assert error / 10 <= estimate <= 100 * error, (estimate, error)
 
 
 def test_ishigami_finds_the_interaction_its_axes_hide():
@@ -252,8 +268,8 @@ def test_ishigami_finds_the_interaction_its_axes_hide():
     np.testing.assert_allclose(result.mean("y"), exact.mean, atol=1e-12)
     np.testing.assert_allclose(result.sobol_total("y")[:, 0], exact.total, atol=1e-3)
     assert result.adaptive.levels[2] >= 2  # x3⁴ needs degree 4: Gauss–Patterson level 2
-    # No isotropic grid of rule auto reaches the adaptive grid's 1e-14: compare at 1e-3.
-    assert result.n_nodes < _smolyak_runs(ishigami, ISHIGAMI, max(error, 1e-3), exact.variance)
+    # Exact to round-off, as the isotropic grid of level 5 (1 023 runs): compare at 1e-14.
+    assert result.n_nodes < _smolyak_runs(ishigami, ISHIGAMI, max(error, 1e-14), exact.variance)
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")

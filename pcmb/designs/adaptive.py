@@ -15,15 +15,15 @@ output's largest std. The surpluses bound the surrogate's L2 error, 10^2–10^5 
 statistics' on smooth functions, so they only mark. After round k, d_k is the largest change,
 over outputs and times, of the mean and std that the active indices make (the whole grid
 against the grid of the refined indices, whose nodes it holds), relative to the largest std:
-the error of the coarser grid. A lucky small change is not believed, g_k = max(d_k, the
-median of d_{k-2}, d_{k-1}, d_k), and the whole grid is about :data:`ROUNDS_AHEAD` rounds
+the error of the coarser grid. Lucky small changes are not believed, g_k = max(d_{k-2},
+d_{k-1}, d_k), and the whole grid is about :data:`ROUNDS_AHEAD` rounds
 ahead of the refined one, so the estimate is g_k ρ_k² with ρ_k = min(1, √(g_k / g_{k-2})) the
 observed reduction per round (:func:`estimated_error`). Chosen once on the stopping rounds of
 OTL circuit, Piston, Wing weight, lognormal6, exp8 and genz_oscillatory together
-(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), it lies within 10x of the true
-error there but where the true error wanders by luck. It assumes a smooth response: where an
-input's axis surpluses fall like a power of the degree no faster than a kink's (a jump or a
-kink) an ``adaptive-nonsmooth`` warning names it.
+(``scripts/calibrate_adaptive.py``, ``docs/methods.md``), the true error there is at most
+10x the estimate. The extrapolation assumes a smooth response: where an input's axis
+surpluses fall like a power of the degree no faster than a kink's (a jump or a kink) an
+``adaptive-nonsmooth`` warning names it, and the estimate is g_k alone.
 """
 
 from __future__ import annotations
@@ -64,6 +64,10 @@ NONSMOOTH_DECAY = 2.5
 #: estimate extrapolates: measured (``scripts/calibrate_adaptive.py``), the true error of the
 #: whole grid is about d_k ρ² on the smooth functions there.
 ROUNDS_AHEAD = 2
+#: Rounds whose largest change the estimate starts from: the changes zig-zag as bulk marking
+#: moves between directions, and the median of three believed two small ones in a row
+#: (Piston at 1e-6: 28x over-confident).
+GUARDED = 3
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 
@@ -288,7 +292,7 @@ class AdaptiveCollocation(GrowingGrid):
 
     def _estimate(self) -> float:
         """The estimated error of the mean and std after the last round (see the module)."""
-        return estimated_error(self._changes)
+        return estimated_error(self._changes, geometric=not self._nonsmooth())
 
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
@@ -399,17 +403,16 @@ class AdaptiveCollocation(GrowingGrid):
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
-def estimated_error(changes: list[float]) -> float:
+def estimated_error(changes: list[float], geometric: bool) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
-    predecessor's): a lucky small change is not believed, g_k = max(d_k, the median of the
-    last three changes), scaled by the reduction per round over the last two,
-    min(1, √(g_k / g_{k-2}))."""
-    guarded = [
-        max(d, float(np.median(changes[max(0, k - 2) : k + 1]))) for k, d in enumerate(changes)
-    ]
+    predecessor's): lucky small changes are not believed, g_k = the largest of the last
+    :data:`GUARDED`, scaled by the reduction per round over the last two,
+    min(1, √(g_k / g_{k-2})), where the decay is ``geometric`` (an algebraic one, a kink's,
+    falls too slowly for the next rounds to be told from the last: g_k alone)."""
+    guarded = [max(changes[max(0, k - GUARDED + 1) : k + 1]) for k in range(len(changes))]
     rate = 1.0
-    if len(guarded) > 2 and guarded[-3] > 0:
+    if geometric and len(guarded) > 2 and guarded[-3] > 0:
         rate = min(1.0, float(np.sqrt(guarded[-1] / guarded[-3])))
     return guarded[-1] * rate**ROUNDS_AHEAD
 
