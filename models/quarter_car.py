@@ -44,7 +44,9 @@ _INITIAL = {"x1_0": 0.0, "x2_0": 0.0, "v1_0": 0.0, "v2_0": 0.0}
 
 # Suspension spring force Fs(δ), δ = x1 - x2; k is in N/m³ (cubic) or N/m (linear).
 _SPRINGS: dict[str, tuple[dict[str, float], Law]] = {
-    "cubic": ({"k": 6.0e6}, lambda d, p: p["k"] * d**3),
+    # d * d * d, not d**3: libm's pow takes a slow path for a negative base (8 times the
+    # cost at 128 nodes), and this law runs about 12 times per integration step.
+    "cubic": ({"k": 6.0e6}, lambda d, p: p["k"] * (d * d * d)),
     # A typical passenger-car corner rate; the linear law serves checks against closed forms.
     "linear": ({"k": 2.0e4}, lambda d, p: p["k"] * d),
 }
