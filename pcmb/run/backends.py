@@ -11,6 +11,7 @@ validate``), one short-lived worker process (:class:`OneProcessPool`).
 from __future__ import annotations
 
 import atexit
+import functools
 import gc
 import logging
 import os
@@ -392,8 +393,7 @@ class DaskPool:
                     raise ClusterError([ConfigProblem(key, message)]) from None
                 raise
         self.slots = jobs or sum(self._client.nthreads().values()) or 1
-        # pure=False: a re-run of a task must run again, not come back from dask's cache.
-        self._executor = self._client.get_executor(pure=False)
+        self._tasks: set[Any] = set()  # this pool's dask futures not yet relayed
 
     def describe(self) -> str:
         """``tcp://127.0.0.1:8786: 2 workers, 2 threads, 4.0 GiB``: the scheduler's address
@@ -410,7 +410,13 @@ class DaskPool:
         )
 
     def submit(self, fn: Callable[..., _T], *args: Any) -> Future[_T]:
-        return self._executor.submit(fn, *args)
+        # pure=False: a re-run of a task must run again, not come back from dask's cache.
+        task = self._client.submit(fn, *args, pure=False)
+        self._tasks.add(task)
+        relayed: Future[_T] = Future()
+        relayed.set_running_or_notify_cancel()
+        task.add_done_callback(functools.partial(_relay, relayed, self._tasks))
+        return relayed
 
     def death(self, error: BaseException) -> str | None:
         # dask reschedules a task whose worker died, until its allowed failures are used up.
@@ -426,10 +432,28 @@ class DaskPool:
         pool's tasks end (cancelled with ``kill``)."""
         if self._own_client:
             self._client.close()
-        else:
-            self._executor.shutdown(wait=not kill)
+        elif kill:
+            self._client.cancel(list(self._tasks))
+        elif self._tasks:
+            import distributed
+
+            distributed.wait(list(self._tasks))
         if self._cluster is not None:
             self._cluster.close()
+
+
+def _relay(relayed: Future[Any], tasks: set[Any], task: Any) -> None:
+    """Hand a finished dask future's outcome to ``relayed``, read once by ``result()``.
+
+    Not distributed's ``get_executor()``: it reads a future's status apart from its value, and
+    a worker death between the two (a finished result lost, its task run again) made it raise
+    ``TypeError: cannot unpack non-iterable Outcome object`` instead of either outcome.
+    """
+    tasks.discard(task)
+    try:
+        relayed.set_result(task.result())
+    except BaseException as error:  # the task's own error, KilledWorker, CancelledError
+        relayed.set_exception(error)
 
 
 def describe_cluster(address: Any, key: str = "address") -> str:
