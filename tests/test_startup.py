@@ -124,3 +124,23 @@ def test_legendre_and_hermite_gauss_rules_import_no_scipy():
         "Legendre().gauss_rule(6), Hermite().gauss_rule(6)"
     )
     assert _loaded(code, ["scipy.special"]) == {"scipy.special": False}
+
+
+def test_kronrod_patterson_extensions_are_computed_once(monkeypatch):
+    """Each adaptive or Smolyak design of a family reuses its Gauss-Patterson points:
+    validating the quarter car's sweep built them 30 times (10 adaptive designs × 3 inputs,
+    0.13 s)."""
+    from pcmb.chaos import nested
+
+    calls = []
+    extend = nested._extend
+
+    def counted(*args):
+        calls.append(args[2])
+        return extend(*args)
+
+    monkeypatch.setattr(nested, "_extend", counted)
+    first = nested.gauss_patterson().nodes(3)
+    again = nested.gauss_patterson().nodes(3)
+    np.testing.assert_array_equal(first, again)
+    assert len(calls) == len(nested.gauss_patterson().added)

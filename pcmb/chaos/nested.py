@@ -376,11 +376,14 @@ def _difference(rule: NestedRule, level: int) -> NDArray[np.float64]:
     return difference
 
 
+@cache
 def _extensions(family: OrthonormalFamily, added: tuple[int, ...]) -> NDArray[np.float64]:
-    """The point sequence 0-level node (the mean), then each extension's nodes in turn."""
+    """The point sequence 0-level node (the mean), then each extension's nodes in turn
+    (read-only: computed once per family, shared by every design)."""
     points = np.array([family.recurrence(1)[0][0]])
     for count in added:
         points = np.concatenate([points, _extend(family, points, count)])
+    points.setflags(write=False)
     return points
 
 

@@ -17,10 +17,12 @@ rescaled to unit norm, which gives the stable orthonormal recurrence
 | ``Hermite()``       | standard normal on R                | normal        |
 | ``Laguerre(a)``     | x^a e^{-x} / Γ(a+1) on [0, ∞)       | gamma         |
 
-Gauss rules come from :mod:`numpy.polynomial` for Legendre and Hermite (``leggauss``,
-``hermegauss``: equal to scipy's to ~1e-13, and no import of scipy.special for the nodes of
-uniform and normal inputs), from :mod:`scipy.special` (``roots_*``) for Jacobi and
-Laguerre; the weights are rescaled to sum to one.
+Gauss rules of Legendre and Hermite up to :data:`NUMPY_RULE_POINTS` points come from
+:mod:`numpy.polynomial` (``leggauss``, ``hermegauss``: equal to scipy's to ~1e-13, and the
+nodes of uniform and normal inputs import no scipy.special); the others from
+:mod:`scipy.special` (``roots_*``; Newton-polished, accurate for hundreds of points, where
+numpy's eigen-solve costs O(q³) and its Hermite weights overflow past 370 points). The
+weights are rescaled to sum to one.
 
 Double-precision limits (checked by the tests): the discrete orthonormality of the
 basis under a (d+1)-point rule holds to ~1e-12 up to degree 20 for every family here;
@@ -43,7 +45,18 @@ from numpy.typing import ArrayLike, NDArray
 if TYPE_CHECKING:
     import scipy.stats as st
 
-__all__ = ["GaussRule", "Hermite", "Jacobi", "Laguerre", "Legendre", "OrthonormalFamily"]
+__all__ = [
+    "NUMPY_RULE_POINTS",
+    "GaussRule",
+    "Hermite",
+    "Jacobi",
+    "Laguerre",
+    "Legendre",
+    "OrthonormalFamily",
+]
+
+#: Most points of a Legendre or Hermite rule taken from numpy (more: scipy's).
+NUMPY_RULE_POINTS = 100
 
 
 def _special():
@@ -170,7 +183,7 @@ class Legendre(OrthonormalFamily):
         return np.zeros(n), b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return legendre.leggauss(q)
+        return legendre.leggauss(q) if q <= NUMPY_RULE_POINTS else _special().roots_legendre(q)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return -1.0 + 2.0 * rng.uniform(0.0, 1.0, size)
@@ -239,7 +252,9 @@ class Hermite(OrthonormalFamily):
         return np.zeros(n), b
 
     def _raw_gauss(self, q: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        return hermite_e.hermegauss(q)
+        if q <= NUMPY_RULE_POINTS:
+            return hermite_e.hermegauss(q)
+        return _special().roots_hermitenorm(q)
 
     def sample(self, size: int, rng: np.random.Generator) -> NDArray[np.float64]:
         return rng.standard_normal(size)
