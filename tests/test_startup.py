@@ -102,15 +102,17 @@ def test_a_run_leaves_the_sweeps_settings_to_sweep_and_validate():
 
 def test_validate_checks_the_model_in_one_child_without_a_pool():
     """``pcmb validate`` builds the model in one worker process it starts (the isolation),
-    never a loky pool: joblib stays unimported in its own process."""
+    never a loky pool: joblib stays unimported in its own process; nor scipy (the nodes'
+    Gauss rules are numpy's, the sweep's Gauss-Patterson points need no scipy)."""
     config = ROOT / "configs" / "quarter_car.yaml"
     code = (
         "import contextlib, io\nfrom pcmb.cli import main\n"
         "with contextlib.redirect_stdout(io.StringIO()):\n"
         f"    assert main(['validate', {str(config)!r}]) == 0"
     )
-    assert _loaded(code, ["joblib", "pcmb.run.executor"]) == {
+    assert _loaded(code, ["joblib", "scipy", "pcmb.run.executor"]) == {
         "joblib": False,
+        "scipy": False,
         "pcmb.run.executor": True,
     }
 
