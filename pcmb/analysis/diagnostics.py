@@ -150,6 +150,8 @@ RANGE_BELOW_ZERO = 0.01
 PDF_MARGIN = 0.05
 #: Run values whose std is below this fraction of their RMS do not vary (round-off).
 _ROUND_OFF = 1e-12
+#: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
+_EXACT = 1e-8
 #: A tail holding more than this share of its energy in one input is "concentrated".
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
@@ -586,23 +588,44 @@ def _unseen_mean_error(
     coefficients: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
-    (M, T) ``coefficients``: the energies of degrees 1 to M - 1 (neighbours averaged) are
-    fitted by a line against p and against log p, each extrapolated up to degree
-    ``UNSEEN_DEGREES`` × M, the larger kept, and weighted by the squared error of the design's
-    ``rule`` (its interpolatory weights on the (N,) germ ``nodes``) on each degree."""
+    (M, T) ``coefficients``, where the design's ``rule`` (its interpolatory weights on the (N,)
+    germ ``nodes``) integrates every degree below M exactly, so that the interpolant's mean is
+    the design's own (zeros otherwise: the interpolant then measures that error itself).
+
+    The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
+    (all of them with fewer than ``_SHAPE_LAYERS`` after it), are fitted by a line against p
+    and against log p, each extrapolated up to degree ``UNSEEN_DEGREES`` × M, the larger
+    kept, and weighted by the squared error of the rule on each degree."""
     first = coefficients.shape[0]
-    if first < 4:
-        return np.zeros(coefficients.shape[1:])
     last = UNSEEN_DEGREES * first
-    rule_errors = (rule @ family.evaluate(nodes, last))[first:, None]
+    rule_errors = rule @ family.evaluate(nodes, last)
+    if first < 4 or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
+        return np.zeros(coefficients.shape[1:])
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
-    seen, unseen = np.arange(1.0, first - 1), np.arange(first, last + 1.0)[:, None]
-    tails = []
-    for transform in (np.asarray, np.log):
-        slope, intercept = np.polyfit(transform(seen), paired, 1)
-        tails.append(np.exp(intercept + np.minimum(slope, 0.0) * transform(unseen)))
-    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors**2, axis=0))
+    seen = np.arange(1.0, first - 1)
+    fitted = np.arange(seen.size)[:, None] >= np.argmax(paired, axis=0)
+    fitted[:, fitted.sum(axis=0) < _SHAPE_LAYERS] = True
+    unseen = np.arange(first, last + 1.0)[:, None]
+    tails = [
+        _extrapolated(transform(seen), paired, fitted, transform(unseen))
+        for transform in (np.asarray, np.log)
+    ]
+    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors[first:, None] ** 2, axis=0))
+
+
+def _extrapolated(
+    x: NDArray[np.float64], y: NDArray[np.float64], fitted: NDArray[np.bool_], at: NDArray
+) -> NDArray[np.float64]:
+    """(U, T) exp of the least-squares line through the (P, T) ``y`` against the (P,) ``x``
+    where ``fitted``, column by column, at the (U, 1) ``at``; a rising line is held flat."""
+    count = fitted.sum(axis=0)
+    x_mean = (fitted * x[:, None]).sum(axis=0) / count
+    y_mean = np.where(fitted, y, 0.0).sum(axis=0) / count
+    dx = np.where(fitted, x[:, None] - x_mean, 0.0)
+    slope = (dx * np.where(fitted, y - y_mean, 0.0)).sum(axis=0) / (dx**2).sum(axis=0)
+    slope = np.minimum(slope, 0.0)
+    return np.exp(y_mean + slope * (at - x_mean))
 
 
 def _interpolated(
