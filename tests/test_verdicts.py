@@ -367,6 +367,34 @@ def test_the_surrogate_cautions_reach_the_file_inspect_and_the_report(tmp_path):
 
 
 @pcmb.batched(outputs=("x",))
+def lognormal(params, times):
+    """exp(z t / 2): its std passes that of a polynomial of order 4 at t = 3.6."""
+    return {"x": np.exp(0.5 * np.outer(params["z"], times))}
+
+
+def test_a_pdf_where_the_verdict_fails_carries_the_caution_in_its_title():
+    # The surrogate's held-out error passes the tolerance wherever the verdict fails; past
+    # t = 3.6 no surrogate caution is recorded (the chaos-unreliable record covers it), and
+    # the PDF at t = 4.5 passes no run by 5 %: its panel must still say it is not to be trusted.
+    from pcmb.analysis.report import _caution_note
+    from pcmb.analysis.statistics import AnalysisSettings
+
+    study = pcmb.Study(
+        lognormal,
+        {"z": pcmb.Normal(0.0, 1.0)},
+        np.linspace(0.0, 5.0, 51),
+        order=4,
+        backend="inprocess",
+        analysis=AnalysisSettings(psd=(), pdf_times=(1.0, 4.5)),
+    )
+    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable from t = 3.6
+        result = study.run()
+    assert result.diagnostics["x"].failing_from < 4.5
+    assert "chaos-unreliable" in _caution_note(result, "x", 4.5)
+    assert _caution_note(result, "x", 1.0) == ""
+
+
+@pcmb.batched(outputs=("x",))
 def sine(params, times):
     """sin(k t): smooth in k at every time."""
     return {"x": np.sin(np.outer(params["k"], times))}

@@ -422,12 +422,13 @@ def _plot_other_draws(
 
 
 def _caution_note(result: StudyResult, name: str, at: float) -> str:
-    """A title line naming the surrogate cautions (:data:`SURROGATE_CAUTIONS`) that cover the
-    point ``at`` of output ``name``, or ``""``."""
+    """A title line naming the surrogate cautions (:data:`SURROGATE_CAUTIONS`) and the verdict's
+    failure (``chaos-unreliable``: the surrogate fails there too) that cover the point ``at`` of
+    output ``name``, or ``""``."""
     codes = dict.fromkeys(
         w.code
         for w in result.warnings_for(name)
-        if w.code in SURROGATE_CAUTIONS
+        if (w.code in SURROGATE_CAUTIONS or w.code == _FLAG)
         and (w.time_range is None or w.time_range[0] <= at <= w.time_range[1])
     )
     return f"\ncaution: {', '.join(codes)} (see the index page)" if codes else ""
