@@ -1153,9 +1153,10 @@ def diagnose(
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
+    holding = ~(times >= failing_from)  # every time where the verdict never fails
+    undecided = (estimate + noise > tolerance) & holding
     if checked is not None:
-        holding = ~(times >= failing_from)  # every time where the verdict never fails
-        records.extend(_inaccurate(output, checked, times, tolerance, holding))
+        records.extend(_inaccurate(output, checked, times, tolerance, holding, undecided))
     if holdout is None and runs.shape[0] > 1 and equal.all():
         records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
@@ -1185,7 +1186,6 @@ def diagnose(
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
-    undecided = (estimate + noise > tolerance) & ~(times >= failing_from)
     found = OutputDiagnostics(
         output,
         scale,
@@ -1303,20 +1303,26 @@ def _inaccurate(
     times: NDArray[np.float64],
     tolerance: float,
     holding: NDArray[np.bool_],
+    undecided: NDArray[np.bool_],
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
-    tolerance at the times where the statistics hold (``holding``: before the verdict fails)."""
+    tolerance at the times where the statistics hold (``holding``: before the verdict fails),
+    saying so of the ``undecided`` ones among them."""
     above = (holdout.error > tolerance) & holding
     if not above.any():
         return []
+    statistics = (
+        f"its mean and std are not flagged there (undecided at {_count(above & undecided)})"
+        if (above & undecided).any()
+        else "its mean and std hold there"
+    )
     return [
         WarningRecord(
             "surrogate-inaccurate",
             f"the surrogate is off by up to {_percent(np.nanmax(holdout.error[above]))} of std "
-            f"at {holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
-            f"there (estimated error at most {_percent(np.nanmax(holdout.statistics[above]))}): "
-            "PDFs, quantiles and Sobol' indices drawn from it are less accurate than its error "
-            "bars",
+            f"at {holdout.count} held-out runs ({_count(above)}) while {statistics} (estimated "
+            f"error at most {_percent(np.nanmax(holdout.statistics[above]))}): PDFs, quantiles "
+            "and Sobol' indices drawn from it are less accurate than its error bars",
             output,
             _span(times, above),
         )
