@@ -656,9 +656,9 @@ def placed_check(
     the expansion (Leja points keep the interpolation well conditioned); its mean and std
     (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
     corrected mean and std, and their differences from the expansion's the estimated
-    errors, the mean's plus the design rule's error on the degrees beyond the interpolant's
-    (:func:`_unseen_mean_error`: with K <= N placed runs beside N Gauss nodes the two means
-    agree exactly). Their standard errors are how far the estimates move when the last
+    errors, the mean's plus, where the two means agree exactly (K <= N placed runs beside N
+    Gauss nodes), the design rule's error on the degrees beyond the interpolant's
+    (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
     than that), the spread that of the larger estimate (the corrected mean's adds the unseen
     error); the surrogate error is the L2 distance of the two surrogates (their
