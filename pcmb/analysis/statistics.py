@@ -83,7 +83,8 @@ class AnalysisSettings:
     quantiles:
         Probability levels of the quantile bands, each in (0, 1).
     samples:
-        Surrogate draws for PDFs and quantiles.
+        Surrogate draws for PDFs; the quantile bands take min(samples, QUANTILE_DRAWS)
+        scrambled Sobol' points.
     seed:
         Seed of those draws.
     units:
