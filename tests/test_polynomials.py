@@ -5,7 +5,7 @@ import pytest
 import scipy.integrate as si
 import scipy.special as sp
 
-from pcmb.chaos.polynomials import NUMPY_RULE_POINTS, Hermite, Jacobi, Laguerre, Legendre
+from pcmb.chaos.polynomials import Hermite, Jacobi, Laguerre, Legendre
 from pcmb.references import gamma_moment, jacobi_moment, normal_moment, uniform_moment
 
 FAMILIES = [
@@ -127,21 +127,3 @@ def test_the_quantile_is_the_germs_inverse_cdf(family):
     u = np.linspace(0.001, 0.999, 41)
     assert family.quantile(u) == pytest.approx(family.germ.ppf(u), rel=1e-12, abs=1e-14)
     assert family.germ.cdf(family.quantile(u)) == pytest.approx(u, rel=1e-12)
-
-
-@pytest.mark.parametrize(
-    ("family", "roots"),
-    [(Legendre(), sp.roots_legendre), (Hermite(), sp.roots_hermitenorm)],
-    ids=["legendre", "hermite"],
-)
-def test_numpy_rules_equal_scipys(family, roots):
-    """Legendre and Hermite rules (numpy's up to NUMPY_RULE_POINTS) equal scipy's roots_*
-    (Newton-polished), an independent implementation: nodes to 1e-14 of the largest, weights
-    to 1e-12 of the largest (against 40-digit rules, both are within 2e-13 of the largest
-    weight at 30 to 80 points); past it they are scipy's (numpy's overflow at 371)."""
-    for q in [*range(1, NUMPY_RULE_POINTS + 1), 371, 572]:
-        rule = family.gauss_rule(q)
-        nodes, weights = roots(q)
-        np.testing.assert_allclose(rule.nodes, nodes, rtol=0, atol=1e-14 * max(1, nodes[-1]))
-        weights = weights / weights.sum()
-        np.testing.assert_allclose(rule.weights, weights, rtol=0, atol=1e-12 * weights.max())
