@@ -41,6 +41,7 @@ import pcmb
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.regression import loo_statistics_error
+from pcmb.references import borehole as borehole_flow
 from pcmb.references import (
     borehole_bounds,
     ishigami,
@@ -50,7 +51,6 @@ from pcmb.references import (
     wing_weight_bounds,
     wing_weight_moments,
 )
-from pcmb.references import borehole as borehole_flow
 from pcmb.references import piston as piston_time
 from pcmb.references import wing_weight as wing_weight_lb
 
@@ -200,7 +200,8 @@ def borehole() -> Case:
     so its moments are those of Hu - Hl times those of g, by a tensor Gauss–Legendre rule of
     :data:`BOREHOLE_POINTS` per remaining input (against 36, 120, 4, 6, 6, 6 points: 3e-11 of
     the std)."""
-    bounds = dict(zip(("rw", "r", "tu", "hu", "tl", "hl", "length", "kw"), borehole_bounds()))
+    names = ("rw", "r", "tu", "hu", "tl", "hl", "length", "kw")
+    bounds = dict(zip(names, borehole_bounds(), strict=True))
     return _box(bounds), borehole_flow, *borehole_moments(bounds, BOREHOLE_POINTS)
 
 
