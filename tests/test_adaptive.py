@@ -149,18 +149,19 @@ def _exp8_moments():
     [
         (_exp8, EXP8, _exp8_moments(), 1e-5),
         (wing_weight, WING, wing_weight_moments(), 1e-3),  # ended at ε/130
+        (wing_weight, WING, wing_weight_moments(), 1e-4),  # ended at ε/104
     ],
 )
 def test_the_tolerance_is_the_error_delivered(function, inputs, moments, tolerance):
     """The calibration's rule (scripts/calibrate_adaptive.py, docs/methods.md): the true error
-    ends between ε/100 and 10 ε, at most 10x the estimate (not over-confident) and at least
-    1/100 of it (issue 23's band: exp8 at 1e-5 is 12x careful since Piston's fix)."""
+    ends between ε/100 and 10 ε, within 10x of the estimate either way (exp8 at 1e-5 was 12x
+    careful while the guard held the largest raw change of the last three)."""
     (mean, std), max_runs = moments, 6000
     result = _adaptive(function, inputs, method="adaptive", tolerance=tolerance, max_runs=max_runs)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert tolerance / 100 <= error <= 10 * tolerance, error
-    assert error / 10 <= estimate <= 100 * error, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
 
 
 #: Genz's corner peak (1 + Σ a_k x_k)^-6 in 5 uniform inputs: no rule was chosen on it.
@@ -289,13 +290,13 @@ def test_two_lucky_small_changes_in_a_row_do_not_stop_the_grid():
     """Issue 23's band at Piston, ε = 1e-6: past 2 000 runs its changes per round zig-zag
     (9.5e-6, then 6.7e-7 and 1.5e-6), the median of the last three believed the two small ones
     and stopped at 3 599 runs 28x over-confident (2.4e-7 against 6.7e-6). The true error stays
-    within 10 ε and 10x the estimate; the estimate at most 100x the error."""
+    within 10 ε and within 10x of the estimate either way."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-6, max_runs=6000)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert error <= 1e-5
-    assert error / 10 <= estimate <= 100 * error, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
 
 
 def test_ishigami_finds_the_interaction_its_axes_hide():
