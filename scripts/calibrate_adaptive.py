@@ -16,7 +16,7 @@ The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on the rounds 
 genz_oscillatory, otl_circuit, piston, wing_weight and lognormal6; ishigami3 and genz_gaussian
 validate it (g_function is not smooth: the estimate cannot see its kink, the warnings must).
 ``--held-out`` runs functions no rule was chosen on (Genz product peak and corner peak,
-Borehole) instead, to check that the rules generalise.
+Borehole, cos of 5 normal inputs) instead, to check that the rules generalise.
 
 ``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
@@ -205,6 +205,17 @@ def borehole() -> Case:
     return _box(bounds), borehole_flow, *borehole_moments(bounds, BOREHOLE_POINTS)
 
 
+def cosine5n() -> Case:
+    """cos(1 + Σ b_k z_k), 5 standard normal inputs (held out): E cos(1 + b·z) = cos 1
+    e^(-|b|²/2), E cos² = (1 + cos 2 e^(-2|b|²)) / 2."""
+    b = np.array([0.5, 0.4, 0.3, 0.2, 0.1])
+    inputs = {f"z{k}": pcmb.Normal(0.0, 1.0) for k in range(b.size)}
+    s = float((b**2).sum())
+    mean = np.cos(1.0) * np.exp(-s / 2)
+    second = (1 + np.cos(2.0) * np.exp(-2 * s)) / 2
+    return inputs, lambda x: np.cos(1 + x @ b), mean, np.sqrt(second - mean**2)
+
+
 #: Gauss–Legendre points per input of g in :func:`borehole`'s reference.
 BOREHOLE_POINTS = (24, 80, 6, 8, 8, 8)
 
@@ -247,7 +258,7 @@ CASES = {
     )
 }
 #: Functions no rule was chosen on, to check that it generalises (``--held-out``).
-HELD_OUT = {f.__name__: f for f in (genz_product_peak, genz_corner_peak, borehole)}
+HELD_OUT = {f.__name__: f for f in (genz_product_peak, genz_corner_peak, borehole, cosine5n)}
 FUNCTIONS = CASES | HELD_OUT
 #: Candidate order of the regression's hyperbolic set.
 REGRESSION_ORDER = 6
