@@ -72,7 +72,7 @@ ROUNDS_AHEAD = 2
 #: median of three believed two small ones in a row: Piston at 1e-6, 28x over-confident).
 GUARDED = 3
 #: The slowest reduction per round the estimate's geometric tail assumes: a guarded change
-#: that does not fall counts 1 / (1 - 0.9) = 10 times.
+#: that does not fall counts 0.9² / (1 - 0.9) = 8.1 times.
 SLOWEST = 0.9
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
