@@ -89,6 +89,20 @@ def test_regress_refits_on_survivors_and_says_so():
     np.testing.assert_allclose(result.std("y") ** 2, var, atol=1e-10)
 
 
+def test_the_file_records_the_least_squares_fit_of_a_grid_with_failed_nodes(tmp_path):
+    study = pcmb.Study(
+        failing,
+        INPUTS,
+        TIMES,
+        method={"kind": "collocation", "order": 3, "validation": 0},
+        execution={"backend": "inprocess", "on_failure": "regress"},
+    )
+    with pytest.warns(pcmb.PcmbWarning):
+        result = study.run(tmp_path / "out.h5")
+    assert result.design.fit == "regression"
+    assert pcmb.load(tmp_path / "out.h5").design.fit == "regression"
+
+
 @pytest.mark.parametrize("method", ["montecarlo", "lhs", "sobol"])
 def test_sampling_methods_share_the_pipeline(method):
     study = pcmb.Study(
