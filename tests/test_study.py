@@ -89,12 +89,15 @@ def test_regress_refits_on_survivors_and_says_so():
     np.testing.assert_allclose(result.std("y") ** 2, var, atol=1e-10)
 
 
-def test_the_file_records_the_least_squares_fit_of_a_grid_with_failed_nodes(tmp_path):
+@pytest.mark.parametrize(
+    "grid", [{"order": 3}, {"grid": "smolyak", "level": 2}, {"order": "auto", "max_runs": 9}]
+)
+def test_the_file_records_the_least_squares_fit_of_a_grid_with_failed_nodes(tmp_path, grid):
     study = pcmb.Study(
         failing,
         INPUTS,
         TIMES,
-        method={"kind": "collocation", "order": 3, "validation": 0},
+        method={"kind": "collocation", **grid, "validation": 0},
         execution={"backend": "inprocess", "on_failure": "regress"},
     )
     with pytest.warns(pcmb.PcmbWarning):

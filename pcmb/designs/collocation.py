@@ -21,6 +21,7 @@ from pcmb.designs.base import (
     MethodSection,
     MethodSettings,
     Recovery,
+    fit_of,
     least_squares_recovery,
     order_words,
     statistics_warnings,
@@ -126,7 +127,7 @@ class TensorCollocation:
     ) -> Recovery:
         flat = [name for name, order in zip(self.names, self.orders, strict=True) if order == 0]
         warnings: tuple[WarningRecord, ...] = ()
-        self._fit = "projection" if ok.all() else "regression"
+        self._fit = fit_of(ok)
         if ok.all():
             index = self._index(grid)
             expansions = {

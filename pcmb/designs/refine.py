@@ -177,7 +177,7 @@ class OrderRefinement(GrowingGrid):
             grid="tensor-nested",
             basis="tensor",
             orders=orders,
-            fit="projection",
+            fit=self._fit,
             rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
             samples=self._grid.size,
             tolerance=self.tolerance,
