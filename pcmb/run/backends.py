@@ -193,7 +193,7 @@ def remove_orphaned_semaphores(folder: str | os.PathLike[str] = "/dev/shm") -> i
             ):
                 continue
             os.unlink(entry.path)
-        except FileNotFoundError:  # removed meanwhile (by its tracker, or another run)
+        except OSError:  # removed meanwhile (by its tracker, another run), or not ours to remove
             continue
         removed += 1
     return removed
@@ -205,8 +205,8 @@ def _ended(pid: int) -> bool:
         os.kill(pid, 0)
     except ProcessLookupError:
         return True
-    except (OSError, OverflowError):
-        return False
+    except (OSError, OverflowError):  # another user's, or no pid this system has
+        pass
     return False
 
 
