@@ -294,6 +294,7 @@ def test_semaphores_of_ended_processes_of_this_user_are_removed_and_only_those(t
     assert remove_orphaned_semaphores(tmp_path / "absent") == 0
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="named semaphores are not in /dev/shm")
 def test_a_run_after_a_killed_process_group_removes_its_semaphores(tmp_path) -> None:
     """Each ``kill -9`` of a ``pcmb run``'s process group left its 15 semaphores in /dev/shm
