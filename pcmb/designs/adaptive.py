@@ -417,7 +417,8 @@ def estimated_error(changes: list[float], geometric: bool) -> float:
     round of the largest of the last :data:`GUARDED` changes G_k (at most :data:`SLOWEST`),
     and g_k the largest of the last :data:`GUARDED` changes, each carried to round k by ρ per
     round of its age (so one lucky small change is not believed, and a steady fall is). An
-    algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone."""
+    algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone (as before
+    GUARDED + 1 rounds, when ρ cannot be measured yet)."""
     guarded = [max(changes[max(0, k - GUARDED + 1) : k + 1]) for k in range(len(changes))]
     if not geometric or len(guarded) <= GUARDED or guarded[-1 - GUARDED] <= 0:
         return guarded[-1]
