@@ -484,6 +484,47 @@ def test_a_pdf_beyond_few_runs_by_the_mass_they_are_expected_to_miss_is_not_note
 
 
 @pcmb.batched(outputs=("y",))
+def ramp(params, times):
+    """k t: exact at order 1, never beyond [0, 1] at t = 1."""
+    return {"y": np.outer(params["k"], times)}
+
+
+def test_a_stored_pdf_smeared_past_every_run_is_noted_though_no_draw_goes_there():
+    # y = k t, k ~ U[0, 1]: the surrogate is exact, so no draw leaves [0, 1], the range of the
+    # 41 runs (the held-out ones reach 0 and 1). A PDF whose kernel (h = 0.2) smears that
+    # hard-edged law, Φ(y / h) - Φ((y - 1) / h), puts 5.7 % of its mass above 1.05 (1 + the
+    # 5 % margin), 7.5 % below -0.01 (a non-negative output's floor): above the 1 % + 1/42
+    # allowance.
+    import dataclasses
+
+    from scipy.stats import norm
+
+    from pcmb.analysis.diagnostics import pdf_outside_runs
+    from pcmb.analysis.statistics import AnalysisSettings, Density
+
+    study = pcmb.Study(
+        ramp,
+        {"k": pcmb.Uniform(0.0, 1.0)},
+        np.linspace(0.0, 1.0, 11),
+        order=7,
+        backend="inprocess",
+        analysis=AnalysisSettings(psd=(), pdf_times=(1.0,)),
+        validation=32,
+    )
+    result = study.run()
+    assert "pdf-outside-runs" not in {w.code for w in result.warnings}
+    value = np.linspace(-1.0, 2.0, 256)
+    density = norm.cdf(value / 0.2) - norm.cdf((value - 1.0) / 0.2)
+    smeared = Density(np.array([1.0]), value[None], density[None], np.array([0.2]))
+    outputs = {"y": dataclasses.replace(result.analysis.outputs["y"], pdf=smeared)}
+    analysis = dataclasses.replace(result.analysis, outputs=outputs)
+    (record,) = pdf_outside_runs(dataclasses.replace(result, analysis=analysis))
+    assert record.code == "pdf-outside-runs" and record.time_range == (1.0, 1.0)
+    assert "puts 13 % of its mass (0 % of the surrogate's draws)" in record.message
+    assert "kernel (bandwidth 0.2) smears" in record.message
+
+
+@pcmb.batched(outputs=("y",))
 def steep_exponential(params, times):
     """exp(12 x t): analytic in x, steeper with time."""
     return {"y": np.exp(12 * np.outer(params["x"], times))}
