@@ -4,7 +4,8 @@ The sum of kernels is computed by linear binning and an FFT convolution (Silverm
 algorithm): O(M) in the number of samples instead of O(M G), which matters for the 10^5
 surrogate draws behind every PDF pcmb stores or plots. The bandwidth is the Improved
 Sheather-Jones one (Botev, Grotowski and Kroese 2010, Ann. Stat. 38(5)), and the kernel mass
-beyond an end of the samples where they pile up is reflected back (docs/analysis.md).
+beyond an end of the samples where they pile up is reflected back (docs/architecture.md,
+"The PDFs").
 """
 
 from __future__ import annotations
