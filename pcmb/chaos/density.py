@@ -133,21 +133,22 @@ def _isj_time(cosines: NDArray[np.float64], size: int, shortest: float) -> float
     power = (cosines[1:] / 2.0) ** 2
     # 2 π^(2s) Σ k^(2s) a_k² e^(-k² π² t): the integral of the squared s-th derivative.
     weights = {s: 2.0 * np.pi ** (2 * s) * wave**s * power for s in range(2, _ISJ_ORDER + 1)}
-    constants = {
-        s: 2.0
-        * (1.0 + 0.5 ** (s + 0.5))
-        / 3.0
-        * np.prod(np.arange(1.0, 2 * s, 2))
-        / np.sqrt(2 * np.pi)
-        for s in range(2, _ISJ_ORDER)
-    }
+
+    def functional(s: int, t: float) -> float:
+        """The sum over the waves whose factor e^(-k² π² t) is above 1e-20 (k² < 4.67 / t)."""
+        count = int(min(wave.size, 4.67 / t + 1.0))
+        return float(weights[s][:count] @ np.exp(-(np.pi**2) * t * wave[:count]))
+
+    def constant(s: int) -> float:
+        """2 (1 + 2^(-s-1/2)) / 3 (2s - 1)!! / √(2π), Botev's Eq. (29)."""
+        odd_product = np.prod(np.arange(1.0, 2 * s, 2))
+        return 2.0 * (1.0 + 0.5 ** (s + 0.5)) / 3.0 * odd_product / np.sqrt(2.0 * np.pi)
 
     @np.errstate(divide="ignore", over="ignore")
     def gap(t: float) -> float:
-        f = weights[_ISJ_ORDER] @ np.exp(-(np.pi**2) * t * wave)
+        f = functional(_ISJ_ORDER, t)
         for s in range(_ISJ_ORDER - 1, 1, -1):
-            t_s = (constants[s] / (size * f)) ** (2.0 / (3 + 2 * s))
-            f = weights[s] @ np.exp(-(np.pi**2) * t_s * wave)
+            f = functional(s, (constant(s) / (size * f)) ** (2.0 / (3 + 2 * s)))
         return t - (2.0 * size * np.sqrt(np.pi) * f) ** -0.4
 
     if not gap(0.1) > 0.0:
