@@ -118,10 +118,10 @@ def test_order_auto_at_its_highest_order_names_that_limit_not_max_runs():
     from pcmb.designs.refine import MAX_ORDER
 
     result, message = _budget_record("order-budget", order="auto", diagnostics_tolerance=1e-9)
-    assert result.refinement.orders.max() <= MAX_ORDER
-    assert f"passes order {MAX_ORDER}, the highest order" in message
-    assert f"{result.n_nodes} of 1000 runs" in message
-    assert "raise method.max_runs" not in message.lower()
+    # Gauss–Patterson's last level, 4 (order 23), is below MAX_ORDER and ends the rounds.
+    assert result.refinement.orders.max() == 23 < MAX_ORDER
+    assert f"after {result.n_nodes} runs, as level 4 is the last of rule gauss-patterson" in message
+    assert "method.max_runs" not in message
 
 
 def test_order_auto_stopped_by_max_runs_says_raise_max_runs():
