@@ -154,6 +154,7 @@ class MultiElementCollocation:
         here, so this forgets the refinement of an earlier run); ``.nodes`` in the inputs' own
         germs."""
         self.exhausted, self.estimate = False, math.nan
+        self.factors, self._splits = np.full(self.start.size, np.nan), []
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
@@ -180,7 +181,8 @@ class MultiElementCollocation:
         if self.elements != "auto":
             return None
         coefficients, _ = self._coefficients(values, ok)
-        errors = element_errors(self.partition, coefficients, self.multi_index)
+        self._check_splits(coefficients)
+        errors = element_errors(self.partition, coefficients, self.multi_index, self.factors)
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
             return None
@@ -200,18 +202,64 @@ class MultiElementCollocation:
         self.exhausted = refused and not chosen
         if not chosen:
             return None
+        parents = self._parent_statistics(coefficients)
         # Children replace their parent in place; the others keep their nodes.
         bounds, renumber, children = [], np.full(self.partition.size, -1), []
         for e in range(self.partition.size):
             if e in chosen:
                 split = self.partition.split(e, chosen[e]).bounds[e : e + 2 ** len(chosen[e])]
-                children += range(len(bounds), len(bounds) + len(split))
+                family = np.arange(len(bounds), len(bounds) + len(split))
+                self._splits.append((family, parents[e]))
+                children += family.tolist()
                 bounds += list(split)
             else:
                 renumber[e] = len(bounds)
                 bounds.append(self.partition.bounds[e])
         kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
+        factors = np.full(len(bounds), np.nan)
+        factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
+        self.factors = factors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
+
+    def _parent_statistics(
+        self, coefficients: Mapping[str, NDArray[np.float64]]
+    ) -> list[dict[str, tuple[NDArray[np.float64], ...]]]:
+        """Per element, output name -> its P_e μ_e, P_e E_e[y²] and what the checked model
+        (:func:`element_errors`, factor 1) estimates of its errors of the mean and std, in the
+        output's units, (P,) each: what :meth:`_check_splits` compares its children with."""
+        size = self.partition.size
+        found: list[dict[str, tuple[NDArray[np.float64], ...]]] = [{} for _ in range(size)]
+        for name, c in coefficients.items():
+            flat = c.reshape(*c.shape[:2], -1)
+            errors = element_errors(self.partition, {name: flat}, self.multi_index, np.ones(size))
+            if not errors.mean:
+                continue
+            scale = np.nanmax(PiecewiseExpansion(self.partition, flat, self.multi_index).std())
+            moments = _moments(self.partition.probability, flat)
+            for e in range(size):
+                model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
+                found[e][name] = (moments[0][e], moments[1][e], model)
+        return found
+
+    def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
+        """Sets the factor of the children of every split since the last call: how many times
+        the change of the mean and std from their parent to them exceeds what the checked
+        model estimated of the parent's errors (at least 1)."""
+        for children, parent in self._splits:
+            factor = 1.0
+            for name, (mean, square, model) in parent.items():
+                flat = coefficients[name].reshape(*coefficients[name].shape[:2], -1)
+                expansion = PiecewiseExpansion(self.partition, flat, self.multi_index)
+                moments = _moments(self.partition.probability, flat)
+                shift = moments[0][children].sum(axis=0) - mean
+                spread = moments[1][children].sum(axis=0) - square - 2 * expansion.mean() * shift
+                sigma = expansion.std()
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    shown = np.fmax(abs(shift), np.where(sigma > 0, abs(spread) / (2 * sigma), 0))
+                if np.max(model) > 0:
+                    factor = max(factor, float(np.nanmax(shown) / np.max(model)))
+            self.factors[children] = factor
+        self._splits = []
 
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
         """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
@@ -248,6 +296,7 @@ class MultiElementCollocation:
         per-element least-squares fit where nodes of the element failed (reported), and
         ``element-decay`` and ``element-budget`` warnings (see the module)."""
         coefficients, warnings = self._coefficients(values, ok)
+        self._check_splits(coefficients)
         expansions = {
             name: PiecewiseExpansion(self.partition, c, self.multi_index, self.names)
             for name, c in coefficients.items()
@@ -312,7 +361,7 @@ class MultiElementCollocation:
         records, self.estimate = [], 0.0
         for name, expansion in expansions.items():
             errors = element_errors(
-                self.partition, {name: expansion.coefficients}, self.multi_index
+                self.partition, {name: expansion.coefficients}, self.multi_index, self.factors
             )
             estimate, each = errors.estimate(), errors.of_each()
             self.estimate = max(self.estimate, estimate)
@@ -331,6 +380,15 @@ class MultiElementCollocation:
                     )
                 )
         return records
+
+
+def _moments(
+    probability: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(E, P) each element's P_e μ_e and P_e E_e[y²] from its (E, S, P) coefficients (the mean
+    term first, the basis orthonormal)."""
+    weight = probability[:, None]
+    return weight * coefficients[:, 0], weight * (coefficients**2).sum(axis=1)
 
 
 def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -369,7 +427,11 @@ class TailErrors:
         the tails of the elements ``among`` (all by default; the others' taken as resolved)."""
         return max(
             (
-                float(np.max(np.fmax(np.nansum(m[among], axis=0), np.nansum(s[among], axis=0))))
+                float(
+                    np.max(
+                        np.fmax(np.nansum(m[among] ** 2, axis=0) ** 0.5, np.nansum(s[among], axis=0))
+                    )
+                )
                 for m, s in zip(self.mean, self.std, strict=True)
             ),
             default=0.0,
@@ -381,21 +443,37 @@ class TailErrors:
         return np.max(each, axis=0) if each else np.zeros(self.along.shape[0])
 
 
+def _decay(tail: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The decay ``tail / before``, at most :data:`DECAY_CAP` (at it where nothing is before),
+    0 where the tail is empty, NaN where it is not finite."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        decay = np.minimum(tail / before, DECAY_CAP)
+    decay = np.where(tail > 0, np.nan_to_num(decay, nan=DECAY_CAP), 0.0)
+    return np.where(np.isfinite(tail), decay, np.nan)
+
+
 def element_errors(
     partition: Partition,
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
+    factors: NDArray[np.float64] | None = None,
 ) -> TailErrors:
     """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
 
-    In element e of probability P_e, at every time, the energy T of the outer two degree
-    layers (:func:`_tails`) over that of the two layers before them is the decay ρ per two
-    degrees (at most :data:`DECAY_CAP`). Continued geometrically, the element's variance
-    misses the energy beyond its degree p, M = T ρ / (1 - ρ), and its mean errs by the
-    coefficients aliased onto it, of energy A = T ρ² / (1 - ρ) (from degree p + 3 on: a
-    Gauss rule integrates below degree 2p + 2 exactly, but the first degrees of a kink mimic
-    a fast decay, so the decay is carried two layers, not p/2). With σ the piecewise
-    surrogate's std: mean error Σ_e P_e √A_e, std error Σ_e P_e M_e / (2σ).
+    Each element e, of probability P_e, misses energy M_e of its variance and errs its mean by
+    a coefficient of energy A_e, both continued geometrically from its tail:
+
+    - an element no split has checked (``factors`` NaN, the default): T the energy of the
+      outer two degree layers, ρ its ratio to the two layers before (at most
+      :data:`DECAY_CAP`), M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the decay carried two
+      layers only, since a kink's first degrees mimic a fast one;
+    - an element whose parent's split measured what this model missed on it (``factors``
+      f >= 1, :meth:`MultiElementCollocation.more`): T the energy of the outer layer, of
+      degree p, ρ its ratio to the layer before, M = f T ρ / (1 - ρ) and √A = f √T ρ^((p+2)/2),
+      the coefficient of degree 2p + 2, the first its Gauss rule does not integrate.
+
+    With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
+    unknown), std error Σ_e P_e M_e / (2σ).
 
     Parameters
     ----------
@@ -405,11 +483,18 @@ def element_errors(
         Output name -> (E, S, ...) coefficients.
     multi_index:
         (S, n) their terms.
+    factors:
+        (E,) each element's factor f, NaN where no split checked it.
     """
     tails = _tails(multi_index)
-    anywhere = tails.any(axis=0)
-    before = tail_terms(multi_index, 4, lowest=1) & ~anywhere
+    two = tails.any(axis=0)
+    two_before = tail_terms(multi_index, 4, lowest=1) & ~two
+    one = tail_terms(multi_index, 1, lowest=1)
+    one_before = tail_terms(multi_index, 2, lowest=1) & ~one
+    degree = int(multi_index.sum(axis=1)[one].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
+    factors = np.full(size, np.nan) if factors is None else factors
+    checked = np.isfinite(factors)[:, None]
     means, stds, along = [], [], np.zeros((size, n))
     for c in coefficients.values():
         flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
@@ -418,15 +503,17 @@ def element_errors(
         if not scale > 0:
             continue
         squares = (flat / scale) ** 2
-        tail = squares[:, anywhere].sum(axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            decay = np.minimum(tail / squares[:, before].sum(axis=1), DECAY_CAP)
-        decay = np.where(tail > 0, np.nan_to_num(decay, nan=DECAY_CAP), 0.0)
-        decay = np.where(np.isfinite(tail), decay, np.nan)
+        tail = squares[:, two].sum(axis=1)
+        decay = _decay(tail, squares[:, two_before].sum(axis=1))
         missing = tail * decay / (1 - decay)
-        aliased = tail * decay**2 / (1 - decay)
+        aliased = np.sqrt(tail * decay**2 / (1 - decay))
+        last = squares[:, one].sum(axis=1)
+        fall = _decay(last, squares[:, one_before].sum(axis=1))
+        factor = np.nan_to_num(factors, nan=1.0)[:, None]
+        missing = np.where(checked, factor * last * fall / (1 - fall), missing)
+        aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
         weight = partition.probability[:, None]
-        means.append(weight * np.sqrt(aliased))
+        means.append(weight * aliased)
         with np.errstate(divide="ignore", invalid="ignore"):
             stds.append(np.where(sigma > 0, weight * missing * scale / (2 * sigma), 0.0))
         worst = np.argmax(np.nan_to_num(tail, nan=np.inf), axis=1)
