@@ -491,6 +491,7 @@ def element_errors(
     two_before = tail_terms(multi_index, 4, lowest=1) & ~two
     one = tail_terms(multi_index, 1, lowest=1)
     one_before = tail_terms(multi_index, 2, lowest=1) & ~one
+    two_layers_before = tail_terms(multi_index, 3, lowest=1) & ~one & ~one_before
     degree = int(multi_index.sum(axis=1)[one].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
@@ -507,8 +508,11 @@ def element_errors(
         decay = _decay(tail, squares[:, two_before].sum(axis=1))
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
-        last = squares[:, one].sum(axis=1)
-        fall = _decay(last, squares[:, one_before].sum(axis=1))
+        last, previous = squares[:, one].sum(axis=1), squares[:, one_before].sum(axis=1)
+        fall = _decay(last, previous)
+        if two_layers_before.any():
+            fall = np.fmax(fall, _decay(previous, squares[:, two_layers_before].sum(axis=1)))
+        last = np.fmax(last, previous * fall)
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
         missing = np.where(checked, factor * last * fall / (1 - fall), missing)
         aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
