@@ -155,6 +155,7 @@ class MultiElementCollocation:
         germs."""
         self.exhausted, self.estimate = False, math.nan
         self.factors, self._splits = np.full(self.start.size, np.nan), []
+        self.floors = np.zeros(self.start.size)
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
@@ -182,7 +183,9 @@ class MultiElementCollocation:
             return None
         coefficients, _ = self._coefficients(values, ok)
         self._check_splits(coefficients)
-        errors = element_errors(self.partition, coefficients, self.multi_index, self.factors)
+        errors = element_errors(
+            self.partition, coefficients, self.multi_index, self.factors, self.floors
+        )
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
             return None
@@ -216,9 +219,12 @@ class MultiElementCollocation:
                 renumber[e] = len(bounds)
                 bounds.append(self.partition.bounds[e])
         kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
-        factors = np.full(len(bounds), np.nan)
+        factors, floors = np.full(len(bounds), np.nan), np.zeros(len(bounds))
         factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
-        self.factors = factors
+        floors[renumber[renumber >= 0]] = self.floors[renumber >= 0]
+        for family, parent in self._splits:
+            floors[family] = parent.pop("") / 4
+        self.factors, self.floors = factors, floors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
 
     def _parent_statistics(
@@ -234,6 +240,8 @@ class MultiElementCollocation:
             errors = element_errors(self.partition, {name: flat}, self.multi_index, np.ones(size))
             if not errors.mean:
                 continue
+            for e in range(size):
+                found[e][""] = max(found[e].get("", 0.0), errors.decay[e])
             scale = np.nanmax(PiecewiseExpansion(self.partition, flat, self.multi_index).std())
             moments = _moments(self.partition.probability, flat)
             for e in range(size):
@@ -361,7 +369,11 @@ class MultiElementCollocation:
         records, self.estimate = [], 0.0
         for name, expansion in expansions.items():
             errors = element_errors(
-                self.partition, {name: expansion.coefficients}, self.multi_index, self.factors
+                self.partition,
+                {name: expansion.coefficients},
+                self.multi_index,
+                self.factors,
+                self.floors,
             )
             estimate, each = errors.estimate(), errors.of_each()
             self.estimate = max(self.estimate, estimate)
@@ -421,6 +433,7 @@ class TailErrors:
     mean: tuple[NDArray[np.float64], ...]
     std: tuple[NDArray[np.float64], ...]
     along: NDArray[np.float64]
+    decay: NDArray[np.float64]
 
     def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
         """The estimated error of the mean and std, the largest over outputs and times, from
@@ -457,6 +470,7 @@ def element_errors(
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
     factors: NDArray[np.float64] | None = None,
+    floors: NDArray[np.float64] | None = None,
 ) -> TailErrors:
     """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
 
@@ -496,6 +510,8 @@ def element_errors(
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
     checked = np.isfinite(factors)[:, None]
+    floors = np.zeros(size) if floors is None else floors
+    decays = np.zeros(size)
     means, stds, along = [], [], np.zeros((size, n))
     for c in coefficients.values():
         flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
@@ -509,9 +525,11 @@ def element_errors(
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
         last, previous = squares[:, one].sum(axis=1), squares[:, one_before].sum(axis=1)
-        fall = _decay(last, previous)
-        if two_layers_before.any():
-            fall = np.fmax(fall, _decay(previous, squares[:, two_layers_before].sum(axis=1)))
+        fall = np.fmax(
+            _decay(last, previous), _decay(previous, squares[:, two_layers_before].sum(axis=1))
+        )
+        decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
+        fall = np.fmax(fall, floors[:, None])
         last = np.fmax(last, previous * fall)
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
         missing = np.where(checked, factor * last * fall / (1 - fall), missing)
@@ -524,7 +542,7 @@ def element_errors(
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         larger = energy.sum(axis=1) > along.sum(axis=1)
         along = np.where(larger[:, None], energy, along)
-    return TailErrors(tuple(means), tuple(stds), along)
+    return TailErrors(tuple(means), tuple(stds), along, decays)
 
 
 @dataclass(frozen=True)
