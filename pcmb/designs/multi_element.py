@@ -525,9 +525,9 @@ def element_errors(
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
         last, previous = squares[:, one].sum(axis=1), squares[:, one_before].sum(axis=1)
-        fall = np.fmax(
-            _decay(last, previous), _decay(previous, squares[:, two_layers_before].sum(axis=1))
-        )
+        fall = _decay(last, previous)
+        if two_layers_before.any():
+            fall = np.fmax(fall, _decay(previous, squares[:, two_layers_before].sum(axis=1)))
         decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
         fall = np.fmax(fall, floors[:, None])
         last = np.fmax(last, previous * fall)
