@@ -223,31 +223,28 @@ class MultiElementCollocation:
         factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
         floors[renumber[renumber >= 0]] = self.floors[renumber >= 0]
         for family, parent in self._splits:
-            floors[family] = parent.pop("") / 4
+            floors[family] = parent.decay / 4
         self.factors, self.floors = factors, floors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
 
-    def _parent_statistics(
-        self, coefficients: Mapping[str, NDArray[np.float64]]
-    ) -> list[dict[str, tuple[NDArray[np.float64], ...]]]:
-        """Per element, output name -> its P_e μ_e, P_e E_e[y²] and what the checked model
-        (:func:`element_errors`, factor 1) estimates of its errors of the mean and std, in the
-        output's units, (P,) each: what :meth:`_check_splits` compares its children with."""
+    def _parent_statistics(self, coefficients: Mapping[str, NDArray[np.float64]]) -> list[_Parent]:
+        """Every element as the parent :meth:`_check_splits` compares its children with."""
         size = self.partition.size
-        found: list[dict[str, tuple[NDArray[np.float64], ...]]] = [{} for _ in range(size)]
+        parents = [_Parent({}, 0.0) for _ in range(size)]
         for name, c in coefficients.items():
             flat = c.reshape(*c.shape[:2], -1)
-            errors = element_errors(self.partition, {name: flat}, self.multi_index, np.ones(size))
+            errors = element_errors(
+                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors
+            )
             if not errors.mean:
                 continue
-            for e in range(size):
-                found[e][""] = max(found[e].get("", 0.0), errors.decay[e])
             scale = np.nanmax(PiecewiseExpansion(self.partition, flat, self.multi_index).std())
             moments = _moments(self.partition.probability, flat)
-            for e in range(size):
+            for e, parent in enumerate(parents):
                 model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
-                found[e][name] = (moments[0][e], moments[1][e], model)
-        return found
+                parent.outputs[name] = (moments[0][e], moments[1][e], model)
+                parent.decay = max(parent.decay, errors.decay[e])
+        return parents
 
     def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
         """Sets the factor of the children of every split since the last call: how many times
@@ -255,7 +252,7 @@ class MultiElementCollocation:
         model estimated of the parent's errors (at least 1)."""
         for children, parent in self._splits:
             factor = 1.0
-            for name, (mean, square, model) in parent.items():
+            for name, (mean, square, model) in parent.outputs.items():
                 flat = coefficients[name].reshape(*coefficients[name].shape[:2], -1)
                 expansion = PiecewiseExpansion(self.partition, flat, self.multi_index)
                 moments = _moments(self.partition.probability, flat)
@@ -394,6 +391,16 @@ class MultiElementCollocation:
         return records
 
 
+@dataclass
+class _Parent:
+    """An element as split: per output name its P_e μ_e, P_e E_e[y²] and the errors of the
+    mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, in the
+    output's units, (P,) each; and its checked decay, the largest over outputs and times."""
+
+    outputs: dict[str, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]
+    decay: float
+
+
 def _moments(
     probability: NDArray[np.float64], coefficients: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -428,6 +435,9 @@ class TailErrors:
         coefficients are not finite).
     along:
         (E, n) each element's tail energy along each input, at its worst output and time.
+    decay:
+        (E,) each element's decay per degree as read (before ``floors``), the largest over
+        outputs and times.
     """
 
     mean: tuple[NDArray[np.float64], ...]
@@ -437,12 +447,16 @@ class TailErrors:
 
     def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
         """The estimated error of the mean and std, the largest over outputs and times, from
-        the tails of the elements ``among`` (all by default; the others' taken as resolved)."""
+        the tails of the elements ``among`` (all by default; the others' taken as resolved):
+        the elements' mean errors in quadrature (their signs unknown), their std errors
+        summed."""
         return max(
             (
                 float(
                     np.max(
-                        np.fmax(np.nansum(m[among] ** 2, axis=0) ** 0.5, np.nansum(s[among], axis=0))
+                        np.fmax(
+                            np.sqrt(np.nansum(m[among] ** 2, axis=0)), np.nansum(s[among], axis=0)
+                        )
                     )
                 )
                 for m, s in zip(self.mean, self.std, strict=True)
@@ -482,9 +496,12 @@ def element_errors(
       :data:`DECAY_CAP`), M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the decay carried two
       layers only, since a kink's first degrees mimic a fast one;
     - an element whose parent's split measured what this model missed on it (``factors``
-      f >= 1, :meth:`MultiElementCollocation.more`): T the energy of the outer layer, of
-      degree p, ρ its ratio to the layer before, M = f T ρ / (1 - ρ) and √A = f √T ρ^((p+2)/2),
-      the coefficient of degree 2p + 2, the first its Gauss rule does not integrate.
+      f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
+      the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
+      its parent's: faster is a parity, not a decay), T the energy of the outer layer, of
+      degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
+      √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
+      not integrate.
 
     With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
     unknown), std error Σ_e P_e M_e / (2σ).
@@ -499,14 +516,16 @@ def element_errors(
         (S, n) their terms.
     factors:
         (E,) each element's factor f, NaN where no split checked it.
+    floors:
+        (E,) each element's least decay per degree (default 0).
     """
     tails = _tails(multi_index)
     two = tails.any(axis=0)
     two_before = tail_terms(multi_index, 4, lowest=1) & ~two
-    one = tail_terms(multi_index, 1, lowest=1)
-    one_before = tail_terms(multi_index, 2, lowest=1) & ~one
-    two_layers_before = tail_terms(multi_index, 3, lowest=1) & ~one & ~one_before
-    degree = int(multi_index.sum(axis=1)[one].max(initial=0))
+    outer = tail_terms(multi_index, 1, lowest=1)
+    second = tail_terms(multi_index, 2, lowest=1) & ~outer
+    third = tail_terms(multi_index, 3, lowest=1) & ~outer & ~second
+    degree = int(multi_index.sum(axis=1)[outer].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
     checked = np.isfinite(factors)[:, None]
@@ -524,10 +543,10 @@ def element_errors(
         decay = _decay(tail, squares[:, two_before].sum(axis=1))
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
-        last, previous = squares[:, one].sum(axis=1), squares[:, one_before].sum(axis=1)
+        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
         fall = _decay(last, previous)
-        if two_layers_before.any():
-            fall = np.fmax(fall, _decay(previous, squares[:, two_layers_before].sum(axis=1)))
+        if third.any():  # order 2 has one ratio
+            fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
         decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
         fall = np.fmax(fall, floors[:, None])
         last = np.fmax(last, previous * fall)
