@@ -11,9 +11,10 @@
 
 ``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
 std relative to the output's largest std, as estimated from the elements' tails
-(:func:`element_errors`: the energy of each element's outer two degree layers, continued
-geometrically, converts to the error of its mean and of the std; ``docs/multi_element.md``
-has the derivation and its calibration). ``auto`` starts from one element and, after each
+(:func:`element_errors`: the decay of each element's outer degree layers, continued
+geometrically, converts to the error of its mean and of the std, and each split checks the
+model on the parent against what its children changed; ``docs/multi_element.md`` has the
+derivation and its calibration). ``auto`` starts from one element and, after each
 round, while the estimate exceeds the tolerance, splits the elements of largest share, the
 fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
 half the largest per-input share of their tail energy, while the partition stays within
@@ -52,8 +53,9 @@ from pcmb.result import Design, DesignReport, ReportFile, StudyResult, WarningRe
 
 __all__ = ["ElementReport", "MultiElementCollocation", "TailErrors", "element_errors"]
 
-#: Largest decay per two degrees read from an element's tail (at it, the energy beyond the
-#: tail is taken to be the tail's own: no decay seen).
+#: Largest decay read from an element's tail, per two degrees or per degree
+#: (:func:`element_errors`; at it, the energy beyond the tail is taken to be the tail's own: no
+#: decay seen).
 DECAY_CAP = 0.5
 
 
@@ -379,7 +381,7 @@ class MultiElementCollocation:
                 records.append(
                     WarningRecord(
                         "element-decay",
-                        f"the error of the mean and std that the elements' outer two degree "
+                        f"the error of the mean and std that the elements' outer degree "
                         f"layers indicate is {estimate:.3g} of the largest std, above the "
                         f"tolerance {self.tolerance:g} (diagnostics.tolerance; most of it in "
                         f"element {worst}, {each[worst]:.3g} alone); elements: auto splits on "
