@@ -288,6 +288,21 @@ def test_auto_refinement_finds_the_jump_and_splits_only_its_input():
     assert design.nodes().size == design.runs and design.partition.size == 1
 
 
+def test_auto_splits_along_fewer_inputs_rather_than_pass_max_elements():
+    # Kinks in both inputs: the element would halve along both (4 children), which passes
+    # max_elements 3; it halves along the input of the larger share instead, then again.
+    design = _design(
+        {"x1": pcmb.Uniform(-1.0, 1.0), "x2": pcmb.Uniform(-1.0, 1.0)},
+        (3, 3),
+        elements="auto",
+        max_elements=3,
+        diagnostics_tolerance=1e-4,
+    )
+    refine(design, _run(lambda p: np.abs(p[:, :1] - 0.3) + 0.8 * np.abs(p[:, 1:] - 0.3)))
+    assert design.partition.size == 3 and design.exhausted
+    assert 0.0 in design.partition.edges[0]  # the larger share first
+
+
 def test_auto_refinement_finds_the_double_well_jump():
     design = _design(X0, (7,), elements="auto", max_elements=8, diagnostics_tolerance=1e-4)
     refine(design, _run(lambda p: double_well(TIMES, p[:, 0])))

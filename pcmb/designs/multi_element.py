@@ -17,9 +17,9 @@ model on the parent against what its children changed; ``docs/multi_element.md``
 derivation and its calibration). ``auto`` starts from one element and, after each
 round, while the estimate exceeds the tolerance, splits the elements of largest share, the
 fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
-half the largest per-input share of their tail energy, while the partition stays within
-``max_elements``; the split elements' nodes leave the recovery (``/nodes/element`` -1) and
-the children's nodes are the next round.
+half the largest per-input share of their tail energy (the largest shares first, as many as
+``max_elements`` leaves room for); the split elements' nodes leave the recovery
+(``/nodes/element`` -1) and the children's nodes are the next round.
 :meth:`MultiElementCollocation.recover` records (``element-decay``) every output whose
 estimate is left above the tolerance, and (``element-budget``) that ``max_elements``
 stopped the refinement. A response chaotic in its inputs (the Lorenz attractor) has no
@@ -197,8 +197,12 @@ class MultiElementCollocation:
         for e in np.argsort(-np.nan_to_num(each, nan=-1.0)):
             if not errors.estimate(left) > self.tolerance or not each[e] > 0:
                 break
-            cut = np.flatnonzero(errors.along[e] >= 0.5 * errors.along[e].max())
-            if size + 2**cut.size - 1 <= self.max_elements:
+            along = errors.along[e]
+            cut = np.flatnonzero(along >= 0.5 * along.max())
+            # The inputs of largest share first, as many as max_elements leaves room for.
+            room = (self.max_elements - size + 1).bit_length() - 1
+            cut = np.sort(cut[np.argsort(-along[cut], kind="stable")][:room])
+            if cut.size:
                 chosen[int(e)] = cut.tolist()
                 size += 2**cut.size - 1
                 left[e] = False
