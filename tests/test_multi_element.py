@@ -230,6 +230,9 @@ def test_failed_nodes_are_refitted_in_their_element():
     recovery = _recover(design, _jump, ok)
     assert recovery.expansions["y"].mean() == pytest.approx(_jump_statistics()[0], abs=1e-10)
     assert any(w.message.startswith("element 1:") for w in recovery.warnings)
+    assert design.record().fit == "regression"  # the fit used, least squares, in /design
+    _recover(design, _jump)
+    assert design.record().fit == "projection"
 
 
 # -- the double well ---------------------------------------------------------------------------
