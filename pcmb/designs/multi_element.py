@@ -44,6 +44,7 @@ from pcmb.chaos.recovery import project_tensor
 from pcmb.designs.base import (
     MethodSettings,
     Recovery,
+    fit_of,
     least_squares_recovery,
     order_words,
     statistics_warnings,
@@ -155,7 +156,7 @@ class MultiElementCollocation:
         """The first round: every starting element's nodes, element by element (a run starts
         here, so this forgets the refinement of an earlier run); ``.nodes`` in the inputs' own
         germs."""
-        self.exhausted, self.estimate, self.fit = False, math.nan, "projection"
+        self.exhausted, self.estimate, self._fit = False, math.nan, "projection"
         self.factors, self._splits = np.full(self.start.size, np.nan), []
         self.floors = np.zeros(self.start.size)
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
@@ -288,7 +289,7 @@ class MultiElementCollocation:
             basis=self.basis,
             orders=self.orders,
             elements=self.partition.size,
-            fit=self.fit,
+            fit=self._fit,
             tolerance=self.tolerance if auto else None,
             label=f"chaos {order_words(self.orders, self.basis)}"
             + (f" (elements auto to {self.tolerance:g})" if auto else ""),
@@ -333,8 +334,8 @@ class MultiElementCollocation:
         self, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
     ) -> tuple[dict[str, NDArray[np.float64]], list[WarningRecord]]:
         """Output name -> (E, S, ...) every current element's coefficients: its projection, or
-        where nodes of it failed a least-squares fit of its survivors (reported; :attr:`fit`
-        is then ``"regression"``, as :meth:`record` stores it)."""
+        where nodes of it failed a least-squares fit of its survivors (reported, and recorded:
+        :func:`~pcmb.designs.base.fit_of`)."""
         index = self.multi_index
         position = {tuple(row): s for s, row in enumerate(index)}
         coefficients = {
@@ -342,7 +343,7 @@ class MultiElementCollocation:
             for name, y in values.items()
         }
         warnings: list[WarningRecord] = []
-        self.fit = "projection"
+        self._fit = fit_of(ok[self.node_elements >= 0])
         for e, grid in enumerate(self.grids):
             rows = self.node_elements == e
             kept = ok[rows]
@@ -350,7 +351,6 @@ class MultiElementCollocation:
                 for name, y in values.items():
                     coefficients[name][e] = project_tensor(grid, y[rows], index)
                 continue
-            self.fit = "regression"
             fitted = least_squares_recovery(
                 grid.distributions,
                 self.names,
