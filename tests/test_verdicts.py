@@ -133,7 +133,10 @@ def test_order_auto_stopped_by_max_runs_says_raise_max_runs():
 
 
 def test_elements_auto_stopped_by_max_elements_names_it_with_the_numbers():
-    result, message = _budget_record("element-budget", order=2, elements="auto", max_elements=2)
+    # Two elements of order 2 hold the kink to 3 % (estimated 2 %): ask for 1e-3.
+    result, message = _budget_record(
+        "element-budget", order=2, elements="auto", max_elements=2, diagnostics_tolerance=1e-3
+    )
     assert result.partition.size == 2
     assert "2 of 2 elements" in message and "method.max_elements" in message
     assert f"{result.n_nodes} runs" in message
@@ -577,9 +580,9 @@ def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
 
 
 def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
-    # The double well, order 3, to 1 %: the elements' tails still indicate 2.6 % at
-    # max_elements 4 (28 runs), where the true error is 0.08 % (docs/multi_element.md: their
-    # estimate is careful where the pieces are smooth); 32 held-out runs decide it holds.
+    # The double well, order 3, to 0.2 %: the elements' tails still indicate 0.27 % at
+    # max_elements 4 (28 runs), where the true error is 0.08 % (docs/multi_element.md: 3.2x
+    # careful there); 32 held-out runs decide it holds.
     study = pcmb.Study(
         model_class("double_well", "DoubleWell"),
         {"x0": pcmb.Uniform(-0.625, 0.375)},
@@ -587,7 +590,7 @@ def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
         order=3,
         elements="auto",
         max_elements=4,
-        diagnostics_tolerance=0.01,
+        diagnostics_tolerance=0.002,
         backend="inprocess",
         validation=32,
     )
