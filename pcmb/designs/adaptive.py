@@ -172,7 +172,7 @@ class AdaptiveCollocation(GrowingGrid):
             grid="adaptive",
             basis="sparse",
             orders=tuple(int(p) for p in self._grid.multi_index.max(axis=0)),
-            fit="projection",
+            fit=self._fit,
             rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
             samples=self._grid.size,
             tolerance=self.tolerance,
