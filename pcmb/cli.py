@@ -319,8 +319,8 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     debugging = post_mortem() if args.pdb else nullcontext()
     if study.design.record().basis is not None:
         # The analysis of an expansion draws its quantile bands from scipy.stats.qmc (with
-        # scipy.special, which the held-out check needs too: 0.3 s of import), imported in a
-        # thread while this one waits for the workers.
+        # scipy.special, which the held-out check needs too: 0.3-0.5 s of import), imported
+        # in a thread while this one waits for the workers.
         threading.Thread(
             target=importlib.import_module, args=("scipy.stats.qmc",), daemon=True
         ).start()

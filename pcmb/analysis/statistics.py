@@ -51,7 +51,8 @@ MIN_SAMPLES = 100
 _BLOCK_VALUES = 4_000_000
 #: Scrambled Sobol' draws for quantile bands (at most ``samples``): a power of two, so each
 #: input's probability is split into 4,096 slices of one draw each; more accurate than
-#: 20,000 random draws at a fifth of the cost (docs/benchmarks.md, "Quantile bands").
+#: 20,000 random draws, the bands at a fifth of their cost (docs/benchmarks.md, "Quantile
+#: bands from fewer draws"; scipy.stats.qmc's import aside).
 QUANTILE_DRAWS = 4096
 
 
