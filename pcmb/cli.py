@@ -299,6 +299,9 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from pcmb.run.worker import post_mortem
     from pcmb.study import Study
 
+    # scipy.special (the Gauss rules of the nodes, 0.15 s or more) is imported in a thread
+    # meanwhile: this one reads the config, then waits for a worker to build the model.
+    threading.Thread(target=importlib.import_module, args=("scipy.special",), daemon=True).start()
     config = _load_config(args.config, check_sweep=False)  # a run ignores sweep:
     output = args.output or config.output
     if output is None:
@@ -317,13 +320,6 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "command_line": shlex.join(["pcmb", *argv]),
     }
     debugging = post_mortem() if args.pdb else nullcontext()
-    if study.design.record().basis is not None:
-        # The analysis of an expansion draws its quantile bands from scipy.stats.qmc (with
-        # scipy.special, which the held-out check needs too: 0.3-0.5 s of import), imported
-        # in a thread while this one waits for the workers.
-        threading.Thread(
-            target=importlib.import_module, args=("scipy.stats.qmc",), daemon=True
-        ).start()
     with warnings.catch_warnings(), _quiet_backend(args.quiet, study.execution.backend), debugging:
         warnings.simplefilter("ignore", PcmbWarning)  # listed below, once each
         result = study.run(

@@ -33,12 +33,7 @@ from pydantic import (
 from pcmb.adapters.registry import ADAPTERS
 from pcmb.analysis.derived import FIGURES, DerivedOutput, parse_derived
 from pcmb.analysis.diagnostics import TOLERANCE
-from pcmb.analysis.statistics import (
-    MIN_SAMPLES,
-    QUANTILE_DRAWS,
-    AnalysisSettings,
-    window_problem,
-)
+from pcmb.analysis.statistics import MIN_SAMPLES, AnalysisSettings, window_problem
 from pcmb.chaos import inputs, process
 from pcmb.config.checks import cross_check, model_check
 from pcmb.config.loader import parse_yaml
@@ -419,9 +414,7 @@ class AnalysisSpec(Section):
         default_factory=lambda: [0.05, 0.95], description="levels of the quantile bands"
     )
     samples: count(ge=MIN_SAMPLES) = Field(
-        default=100_000,
-        description="surrogate draws for PDFs; the quantile bands take the first "
-        f"min(samples, {QUANTILE_DRAWS}) scrambled Sobol' points",
+        default=100_000, description="surrogate draws for PDFs and quantiles"
     )
     seed: NonNegativeInt = Field(default=0, description="seed of the surrogate draws")
     units: dict[Name, str] = Field(default_factory=dict, description="output -> unit, for figures")
