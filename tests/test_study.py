@@ -90,7 +90,13 @@ def test_regress_refits_on_survivors_and_says_so():
 
 
 @pytest.mark.parametrize(
-    "grid", [{"order": 3}, {"grid": "smolyak", "level": 2}, {"order": "auto", "max_runs": 9}]
+    "grid",
+    [
+        {"order": 3},
+        {"grid": "smolyak", "level": 2},
+        {"order": "auto", "max_runs": 9},
+        {"kind": "adaptive", "tolerance": 1e-3, "max_runs": 30},
+    ],
 )
 def test_the_file_records_the_least_squares_fit_of_a_grid_with_failed_nodes(tmp_path, grid):
     study = pcmb.Study(
