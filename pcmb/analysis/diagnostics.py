@@ -601,7 +601,7 @@ def _unseen_mean_error(
     first = coefficients.shape[0]
     last = UNSEEN_DEGREES * first
     rule_errors = rule @ family.evaluate(nodes, last)
-    # Degrees 1 to M - 1 make M - 2 neighbour averages: too few tell no decay's shape.
+    # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
     if first - 2 < _SHAPE_LAYERS or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
         return np.zeros(coefficients.shape[1:])
     energy = coefficients[1:] ** 2
