@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib
 import json
 import os
 import shlex
@@ -299,9 +298,6 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from pcmb.run.worker import post_mortem
     from pcmb.study import Study
 
-    # scipy.special (the Gauss rules of the nodes, 0.15 s or more) is imported in a thread
-    # meanwhile: this one reads the config, then waits for a worker to build the model.
-    threading.Thread(target=importlib.import_module, args=("scipy.special",), daemon=True).start()
     config = _load_config(args.config, check_sweep=False)  # a run ignores sweep:
     output = args.output or config.output
     if output is None:
