@@ -95,6 +95,13 @@ class PreferringRamp(Ramp):
     chunk_size = 5
 
 
+class StackedRamp(Ramp):
+    """A ramp that prefers the chunks of the stacked ODE models (128 nodes), whose every call
+    costs its steps whatever the batch."""
+
+    chunk_size = 128
+
+
 class RaisingRamp(Ramp):
     """Raises when a node with ``a`` in ``bad`` is in the batch."""
 
