@@ -422,14 +422,16 @@ RECORDED_ONLY = (
     frozenset({"sobol-undefined", "surrogate-out-of-range", "output-constant"}) | SURROGATE_CAUTIONS
 )
 #: Codes of a method's own convergence indicators (an element's decay, a regression's
-#: leave-one-out error) and of the budgets that ended a refinement judged by the same
-#: tolerance as the verdict or by an internal threshold (``order: auto``, ``elements: auto``;
-#: not ``method.tolerance``, which the user asked of ``adaptive`` and regression): the
-#: diagnostics' verdict judges the result, so where it calls their output (for a record of
-#: the whole study: every output it judged) reliable they are notes like
-#: :data:`RECORDED_ONLY`; where it does not, or there is none, they are warnings that
-#: support it.
-INDICATORS = frozenset({"element-decay", "regression-loo", "element-budget", "order-budget"})
+#: leave-one-out error, the adaptive grid's surpluses falling algebraically) and of the
+#: budgets that ended a refinement judged by the same tolerance as the verdict or by an
+#: internal threshold (``order: auto``, ``elements: auto``; not ``method.tolerance``, which
+#: the user asked of ``adaptive`` and regression): the diagnostics' verdict judges the
+#: result, so where it calls their output (for a record of the whole study: every output it
+#: judged) reliable they are notes like :data:`RECORDED_ONLY`; where it does not, or there
+#: is none, they are warnings that support it.
+INDICATORS = frozenset(
+    {"element-decay", "regression-loo", "adaptive-nonsmooth", "element-budget", "order-budget"}
+)
 
 
 @dataclass(frozen=True, repr=False)

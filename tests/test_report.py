@@ -282,6 +282,32 @@ def test_report_shades_and_explains_where_the_chaos_is_unreliable(tmp_path):
     assert _shaded_share(tmp_path / "unflagged" / "x_time.png") < 1e-3
 
 
+@pytest.mark.slow
+def test_the_sobol_figure_shades_where_the_chaos_is_unreliable_and_names_the_caution(tmp_path):
+    # Sobol' indices are drawn from the surrogate: where the verdict fails (the double well at
+    # order 7, from t ≈ 3.15) they are shaded as the time plot is, and the title names the
+    # surrogate-inaccurate range before it (docs/diagnostics.md, "Surrogate cautions").
+    from pcmb.analysis.report import _horizon, _Labels, _surrogate_note
+    from pcmb.references import double_well
+
+    @pcmb.batched(outputs=("x",))
+    def tilted_well(params, times):
+        x0, a = np.asarray(params["x0"]), np.asarray(params["a"])
+        return {"x": double_well(times, x0) + 0.1 * np.outer(a, times)}
+
+    inputs = {"x0": pcmb.Uniform(-0.625, 0.375), "a": pcmb.Uniform(0.0, 1.0)}
+    times = np.linspace(0.0, 4.0, 41)
+    study = pcmb.Study(tilted_well, inputs, times, order=7, backend="inprocess", validation=128)
+    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable
+        result = study.run()
+    assert not result.diagnostics["x"].reliable
+    write_report(result, tmp_path / "report")
+    assert _shaded_share(tmp_path / "report" / "x_sobol.png") > 0.02
+    assert any(w.code == "surrogate-inaccurate" for w in result.warnings)
+    labels = _Labels(AnalysisSettings(), _horizon(result))
+    assert "surrogate-inaccurate" in _surrogate_note(result, "x", labels)
+
+
 # -- what a figure shows must fit it -----------------------------------------------------------
 
 

@@ -16,6 +16,7 @@ from model_loading import model_class
 from scipy.integrate import solve_ivp
 
 import pcmb
+from pcmb.analysis.diagnostics import TOLERANCE
 
 # -- a degenerate design -----------------------------------------------------------------------
 
@@ -364,6 +365,80 @@ def test_the_surrogate_cautions_reach_the_file_inspect_and_the_report(tmp_path):
     page = (tmp_path / "report" / "index.html").read_text()
     (caution,) = [line for line in page.splitlines() if line.startswith('<p class="caution">')]
     assert "surrogate-inaccurate" in caution and "pdf-outside-runs" in caution
+
+
+@pcmb.batched(outputs=("x",))
+def lognormal(params, times):
+    """exp(z t / 2): its std passes that of a polynomial of order 4 at t = 3.6."""
+    return {"x": np.exp(0.5 * np.outer(params["z"], times))}
+
+
+def test_a_pdf_where_the_verdict_fails_carries_the_caution_in_its_title():
+    # The surrogate's held-out error passes the tolerance wherever the verdict fails; past
+    # t = 3.6 no surrogate caution is recorded (the chaos-unreliable record covers it), and
+    # the PDF at t = 4.5 passes no run by 5 %: its panel must still say it is not to be trusted.
+    from pcmb.analysis.report import _caution_note
+    from pcmb.analysis.statistics import AnalysisSettings
+
+    study = pcmb.Study(
+        lognormal,
+        {"z": pcmb.Normal(0.0, 1.0)},
+        np.linspace(0.0, 5.0, 51),
+        order=4,
+        backend="inprocess",
+        analysis=AnalysisSettings(psd=(), pdf_times=(1.0, 4.5)),
+    )
+    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable from t = 3.6
+        result = study.run()
+    assert result.diagnostics["x"].failing_from < 4.5
+    assert "chaos-unreliable" in _caution_note(result, "x", 4.5)
+    assert _caution_note(result, "x", 1.0) == ""
+
+
+def test_the_surrogate_caution_does_not_say_the_statistics_hold_where_they_are_undecided():
+    # The double well at order 7 with its default 8 placed runs: undecided from t ≈ 2.6 to the
+    # flag at 3.2, where the surrogate is already 20-30 % off (docs/diagnostics.md).
+    study = pcmb.Study(
+        model_class("double_well", "DoubleWell"),
+        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        np.linspace(0.0, 4.0, 41),
+        order=7,
+        backend="inprocess",
+    )
+    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable, chaos-undecided before it
+        result = study.run()
+    found = result.diagnostics["x"]
+    (inaccurate,) = [w for w in result.warnings if w.code == "surrogate-inaccurate"]
+    start, stop = inaccurate.time_range
+    covered = (result.times >= start) & (result.times <= stop)
+    assert (covered & found.undecided).any()
+    assert "hold there" not in inaccurate.message
+    assert "undecided" in inaccurate.message
+
+
+@pcmb.batched(outputs=("y",))
+def tilted_kink(params, times):
+    """(|x - 0.3| + a/2) t: a kink in x, linear in a."""
+    kinked = np.abs(np.asarray(params["x"]) - 0.3) + 0.5 * np.asarray(params["a"])
+    return {"y": np.outer(kinked, times)}
+
+
+def test_the_adaptive_grid_s_own_smoothness_indicator_never_contradicts_the_verdict():
+    # The adaptive grid's surpluses along x fall algebraically (the kink): its adaptive-nonsmooth
+    # record says its own estimate may be far too small ("not resolved yet"). Where the held-out
+    # check vouches for every output it is a note, not a warning beside "reliable".
+    times = np.linspace(0.0, 1.0, 11)
+    inputs = {"x": pcmb.Uniform(-1.0, 1.0), "a": pcmb.Uniform(0.0, 1.0)}
+    method = {"kind": "adaptive", "tolerance": 1e-2}
+    result = pcmb.Study(tilted_kink, inputs, times, method=method, backend="inprocess").run()
+    (nonsmooth,) = [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
+    assert result.diagnostics["y"].vouched and result.is_note(nonsmooth)
+    # ... and the verdict is right: E|x - 0.3| = 0.545, Var |x - 0.3| = 0.4233 - 0.545²
+    mean = (0.545 + 0.25) * times
+    std = np.sqrt(1 / 3 + 0.09 - 0.545**2 + 1 / 48) * times
+    scale = std.max()
+    assert np.max(abs(result.mean("y") - mean)) / scale < TOLERANCE
+    assert np.max(abs(result.std("y") - std)) / scale < TOLERANCE
 
 
 @pcmb.batched(outputs=("x",))

@@ -150,6 +150,8 @@ RANGE_BELOW_ZERO = 0.01
 PDF_MARGIN = 0.05
 #: Run values whose std is below this fraction of their RMS do not vary (round-off).
 _ROUND_OFF = 1e-12
+#: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
+_EXACT = 1e-8
 #: A tail holding more than this share of its energy in one input is "concentrated".
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
@@ -586,23 +588,44 @@ def _unseen_mean_error(
     coefficients: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
-    (M, T) ``coefficients``: the energies of degrees 1 to M - 1 (neighbours averaged) are
-    fitted by a line against p and against log p, each extrapolated up to degree
-    ``UNSEEN_DEGREES`` × M, the larger kept, and weighted by the squared error of the design's
-    ``rule`` (its interpolatory weights on the (N,) germ ``nodes``) on each degree."""
+    (M, T) ``coefficients``, where the design's ``rule`` (its interpolatory weights on the (N,)
+    germ ``nodes``) integrates every degree below M exactly, so that the interpolant's mean is
+    the design's own (zeros otherwise: the interpolant then measures that error itself).
+
+    The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
+    (all of them with fewer than ``_SHAPE_LAYERS`` after it), are fitted by a line against p
+    and against log p, each extrapolated up to degree ``UNSEEN_DEGREES`` × M, the larger
+    kept, and weighted by the squared error of the rule on each degree."""
     first = coefficients.shape[0]
-    if first < 4:
-        return np.zeros(coefficients.shape[1:])
     last = UNSEEN_DEGREES * first
-    rule_errors = (rule @ family.evaluate(nodes, last))[first:, None]
+    rule_errors = rule @ family.evaluate(nodes, last)
+    if first < 4 or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
+        return np.zeros(coefficients.shape[1:])
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
-    seen, unseen = np.arange(1.0, first - 1), np.arange(first, last + 1.0)[:, None]
-    tails = []
-    for transform in (np.asarray, np.log):
-        slope, intercept = np.polyfit(transform(seen), paired, 1)
-        tails.append(np.exp(intercept + np.minimum(slope, 0.0) * transform(unseen)))
-    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors**2, axis=0))
+    seen = np.arange(1.0, first - 1)
+    fitted = np.arange(seen.size)[:, None] >= np.argmax(paired, axis=0)
+    fitted[:, fitted.sum(axis=0) < _SHAPE_LAYERS] = True
+    unseen = np.arange(first, last + 1.0)[:, None]
+    tails = [
+        _extrapolated(transform(seen), paired, fitted, transform(unseen))
+        for transform in (np.asarray, np.log)
+    ]
+    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors[first:, None] ** 2, axis=0))
+
+
+def _extrapolated(
+    x: NDArray[np.float64], y: NDArray[np.float64], fitted: NDArray[np.bool_], at: NDArray
+) -> NDArray[np.float64]:
+    """(U, T) exp of the least-squares line through the (P, T) ``y`` against the (P,) ``x``
+    where ``fitted``, column by column, at the (U, 1) ``at``; a rising line is held flat."""
+    count = fitted.sum(axis=0)
+    x_mean = (fitted * x[:, None]).sum(axis=0) / count
+    y_mean = np.where(fitted, y, 0.0).sum(axis=0) / count
+    dx = np.where(fitted, x[:, None] - x_mean, 0.0)
+    slope = (dx * np.where(fitted, y - y_mean, 0.0)).sum(axis=0) / (dx**2).sum(axis=0)
+    slope = np.minimum(slope, 0.0)
+    return np.exp(y_mean + slope * (at - x_mean))
 
 
 def _interpolated(
@@ -633,9 +656,9 @@ def placed_check(
     the expansion (Leja points keep the interpolation well conditioned); its mean and std
     (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
     corrected mean and std, and their differences from the expansion's the estimated
-    errors, the mean's plus the design rule's error on the degrees beyond the interpolant's
-    (:func:`_unseen_mean_error`: with K <= N placed runs beside N Gauss nodes the two means
-    agree exactly). Their standard errors are how far the estimates move when the last
+    errors, the mean's plus, where the two means agree exactly (K <= N placed runs beside N
+    Gauss nodes), the design rule's error on the degrees beyond the interpolant's
+    (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
     than that), the spread that of the larger estimate (the corrected mean's adds the unseen
     error); the surrogate error is the L2 distance of the two surrogates (their
@@ -1130,9 +1153,10 @@ def diagnose(
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
+    holding = ~(times >= failing_from)  # every time where the verdict never fails
+    undecided = (estimate + noise > tolerance) & holding
     if checked is not None:
-        holding = ~(times >= failing_from)  # every time where the verdict never fails
-        records.extend(_inaccurate(output, checked, times, tolerance, holding))
+        records.extend(_inaccurate(output, checked, times, tolerance, holding, undecided))
     if holdout is None and runs.shape[0] > 1 and equal.all():
         records.append(_all_equal(output, runs, times, nominal))
     if not np.isnan(failing_from):
@@ -1162,7 +1186,6 @@ def diagnose(
         )
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
-    undecided = (estimate + noise > tolerance) & ~(times >= failing_from)
     found = OutputDiagnostics(
         output,
         scale,
@@ -1280,20 +1303,26 @@ def _inaccurate(
     times: NDArray[np.float64],
     tolerance: float,
     holding: NDArray[np.bool_],
+    undecided: NDArray[np.bool_],
 ) -> list[WarningRecord]:
     """A ``surrogate-inaccurate`` record where the surrogate's pointwise error exceeds the
-    tolerance at the times where the statistics hold (``holding``: before the verdict fails)."""
+    tolerance at the times where the statistics hold (``holding``: before the verdict fails),
+    saying so of the ``undecided`` ones among them."""
     above = (holdout.error > tolerance) & holding
     if not above.any():
         return []
+    statistics = (
+        f"its mean and std are not flagged there (undecided at {_count(above & undecided)})"
+        if (above & undecided).any()
+        else "its mean and std hold there"
+    )
     return [
         WarningRecord(
             "surrogate-inaccurate",
             f"the surrogate is off by up to {_percent(np.nanmax(holdout.error[above]))} of std "
-            f"at {holdout.count} held-out runs ({_count(above)}) while its mean and std hold "
-            f"there (estimated error at most {_percent(np.nanmax(holdout.statistics[above]))}): "
-            "PDFs, quantiles and Sobol' indices drawn from it are less accurate than its error "
-            "bars",
+            f"at {holdout.count} held-out runs ({_count(above)}) while {statistics} (estimated "
+            f"error at most {_percent(np.nanmax(holdout.statistics[above]))}): PDFs, quantiles "
+            "and Sobol' indices drawn from it are less accurate than its error bars",
             output,
             _span(times, above),
         )

@@ -63,6 +63,8 @@ PANELS_PER_ROW = 3
 _PSD_FLOOR = 1e-6
 #: Characters of a legend's line: three columns of them fit the figure's width.
 _LEGEND_CHARACTERS = 44
+#: Characters of a title line of a figure of two panels side by side.
+_HALF_TITLE_CHARACTERS = 48
 #: Histogram bins of sampled comparisons.
 _BINS = 40
 #: The diagnostics' record that explains a shaded time range.
@@ -300,6 +302,43 @@ def _unreliable(result: StudyResult, name: str) -> float | None:
     return None if found is None or found.reliable else float(found.failing_from)
 
 
+def _shade_unreliable(
+    panels: Sequence[Any], result: StudyResult, name: str, labels: _Labels
+) -> str:
+    """Shade, on every panel of output ``name`` over its points, where the diagnostics call
+    its chaos unreliable; the title line that says so, or ``""``."""
+    unreliable = _unreliable(result, name)
+    if unreliable is None:
+        return ""
+    grid = labels.grid(result, name)
+    for axes in panels:
+        axes.axvspan(
+            grid[np.searchsorted(result.grid(name), unreliable)],
+            grid[-1],
+            color=UNRELIABLE_COLOR,
+            alpha=UNRELIABLE_ALPHA,
+            lw=0,
+            label="chaos unreliable (see the index page)",
+        )
+    return f"\n(shaded: chaos unreliable from {labels.where(result, name, unreliable)})"
+
+
+def _surrogate_note(result: StudyResult, name: str, labels: _Labels) -> str:
+    """A title line naming where a ``surrogate-inaccurate`` record cautions the quantile bands
+    and Sobol' indices of output ``name`` (drawn from the surrogate), or ``""``."""
+    spans = [
+        "everywhere"
+        if w.time_range is None
+        else f"from {labels.where(result, name, w.time_range[0])} to "
+        f"{labels.where(result, name, w.time_range[1])}"
+        for w in result.warnings_for(name)
+        if w.code == "surrogate-inaccurate"
+    ]
+    return (
+        f"\ncaution: surrogate-inaccurate {', '.join(spans)} (see the index page)" if spans else ""
+    )
+
+
 def _points_axis(axes: Any, result: StudyResult, name: str, labels: _Labels) -> None:
     """The x axis of an output's points: time, or its own axis (log where it is a frequency
     and positive)."""
@@ -348,20 +387,10 @@ def _time_figure(
         axes.plot(times, _gaps(o_mean), color=other.color, lw=1.2, label=f"mean: {other.label}")
         axes.plot(times, o_high, color=other.color, lw=1.0, ls="-.", label=f"± 1σ: {other.label}")
         axes.plot(times, o_low, color=other.color, lw=1.0, ls="-.")
-    unreliable = _unreliable(result, name)
-    if unreliable is not None:
-        axes.axvspan(
-            labels.grid(result, name)[np.searchsorted(result.grid(name), unreliable)],
-            times[-1],
-            color=UNRELIABLE_COLOR,
-            alpha=UNRELIABLE_ALPHA,
-            lw=0,
-            label="chaos unreliable (see the index page)",
-        )
-        note += f"\n(shaded: chaos unreliable from {labels.where(result, name, unreliable)})"
+    note += _shade_unreliable([axes], result, name, labels)
     _points_axis(axes, result, name, labels)
     axes.set_ylabel(labels.output(name))
-    axes.set_title(f"{name}: mean with error bars{note}")
+    axes.set_title(f"{name}: mean with error bars{note}{_surrogate_note(result, name, labels)}")
     _legend(figure, [axes])
     suffix = "time" if result.on_time(name) else result.axis(name).name
     return canvas.save(figure, f"{name}_{suffix}.png")
@@ -422,12 +451,13 @@ def _plot_other_draws(
 
 
 def _caution_note(result: StudyResult, name: str, at: float) -> str:
-    """A title line naming the surrogate cautions (:data:`SURROGATE_CAUTIONS`) that cover the
-    point ``at`` of output ``name``, or ``""``."""
+    """A title line naming the surrogate cautions (:data:`SURROGATE_CAUTIONS`) and the verdict's
+    failure (``chaos-unreliable``: the surrogate fails there too) that cover the point ``at`` of
+    output ``name``, or ``""``."""
     codes = dict.fromkeys(
         w.code
         for w in result.warnings_for(name)
-        if w.code in SURROGATE_CAUTIONS
+        if (w.code in SURROGATE_CAUTIONS or w.code == _FLAG)
         and (w.time_range is None or w.time_range[0] <= at <= w.time_range[1])
     )
     return f"\ncaution: {', '.join(codes)} (see the index page)" if codes else ""
@@ -493,8 +523,11 @@ def _sobol_figure(canvas: _Canvas, result: StudyResult, name: str, labels: _Labe
     )
     for k, input_name in enumerate(result.input_names):
         total_axes.plot(times, total[k], color=colors[k], lw=1.6, label=input_name)
-    first_axes.set_title(f"{name}: first-order Sobol' indices (stacked)")
-    total_axes.set_title(f"{name}: total Sobol' indices")
+    note = _shade_unreliable([first_axes, total_axes], result, name, labels)
+    note += _surrogate_note(result, name, labels)
+    note = "\n".join(textwrap.fill(line, _HALF_TITLE_CHARACTERS) for line in note.split("\n"))
+    first_axes.set_title(f"{name}: first-order Sobol' indices (stacked){note}")
+    total_axes.set_title(f"{name}: total Sobol' indices{note}")
     for axes in (first_axes, total_axes):
         _points_axis(axes, result, name, labels)
         axes.set_ylabel("share of the variance")
