@@ -131,8 +131,8 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
         cwd=folder,
-        # The model's first call is the nominal run (not journaled), then the nodes.
-        env={**os.environ, "BLOCK_AFTER": str(after + 1), **env},
+        # The nodes come first, then the held-out runs and the nominal run (not journaled).
+        env={**os.environ, "BLOCK_AFTER": str(after), **env},
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
@@ -181,9 +181,14 @@ def inspected(path: Path) -> str:
 
 
 def snapshot(directory: Path, *, lock: bool = True) -> dict[str, bytes]:
-    """Every file of a journal and its bytes (without the lock file, if ``lock`` is False:
-    a run that takes over the lock of a killed one writes its own PID there)."""
-    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if lock or p.name != "lock"}
+    """Every file of a journal, its folders' too (the held-out runs'), and its bytes (without
+    the lock files, if ``lock`` is False: a run that takes over the lock of a killed one
+    writes its own PID there)."""
+    return {
+        str(p.relative_to(directory)): p.read_bytes()
+        for p in sorted(directory.rglob("*"))
+        if p.is_file() and (lock or p.name != "lock")
+    }
 
 
 def output_values(path: Path) -> dict[str, np.ndarray]:
