@@ -717,7 +717,8 @@ def run_nodes(
     retries:
         How many more times a failed node is tried before it is reported.
     journal:
-        Persists every finished chunk; its successful nodes are taken instead of being run.
+        Persists every finished chunk; its successful nodes are taken instead of being run. A
+        :class:`JoinedJournal`: the nodes are several sets, each journaled on its own.
     progress:
         Progress line on stderr; default: only when stderr is a terminal.
     stop_on_failure:
