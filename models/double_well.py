@@ -51,7 +51,7 @@ class DoubleWell(StackedODEModel):
         return p["x0"][None, :]
 
     def _rhs(self, t: float, y: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
-        return y - y**3
+        return y - y * y * y
 
     def _observe(
         self, times: NDArray[np.float64], states: NDArray[np.float64], p: Params

@@ -144,7 +144,7 @@ class CubicOscillator(StackedODEModel):
     def _rhs(self, t: float, y: NDArray[np.float64], p: Params) -> NDArray[np.float64]:
         x, v = y
         force = self._force(t, p)
-        return np.stack([v, (force - p["c"] * v - p["h"] * x**3) / p["m"]])
+        return np.stack([v, (force - p["c"] * v - p["h"] * (x * x * x)) / p["m"]])
 
     def _observe(
         self, times: NDArray[np.float64], states: NDArray[np.float64], p: Params

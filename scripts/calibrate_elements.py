@@ -5,7 +5,8 @@ For each case and ``diagnostics.tolerance`` the multi-element design runs in thi
 workers, no held-out check) with ``max_elements`` 64; the true error is the largest over time
 of max(|Δmean|, |Δstd|) over the largest std, against the closed form (double well:
 :func:`pcmb.references.double_well_moments`; |x - 0.3| and the step at 0.3 on U[-1, 1];
-exp(z t / 2): :func:`pcmb.references.lognormal_moments`) or, for the bouncing ball, a
+exp(z t / 2): :func:`pcmb.references.lognormal_moments`; the two cases no test tunes on,
+|x1 - x2| + sin(x1 + x2) and sign(x) x², in their docstrings) or, for the bouncing ball, a
 4000-point Gauss–Legendre rule over its closed-form heights. ``estimate/true`` > 1 is a
 careful estimate, < 1 an over-confident one.
 
@@ -82,7 +83,29 @@ def lognormal() -> Case:
     )
 
 
-CASES = {f.__name__: f for f in (well, kink, step, ball, lognormal)}
+def diagonal() -> Case:
+    """|x1 - x2| + sin(x1 + x2) on U[-1, 1]²: smooth but for a kink along the diagonal, which
+    no split follows (mean 2/3; E y² = 2/3 + (1 - sin²(2) / 4) / 2, the cross term odd)."""
+    square = 2 / 3 + (1 - np.sin(2.0) ** 2 / 4) / 2
+    return (
+        {"x1": pcmb.Uniform(-1.0, 1.0), "x2": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        lambda x, t: np.abs(x[:, :1] - x[:, 1:2]) + np.sin(x[:, :1] + x[:, 1:2]),
+        (np.array([2 / 3]), np.sqrt(np.array([square - 4 / 9]))),
+    )
+
+
+def signed_square() -> Case:
+    """sign(x) x² on U[-1, 2]: its second derivative jumps at x = 0 (mean 7/9, E y² = 11/5)."""
+    return (
+        {"x": pcmb.Uniform(-1.0, 2.0)},
+        np.zeros(1),
+        lambda x, t: np.sign(x[:, :1]) * x[:, :1] ** 2,
+        (np.array([7 / 9]), np.sqrt(np.array([11 / 5 - 49 / 81]))),
+    )
+
+
+CASES = {f.__name__: f for f in (well, kink, step, ball, lognormal, diagonal, signed_square)}
 
 
 def run(

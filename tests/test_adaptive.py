@@ -3,6 +3,9 @@ exponential where few inputs matter, and Ishigami; the budget; a YAML study resu
 
 from __future__ import annotations
 
+import itertools
+import math
+
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -146,18 +149,56 @@ def _exp8_moments():
     [
         (_exp8, EXP8, _exp8_moments(), 1e-5),
         (wing_weight, WING, wing_weight_moments(), 1e-3),  # ended at ε/130
+        (wing_weight, WING, wing_weight_moments(), 1e-4),  # ended at ε/104
     ],
 )
 def test_the_tolerance_is_the_error_delivered(function, inputs, moments, tolerance):
     """The calibration's rule (scripts/calibrate_adaptive.py, docs/methods.md): the true error
-    ends between ε/100 and 10 ε, at most 10x the estimate (not over-confident) and at least
-    1/100 of it (issue 23's band: exp8 at 1e-5 is 12x careful since Piston's fix)."""
+    ends between ε/100 and 10 ε, within 10x of the estimate either way (exp8 at 1e-5 was 12x
+    careful while the guard held the largest raw change of the last three)."""
     (mean, std), max_runs = moments, 6000
     result = _adaptive(function, inputs, method="adaptive", tolerance=tolerance, max_runs=max_runs)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert tolerance / 100 <= error <= 10 * tolerance, error
-    assert error / 10 <= estimate <= 100 * error, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
+
+
+#: Genz's corner peak (1 + Σ a_k x_k)^-6 in 5 uniform inputs: no rule was chosen on it.
+CORNER_RATES = np.array([1.0, 0.8, 0.6, 0.4, 0.2])
+CORNER = {f"x{k}": pcmb.Uniform(0.0, 1.0) for k in range(CORNER_RATES.size)}
+
+
+def _corner_integral(power: int) -> float:
+    """∫ (1 + a·x)^-power over the unit cube, in closed form: an alternating sum over its
+    corners v of (1 + a·v)^(n - power)."""
+    n = CORNER_RATES.size
+    corners = np.array(list(itertools.product((0, 1), repeat=n)))
+    terms = (-1.0) ** corners.sum(axis=1) * (1 + corners @ CORNER_RATES) ** (n - power)
+    return math.fsum(terms) / (math.prod(range(power - n, power)) * np.prod(CORNER_RATES))
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+def test_slowly_falling_changes_are_summed_not_believed_to_be_the_error():
+    """The corner peak's many small rounds each change the mean and std by a small part of
+    what is left: taking the largest of the last three changes, ρ² below, as the error
+    stopped at 1 719 runs with an estimate of 1e-4 for a true error of 1.3e-3 (13 ε). The
+    error left is the sum of the changes to come, a geometric tail of 1 / (1 - ρ)."""
+    mean, second = _corner_integral(6), _corner_integral(12)
+    std = np.sqrt(second - mean**2)
+    result = _adaptive(
+        lambda x: (1 + x @ CORNER_RATES) ** -6.0,
+        CORNER,
+        method="adaptive",
+        tolerance=1e-4,
+        max_runs=6000,
+    )
+    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    estimate = result.adaptive.estimate
+    assert estimate <= 1e-4
+    assert 1e-6 <= error <= 1e-3, error
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
 
 
 def test_a_kink_is_reported_as_a_response_the_estimate_cannot_see():
@@ -251,13 +292,13 @@ def test_two_lucky_small_changes_in_a_row_do_not_stop_the_grid():
     """Issue 23's band at Piston, ε = 1e-6: past 2 000 runs its changes per round zig-zag
     (9.5e-6, then 6.7e-7 and 1.5e-6), the median of the last three believed the two small ones
     and stopped at 3 599 runs 28x over-confident (2.4e-7 against 6.7e-6). The true error stays
-    within 10 ε and 10x the estimate; the estimate at most 100x the error."""
+    within 10 ε and within 10x of the estimate either way."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-6, max_runs=6000)
     error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
     estimate = result.adaptive.estimate
     assert error <= 1e-5
-    assert error / 10 <= estimate <= 100 * error, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
 
 
 def test_ishigami_finds_the_interaction_its_axes_hide():

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import psutil
 import pytest
-from cli_process import pcmb_here
+from cli_process import pcmb_cli, pcmb_here
+from test_resume import PYTHON_CONFIG, PYTHON_MODEL, run_and_kill
 
 #: Seconds a process may take to die after pcmb does (the issue's allowance).
 GRACE = 5.0
@@ -258,6 +259,54 @@ def test_closing_the_warm_workers_frees_their_semaphores_before_it_returns() -> 
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["0"], done.stdout + done.stderr
     assert "resource_tracker" not in done.stderr, done.stderr
+
+
+def _gone_pid() -> int:
+    """The pid of a process that has ended (and been reaped)."""
+    done = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return int(done.stdout)
+
+
+def test_semaphores_of_ended_processes_of_this_user_are_removed_and_only_those(tmp_path) -> None:
+    """What ``kill -9`` of pcmb's process group leaves (its resource tracker dies with it):
+    removed when this user's process of that pid is gone; kept when the process lives, the
+    file is another user's, or it is no regular file."""
+    from pcmb.run.backends import remove_orphaned_semaphores
+
+    gone, alive = _gone_pid(), os.getpid()
+    orphans = [tmp_path / f"sem.loky-{gone}-{tag}" for tag in ("k2ax_9q1", "0aa3mz8b")]
+    kept = [tmp_path / f"sem.loky-{alive}-k2ax_9q1", tmp_path / f"sem.mp-{gone}-k2ax_9q1"]
+    for path in (*orphans, *kept):
+        path.write_bytes(bytes(32))
+    link = tmp_path / f"sem.loky-{gone}-linked1"
+    link.symlink_to(kept[0])
+    if os.geteuid() == 0:  # a file of another user, in a shared folder
+        kept.append(tmp_path / f"sem.loky-{gone}-theirs1")
+        kept[-1].write_bytes(bytes(32))
+        os.chown(kept[-1], 65534, 65534)
+    assert remove_orphaned_semaphores(tmp_path) == 2
+    assert sorted(tmp_path.iterdir()) == sorted([*kept, link])
+    assert remove_orphaned_semaphores(tmp_path / "absent") == 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/dev/shm").is_dir(), reason="named semaphores are not in /dev/shm")
+def test_a_run_after_a_killed_process_group_removes_its_semaphores(tmp_path) -> None:
+    """Each ``kill -9`` of a ``pcmb run``'s process group left its 15 semaphores in /dev/shm
+    (10,051 after a day of test suites); the next run removes them."""
+    (tmp_path / "model.py").write_text(PYTHON_MODEL)
+    (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
+    killed = run_and_kill(tmp_path, after=2)
+    left = sorted(Path("/dev/shm").glob(f"sem.loky-{killed}-*"))
+    assert left  # what loky's resource tracker, killed too, did not unlink
+    done = pcmb_cli("run", "study.yaml", "--quiet", "--resume", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert [path for path in left if path.exists()] == []
 
 
 # -- a result file's temporary, left by a kill -9 during the final write ---------------------

@@ -263,7 +263,27 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
     assert min(departures(paper)) > 5
     assert np.isfinite(paper.diagnostics["x1"].failing_from)  # and the tool says so
     mean_z, std_z, ks = departures(remedy)
-    assert mean_z < 3 and std_z < 3 and ks < 1
+    assert mean_z < 3 and std_z < 3 and ks < 1  # its verdict: the test below
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True, reason="the held-out check flags the remedy, 0.24 % off, as 1.3 % ± 0.44 % off"
+)
+def test_mr_damper_remedy_is_not_flagged_by_its_held_out_check():
+    """The remedy of Fig. 11 (``elements: auto``, order 3, to 1 %: 10 elements, 76 runs) is
+    0.24 % off at worst over t in [0, 6] (against 64 elements of order 7, which 39 elements
+    of order 9 match to 1e-5). Its held-out check flags it from t = 2.3: "mean off by an
+    estimated 1.3 % (± 0.44 % from 19 held-out runs)", 59 % of it in the element I in
+    [0, 0.0625]: a false alarm of pcmb.analysis.diagnostics (issue 23, verdicts with their
+    noise), which the remedy's 16 elements of before (124 runs) did not show."""
+    config = pcmb.load_config(CONFIGS_DIR / "mr_damper.yaml")
+    study = pcmb.Study.from_config(config).replace(
+        times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        remedy = study.replace(elements="auto", diagnostics_tolerance=0.01).run()
     assert np.isnan(remedy.diagnostics["x1"].failing_from)
 
 

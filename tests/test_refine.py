@@ -254,8 +254,55 @@ def test_a_failed_node_ends_the_rounds_naming_the_order_its_estimate_belongs_to(
         ok = np.concatenate([ok, ~np.isin(np.arange(batch.size), lost)])
     recovery = design.recover(nodes, {"y": values}, ok, TIMES)
     assert nodes.size == 285 and design.record().orders == (11, 14)
-    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    (record,) = [w for w in recovery.warnings if w.code == "nodes-failed"]
     last = recovery.report.refinement
     assert last.orders[-1].tolist() == [5, 7]
     assert f"the estimated error of order 7 {last.indicator[-1]:.3g} above" in record.message
     assert "1 node(s) of level 3 failed" in record.message
+
+
+def _refined(inputs, values_at, ok_at=lambda nodes: np.ones(nodes.size, dtype=bool)):
+    """Run ``order: auto`` at diagnostics.tolerance 1e-6 on outputs ``values_at(nodes)``
+    (name -> (N, T)); the design, its nodes and its recovery."""
+    settings = MethodSettings(kind="collocation", orders="auto", diagnostics_tolerance=1e-6)
+    design = make_design(inputs, settings)
+    nodes = design.nodes()
+    values, ok = values_at(nodes), ok_at(nodes)
+    while (batch := design.more(nodes, values, ok)) is not None:
+        found = values_at(batch)
+        nodes = join_nodes(nodes, batch)
+        values = {name: np.vstack([values[name], found[name]]) for name in values}
+        ok = np.concatenate([ok, ok_at(batch)])
+    return design, nodes, design.recover(nodes, values, ok, TIMES)
+
+
+def test_a_non_finite_output_at_a_node_run_ends_the_rounds_naming_the_output_and_node():
+    """NaN at a node counted as run made the estimate NaN, which never met the tolerance: the
+    rounds went on to max_runs (1000) or the highest order."""
+
+    def values_at(nodes):
+        y = np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])
+        z = y.copy()
+        z[nodes.params[:, 0] == 3.0, 4] = np.nan  # the middle node in a (0, 3 or 6 at level 1)
+        return {"y": y, "z": z}
+
+    _, nodes, recovery = _refined(_inputs(6.0), values_at)
+    assert nodes.size == 9  # level 1 only
+    (record,) = [w for w in recovery.warnings if "order refinement" in w.message]
+    assert record.code == "statistic-non-finite" and record.output == "z"
+    middle = np.flatnonzero(nodes.params[:, 0] == 3.0)
+    assert [f"node {i} (a=3, b=" in record.message for i in middle] == [True] * 3
+    assert "order-budget" not in {w.code for w in recovery.warnings}
+
+
+def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
+    def values_at(nodes):
+        return {"y": np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])}
+
+    *_, recovery = _refined(_inputs(6.0), values_at, lambda nodes: nodes.params[:, 0] != 3.0)
+    codes = [w.code for w in recovery.warnings]
+    assert "order-budget" not in codes
+    (record,) = [w for w in recovery.warnings if "order refinement" in w.message]
+    assert record.code == "nodes-failed"
+    assert "node(s) of level 1 failed" in record.message
+    assert "method.max_runs" not in record.message

@@ -125,8 +125,9 @@ def records(folder: Path) -> list[Path]:
     return sorted((folder / "out.h5.journal").rglob("record-*.npz"))
 
 
-def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
-    """Start ``pcmb run`` blocking after ``after`` more nodes, wait for them, SIGKILL it."""
+def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> int:
+    """Start ``pcmb run`` blocking after ``after`` more nodes, wait for them, SIGKILL its
+    process group; its pid."""
     wanted = len(records(folder)) + after
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
@@ -149,6 +150,7 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> None:
         process.stderr.close()
     assert len(records(folder)) == wanted  # the model hangs at the next node
     assert not (folder / "out.h5").exists()
+    return process.pid
 
 
 def resume_and_rerun(folder: Path) -> tuple[StudyResult, StudyResult]:

@@ -89,6 +89,29 @@ def test_regress_refits_on_survivors_and_says_so():
     np.testing.assert_allclose(result.std("y") ** 2, var, atol=1e-10)
 
 
+@pytest.mark.parametrize(
+    "grid",
+    [
+        {"order": 3},
+        {"grid": "smolyak", "level": 2},
+        {"order": "auto", "max_runs": 9},
+        {"kind": "adaptive", "tolerance": 1e-3, "max_runs": 30},
+    ],
+)
+def test_the_file_records_the_least_squares_fit_of_a_grid_with_failed_nodes(tmp_path, grid):
+    study = pcmb.Study(
+        failing,
+        INPUTS,
+        TIMES,
+        method={"kind": "collocation", **grid, "validation": 0},
+        execution={"backend": "inprocess", "on_failure": "regress"},
+    )
+    with pytest.warns(pcmb.PcmbWarning):
+        result = study.run(tmp_path / "out.h5")
+    assert result.design.fit == "regression"
+    assert pcmb.load(tmp_path / "out.h5").design.fit == "regression"
+
+
 @pytest.mark.parametrize("method", ["montecarlo", "lhs", "sobol"])
 def test_sampling_methods_share_the_pipeline(method):
     study = pcmb.Study(

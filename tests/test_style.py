@@ -1,5 +1,6 @@
 """The house rules that tooling can check, as part of the suite CI runs."""
 
+import ast
 import shutil
 import subprocess
 import sys
@@ -43,3 +44,25 @@ def test_every_public_name_resolves():
     assert set(pcmb.__all__) == set(pcmb._MODULE_OF)
     listed = [name for names in pcmb._EXPORTS.values() for name in names]
     assert len(listed) == len(set(listed)), "a name is exported from two modules"
+
+
+def _odd_powers(tree: ast.AST) -> list[int]:
+    """Lines of ``a ** n`` with an odd integer ``n`` in the ``_rhs`` methods of ``tree``."""
+    return [
+        node.lineno
+        for function in ast.walk(tree)
+        if isinstance(function, ast.FunctionDef) and function.name == "_rhs"
+        for node in ast.walk(function)
+        if isinstance(node, ast.BinOp)
+        and isinstance(node.op, ast.Pow)
+        and isinstance(node.right, ast.Constant)
+        and isinstance(node.right.value, int)
+        and node.right.value % 2 == 1
+    ]
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "models").glob("*.py")), ids=lambda p: p.name)
+def test_right_hand_sides_raise_to_odd_powers_by_products(path):
+    """``x * x * x``, not ``x**3``: libm's pow takes a slow path for a negative base, and a
+    right-hand side runs at every step of every node."""
+    assert _odd_powers(ast.parse(path.read_text())) == []

@@ -118,10 +118,10 @@ def test_order_auto_at_its_highest_order_names_that_limit_not_max_runs():
     from pcmb.designs.refine import MAX_ORDER
 
     result, message = _budget_record("order-budget", order="auto", diagnostics_tolerance=1e-9)
-    assert result.refinement.orders.max() <= MAX_ORDER
-    assert f"passes order {MAX_ORDER}, the highest order" in message
-    assert f"{result.n_nodes} of 1000 runs" in message
-    assert "raise method.max_runs" not in message.lower()
+    # Gauss–Patterson's last level, 4 (order 23), is below MAX_ORDER and ends the rounds.
+    assert result.refinement.orders.max() == 23 < MAX_ORDER
+    assert f"after {result.n_nodes} runs, as level 4 is the last of rule gauss-patterson" in message
+    assert "method.max_runs" not in message
 
 
 def test_order_auto_stopped_by_max_runs_says_raise_max_runs():
@@ -133,7 +133,10 @@ def test_order_auto_stopped_by_max_runs_says_raise_max_runs():
 
 
 def test_elements_auto_stopped_by_max_elements_names_it_with_the_numbers():
-    result, message = _budget_record("element-budget", order=2, elements="auto", max_elements=2)
+    # Two elements of order 2 hold the kink to 3 % (estimated 2 %): ask for 1e-3.
+    result, message = _budget_record(
+        "element-budget", order=2, elements="auto", max_elements=2, diagnostics_tolerance=1e-3
+    )
     assert result.partition.size == 2
     assert "2 of 2 elements" in message and "method.max_elements" in message
     assert f"{result.n_nodes} runs" in message
@@ -484,6 +487,47 @@ def test_a_pdf_beyond_few_runs_by_the_mass_they_are_expected_to_miss_is_not_note
 
 
 @pcmb.batched(outputs=("y",))
+def ramp(params, times):
+    """k t: exact at order 1, never beyond [0, 1] at t = 1."""
+    return {"y": np.outer(params["k"], times)}
+
+
+def test_a_stored_pdf_smeared_past_every_run_is_noted_though_no_draw_goes_there():
+    # y = k t, k ~ U[0, 1]: the surrogate is exact, so no draw leaves [0, 1], the range of the
+    # 41 runs (the held-out ones reach 0 and 1). A PDF whose kernel (h = 0.2) smears that
+    # hard-edged law, Φ(y / h) - Φ((y - 1) / h), puts 5.7 % of its mass above 1.05 (1 + the
+    # 5 % margin), 7.5 % below -0.01 (a non-negative output's floor): above the 1 % + 1/42
+    # allowance.
+    import dataclasses
+
+    from scipy.stats import norm
+
+    from pcmb.analysis.diagnostics import pdf_outside_runs
+    from pcmb.analysis.statistics import AnalysisSettings, Density
+
+    study = pcmb.Study(
+        ramp,
+        {"k": pcmb.Uniform(0.0, 1.0)},
+        np.linspace(0.0, 1.0, 11),
+        order=7,
+        backend="inprocess",
+        analysis=AnalysisSettings(psd=(), pdf_times=(1.0,)),
+        validation=32,
+    )
+    result = study.run()
+    assert "pdf-outside-runs" not in {w.code for w in result.warnings}
+    value = np.linspace(-1.0, 2.0, 256)
+    density = norm.cdf(value / 0.2) - norm.cdf((value - 1.0) / 0.2)
+    smeared = Density(np.array([1.0]), value[None], density[None], np.array([0.2]))
+    outputs = {"y": dataclasses.replace(result.analysis.outputs["y"], pdf=smeared)}
+    analysis = dataclasses.replace(result.analysis, outputs=outputs)
+    (record,) = pdf_outside_runs(dataclasses.replace(result, analysis=analysis))
+    assert record.code == "pdf-outside-runs" and record.time_range == (1.0, 1.0)
+    assert "puts 13 % of its mass (0 % of the surrogate's draws)" in record.message
+    assert "kernel (bandwidth 0.2) smears" in record.message
+
+
+@pcmb.batched(outputs=("y",))
 def steep_exponential(params, times):
     """exp(12 x t): analytic in x, steeper with time."""
     return {"y": np.exp(12 * np.outer(params["x"], times))}
@@ -536,9 +580,9 @@ def test_after_elements_auto_ran_out_the_remedy_names_max_elements():
 
 
 def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
-    # The double well, order 3, to 1 %: the elements' tails still indicate 2.6 % at
-    # max_elements 4 (28 runs), where the true error is 0.08 % (docs/multi_element.md: their
-    # estimate is careful where the pieces are smooth); 32 held-out runs decide it holds.
+    # The double well, order 3, to 0.2 %: the elements' tails still indicate 0.27 % at
+    # max_elements 4 (28 runs), where the true error is 0.08 % (docs/multi_element.md: 3.2x
+    # careful there); 32 held-out runs decide it holds.
     study = pcmb.Study(
         model_class("double_well", "DoubleWell"),
         {"x0": pcmb.Uniform(-0.625, 0.375)},
@@ -546,7 +590,7 @@ def test_a_budget_record_beside_a_reliable_verdict_is_a_note():
         order=3,
         elements="auto",
         max_elements=4,
-        diagnostics_tolerance=0.01,
+        diagnostics_tolerance=0.002,
         backend="inprocess",
         validation=32,
     )

@@ -829,11 +829,7 @@ def _outside_sides(
 ) -> NDArray[np.float64]:
     """(2, T) the shares of :func:`out_of_range` below and above the runs' range."""
     values = np.asarray(node_values, dtype=float)
-    low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
-    reach = margin * (high - low)
-    floor = low - reach
-    if np.nanmin(values) >= 0:
-        floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
+    floor, ceiling = _far_bounds(values, margin)
     germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
     if node_germ is not None:
         box = np.asarray(node_germ, dtype=float)
@@ -841,15 +837,45 @@ def _outside_sides(
     if germ.shape[0] == 0:
         return np.zeros((2, values.shape[1]))
     samples = expansion.evaluate_germ(germ)
-    sides = np.stack([(samples < floor).mean(axis=0), (samples > high + reach).mean(axis=0)])
-    return np.where(expansion.varies() & (high > low), sides, 0.0)
+    sides = np.stack([(samples < floor).mean(axis=0), (samples > ceiling).mean(axis=0)])
+    return np.where(expansion.varies() & (ceiling > floor), sides, 0.0)
+
+
+def _far_bounds(values: NDArray[np.float64], margin: float) -> tuple[NDArray, NDArray]:
+    """(T,) bounds below and above which a value is far outside the (N, T) runs ``values``
+    (:func:`out_of_range`)."""
+    low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
+    reach = margin * (high - low)
+    floor = low - reach
+    if np.nanmin(values) >= 0:
+        floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
+    return floor, high + reach
+
+
+def _table_mass_beyond(
+    value: NDArray[np.float64], density: NDArray[np.float64], floor: float, ceiling: float
+) -> NDArray[np.float64]:
+    """(2,) mass of a tabulated density (linear between its points) below ``floor`` and
+    above ``ceiling``, over its whole mass."""
+
+    def mass(start: float, stop: float) -> float:
+        inner = value[(value > start) & (value < stop)]
+        points = np.concatenate([[start], inner, [stop]])
+        return float(np.trapezoid(np.interp(points, value, density), points))
+
+    whole = float(np.trapezoid(density, value))
+    below = mass(value[0], floor) if floor > value[0] else 0.0
+    above = mass(ceiling, value[-1]) if ceiling < value[-1] else 0.0
+    return np.array([below, above]) / whole
 
 
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
-    """``pdf-outside-runs`` records (notes): a PDF drawn from the surrogate at one of
-    ``analysis.pdf_times`` with more of its mass than :func:`_pdf_allowance` on one side beyond
-    the range of every run made (design, held-out and nominal) by more than ``PDF_MARGIN`` of
-    that range, among the draws inside the box the design's nodes span (:func:`out_of_range`)."""
+    """``pdf-outside-runs`` records (notes): a PDF stored at one of ``analysis.pdf_times`` with
+    more of its mass than :func:`_pdf_allowance` on one side beyond the range of every run
+    made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range. The mass
+    is the stored density's (its kernel may smear the draws past a hard bound) or, where
+    larger, the share of the surrogate's draws inside the box the design's nodes span
+    (:func:`out_of_range`)."""
     analysis, ok = result.analysis, result.ok
     if analysis is None or not ok.any():
         return ()
@@ -863,26 +889,34 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         if name in result.nominal:
             runs.append(np.reshape(result.nominal[name], (1, -1)))
         made = _finite_rows(np.vstack(runs))
-        at = analysis.outputs[name].pdf.at
-        points = nearest_indices(result.grid(name), at)
-        sides = _outside_sides(
+        pdf = analysis.outputs[name].pdf
+        points = nearest_indices(result.grid(name), pdf.at)
+        drawn = _outside_sides(
             expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
         )
-        share = sides.sum(axis=0)
+        floor, ceiling = _far_bounds(made, PDF_MARGIN)
         allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
         where = "" if axis is None else f"{axis.name} = "
-        for t, k in zip(at, points, strict=True):
-            if sides[:, k].max() <= allowed:
+        for row, (t, k) in enumerate(zip(pdf.at, points, strict=True)):
+            stored = np.zeros(2)
+            if np.isfinite(pdf.bandwidth[row]) and ceiling[k] > floor[k]:
+                stored = _table_mass_beyond(pdf.value[row], pdf.density[row], floor[k], ceiling[k])
+            if max(stored.max(), drawn[:, k].max()) <= allowed:
                 continue
+            cause = (
+                "the surrogate overshoots (see its held-out error)"
+                if drawn[:, k].max() > allowed
+                else f"its kernel (bandwidth {pdf.bandwidth[row]:.3g}) smears the draws past them"
+            )
             records.append(
                 WarningRecord(
                     "pdf-outside-runs",
-                    f"the PDF at {where}{t:g} puts {_percent(share[k])} of its mass beyond "
+                    f"the PDF at {where}{t:g} puts {_percent(stored.sum())} of its mass "
+                    f"({_percent(drawn[:, k].sum())} of the surrogate's draws) beyond "
                     f"[{np.min(made[:, k]):.4g}, {np.max(made[:, k]):.4g}], the range of all "
                     f"{made.shape[0]} runs made (design, held-out and nominal), by more than "
-                    f"{_percent(PDF_MARGIN)} of that range: no run went there, the surrogate "
-                    "overshoots (see its held-out error)",
+                    f"{_percent(PDF_MARGIN)} of that range: no run went there, {cause}",
                     name,
                     (float(t), float(t)) if result.on_time(name) else None,
                 )

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from pcmb.chaos.basis import PolynomialBasis
 from pcmb.chaos.density import DENSITY_POINTS, kernel_density
 from pcmb.chaos.elements import PiecewiseExpansion, piecewise_spectrum
-from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std, unsafe_to_square
+from pcmb.chaos.expansion import ChaosExpansion, sample_mean, sample_std
 from pcmb.chaos.nodes import TensorGrid, draw_germs
 from pcmb.chaos.spectral import ChaosSpectrum, chaos_spectrum, periodogram, taper, uniform_step
 from pcmb.errors import ConfigError, ConfigProblem, UsageError
@@ -306,20 +306,9 @@ def tensor_grid_of(result: StudyResult) -> TensorGrid | None:
     return TensorGrid(result.distributions, design.orders)
 
 
-def _kde(samples: NDArray[np.float64], *, nonnegative: bool) -> tuple[NDArray, NDArray, float]:
-    """:func:`kernel_density` of (M,) samples; Scott's bandwidth computed without overflow
-    for samples whose squares would overflow or underflow (e.g. an output near 1e200)."""
-    finite = samples[np.isfinite(samples)]
-    if finite.size < 2 or not unsafe_to_square(finite):
-        return kernel_density(samples, nonnegative=nonnegative)
-    bandwidth = float(sample_std(finite)) * finite.size ** (-0.2)
-    with np.errstate(over="ignore", under="ignore"):
-        return kernel_density(samples, nonnegative=nonnegative, bandwidth=bandwidth)
-
-
 def _density_table(at: NDArray[np.float64], columns: NDArray, *, nonnegative: bool) -> Density:
     """KDEs of each column of (M, P) samples, at the P locations ``at``."""
-    tables = [_kde(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
+    tables = [kernel_density(columns[:, p], nonnegative=nonnegative) for p in range(at.size)]
     value = np.array([t[0] for t in tables]).reshape(at.size, DENSITY_POINTS)
     density = np.array([t[1] for t in tables]).reshape(at.size, DENSITY_POINTS)
     bandwidth = np.array([t[2] for t in tables], dtype=float).reshape(at.size)

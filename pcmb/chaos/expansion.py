@@ -279,8 +279,8 @@ class ChaosExpansion:
         """Density of a scalar output at ``points``: a Gaussian KDE of surrogate samples.
 
         Select a scalar first, e.g. ``expansion[time_index].pdf(x)``. The estimate is
-        :func:`pcmb.chaos.density.kernel_density` (Scott's bandwidth), the one stored in result
-        files; it is zero beyond three bandwidths from the samples.
+        :func:`pcmb.chaos.density.kernel_density`, the one stored in result files; it is zero
+        beyond three bandwidths from the samples, and beyond an end where they pile up.
 
         Raises
         ------

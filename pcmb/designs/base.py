@@ -265,6 +265,12 @@ def order_words(orders: Sequence[int], basis: str | None) -> str:
     return "orders " + "x".join(map(str, orders))
 
 
+def fit_of(ok: NDArray[np.bool_]) -> str:
+    """The record's ``fit`` of a grid's recovery: ``projection``, or ``regression`` (the least
+    squares of :func:`least_squares_recovery`) when a node failed (``ok`` False)."""
+    return "projection" if ok.all() else "regression"
+
+
 def least_squares_recovery(
     distributions: Sequence[Distribution],
     names: Sequence[str],

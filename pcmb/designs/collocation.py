@@ -21,6 +21,7 @@ from pcmb.designs.base import (
     MethodSection,
     MethodSettings,
     Recovery,
+    fit_of,
     least_squares_recovery,
     order_words,
     statistics_warnings,
@@ -77,7 +78,8 @@ class TensorCollocation:
 
     ``basis: tensor`` recovers every term of the grid (interpolation); ``basis: total``
     projects onto the terms of total degree <= max P_k inside it. A grid with failed nodes
-    is no quadrature rule: its survivors are refitted by least squares.
+    is no quadrature rule: its survivors are refitted by least squares, and the record of the
+    last recovery says so (``fit: regression``).
     """
 
     Settings = CollocationSettings
@@ -88,6 +90,7 @@ class TensorCollocation:
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.basis = settings.basis or "tensor"
+        self._fit = "projection"
 
     @property
     def runs(self) -> int:
@@ -105,7 +108,7 @@ class TensorCollocation:
             grid="tensor-gauss",
             basis=self.basis,
             orders=self.orders,
-            fit="projection",
+            fit=self._fit,
             label=f"chaos {order_words(self.orders, self.basis)}",
         )
 
@@ -124,6 +127,7 @@ class TensorCollocation:
     ) -> Recovery:
         flat = [name for name, order in zip(self.names, self.orders, strict=True) if order == 0]
         warnings: tuple[WarningRecord, ...] = ()
+        self._fit = fit_of(ok)
         if ok.all():
             index = self._index(grid)
             expansions = {

@@ -11,14 +11,15 @@
 
 ``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
 std relative to the output's largest std, as estimated from the elements' tails
-(:func:`element_errors`: the energy of each element's outer two degree layers, continued
-geometrically, converts to the error of its mean and of the std; ``docs/multi_element.md``
-has the derivation and its calibration). ``auto`` starts from one element and, after each
+(:func:`element_errors`: the decay of each element's outer degree layers, continued
+geometrically, converts to the error of its mean and of the std, and each split checks the
+model on the parent against what its children changed; ``docs/multi_element.md`` has the
+derivation and its calibration). ``auto`` starts from one element and, after each
 round, while the estimate exceeds the tolerance, splits the elements of largest share, the
 fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
-half the largest per-input share of their tail energy, while the partition stays within
-``max_elements``; the split elements' nodes leave the recovery (``/nodes/element`` -1) and
-the children's nodes are the next round.
+half the largest per-input share of their tail energy (the largest shares first, as many as
+``max_elements`` leaves room for); the split elements' nodes leave the recovery
+(``/nodes/element`` -1) and the children's nodes are the next round.
 :meth:`MultiElementCollocation.recover` records (``element-decay``) every output whose
 estimate is left above the tolerance, and (``element-budget``) that ``max_elements``
 stopped the refinement. A response chaotic in its inputs (the Lorenz attractor) has no
@@ -43,6 +44,7 @@ from pcmb.chaos.recovery import project_tensor
 from pcmb.designs.base import (
     MethodSettings,
     Recovery,
+    fit_of,
     least_squares_recovery,
     order_words,
     statistics_warnings,
@@ -52,8 +54,9 @@ from pcmb.result import Design, DesignReport, ReportFile, StudyResult, WarningRe
 
 __all__ = ["ElementReport", "MultiElementCollocation", "TailErrors", "element_errors"]
 
-#: Largest decay per two degrees read from an element's tail (at it, the energy beyond the
-#: tail is taken to be the tail's own: no decay seen).
+#: Largest decay read from an element's tail, per two degrees or per degree
+#: (:func:`element_errors`; at it, the energy beyond the tail is taken to be the tail's own: no
+#: decay seen).
 DECAY_CAP = 0.5
 
 
@@ -153,7 +156,9 @@ class MultiElementCollocation:
         """The first round: every starting element's nodes, element by element (a run starts
         here, so this forgets the refinement of an earlier run); ``.nodes`` in the inputs' own
         germs."""
-        self.exhausted, self.estimate = False, math.nan
+        self.exhausted, self.estimate, self._fit = False, math.nan, "projection"
+        self.factors, self._splits = np.full(self.start.size, np.nan), []
+        self.floors = np.zeros(self.start.size)
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
@@ -180,7 +185,10 @@ class MultiElementCollocation:
         if self.elements != "auto":
             return None
         coefficients, _ = self._coefficients(values, ok)
-        errors = element_errors(self.partition, coefficients, self.multi_index)
+        self._check_splits(coefficients)
+        errors = element_errors(
+            self.partition, coefficients, self.multi_index, self.factors, self.floors
+        )
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
             return None
@@ -190,8 +198,12 @@ class MultiElementCollocation:
         for e in np.argsort(-np.nan_to_num(each, nan=-1.0)):
             if not errors.estimate(left) > self.tolerance or not each[e] > 0:
                 break
-            cut = np.flatnonzero(errors.along[e] >= 0.5 * errors.along[e].max())
-            if size + 2**cut.size - 1 <= self.max_elements:
+            along = errors.along[e]
+            cut = np.flatnonzero(along >= 0.5 * along.max())
+            # The inputs of largest share first, as many as max_elements leaves room for.
+            room = (self.max_elements - size + 1).bit_length() - 1
+            cut = np.sort(cut[np.argsort(-along[cut], kind="stable")][:room])
+            if cut.size:
                 chosen[int(e)] = cut.tolist()
                 size += 2**cut.size - 1
                 left[e] = False
@@ -200,18 +212,66 @@ class MultiElementCollocation:
         self.exhausted = refused and not chosen
         if not chosen:
             return None
+        parents = self._parent_statistics(coefficients)
         # Children replace their parent in place; the others keep their nodes.
         bounds, renumber, children = [], np.full(self.partition.size, -1), []
         for e in range(self.partition.size):
             if e in chosen:
                 split = self.partition.split(e, chosen[e]).bounds[e : e + 2 ** len(chosen[e])]
-                children += range(len(bounds), len(bounds) + len(split))
+                family = np.arange(len(bounds), len(bounds) + len(split))
+                self._splits.append((family, parents[e]))
+                children += family.tolist()
                 bounds += list(split)
             else:
                 renumber[e] = len(bounds)
                 bounds.append(self.partition.bounds[e])
         kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
+        factors, floors = np.full(len(bounds), np.nan), np.zeros(len(bounds))
+        factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
+        floors[renumber[renumber >= 0]] = self.floors[renumber >= 0]
+        for family, parent in self._splits:
+            floors[family] = parent.decay / 4
+        self.factors, self.floors = factors, floors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
+
+    def _parent_statistics(self, coefficients: Mapping[str, NDArray[np.float64]]) -> list[_Parent]:
+        """Every element as the parent :meth:`_check_splits` compares its children with."""
+        size = self.partition.size
+        parents = [_Parent({}, 0.0) for _ in range(size)]
+        for name, c in coefficients.items():
+            flat = c.reshape(*c.shape[:2], -1)
+            errors = element_errors(
+                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors
+            )
+            if not errors.mean:
+                continue
+            scale = np.nanmax(PiecewiseExpansion(self.partition, flat, self.multi_index).std())
+            moments = _moments(self.partition.probability, flat)
+            for e, parent in enumerate(parents):
+                model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
+                parent.outputs[name] = (moments[0][e], moments[1][e], model)
+                parent.decay = max(parent.decay, errors.decay[e])
+        return parents
+
+    def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
+        """Sets the factor of the children of every split since the last call: how many times
+        the change of the mean and std from their parent to them exceeds what the checked
+        model estimated of the parent's errors (at least 1)."""
+        for children, parent in self._splits:
+            factor = 1.0
+            for name, (mean, square, model) in parent.outputs.items():
+                flat = coefficients[name].reshape(*coefficients[name].shape[:2], -1)
+                expansion = PiecewiseExpansion(self.partition, flat, self.multi_index)
+                moments = _moments(self.partition.probability, flat)
+                shift = moments[0][children].sum(axis=0) - mean
+                spread = moments[1][children].sum(axis=0) - square - 2 * expansion.mean() * shift
+                sigma = expansion.std()
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    shown = np.fmax(abs(shift), np.where(sigma > 0, abs(spread) / (2 * sigma), 0))
+                if np.max(model) > 0:
+                    factor = max(factor, float(np.nanmax(shown) / np.max(model)))
+            self.factors[children] = factor
+        self._splits = []
 
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
         """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
@@ -229,7 +289,7 @@ class MultiElementCollocation:
             basis=self.basis,
             orders=self.orders,
             elements=self.partition.size,
-            fit="projection",
+            fit=self._fit,
             tolerance=self.tolerance if auto else None,
             label=f"chaos {order_words(self.orders, self.basis)}"
             + (f" (elements auto to {self.tolerance:g})" if auto else ""),
@@ -248,6 +308,7 @@ class MultiElementCollocation:
         per-element least-squares fit where nodes of the element failed (reported), and
         ``element-decay`` and ``element-budget`` warnings (see the module)."""
         coefficients, warnings = self._coefficients(values, ok)
+        self._check_splits(coefficients)
         expansions = {
             name: PiecewiseExpansion(self.partition, c, self.multi_index, self.names)
             for name, c in coefficients.items()
@@ -273,7 +334,8 @@ class MultiElementCollocation:
         self, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
     ) -> tuple[dict[str, NDArray[np.float64]], list[WarningRecord]]:
         """Output name -> (E, S, ...) every current element's coefficients: its projection, or
-        where nodes of it failed a least-squares fit of its survivors (reported)."""
+        where nodes of it failed a least-squares fit of its survivors (reported, and recorded:
+        :func:`~pcmb.designs.base.fit_of`)."""
         index = self.multi_index
         position = {tuple(row): s for s, row in enumerate(index)}
         coefficients = {
@@ -281,6 +343,7 @@ class MultiElementCollocation:
             for name, y in values.items()
         }
         warnings: list[WarningRecord] = []
+        self._fit = fit_of(ok[self.node_elements >= 0])
         for e, grid in enumerate(self.grids):
             rows = self.node_elements == e
             kept = ok[rows]
@@ -312,7 +375,11 @@ class MultiElementCollocation:
         records, self.estimate = [], 0.0
         for name, expansion in expansions.items():
             errors = element_errors(
-                self.partition, {name: expansion.coefficients}, self.multi_index
+                self.partition,
+                {name: expansion.coefficients},
+                self.multi_index,
+                self.factors,
+                self.floors,
             )
             estimate, each = errors.estimate(), errors.of_each()
             self.estimate = max(self.estimate, estimate)
@@ -321,7 +388,7 @@ class MultiElementCollocation:
                 records.append(
                     WarningRecord(
                         "element-decay",
-                        f"the error of the mean and std that the elements' outer two degree "
+                        f"the error of the mean and std that the elements' outer degree "
                         f"layers indicate is {estimate:.3g} of the largest std, above the "
                         f"tolerance {self.tolerance:g} (diagnostics.tolerance; most of it in "
                         f"element {worst}, {each[worst]:.3g} alone); elements: auto splits on "
@@ -331,6 +398,25 @@ class MultiElementCollocation:
                     )
                 )
         return records
+
+
+@dataclass
+class _Parent:
+    """An element as split: per output name its P_e μ_e, P_e E_e[y²] and the errors of the
+    mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, in the
+    output's units, (P,) each; and its checked decay, the largest over outputs and times."""
+
+    outputs: dict[str, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]
+    decay: float
+
+
+def _moments(
+    probability: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(E, P) each element's P_e μ_e and P_e E_e[y²] from its (E, S, P) coefficients (the mean
+    term first, the basis orthonormal)."""
+    weight = probability[:, None]
+    return weight * coefficients[:, 0], weight * (coefficients**2).sum(axis=1)
 
 
 def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -358,18 +444,30 @@ class TailErrors:
         coefficients are not finite).
     along:
         (E, n) each element's tail energy along each input, at its worst output and time.
+    decay:
+        (E,) each element's decay per degree as read (before ``floors``), the largest over
+        outputs and times.
     """
 
     mean: tuple[NDArray[np.float64], ...]
     std: tuple[NDArray[np.float64], ...]
     along: NDArray[np.float64]
+    decay: NDArray[np.float64]
 
     def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
         """The estimated error of the mean and std, the largest over outputs and times, from
-        the tails of the elements ``among`` (all by default; the others' taken as resolved)."""
+        the tails of the elements ``among`` (all by default; the others' taken as resolved):
+        the elements' mean errors in quadrature (their signs unknown), their std errors
+        summed."""
         return max(
             (
-                float(np.max(np.fmax(np.nansum(m[among], axis=0), np.nansum(s[among], axis=0))))
+                float(
+                    np.max(
+                        np.fmax(
+                            np.sqrt(np.nansum(m[among] ** 2, axis=0)), np.nansum(s[among], axis=0)
+                        )
+                    )
+                )
                 for m, s in zip(self.mean, self.std, strict=True)
             ),
             default=0.0,
@@ -381,21 +479,41 @@ class TailErrors:
         return np.max(each, axis=0) if each else np.zeros(self.along.shape[0])
 
 
+def _decay(tail: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The decay ``tail / before``, at most :data:`DECAY_CAP` (at it where nothing is before),
+    0 where the tail is empty, NaN where it is not finite."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        decay = np.minimum(tail / before, DECAY_CAP)
+    decay = np.where(tail > 0, np.nan_to_num(decay, nan=DECAY_CAP), 0.0)
+    return np.where(np.isfinite(tail), decay, np.nan)
+
+
 def element_errors(
     partition: Partition,
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
+    factors: NDArray[np.float64] | None = None,
+    floors: NDArray[np.float64] | None = None,
 ) -> TailErrors:
     """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
 
-    In element e of probability P_e, at every time, the energy T of the outer two degree
-    layers (:func:`_tails`) over that of the two layers before them is the decay ρ per two
-    degrees (at most :data:`DECAY_CAP`). Continued geometrically, the element's variance
-    misses the energy beyond its degree p, M = T ρ / (1 - ρ), and its mean errs by the
-    coefficients aliased onto it, of energy A = T ρ² / (1 - ρ) (from degree p + 3 on: a
-    Gauss rule integrates below degree 2p + 2 exactly, but the first degrees of a kink mimic
-    a fast decay, so the decay is carried two layers, not p/2). With σ the piecewise
-    surrogate's std: mean error Σ_e P_e √A_e, std error Σ_e P_e M_e / (2σ).
+    Each element e, of probability P_e, misses energy M_e of its variance and errs its mean by
+    a coefficient of energy A_e, both continued geometrically from its tail:
+
+    - an element no split has checked (``factors`` NaN, the default): T the energy of the
+      outer two degree layers, ρ its ratio to the two layers before (at most
+      :data:`DECAY_CAP`), M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the decay carried two
+      layers only, since a kink's first degrees mimic a fast one;
+    - an element whose parent's split measured what this model missed on it (``factors``
+      f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
+      the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
+      its parent's: faster is a parity, not a decay), T the energy of the outer layer, of
+      degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
+      √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
+      not integrate.
+
+    With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
+    unknown), std error Σ_e P_e M_e / (2σ).
 
     Parameters
     ----------
@@ -405,11 +523,23 @@ def element_errors(
         Output name -> (E, S, ...) coefficients.
     multi_index:
         (S, n) their terms.
+    factors:
+        (E,) each element's factor f, NaN where no split checked it.
+    floors:
+        (E,) each element's least decay per degree (default 0).
     """
     tails = _tails(multi_index)
-    anywhere = tails.any(axis=0)
-    before = tail_terms(multi_index, 4, lowest=1) & ~anywhere
+    two = tails.any(axis=0)
+    two_before = tail_terms(multi_index, 4, lowest=1) & ~two
+    outer = tail_terms(multi_index, 1, lowest=1)
+    second = tail_terms(multi_index, 2, lowest=1) & ~outer
+    third = tail_terms(multi_index, 3, lowest=1) & ~outer & ~second
+    degree = int(multi_index.sum(axis=1)[outer].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
+    factors = np.full(size, np.nan) if factors is None else factors
+    checked = np.isfinite(factors)[:, None]
+    floors = np.zeros(size) if floors is None else floors
+    decays = np.zeros(size)
     means, stds, along = [], [], np.zeros((size, n))
     for c in coefficients.values():
         flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
@@ -418,22 +548,29 @@ def element_errors(
         if not scale > 0:
             continue
         squares = (flat / scale) ** 2
-        tail = squares[:, anywhere].sum(axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            decay = np.minimum(tail / squares[:, before].sum(axis=1), DECAY_CAP)
-        decay = np.where(tail > 0, np.nan_to_num(decay, nan=DECAY_CAP), 0.0)
-        decay = np.where(np.isfinite(tail), decay, np.nan)
+        tail = squares[:, two].sum(axis=1)
+        decay = _decay(tail, squares[:, two_before].sum(axis=1))
         missing = tail * decay / (1 - decay)
-        aliased = tail * decay**2 / (1 - decay)
+        aliased = np.sqrt(tail * decay**2 / (1 - decay))
+        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
+        fall = _decay(last, previous)
+        if third.any():  # order 2 has one ratio
+            fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
+        decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
+        fall = np.fmax(fall, floors[:, None])
+        last = np.fmax(last, previous * fall)
+        factor = np.nan_to_num(factors, nan=1.0)[:, None]
+        missing = np.where(checked, factor * last * fall / (1 - fall), missing)
+        aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
         weight = partition.probability[:, None]
-        means.append(weight * np.sqrt(aliased))
+        means.append(weight * aliased)
         with np.errstate(divide="ignore", invalid="ignore"):
             stds.append(np.where(sigma > 0, weight * missing * scale / (2 * sigma), 0.0))
         worst = np.argmax(np.nan_to_num(tail, nan=np.inf), axis=1)
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         larger = energy.sum(axis=1) > along.sum(axis=1)
         along = np.where(larger[:, None], energy, along)
-    return TailErrors(tuple(means), tuple(stds), along)
+    return TailErrors(tuple(means), tuple(stds), along, decays)
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,9 @@ lower in k alone), carried to the grid's degree by the decay per degree of the c
 along k, squared, as the std's error is quadratic in the coefficients left out. The first
 round (level 1) can so stop on its own.
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
-warning, when the next level's order would pass :data:`MAX_ORDER` or its grid
-``method.max_runs``, or a node failed.
+warning, when the next level's order would pass :data:`MAX_ORDER` (or its rule has no next
+level) or its grid ``method.max_runs``; a failed node ends them with a ``nodes-failed`` record,
+a value that is not finite at a node counted as run with a ``statistic-non-finite`` one.
 
 All inputs are raised together (kind ``adaptive`` with ``basis: tensor`` raises the one with
 the largest estimated error, one at a time).
@@ -36,7 +37,15 @@ from pcmb.designs.adaptive import BLIND, DEFAULT_MAX_RUNS
 from pcmb.designs.base import MethodSettings, Recovery, order_words
 from pcmb.designs.collocation import CollocationSettings
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
-from pcmb.result import Design, Placement, RecordReport, Refinement, StudyResult, WarningRecord
+from pcmb.result import (
+    Design,
+    NodeFailure,
+    Placement,
+    RecordReport,
+    Refinement,
+    StudyResult,
+    WarningRecord,
+)
 
 __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
 
@@ -145,7 +154,8 @@ class OrderRefinement(GrowingGrid):
         self._grid = self._first
         self._ids = self._first.node_ids
         self._history: list[tuple[tuple[int, ...], int, float]] = []
-        self._stopped: str | None = None
+        # The record of what ended the rounds before the tolerance was met.
+        self._stopped: tuple[WarningRecord, ...] = ()
 
     @property
     def runs(self) -> int:
@@ -167,7 +177,7 @@ class OrderRefinement(GrowingGrid):
             grid="tensor-nested",
             basis="tensor",
             orders=orders,
-            fit="projection",
+            fit=self._fit,
             rule=", ".join(dict.fromkeys(rule.name for rule in self.rules)),
             samples=self._grid.size,
             tolerance=self.tolerance,
@@ -190,33 +200,94 @@ class OrderRefinement(GrowingGrid):
         level = int(self._grid.index_set.max())
         if not ok[order].all():
             self._stopped = (
-                f"{int(np.sum(~ok[order]))} node(s) of level {level} failed, and a round "
-                "needs every node: see the failures"
+                self._ended(
+                    "nodes-failed",
+                    f"{nodes.size} runs, as {int(np.sum(~ok[order]))} node(s) of level {level} "
+                    "failed",
+                    "a round needs every node: see the failures",
+                ),
             )
             return None
         on_grid = np.stack([y[order] for y in values.values()], axis=1)
+        finite = np.isfinite(on_grid).all(axis=-1)  # (N, outputs)
+        if not finite.all():
+            self._stopped = tuple(
+                self._ended(
+                    "statistic-non-finite",
+                    f"{nodes.size} runs, as output {name!r} is not finite at "
+                    + self._named(nodes, order[~finite[:, k]]),
+                    "its error estimate is undefined, so no round can meet the tolerance",
+                    name,
+                )
+                for k, name in enumerate(values)
+                if not finite[:, k].all()
+            )
+            return None
         estimate = float(box_errors(self._grid, on_grid).max())
         self._history.append((self._orders(self._grid), nodes.size, estimate))
         if estimate < self.tolerance:
             return None
-        last = any(rule.max_level is not None and level >= rule.max_level for rule in self.rules)
+        last = [
+            rule.name
+            for rule in self.rules
+            if rule.max_level is not None and level >= rule.max_level
+        ]
         grid = None if last else self._level(level + 1)
         if grid is None or max(self._orders(grid)) > MAX_ORDER:
+            limit = (
+                f"level {level} is the last of rule {last[0]}"
+                if last
+                else f"the next level's order {max(self._orders(grid))} passes {MAX_ORDER}, the "
+                "highest order auto tries (pcmb.designs.refine.MAX_ORDER)"
+            )
             self._stopped = (
-                f"the next level passes order {MAX_ORDER}, the highest order auto tries "
-                "(pcmb.designs.refine.MAX_ORDER), or its rule's last level, so more runs would "
-                "not help: order alone may not converge (a steep, discontinuous or chaotic "
-                "response), follow the diagnostics' remedy"
+                self._ended(
+                    "order-budget",
+                    f"{nodes.size} runs, as {limit}",
+                    "more runs would not help: order alone may not converge (a steep, "
+                    "discontinuous or chaotic response), follow the diagnostics' remedy",
+                ),
             )
             return None
         if grid.size > self.max_runs:
             self._stopped = (
-                f"level {level + 1} would take {grid.size - nodes.size} more runs, past the "
-                "budget: raise method.max_runs, or follow the diagnostics' remedy (order alone "
-                "may not converge for a steep, discontinuous or chaotic response)"
+                self._ended(
+                    "order-budget",
+                    f"{nodes.size} of {self.max_runs} runs (method.max_runs), as level {level + 1} "
+                    f"would take {grid.size - nodes.size} more",
+                    "raise method.max_runs, or follow the diagnostics' remedy (order alone may not "
+                    "converge for a steep, discontinuous or chaotic response)",
+                ),
             )
             return None
         return self._adopt(grid)
+
+    def _named(self, nodes: NodeSet, rows: NDArray[np.intp], shown: int = 5) -> str:
+        """``node 3 (a=0.5, b=2), ...``: the first ``shown`` of ``nodes``' ``rows``."""
+        named = [
+            NodeFailure(
+                int(row), dict(zip(self.names, map(float, nodes.params[row]), strict=True)), ""
+            ).node
+            for row in rows[:shown]
+        ]
+        rest = f" and {rows.size - shown} more" if rows.size > shown else ""
+        return ", ".join(named) + rest
+
+    def _ended(
+        self, code: str, limit: str, advice: str, output: str | None = None
+    ) -> WarningRecord:
+        """The record of rounds that ``limit`` ended with the estimate above the tolerance."""
+        # The last estimate is of the last round that ran whole: a lower order than the grid
+        # recovered when a node of the next round failed.
+        reached = "no error estimate yet against"
+        if self._history:
+            orders, _, estimate = self._history[-1]
+            reached = f"the estimated error of order {max(orders)} {estimate:.3g} above"
+        message = (
+            f"order refinement ended at order {max(self._orders(self._grid))} after {limit}; "
+            f"{reached} the tolerance {self.tolerance:g} (diagnostics.tolerance): {advice}"
+        )
+        return WarningRecord(code, message, output)
 
     def recover(
         self,
@@ -234,22 +305,7 @@ class OrderRefinement(GrowingGrid):
             runs=np.array([h[1] for h in history], dtype=np.int64),
             indicator=np.array([h[2] for h in history], dtype=float),
         )
-        warnings = recovery.warnings
-        if self._stopped is not None:
-            # The last estimate is of the last round that ran whole: a lower order than the
-            # grid recovered when a node of the next round failed.
-            reached = "unknown"
-            if history:
-                reached = f"of order {max(history[-1][0])} {history[-1][2]:.3g}"
-            warnings += (
-                WarningRecord(
-                    "order-budget",
-                    f"order refinement ended at order {max(self._orders(self._grid))} after "
-                    f"{nodes.size} of {self.max_runs} runs (method.max_runs), the estimated "
-                    f"error {reached} above the tolerance {self.tolerance:g} "
-                    f"(diagnostics.tolerance): {self._stopped}",
-                ),
-            )
+        warnings = recovery.warnings + self._stopped
         return Recovery(recovery.expansions, warnings, RefinementReport(refinement))
 
 

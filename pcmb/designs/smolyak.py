@@ -17,6 +17,7 @@ from pcmb.chaos.sparse import SparseGrid, find_rows
 from pcmb.designs.base import (
     MethodSettings,
     Recovery,
+    fit_of,
     least_squares_recovery,
     statistics_warnings,
 )
@@ -38,10 +39,12 @@ class SparseCollocation:
     The expansion holds every term the grid recovers exactly (:attr:`SparseGrid.multi_index`).
     The quadrature weights sum to one but some are negative: they are a signed combination
     of tensor rules. A grid with failed nodes is no quadrature rule: its survivors are
-    refitted by (unweighted) least squares.
+    refitted by (unweighted) least squares, and the record of the last recovery says so
+    (``fit: regression``).
     """
 
     Settings = CollocationSettings
+    _fit = "projection"
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         level, rule = settings.level, settings.rule
@@ -88,7 +91,7 @@ class SparseCollocation:
             basis="sparse",
             orders=self.orders,
             level=self.level,
-            fit="projection",
+            fit=self._fit,
             rule=rule,
             label=f"Smolyak level {self.level}, rule {rule}",
         )
@@ -100,6 +103,7 @@ class SparseCollocation:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
+        self._fit = fit_of(ok)
         return sparse_recovery(self.grid, self.names, values, ok, times)
 
 
@@ -129,6 +133,8 @@ class GrowingGrid:
     names: tuple[str, ...]
     _grid: SparseGrid
     _ids: NDArray[np.float64]
+    #: The fit of the last recovery (:func:`fit_of`).
+    _fit = "projection"
 
     def _order(self, nodes: NodeSet) -> NDArray[np.intp]:
         """Row of every grid node among ``nodes`` (in run order)."""
@@ -159,6 +165,7 @@ class GrowingGrid:
         """:func:`sparse_recovery` on the grid so far, of values given in run order."""
         order = self._order(nodes)
         on_grid = {name: y[order] for name, y in values.items()}
+        self._fit = fit_of(ok)
         return sparse_recovery(self._grid, self.names, on_grid, ok[order], times)
 
 

@@ -98,6 +98,7 @@ class LokyPool:
     ) -> None:
         self.slots = workers
         self._executor: Any = None
+        remove_orphaned_semaphores()
         self.rebuild()
 
     def rebuild(self) -> None:
@@ -160,6 +161,53 @@ class LokyPool:
         self._executor.shutdown(wait=True, kill_workers=kill)
         self._executor = None
         gc.collect()
+
+
+#: A loky named semaphore's file, named after the process that made it (loky's SemLock names).
+_LOKY_SEMAPHORE = re.compile(r"sem\.loky-(\d+)-\w+")
+
+
+def remove_orphaned_semaphores(folder: str | os.PathLike[str] = "/dev/shm") -> int:
+    """Unlink the named semaphores of loky pools whose process is gone: a ``kill -9`` of
+    pcmb's process group kills loky's resource tracker too, which would have unlinked them.
+    Only this user's regular files named ``sem.loky-PID-*`` whose process PID has ended (a
+    pid reused since keeps them). The number removed (0 without ``folder``)."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:  # no such folder: named semaphores live elsewhere on this system
+        return 0
+    ended: dict[int, bool] = {}
+    removed = 0
+    for entry in entries:
+        match = _LOKY_SEMAPHORE.fullmatch(entry.name)
+        if match is None:
+            continue
+        pid = int(match[1])
+        if pid not in ended:
+            ended[pid] = _ended(pid)
+        try:
+            if not (
+                ended[pid]
+                and entry.is_file(follow_symlinks=False)
+                and entry.stat(follow_symlinks=False).st_uid == os.geteuid()
+            ):
+                continue
+            os.unlink(entry.path)
+        except OSError:  # removed meanwhile (by its tracker, another run), or not ours to remove
+            continue
+        removed += 1
+    return removed
+
+
+def _ended(pid: int) -> bool:
+    """Whether no process has this pid (another user's counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except (OSError, OverflowError):  # another user's, or no pid this system has
+        pass
+    return False
 
 
 def _died(codes: Iterable[int]) -> str:
