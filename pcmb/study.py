@@ -851,7 +851,7 @@ class Study:
             with contextlib.suppress(BaseException):
                 checking.exception()
             raise
-        with phase(plural(first, "held-out run"), stream if beside else None):
+        with phase(plural(first, "held-out run"), stream if beside or (joined and first) else None):
             held_out, held_out_failed = checking.result()
         if not intrusive:
             held_out = self._with_derived(held_out)
@@ -1127,7 +1127,9 @@ class Study:
             )
         params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
         try:
-            runs = self._campaign(params, facts, outputs, pool, joined, progress)
+            runs = self._campaign(
+                params, facts, outputs, pool, joined, progress, counted=nodes.size
+            )
         except (UsageError, ModelDefinitionError):
             if journal is not None and fresh_journal:
                 journal.remove()  # its held-out runs' folder with it
@@ -1212,9 +1214,11 @@ class Study:
         *,
         proven: bool = False,
         keep: bool = True,
+        counted: int | None = None,
     ) -> RunResult:
         """:func:`~pcmb.run.executor.run_nodes` of the model at ``params`` under the study's
-        execution settings and failure policy (see :meth:`_run_nodes`)."""
+        execution settings and failure policy (see :meth:`_run_nodes`); the progress line
+        counts the first ``counted`` runs (default: all)."""
         return run_nodes(
             self.model_factory,
             params,
@@ -1231,6 +1235,7 @@ class Study:
             facts=facts,
             proven=proven,
             keep_values=keep,
+            counted=counted,
         )
 
     def _judge_failures(self, runs: RunResult, journal: Journal | None) -> None:

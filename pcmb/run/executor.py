@@ -354,6 +354,7 @@ class _Campaign:
         self.proven = proven
         self.resumed = 0
         self.progress: Progress | None = None
+        self.counted = n_nodes  # the first nodes, those the progress line counts
 
     def resume(self, journal: Journal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
@@ -420,8 +421,9 @@ class _Campaign:
         self.broken.update(int(i) for i, b in zip(task.indices, broken, strict=False) if b)
         if self.journal is not None:
             self.journal.record(task.indices, chunk, self.status[task.indices], found, raised)
-        if self.progress is not None:
-            self.progress.advance(task.indices.size)
+        counted = int(np.count_nonzero(task.indices < self.counted))
+        if self.progress is not None and counted:
+            self.progress.advance(counted)
 
     def accept_outcome(self, task: _Task, outcome: Outcome) -> None:
         self.accept(task, outcome.values, outcome.messages, outcome.broken, outcome.tracebacks)
@@ -688,6 +690,7 @@ def run_nodes(
     facts: ModelFacts | None = None,
     proven: bool = False,
     keep_values: bool = True,
+    counted: int | None = None,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -737,6 +740,9 @@ def run_nodes(
     keep_values:
         False: the values go to the ``journal`` only (a streamed study reads them from it
         block by block) and the result's arrays have no rows.
+    counted:
+        The progress line counts the first ``counted`` nodes only (default: all): the others
+        are runs of other sets joined to them (a study's held-out and nominal runs).
 
     Returns
     -------
@@ -780,6 +786,7 @@ def run_nodes(
                 pool=own,
                 proven=proven,
                 keep_values=keep_values,
+                counted=counted,
             )
     if keep_values is False and journal is None:
         raise UsageError("values not kept in memory must go to a journal", source="run_nodes")
@@ -815,7 +822,10 @@ def run_nodes(
     tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or _balanced(n_nodes, facts.chunk_size)))
     limits = _Limits(timeout, pool.startup_seconds + 2 * facts.build_seconds)
     show = sys.stderr.isatty() if progress is None else progress
-    campaign.progress = Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
+    if counted is not None:
+        campaign.counted = counted
+    reused = int(np.count_nonzero(campaign.status[: campaign.counted] == Status.OK))
+    campaign.progress = Progress(campaign.counted, reused, sys.stderr if show else None)
     try:
         _run_pooled(campaign, pool, tasks, limits, stop_on_failure)
     finally:
