@@ -140,7 +140,6 @@ class JoinedJournal:
 
     def __init__(self, parts: Sequence[tuple[Journal | None, int]]) -> None:
         self.parts = tuple(parts)
-        self.n_nodes = sum(size for _, size in self.parts)
 
     def _pieces(self) -> list[tuple[Journal, int, int]]:
         """(journal, first index, end) of each journaled part, in the joined indices."""
@@ -356,7 +355,7 @@ class _Campaign:
         self.progress: Progress | None = None
         self.counted = n_nodes  # the first nodes, those the progress line counts
 
-    def resume(self, journal: Journal) -> None:
+    def resume(self, journal: Journal | JoinedJournal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
         if self.keep_values:
             indices, values, status = journal.completed()
@@ -817,8 +816,9 @@ def run_nodes(
     )
     if journal is not None:
         campaign.resume(journal)
-    # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
-    # boundaries depend on N, the config and the model class only, never on jobs or backend.
+    # A model may prefer a chunk size (model protocol: the most per chunk, made as equal as
+    # can be); an explicit one wins. Either way the boundaries depend on N, the config and
+    # the model class only, never on jobs or backend.
     tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or _balanced(n_nodes, facts.chunk_size)))
     limits = _Limits(timeout, pool.startup_seconds + 2 * facts.build_seconds)
     show = sys.stderr.isatty() if progress is None else progress
