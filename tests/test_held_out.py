@@ -353,6 +353,31 @@ def test_an_element_with_fewer_placed_runs_than_the_spare_leaves_out_only_those(
     assert found.corrected_std_se[0] < 1e-12 and found.upper[0] - found.error[0] < 1e-12
 
 
+def test_an_element_without_placed_runs_extrapolates_no_tail_from_its_own_three_degrees():
+    # (x - 1/2)² on (-1, 1) in two elements at order 3 (exact in each: its mean 7/12), both
+    # placed runs in the first: the second's only degrees 1-3 (0, c₂, 0) cannot tell how its
+    # spectrum decays; a line through their two neighbour averages is flat and once put the
+    # 4-point rule's errors on degrees 8-12 into the mean: 0.037, 6 % of its std 0.65 (the MR
+    # damper's remedy, issue 23).
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
+    coefficients, nodes = [], []
+    for (conditional,) in partition.inputs:
+        grid = TensorGrid((conditional,), (3,))
+        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
+        coefficients.append(grid.weights @ (basis * (grid.params - 0.5) ** 2))
+        nodes.append(grid.params[:, 0])
+    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
+    physical = np.concatenate(nodes)
+    where = partition.locate(physical[:, None])
+    germ = partition.distributions[0].to_germ(physical)
+    draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0], 2)
+    assert np.bincount(partition.locate(draws.params), minlength=2).tolist() == [2, 0]
+    values, observed = (physical[:, None] - 0.5) ** 2, (draws.params - 0.5) ** 2
+    found = placed_check(expansion, germ, values, draws.nodes, observed, 1.0)
+    assert found.corrected_mean[0] == pytest.approx(7.0 / 12.0, rel=1e-12)
+    assert found.mean_error[0] < 1e-12
+
+
 def test_the_noise_is_the_spread_times_the_normal_quantile():
     found = HeldOutCheck(*[np.full(1, 0.5)] * 9, count=8, confidence=0.975)
     assert found.noise[0] == pytest.approx(0.5 * 1.959963984540054, rel=1e-12)

@@ -595,11 +595,14 @@ def _unseen_mean_error(
     The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
     (all of them with fewer than ``_SHAPE_LAYERS`` after it), are fitted by a line against p
     and against log p, each extrapolated up to degree ``UNSEEN_DEGREES`` × M, the larger
-    kept, and weighted by the squared error of the rule on each degree."""
+    kept, and weighted by the squared error of the rule on each degree; zeros with fewer than
+    ``_SHAPE_LAYERS`` averages (M < 5: an element without placed runs, whose own three degrees
+    once read flat extrapolated its 4-point rule's errors into a false alarm)."""
     first = coefficients.shape[0]
     last = UNSEEN_DEGREES * first
     rule_errors = rule @ family.evaluate(nodes, last)
-    if first < 4 or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
+    # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
+    if first - 2 < _SHAPE_LAYERS or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
         return np.zeros(coefficients.shape[1:])
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
