@@ -5,9 +5,9 @@ process; the resumes and refusals that follow run :func:`pcmb.cli.main` in this 
 (``tests/cli_process.py``): the journal a killed process left is their subject, not the
 process. The models of this file block instead of sleeping, so that a kill always lands at a
 known point: ``BLOCK_AFTER=K`` in a run's environment makes its model hang (until the run is
-killed) at its (K+1)-th call; a study's first call is its nominal run, so that is after K - 1
-journaled chunks of one node each; ``GATE=path`` makes it wait after the nominal run and the
-first node for as long as ``path`` exists.
+killed) at its (K+1)-th call; a study's nodes come first (its held-out runs and nominal run
+after them, in the same campaign), so that is after K journaled chunks of one node each;
+``GATE=path`` makes it wait after the first two nodes for as long as ``path`` exists.
 """
 
 from __future__ import annotations
