@@ -68,6 +68,7 @@ from pcmb.errors import (
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
+    JoinedJournal,
     PendingRun,
     RunResult,
     chunk_bounds,
@@ -75,6 +76,7 @@ from pcmb.run.executor import (
     join_runs,
     run_in_worker,
     run_nodes,
+    split_runs,
     start_run,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
@@ -758,11 +760,18 @@ class Study:
                     f"continue with --resume, or delete it or {FRESH} (which discards them)"
                 )
             journaling = _Journaling(journal_dir, self._file_digests(facts.loaded_files))
-        early = self._start_nominal(facts, outputs, pool)
+        joined = self._joins_runs(record, streaming is not None)
+        early = None if joined else self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
+        nominal = None
         try:
-            if intrusive:
+            if joined:
+                first = self.held_out_runs(nodes.size, record)[0]
+                runs, journal, checked, nominal = self._run_joined(
+                    nodes, facts, outputs, pool, journaling, progress, record, first
+                )
+            elif intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
                 # held-out runs, which are few and run again on a resume.
                 journal, journaling = None, None
@@ -777,14 +786,17 @@ class Study:
                     )
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size, record)
-            # The workers make the held-out runs while this process fits the expansions and
-            # draws the statistics, which do not need them; not in this process's own thread
-            # (in-process runs), nor beside a nominal run sent after them (a timeout).
+            # Runs joined: made already. Else the workers make the held-out runs while this
+            # process fits the expansions and draws the statistics, which do not need them;
+            # not in this process's own thread (in-process runs), nor beside a nominal run sent
+            # after them (a timeout).
             beside = bool(first) and not (
-                isinstance(pool, InProcessPool) or self.execution.timeout is not None
+                joined or isinstance(pool, InProcessPool) or self.execution.timeout is not None
             )
-            checking = _beside(
-                functools.partial(
+            check = (
+                (lambda: checked)
+                if joined
+                else functools.partial(
                     self._run_held_out,
                     facts,
                     outputs,
@@ -795,15 +807,16 @@ class Study:
                     first,
                     nodes.nodes,
                     None if intrusive else runs.values,
-                ),
-                beside,
+                )
             )
+            checking = _beside(check, beside)
         except PcmbError:
             if early is not None:
                 early.result()  # the nominal run sent ahead ends too: no run is left half done
             raise
         try:
-            nominal = early.result() if early is not None else None
+            if early is not None:
+                nominal = early.result()
             if self.execution.nominal_run and nominal is None:
                 nominal = self._run_nominal(facts, outputs, pool)
             if streaming is not None:
@@ -838,7 +851,7 @@ class Study:
             with contextlib.suppress(BaseException):
                 checking.exception()
             raise
-        with phase(plural(first, "held-out run"), stream if beside else None):
+        with phase(plural(first, "held-out run"), stream if beside or (joined and first) else None):
             held_out, held_out_failed = checking.result()
         if not intrusive:
             held_out = self._with_derived(held_out)
@@ -1060,6 +1073,78 @@ class Study:
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
         return nodes, runs
 
+    def _joins_runs(self, record: Design, streams: bool) -> bool:
+        """Whether the design's runs, its first held-out runs and the nominal run go to the
+        workers as one campaign (:meth:`_run_joined`): all of them known before any node runs
+        (no rounds, no intrusive solve, held-out runs not placed by the element nodes' values),
+        and the runs kept in memory (``streams`` False)."""
+        return not (
+            streams
+            or hasattr(self.design, "more")
+            or hasattr(self.design, "solve")
+            or (self.places_held_out(record) and hasattr(self.design, "partition"))
+        )
+
+    def _run_joined(
+        self,
+        nodes: TensorGrid | NodeSet,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        pool: Pool,
+        journaling: _Journaling | None,
+        progress: bool | None,
+        record: Design,
+        count: int,
+    ) -> tuple[
+        RunResult,
+        Journal | None,
+        tuple[HeldOut | None, tuple[WarningRecord, ...]],
+        RunResult | None,
+    ]:
+        """The design's ``nodes``, its first ``count`` held-out runs and the nominal run (if
+        wanted) as one campaign, so that a chunk may hold runs of all three and the workers
+        make as few model calls as the runs need (a stacked ODE pays its steps per call). Each
+        set is journaled where it would be alone (the nominal run not at all) and judged by
+        the failure policy as it would be, the design's runs first: (design runs, their
+        journal, the held-out check as :meth:`_run_held_out` makes it, the nominal run)."""
+        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
+        # (model parameters, journal) of each set of runs, in order.
+        sets = [(model_params(self.model_inputs, nodes.params), journal)]
+        draws, held_journal = None, None
+        if count and record.basis is not None:
+            draws = self._held_out_draws(record, count, nodes.nodes)
+            if journaling is not None:
+                folder = journaling.folder("validation")
+                held_journal, _ = self._journal(draws.nodes, facts, outputs, folder)
+            sets.append((model_params(self.model_inputs, draws.nodes.params), held_journal))
+        if self.execution.nominal_run:
+            sets.append((self._nominal_node(), None))
+        sizes = [len(next(iter(params.values()))) for params, _ in sets]
+        joined = None
+        if journal is not None:
+            joined = JoinedJournal(
+                [(part, size) for (_, part), size in zip(sets, sizes, strict=True)]
+            )
+        params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
+        try:
+            runs = self._campaign(
+                params, facts, outputs, pool, joined, progress, counted=nodes.size
+            )
+        except (UsageError, ModelDefinitionError):
+            if journal is not None and fresh_journal:
+                journal.remove()  # its held-out runs' folder with it
+            raise
+        design_runs, *others = split_runs(runs, sizes)
+        self._judge_failures(design_runs, journal)
+        checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
+        if draws is not None:
+            found = others.pop(0)
+            if held_journal is not None:
+                held_journal.close()  # the folder goes with the whole journal at the end
+            self._judge_failures(found, held_journal)
+            checked = draws.checked(found)
+        return design_runs, journal, checked, others[0] if others else None
+
     def _run_nodes(
         self,
         nodes: TensorGrid | NodeSet,
@@ -1079,30 +1164,18 @@ class Study:
         ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study)."""
-        journal = None
-        fresh_journal = False
-        if journaling is not None:
-            fresh_journal = not Journal.exists(journaling.directory)
-            widths = Layout.of(outputs, self.times, facts.axes).widths
-            fingerprint = self._fingerprint(nodes, outputs, journaling.files)
-            journal = Journal(journaling.directory, fingerprint, nodes.size, outputs, widths)
+        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
         try:
-            runs = run_nodes(
-                self.model_factory,
+            runs = self._campaign(
                 model_params(self.model_inputs, nodes.params),
-                self.times,
+                facts,
                 outputs,
-                execution=self.execution,
-                address=self.address,
-                chunk_size=chunk_size,
-                retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
-                journal=journal,
-                progress=progress,
-                stop_on_failure=self.execution.on_failure == "abort",
-                pool=pool,
-                facts=facts,
+                pool,
+                journal,
+                progress,
+                chunk_size,
                 proven=proven,
-                keep_values=keep,
+                keep=keep,
             )
         except (UsageError, ModelDefinitionError):
             # Rejected before any node ran, or a model broken at every node: leave nothing
@@ -1110,26 +1183,83 @@ class Study:
             if journal is not None and fresh_journal:
                 journal.remove()
             raise
-        if runs.failures and self.execution.on_failure != "regress":
-            finished = int(np.sum(runs.status == Status.OK))
-            kept = (
-                f"; the {finished} finished node(s) are kept in {journal.directory}"
-                if journal is not None and finished
-                else ""
-            )
-            pending = int(np.sum(runs.status == Status.PENDING))
-            stopped = (
-                f"; stopped at the first failure, {pending} node(s) not run"
-                + (" (--resume runs them)" if journal is not None else "")
-                if pending
-                else ""
-            )
-            raise ModelRunError(
-                runs.failures,
-                f"the model failed at {len(runs.failures)} of {nodes.size} node(s) "
-                f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
-            )
+        self._judge_failures(runs, journal)
         return runs, journal
+
+    def _journal(
+        self,
+        nodes: TensorGrid | NodeSet,
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        journaling: _Journaling | None,
+    ) -> tuple[Journal | None, bool]:
+        """The journal of ``nodes`` by ``journaling`` (``None``: none), and whether it is
+        new."""
+        if journaling is None:
+            return None, False
+        fresh = not Journal.exists(journaling.directory)
+        widths = Layout.of(outputs, self.times, facts.axes).widths
+        fingerprint = self._fingerprint(nodes, outputs, journaling.files)
+        return Journal(journaling.directory, fingerprint, nodes.size, outputs, widths), fresh
+
+    def _campaign(
+        self,
+        params: dict[str, NDArray[np.float64]],
+        facts: ModelFacts,
+        outputs: tuple[str, ...],
+        pool: Pool,
+        journal: Journal | JoinedJournal | None,
+        progress: bool | None,
+        chunk_size: int | None = None,
+        *,
+        proven: bool = False,
+        keep: bool = True,
+        counted: int | None = None,
+    ) -> RunResult:
+        """:func:`~pcmb.run.executor.run_nodes` of the model at ``params`` under the study's
+        execution settings and failure policy (see :meth:`_run_nodes`); the progress line
+        counts the first ``counted`` runs (default: all)."""
+        return run_nodes(
+            self.model_factory,
+            params,
+            self.times,
+            outputs,
+            execution=self.execution,
+            address=self.address,
+            chunk_size=chunk_size,
+            retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
+            journal=journal,
+            progress=progress,
+            stop_on_failure=self.execution.on_failure == "abort",
+            pool=pool,
+            facts=facts,
+            proven=proven,
+            keep_values=keep,
+            counted=counted,
+        )
+
+    def _judge_failures(self, runs: RunResult, journal: Journal | None) -> None:
+        """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on."""
+        if not runs.failures or self.execution.on_failure == "regress":
+            return
+        finished = int(np.sum(runs.status == Status.OK))
+        kept = (
+            f"; the {finished} finished node(s) are kept in {journal.directory}"
+            if journal is not None and finished
+            else ""
+        )
+        pending = int(np.sum(runs.status == Status.PENDING))
+        stopped = (
+            f"; stopped at the first failure, {pending} node(s) not run"
+            + (" (--resume runs them)" if journal is not None else "")
+            if pending
+            else ""
+        )
+        raise ModelRunError(
+            runs.failures,
+            f"the model failed at {len(runs.failures)} of {runs.status.size} node(s) "
+            f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
+        )
 
     def held_out_runs(self, design_runs: int, record: Design | None = None) -> tuple[int, int]:
         """(first batch, most in all) of the held-out runs that check an expansion of
@@ -1188,6 +1318,30 @@ class Study:
         leaves them out)."""
         if not count or record.basis is None:
             return None, ()
+        draws = self._held_out_draws(record, count, design, values, batch)
+        name = "validation" if batch == 0 else f"validation-{batch}"
+        folder = None if journaling is None else journaling.folder(name)
+        # Two chunks, whatever the workers: a few runs do not pay one model call each.
+        halves = self.execution.chunk_size or -(-count // 2)
+        # After the nodes (not after an intrusive solve) the model is known to work.
+        proven = not hasattr(self.design, "solve")
+        found, journal = self._run_nodes(
+            draws.nodes, facts, outputs, pool, folder, progress, halves, proven=proven
+        )
+        if journal is not None:
+            journal.close()  # the folder goes with the whole journal at the end
+        return draws.checked(found)
+
+    def _held_out_draws(
+        self,
+        record: Design,
+        count: int,
+        design: NDArray[np.float64],
+        values: Mapping[str, NDArray[np.float64]] | None = None,
+        batch: int = 0,
+    ) -> _HeldOutDraws:
+        """Where the ``count`` held-out runs of batch ``batch`` go (see :meth:`_run_held_out`),
+        checked finite."""
         seed = self.method.seed + HELD_OUT_SEED + batch
         placed = self.places_held_out(record)
         partition = getattr(self.design, "partition", None)
@@ -1209,27 +1363,7 @@ class Study:
             # statistics against a few runs missing where the error sits.
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
         self._check_finite(draws)
-        name = "validation" if batch == 0 else f"validation-{batch}"
-        folder = None if journaling is None else journaling.folder(name)
-        # Two chunks, whatever the workers: a few runs do not pay one model call each.
-        halves = self.execution.chunk_size or -(-count // 2)
-        # After the nodes (not after an intrusive solve) the model is known to work.
-        proven = not hasattr(self.design, "solve")
-        found, journal = self._run_nodes(
-            draws, facts, outputs, pool, folder, progress, halves, proven=proven
-        )
-        if journal is not None:
-            journal.close()  # the folder goes with the whole journal at the end
-        ok = found.status == Status.OK
-        held_out = HeldOut(seed, draws.nodes, draws.params, found.values, ok, weights, placed)
-        if not found.failures:
-            return held_out, ()
-        failed = WarningRecord(
-            "nodes-failed",
-            f"{len(found.failures)} of {draws.size} held-out run(s) failed and were left out of "
-            f"the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
-        )
-        return held_out, (failed,)
+        return _HeldOutDraws(seed, draws, weights, placed)
 
     def _diagnosed(
         self,
@@ -1362,6 +1496,39 @@ class _Journaling:
     def folder(self, name: str) -> _Journaling:
         """The journaling of a folder of this journal (a round's, the held-out runs')."""
         return dataclasses.replace(self, directory=self.directory / name)
+
+
+@dataclasses.dataclass(frozen=True)
+class _HeldOutDraws:
+    """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
+    ``placed`` or drawn (:meth:`Study._held_out_draws`)."""
+
+    seed: int
+    nodes: NodeSet
+    weights: NDArray[np.float64]
+    placed: bool
+
+    def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
+        """The held-out runs made (``found``), and a ``nodes-failed`` record naming those that
+        failed (``regress`` leaves them out)."""
+        ok = found.status == Status.OK
+        held_out = HeldOut(
+            self.seed,
+            self.nodes.nodes,
+            self.nodes.params,
+            found.values,
+            ok,
+            self.weights,
+            self.placed,
+        )
+        if not found.failures:
+            return held_out, ()
+        failed = WarningRecord(
+            "nodes-failed",
+            f"{len(found.failures)} of {self.nodes.size} held-out run(s) failed and were left out "
+            f"of the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
+        )
+        return held_out, (failed,)
 
 
 def _merged_reports(parts: list[Recovery]) -> DesignReport | None:

@@ -1,7 +1,7 @@
 """Whole-process benchmark of ``pcmb run configs/quarter_car.yaml`` (issue 4).
 
-Three whole processes (imports included), each timed ``--repeat`` times with the shared
-helper :func:`bench_timing.median_seconds`; medians are printed:
+Three whole processes (imports included), each timed ``--repeat`` times; medians are
+printed:
 
 - the main job, ``pcmb run configs/quarter_car.yaml -o OUT.h5 --quiet``;
 - the floor, ``python -c "import numpy, scipy.integrate, h5py"``: what any Python pipeline
@@ -11,7 +11,10 @@ helper :func:`bench_timing.median_seconds`; medians are printed:
   order 5 (216 nodes), one ``solve_ivp`` per node at the same tolerance as pcmb's model
   (DOP853, rtol 1e-8, atol 1e-10), ``fit_quadrature`` and mean/std.
 
-Also: ``pcmb --help`` start-up time against a bare ``python -c pass``.
+Also: ``pcmb --help`` start-up time against a bare ``python -c pass``; and the CPU seconds
+(user + system) of each tree's main job: its own when ``pcmb run`` returns, and its workers',
+those of the whole process and the children it reaped (its workers, at exit) less its own.
+The workers' CPU hardly depends on the load of the machine, the wall does.
 
 The jobs alternate (the machine is shared: the load of the moment hits each of them), after an
 untimed round that fills the bytecode caches; ``--baseline OTHER_TREE`` adds the main job of
@@ -23,10 +26,12 @@ Run: ``python scripts/bench_pipeline.py [--repeat 5] [--baseline OTHER_TREE]``.
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -73,11 +78,34 @@ print(float(mean.max()), float(std.max()))
 """
 
 
-def _process(command: list[str], cwd: Path, tree: Path | None = None) -> Callable[[], object]:
+#: ``pcmb run ARGS`` as ``python -m pcmb.cli`` runs it, then the CPU seconds of the process so
+#: far on the last line of stdout.
+RUN_AND_SAY_CPU = """
+import resource, sys
+from pcmb.cli import main
+code = main(["run", *sys.argv[1:]])
+own = resource.getrusage(resource.RUSAGE_SELF)
+print(own.ru_utime + own.ru_stime)
+sys.exit(code)
+"""
+
+
+def _process(
+    command: list[str], cwd: Path, tree: Path | None = None
+) -> Callable[[], tuple[str, float]]:
     """A call that runs ``command`` as a whole process (failing loudly if it fails), with
-    ``tree`` first on the path."""
+    ``tree`` first on the path: its stdout, and the CPU seconds of the process and of the
+    children it reaped."""
     env = process_env(tree)
-    return lambda: subprocess.run(command, cwd=cwd, env=env, check=True, capture_output=True)
+
+    def run() -> tuple[str, float]:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        done = subprocess.run(command, cwd=cwd, env=env, check=True, capture_output=True, text=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        used = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+        return done.stdout, used
+
+    return run
 
 
 def main() -> None:
@@ -95,15 +123,21 @@ def main() -> None:
         for label, tree in trees.items():
             # Each tree runs its own copy of the config (its models follow its own layout).
             config = tree / "configs" / "quarter_car.yaml"
-            command = [sys.executable, "-m", "pcmb.cli", "run", str(config), "-o", "qc.h5"]
+            command = [sys.executable, "-c", RUN_AND_SAY_CPU, str(config), "-o", "qc.h5"]
             jobs[f"{label}pcmb run"] = _process([*command, "--quiet"], work, tree)
         jobs["chaospy"] = _process([sys.executable, str(baseline)], work)
         for job in jobs.values():  # untimed: fills the bytecode caches
             job()
         times: dict[str, list[float]] = {label: [] for label in jobs}
+        cpu: dict[str, list[list[float]]] = {label: [] for label in jobs}
         for _ in range(args.repeat):  # alternating: the load of the moment hits every job
             for label, job in jobs.items():
-                times[label].append(median_seconds(job, 1))
+                start = time.perf_counter()
+                out, used = job()
+                times[label].append(time.perf_counter() - start)
+                if label.endswith("pcmb run"):
+                    own = float(out.strip().splitlines()[-1])
+                    cpu[label].append([own, used - own])
         help_s = median_seconds(_process([sys.executable, "-m", "pcmb.cli", "--help"], work), 5)
         bare_s = median_seconds(_process([sys.executable, "-c", "pass"], work), 5)
     loads.append(load_average())
@@ -117,10 +151,14 @@ def main() -> None:
         ours = median[f"{label}pcmb run"]
         ratio = ours / floor
         verdict = "meets" if ratio <= TARGET_RATIO else "misses"
+        own, workers = (
+            statistics.median(used) for used in zip(*cpu[f"{label}pcmb run"], strict=True)
+        )
         print(
             f"  {label + 'pcmb run configs/quarter_car.yaml':<58}{ours:7.2f} s  "
             f"{ratio:.2f} x the floor ({verdict} {TARGET_RATIO:g} x), "
-            f"{ours / theirs:.3f} x chaospy (target {CHAOSPY_RATIO:g})"
+            f"{ours / theirs:.3f} x chaospy (target {CHAOSPY_RATIO:g}); "
+            f"CPU {own:.2f} s own, {workers:.2f} s workers"
         )
     print(f"pcmb --help {help_s * 1e3:.0f} ms (bare python {bare_s * 1e3:.0f} ms), median of 5")
 

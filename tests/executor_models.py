@@ -11,6 +11,7 @@ import os
 import signal
 import time
 from collections.abc import Mapping, Sequence
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -95,6 +96,13 @@ class PreferringRamp(Ramp):
     chunk_size = 5
 
 
+class StackedRamp(Ramp):
+    """A ramp that prefers the chunks of the stacked ODE models (128 nodes), whose every call
+    costs its steps whatever the batch."""
+
+    chunk_size = 128
+
+
 class RaisingRamp(Ramp):
     """Raises when a node with ``a`` in ``bad`` is in the batch."""
 
@@ -124,6 +132,22 @@ class FlakyRamp(Ramp):
             self.calls[float(a)] = self.calls.get(float(a), 0) + 1
             if self.calls[float(a)] <= self.failures:
                 raise RuntimeError(f"transient failure {self.calls[float(a)]} at a={float(a)!r}")
+
+
+class SwitchedRamp(Ramp):
+    """Raises for a node with ``a`` in ``bad`` while the file ``switch`` exists; ``RAN`` keeps
+    the parameters (by name, sorted) of every node it was called at in this process."""
+
+    RAN: ClassVar[list[tuple[float, ...]]] = []
+
+    def __init__(self, bad: Sequence[float], switch: str) -> None:
+        self.bad, self.switch = np.asarray(bad, dtype=np.float64), switch
+
+    def check(self, params: Mapping[str, NDArray[np.float64]]) -> None:
+        self.RAN.extend(zip(*(params[name].tolist() for name in sorted(params)), strict=True))
+        hit = params["a"][np.isin(params["a"], self.bad)]
+        if hit.size and os.path.exists(self.switch):
+            raise ValueError(f"a={float(hit[0])!r} is switched off")
 
 
 class NanRamp(Ramp):

@@ -96,13 +96,13 @@ def test_one_held_out_run_leaves_the_verdict_undecided_without_failing():
 
 def test_a_second_batch_is_drawn_only_where_the_first_leaves_the_verdict_undecided():
     times = np.linspace(0.0, 5.0, 101)
-    # Two inputs the response ignores: 125 runs, at most 32 held-out.
+    # Two inputs the response ignores: 125 runs, at most 31 held-out (a quarter, rounded down).
     inputs = {"z": pcmb.Normal(0.0, 1.0), "u": pcmb.Uniform(0.0, 1.0), "v": pcmb.Uniform(0, 1)}
-    assert pcmb.Study(lognormal, inputs, times, order=4).held_out_runs(125) == (8, 32)
+    assert pcmb.Study(lognormal, inputs, times, order=4).held_out_runs(125) == (8, 31)
     # To t = 2 the expansion holds and 8 runs say so.
     assert _run(lognormal, inputs, times[:41], order=4).held_out.ok.size == 8
     # To t = 5 its std fails from t = 3.6: the first 8 leave times undecided, more follow.
-    assert 8 < _run(lognormal, inputs, times, order=4).held_out.ok.size <= 32
+    assert 8 < _run(lognormal, inputs, times, order=4).held_out.ok.size <= 31
 
 
 # -- no run wasted -----------------------------------------------------------------------------
@@ -430,3 +430,9 @@ def test_the_verdict_weighs_the_noise_of_the_larger_estimate():
     found = holdout_error(z, np.sign(z) * np.sqrt(z**2 + 0.44), np.zeros(1), np.ones(1), 1.0)
     assert found.std_error[0] == pytest.approx(0.2, abs=0.01) and found.mean_error[0] < 0.1
     assert found.spread[0] == pytest.approx(found.corrected_std_se[0])
+
+
+@pytest.mark.parametrize("design_runs", [1, 4, 32, 33, 75, 105, 125, 1000])
+def test_the_default_check_makes_at_most_a_quarter_of_the_design_or_eight(design_runs):
+    # Issue 23: "at most max(8, 1/4 of the design's runs)"; 105 runs may not get 27.
+    assert held_out_budget(design_runs) == max(8, design_runs // 4)

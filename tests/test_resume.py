@@ -5,9 +5,9 @@ process; the resumes and refusals that follow run :func:`pcmb.cli.main` in this 
 (``tests/cli_process.py``): the journal a killed process left is their subject, not the
 process. The models of this file block instead of sleeping, so that a kill always lands at a
 known point: ``BLOCK_AFTER=K`` in a run's environment makes its model hang (until the run is
-killed) at its (K+1)-th call; a study's first call is its nominal run, so that is after K - 1
-journaled chunks of one node each; ``GATE=path`` makes it wait after the nominal run and the
-first node for as long as ``path`` exists.
+killed) at its (K+1)-th call; a study's nodes come first (its held-out runs and nominal run
+after them, in the same campaign), so that is after K journaled chunks of one node each;
+``GATE=path`` makes it wait after the first two nodes for as long as ``path`` exists.
 """
 
 from __future__ import annotations
@@ -132,8 +132,8 @@ def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> int:
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
         cwd=folder,
-        # The model's first call is the nominal run (not journaled), then the nodes.
-        env={**os.environ, "BLOCK_AFTER": str(after + 1), **env},
+        # The nodes come first, then the held-out runs and the nominal run (not journaled).
+        env={**os.environ, "BLOCK_AFTER": str(after), **env},
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
@@ -183,9 +183,14 @@ def inspected(path: Path) -> str:
 
 
 def snapshot(directory: Path, *, lock: bool = True) -> dict[str, bytes]:
-    """Every file of a journal and its bytes (without the lock file, if ``lock`` is False:
-    a run that takes over the lock of a killed one writes its own PID there)."""
-    return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if lock or p.name != "lock"}
+    """Every file of a journal, its folders' too (the held-out runs'), and its bytes (without
+    the lock files, if ``lock`` is False: a run that takes over the lock of a killed one
+    writes its own PID there)."""
+    return {
+        str(p.relative_to(directory)): p.read_bytes()
+        for p in sorted(directory.rglob("*"))
+        if p.is_file() and (lock or p.name != "lock")
+    }
 
 
 def output_values(path: Path) -> dict[str, np.ndarray]:
@@ -317,7 +322,9 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
     )
     try:
         deadline = time.monotonic() + 60
-        while not records(folder):  # the first run holds the lock and waits at the gate
+        # The first run journals its first two nodes (the model's first two calls), then
+        # holds the lock and waits at the gate.
+        while len(records(folder)) < 2:
             assert first.poll() is None, first.stderr.read()
             assert time.monotonic() < deadline
             time.sleep(0.01)

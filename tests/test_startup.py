@@ -39,10 +39,15 @@ def _line(params, times):
     return {"y": params["a"] * times + params["b"] ** 2}
 
 
+#: A design with rounds: its held-out runs are made beside the fit.
+_ROUNDS = {"kind": "adaptive", "tolerance": 1e-2, "max_runs": 200}
+
+
 def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
-    """The workers make the held-out runs while the main process fits and draws the
-    statistics: the held-out runs here wait until the fit has begun (on the code before, which
-    ran them first, they waited in vain, for the guard's 20 s)."""
+    """The workers make the held-out runs of a design with rounds (known only after them,
+    so not joined to its runs) while the main process fits and draws the statistics: the
+    held-out runs here wait until the fit has begun (on the code before, which ran them first,
+    they waited in vain, for the guard's 20 s)."""
     fitting = threading.Event()
     seen = []
     run_held_out, recover = Study._run_held_out, Study._recover
@@ -58,7 +63,7 @@ def test_the_held_out_runs_go_on_while_the_expansions_are_fitted(monkeypatch):
     monkeypatch.setattr(Study, "_run_held_out", held_out_after_the_fit_began)
     monkeypatch.setattr(Study, "_recover", recover_and_say_so)
     inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
-    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), order=2, jobs=1)
+    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), method=_ROUNDS, execution={"jobs": 1})
     result = study.run()
     assert seen == [True]
     assert result.held_out is not None and result.held_out.ok.all()
@@ -82,7 +87,7 @@ def test_a_run_that_fails_while_its_held_out_runs_go_on_waits_for_them(monkeypat
     monkeypatch.setattr(Study, "_run_held_out", slow_held_out)
     monkeypatch.setattr(Study, "_recover", broken_fit)
     inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Normal(0.0, 1.0)}
-    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), order=2, jobs=1)
+    study = Study(_line, inputs, np.linspace(0.0, 2.0, 5), method=_ROUNDS, execution={"jobs": 1})
     with pytest.raises(RuntimeError, match="the fit broke"):
         study.run()
     assert ended == [True]

@@ -478,3 +478,67 @@ def test_a_journaled_run_digests_the_models_files_once_for_all_its_journals(tmp_
     result = study.run(tmp_path / "r.h5")
     assert result.design.samples > study.design.nodes().size  # rounds were journaled
     assert len(digested) == 1
+
+
+def test_a_quarter_car_like_study_makes_no_more_model_calls_than_its_workers():
+    """216 design nodes, 8 held-out runs and the nominal run of a model preferring chunks of
+    128 (as the stacked ODE models do) go to 2 workers in 2 calls of 113 and 112 runs, not in
+    5 (128 + 88 nodes, 4 + 4 held-out runs, the nominal run alone): each run says the size of
+    the batch it was part of, so the calls are the sum of 1 / batch size."""
+    from executor_models import StackedRamp
+
+    inputs = {name: pcmb.Uniform(1.0, 3.0) for name in ("a", "b", "c")}
+    study = pcmb.Study(
+        StackedRamp,
+        inputs,
+        TIMES,
+        method={"kind": "collocation", "order": 5},
+        execution={"jobs": 2, "backend": "loky"},
+        outputs=["y", "batch_size"],
+        diagnostics={"outputs": ["y"]},  # the batch sizes vary by node: no chaos of them
+    )
+    result = study.run()
+    sizes = np.concatenate(
+        [
+            result.values["batch_size"][:, 0],
+            result.held_out.values["batch_size"][:, 0],
+            result.nominal["batch_size"][:1],
+        ]
+    )
+    assert sizes.size == 216 + 8 + 1
+    assert round(np.sum(1 / sizes)) <= study.execution.jobs
+    assert sorted(set(sizes)) == [112, 113]
+    assert np.array_equal(result.values["y"][:, -1], 2.0 * result.params[:, 0])
+
+
+def test_a_resumed_study_reruns_only_what_its_joined_campaign_left(tmp_path):
+    """The design's nodes, the held-out runs and the nominal run go in one campaign, each set
+    journaled in its own folder: a run stopped by a failed held-out run (on_failure: abort)
+    resumes with that run, those never started and the nominal run (never journaled) only,
+    and every run keeps its own values (a ramp: y = a t)."""
+    from executor_models import SwitchedRamp
+
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Uniform(0.0, 1.0)}
+    settings = {
+        "method": {"kind": "collocation", "order": 2},
+        "outputs": ["y"],
+        "nominal": {"a": 1.5, "b": 0.25},  # no node's
+        "execution": {"backend": "inprocess", "on_failure": "abort"},
+    }
+    switch = tmp_path / "switch"
+    plain = pcmb.Study(SwitchedRamp, inputs, TIMES, params={"bad": [], "switch": ""}, **settings)
+    held_out = [tuple(row) for row in plain.run().held_out.params.tolist()]
+    switch.touch()
+    params = {"bad": [held_out[3][0]], "switch": str(switch)}
+    study = pcmb.Study(SwitchedRamp, inputs, TIMES, params=params, **settings)
+    SwitchedRamp.RAN.clear()
+    with pytest.raises(ModelRunError, match=r"failed at 1 of 8 node\(s\)"):
+        study.run(tmp_path / "r.h5")
+    never = [row for row in held_out if row not in SwitchedRamp.RAN]
+    switch.unlink()
+    SwitchedRamp.RAN.clear()
+    result = study.run(tmp_path / "r.h5", resume=True)
+    assert sorted(SwitchedRamp.RAN) == sorted([held_out[3], *never, (1.5, 0.25)])
+    assert np.array_equal(result.values["y"], result.params[:, :1] * TIMES)
+    assert np.array_equal(result.held_out.values["y"], result.held_out.params[:, :1] * TIMES)
+    assert np.array_equal(result.nominal["y"], 1.5 * TIMES)

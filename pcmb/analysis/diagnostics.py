@@ -215,8 +215,8 @@ def _rms_over_scale(differences: NDArray[np.float64], scale: float, count: float
 
 def held_out_budget(design_runs: int) -> int:
     """The most held-out runs a check makes by default: ``HELD_OUT_FLOOR`` or
-    ``HELD_OUT_SHARE`` of the design's runs, the larger."""
-    return max(HELD_OUT_FLOOR, math.ceil(HELD_OUT_SHARE * design_runs))
+    ``HELD_OUT_SHARE`` of the design's runs (rounded down: at most that share), the larger."""
+    return max(HELD_OUT_FLOOR, math.floor(HELD_OUT_SHARE * design_runs))
 
 
 def _tail_width(normal_inputs: int) -> float:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import math
 import os
 import sys
@@ -48,6 +49,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Execution",
+    "JoinedJournal",
     "PendingRun",
     "RunResult",
     "chunk_bounds",
@@ -55,6 +57,7 @@ __all__ = [
     "join_runs",
     "run_in_worker",
     "run_nodes",
+    "split_runs",
     "start_run",
 ]
 
@@ -107,6 +110,80 @@ def join_runs(first: RunResult, second: RunResult) -> RunResult:
     )
 
 
+def split_runs(runs: RunResult, sizes: Sequence[int]) -> list[RunResult]:
+    """The runs of ``runs`` cut into parts of ``sizes`` runs, in order (each with its own node
+    indices, counted from 0): :func:`join_runs` undone. Each part keeps the wall time of the
+    whole call; the count of resumed runs goes with the first part."""
+    parts = []
+    for k, (start, stop) in enumerate(itertools.pairwise(np.cumsum([0, *sizes]).tolist())):
+        parts.append(
+            RunResult(
+                values={name: array[start:stop] for name, array in runs.values.items()},
+                status=runs.status[start:stop],
+                failures=tuple(
+                    dataclasses.replace(f, index=f.index - start)
+                    for f in runs.failures
+                    if start <= f.index < stop
+                ),
+                seconds=runs.seconds,
+                resumed=runs.resumed if k == 0 else 0,
+            )
+        )
+    return parts
+
+
+class JoinedJournal:
+    """The journals of runs of different sets joined into one campaign, seen as one journal
+    by :func:`run_nodes`: ``parts`` are (journal, runs) in order; a chunk is recorded in the
+    journal of each part it holds runs of, at that part's own indices. A part without a
+    journal (``None``) is not recorded: it runs again on a resume."""
+
+    def __init__(self, parts: Sequence[tuple[Journal | None, int]]) -> None:
+        self.parts = tuple(parts)
+
+    def _pieces(self) -> list[tuple[Journal, int, int]]:
+        """(journal, first index, end) of each journaled part, in the joined indices."""
+        ends = np.cumsum([0, *(size for _, size in self.parts)]).tolist()
+        return [
+            (journal, start, stop)
+            for (journal, _), start, stop in zip(self.parts, ends, ends[1:], strict=False)
+            if journal is not None
+        ]
+
+    def record(
+        self,
+        indices: NDArray[np.intp],
+        values: Mapping[str, NDArray[np.float64]],
+        status: NDArray[np.int8],
+        messages: Mapping[int, str],
+        tracebacks: Mapping[int, ModelTraceback],
+    ) -> None:
+        """:meth:`Journal.record` of a chunk, in the journal of each part it holds runs of."""
+        for journal, start, stop in self._pieces():
+            mine = (indices >= start) & (indices < stop)
+            if not mine.any():
+                continue
+            journal.record(
+                indices[mine] - start,
+                {name: part[mine] for name, part in values.items()},
+                status[mine],
+                {i - start: text for i, text in messages.items() if start <= i < stop},
+                {i - start: where for i, where in tracebacks.items() if start <= i < stop},
+            )
+
+    def completed(
+        self,
+    ) -> tuple[NDArray[np.int64], dict[str, NDArray[np.float64]], NDArray[np.int8]]:
+        """:meth:`Journal.completed` of every journaled part, at the joined indices."""
+        found = [(start, *journal.completed()) for journal, start, _ in self._pieces()]
+        names = found[0][2]
+        return (
+            np.concatenate([start + indices for start, indices, _, _ in found]),
+            {name: np.concatenate([values[name] for *_, values, _ in found]) for name in names},
+            np.concatenate([status for *_, status in found]),
+        )
+
+
 # -- chunking --------------------------------------------------------------------------------
 
 
@@ -136,6 +213,12 @@ def chunk_bounds(n_nodes: int, chunk_size: int | None = None) -> list[tuple[int,
         raise ValueError(f"n_nodes and chunk_size must be positive, got {n_nodes}, {chunk_size}")
     size = chunk_size or min(MAX_CHUNK_SIZE, max(1, math.ceil(n_nodes / TARGET_CHUNKS)))
     return [(start, min(start + size, n_nodes)) for start in range(0, n_nodes, size)]
+
+
+def _balanced(n_nodes: int, most: int | None) -> int | None:
+    """The chunk size that cuts ``n_nodes`` nodes into as few chunks of at most ``most`` (a
+    model's preference; ``None``: none) as equal as can be: 225 nodes at most 128 -> 113."""
+    return None if most is None else math.ceil(n_nodes / math.ceil(n_nodes / most))
 
 
 # -- tasks -----------------------------------------------------------------------------------
@@ -248,7 +331,7 @@ class _Campaign:
         times: NDArray[np.float64],
         outputs: tuple[str, ...],
         retries: int,
-        journal: Journal | None,
+        journal: Journal | JoinedJournal | None,
         axes: Mapping[str, OutputAxis | None] | None = None,
         proven: bool = False,
         keep_values: bool = True,
@@ -270,8 +353,9 @@ class _Campaign:
         self.proven = proven
         self.resumed = 0
         self.progress: Progress | None = None
+        self.counted = n_nodes  # the first nodes, those the progress line counts
 
-    def resume(self, journal: Journal) -> None:
+    def resume(self, journal: Journal | JoinedJournal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
         if self.keep_values:
             indices, values, status = journal.completed()
@@ -336,8 +420,9 @@ class _Campaign:
         self.broken.update(int(i) for i, b in zip(task.indices, broken, strict=False) if b)
         if self.journal is not None:
             self.journal.record(task.indices, chunk, self.status[task.indices], found, raised)
-        if self.progress is not None:
-            self.progress.advance(task.indices.size)
+        counted = int(np.count_nonzero(task.indices < self.counted))
+        if self.progress is not None and counted:
+            self.progress.advance(counted)
 
     def accept_outcome(self, task: _Task, outcome: Outcome) -> None:
         self.accept(task, outcome.values, outcome.messages, outcome.broken, outcome.tracebacks)
@@ -570,7 +655,12 @@ def _check_outputs(facts: ModelFacts, outputs: Sequence[str]) -> None:
         )
 
 
-def _check_journal(journal: Journal, n_nodes: int, layout: Layout) -> None:
+def _check_journal(journal: Journal | JoinedJournal, n_nodes: int, layout: Layout) -> None:
+    if isinstance(journal, JoinedJournal):
+        for part, size in journal.parts:
+            if part is not None:
+                _check_journal(part, size, layout)
+        return
     found = (journal.n_nodes, tuple(journal.outputs), journal.widths)
     if found != (n_nodes, layout.outputs, layout.widths):
         raise UsageError(
@@ -592,13 +682,14 @@ def run_nodes(
     address: Any = None,
     chunk_size: int | None = None,
     retries: int = 0,
-    journal: Journal | None = None,
+    journal: Journal | JoinedJournal | None = None,
     progress: bool | None = None,
     stop_on_failure: bool = False,
     pool: Pool | None = None,
     facts: ModelFacts | None = None,
     proven: bool = False,
     keep_values: bool = True,
+    counted: int | None = None,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -628,7 +719,8 @@ def run_nodes(
     retries:
         How many more times a failed node is tried before it is reported.
     journal:
-        Persists every finished chunk; its successful nodes are taken instead of being run.
+        Persists every finished chunk; its successful nodes are taken instead of being run. A
+        :class:`JoinedJournal`: the nodes are several sets, each journaled on its own.
     progress:
         Progress line on stderr; default: only when stderr is a terminal.
     stop_on_failure:
@@ -647,6 +739,9 @@ def run_nodes(
     keep_values:
         False: the values go to the ``journal`` only (a streamed study reads them from it
         block by block) and the result's arrays have no rows.
+    counted:
+        The progress line counts the first ``counted`` nodes only (default: all): the others
+        are runs of other sets joined to them (a study's held-out and nominal runs).
 
     Returns
     -------
@@ -690,6 +785,7 @@ def run_nodes(
                 pool=own,
                 proven=proven,
                 keep_values=keep_values,
+                counted=counted,
             )
     if keep_values is False and journal is None:
         raise UsageError("values not kept in memory must go to a journal", source="run_nodes")
@@ -720,12 +816,16 @@ def run_nodes(
     )
     if journal is not None:
         campaign.resume(journal)
-    # A model may prefer a chunk size (model protocol); an explicit one wins. Either way the
-    # boundaries depend on N, the config and the model class only, never on jobs or backend.
-    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or facts.chunk_size))
+    # A model may prefer a chunk size (model protocol: the most per chunk, made as equal as
+    # can be); an explicit one wins. Either way the boundaries depend on N, the config and
+    # the model class only, never on jobs or backend.
+    tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or _balanced(n_nodes, facts.chunk_size)))
     limits = _Limits(timeout, pool.startup_seconds + 2 * facts.build_seconds)
     show = sys.stderr.isatty() if progress is None else progress
-    campaign.progress = Progress(n_nodes, campaign.resumed, sys.stderr if show else None)
+    if counted is not None:
+        campaign.counted = counted
+    reused = int(np.count_nonzero(campaign.status[: campaign.counted] == Status.OK))
+    campaign.progress = Progress(campaign.counted, reused, sys.stderr if show else None)
     try:
         _run_pooled(campaign, pool, tasks, limits, stop_on_failure)
     finally:
