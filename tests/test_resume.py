@@ -6,7 +6,8 @@ process; the resumes and refusals that follow run :func:`pcmb.cli.main` in this 
 process. The models of this file block instead of sleeping, so that a kill always lands at a
 known point: ``BLOCK_AFTER=K`` in a run's environment makes its model hang (until the run is
 killed) at its (K+1)-th call; a study's nodes come first (its held-out runs and nominal run
-after them, in the same campaign), so that is after K journaled chunks of one node each;
+after them, in the same campaign), so that is after K journaled chunks of one node each; a
+design with rounds sends its nominal run ahead of them (``run_and_kill(nominal_first=True)``);
 ``GATE=path`` makes it wait after the first two nodes for as long as ``path`` exists.
 """
 
@@ -125,15 +126,18 @@ def records(folder: Path) -> list[Path]:
     return sorted((folder / "out.h5.journal").rglob("record-*.npz"))
 
 
-def run_and_kill(folder: Path, *args: str, after: int, **env: str) -> int:
+def run_and_kill(
+    folder: Path, *args: str, after: int, nominal_first: bool = False, **env: str
+) -> int:
     """Start ``pcmb run`` blocking after ``after`` more nodes, wait for them, SIGKILL its
-    process group; its pid."""
+    process group; its pid. ``nominal_first``: the model's first call is the nominal run (a
+    design with rounds sends it ahead of the nodes; it is not journaled)."""
     wanted = len(records(folder)) + after
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
         cwd=folder,
         # The nodes come first, then the held-out runs and the nominal run (not journaled).
-        env={**os.environ, "BLOCK_AFTER": str(after), **env},
+        env={**os.environ, "BLOCK_AFTER": str(after + nominal_first), **env},
         stderr=subprocess.PIPE,
         start_new_session=True,
     )

@@ -268,10 +268,12 @@ def test_a_run_killed_between_and_inside_rounds_resumes_to_the_same_result(tmp_p
             '{"y": 1.0 / (1.0 + params["a"] * times + params["b"] ** 2)}',
         )
     )
-    run_and_kill(tmp_path, after=16)  # round 0 journaled, killed at round 1's first node
+    run_and_kill(
+        tmp_path, after=16, nominal_first=True
+    )  # round 0 journaled, killed at round 1's first node
     journal = tmp_path / "out.h5.journal"
     assert len(list(journal.glob("record-*.npz"))) == 16
-    run_and_kill(tmp_path, "--resume", after=3)  # 3 nodes of round 1 journaled
+    run_and_kill(tmp_path, "--resume", after=3, nominal_first=True)  # 3 nodes of round 1 journaled
     assert len(list((journal / "round-1").glob("record-*.npz"))) == 3
     first, second = resume_and_rerun(tmp_path)
     assert first.n_nodes == second.n_nodes > 32 and first.design == second.design
