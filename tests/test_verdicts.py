@@ -635,3 +635,32 @@ def test_a_kink_whose_few_coefficients_look_geometric_is_told_to_use_elements():
     assert "fall geometrically" in remedy  # what the coefficients alone say
     assert remedy.startswith("multi-element chaos along x (method.elements)")
     assert "sits inside the range of x" in remedy
+
+
+@pcmb.batched(outputs=("y",))
+def first_input_ramp(params, times):
+    """k0 t: exact at order 1; k1 and k2 do nothing."""
+    return {"y": np.outer(params["k0"], times)}
+
+
+def test_a_pdf_past_the_runs_outside_the_nodes_box_blames_the_surrogate_not_the_kernel():
+    # Order 2's nodes span k0 in [0.113, 0.887]; the 28 runs made reach 0.887 at t = 1, and
+    # the exact surrogate's draws with k0 > 0.926 (7.4 % of them, all outside the nodes'
+    # box) lie past 0.887 + 5 % of the range: a correct PDF, noted because no run checks it
+    # there; its kernel (a bandwidth of about 0.004) smears nothing of that.
+    from pcmb.analysis.statistics import AnalysisSettings
+
+    study = pcmb.Study(
+        first_input_ramp,
+        {name: pcmb.Uniform(0.0, 1.0) for name in ("k0", "k1", "k2")},
+        np.linspace(0.0, 1.0, 11),
+        method={"kind": "collocation", "order": 2, "validation": 0},
+        execution={"backend": "inprocess"},
+        analysis=AnalysisSettings(psd=(), pdf_times=(1.0,)),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        result = study.run()
+    (record,) = [w for w in result.warnings if w.code == "pdf-outside-runs"]
+    assert "kernel" not in record.message
+    assert "outside the box the design's nodes span" in record.message

@@ -43,6 +43,7 @@ the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -878,7 +879,8 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
     made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range. The mass
     is the stored density's (its kernel may smear the draws past a hard bound) or, where
     larger, the share of the surrogate's draws inside the box the design's nodes span
-    (:func:`out_of_range`)."""
+    (:func:`out_of_range`); the record names the cause: the surrogate inside that box, its
+    draws from outside it, or the kernel."""
     analysis, ok = result.analysis, result.ok
     if analysis is None or not ok.any():
         return ()
@@ -897,6 +899,12 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         drawn = _outside_sides(
             expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
         )
+        # The draws from the whole input space, only where a record needs its cause.
+        anywhere = functools.cache(
+            functools.partial(
+                _outside_sides, expansion, made, RANGE_DRAWS, RANGE_SEED, None, PDF_MARGIN
+            )
+        )
         floor, ceiling = _far_bounds(made, PDF_MARGIN)
         allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
@@ -907,11 +915,16 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                 stored = _table_mass_beyond(pdf.value[row], pdf.density[row], floor[k], ceiling[k])
             if max(stored.max(), drawn[:, k].max()) <= allowed:
                 continue
-            cause = (
-                "the surrogate overshoots (see its held-out error)"
-                if drawn[:, k].max() > allowed
-                else f"its kernel (bandwidth {pdf.bandwidth[row]:.3g}) smears the draws past them"
-            )
+            if drawn[:, k].max() > allowed:
+                cause = "the surrogate overshoots (see its held-out error)"
+            elif 2 * anywhere()[:, k].sum() >= stored.sum():
+                cause = (
+                    "the surrogate's draws go there from outside the box the design's nodes "
+                    "span, where it extrapolates and no run checks it"
+                )
+            else:
+                smears = f"its kernel (bandwidth {pdf.bandwidth[row]:.3g}) smears"
+                cause = f"{smears} the draws past them"
             records.append(
                 WarningRecord(
                     "pdf-outside-runs",
