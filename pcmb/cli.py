@@ -202,7 +202,7 @@ def _summary(config, address: str | None = None) -> str:
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
     budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    first, most = study.held_out_runs(nodes.size, design) if design.basis is not None else (0, 0)
+    first, most = study.held_out_runs(nodes.size) if design.basis is not None else (0, 0)
     upto = f"{first} to {most}" if most > first else f"{most}"
     checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(
@@ -213,18 +213,18 @@ def _summary(config, address: str | None = None) -> str:
     where = "relative to the current directory; model files resolve against the config's folder"
     lines.append(f"output   {config.output or '(none: give -o)'} ({where})")
     lines.append(_space_line(study, nodes.size, outputs, config.output))
-    lines.append(_memory_line(study, nodes.size, outputs, config.output, design))
+    lines.append(_memory_line(study, nodes.size, outputs, config.output))
     return "\n".join(lines)
 
 
-def _memory_line(study, n_nodes: int, outputs, output: str | None, record) -> str:
-    """The ``memory`` line of the summary (``record``: the design's); checks that the run
-    fits or streams (raises UsageError)."""
+def _memory_line(study, n_nodes: int, outputs, output: str | None) -> str:
+    """The ``memory`` line of the summary; checks that the run fits or streams (raises
+    UsageError)."""
     from pcmb.run.memory import check_memory
     from pcmb.run.output import format_bytes
 
-    estimate = study.memory_estimate(n_nodes, outputs, record=record)
-    streams = study.why_not_streamed(output, record)
+    estimate = study.memory_estimate(n_nodes, outputs)
+    streams = study.why_not_streamed(output)
     available, plan = check_memory(
         estimate, study.memory, inputs=len(study.inputs), streams=streams
     )

@@ -567,18 +567,16 @@ class Study:
         n_nodes: int,
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
-        record: Design | None = None,
     ) -> MemoryEstimate:
         """Upper estimate of the memory a run needs (:mod:`pcmb.run.memory`): ``n_nodes``
         nodes (an adaptive design: its budget is counted), the held-out runs and the range
         check's draws of a method with an expansion, every output (the derived ones too) as
-        wide as the widest (``record``: the design's record, if at hand)."""
+        wide as the widest."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
-        record = record or self.design.record()
-        chaos = record.basis is not None
+        chaos = self.design.record().basis is not None
         return MemoryEstimate(
             nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.held_out_runs(n_nodes, record)[1] if chaos else 0,
+            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
             draws=RANGE_DRAWS if chaos else 0,
@@ -737,10 +735,10 @@ class Study:
         # an output that cannot be written (a folder, a read-only or full file system) are
         # found now.
         _, streaming = check_memory(
-            self.memory_estimate(nodes.size, outputs, facts.axes, record),
+            self.memory_estimate(nodes.size, outputs, facts.axes),
             self.memory,
             inputs=len(self.inputs),
-            streams=self.why_not_streamed(output, record),
+            streams=self.why_not_streamed(output),
         )
         journaling = None
         if output is not None:
@@ -767,7 +765,7 @@ class Study:
         nominal = None
         try:
             if joined:
-                first = self.held_out_runs(nodes.size, record)[0]
+                first = self.held_out_runs(nodes.size)[0]
                 runs, journal, checked, nominal = self._run_joined(
                     nodes, facts, outputs, pool, journaling, progress, record, first
                 )
@@ -785,7 +783,7 @@ class Study:
                         nodes, runs, facts, outputs, pool, journaling, progress
                     )
                     record = self.design.record()  # with the runs the rounds made
-            first, most = self.held_out_runs(nodes.size, record)
+            first, most = self.held_out_runs(nodes.size)
             # Runs joined: made already. Else the workers make the held-out runs while this
             # process fits the expansions and draws the statistics, which do not need them;
             # not in this process's own thread (in-process runs), nor beside a nominal run sent
@@ -889,13 +887,11 @@ class Study:
             warnings.warn(str(alert), PcmbWarning, stacklevel=3)
         return result
 
-    def why_not_streamed(
-        self, output: str | Path | None, record: Design | None = None
-    ) -> str | None:
+    def why_not_streamed(self, output: str | Path | None) -> str | None:
         """Why this study cannot stream its runs (``None``: it can): only a sampling design
         without a fit, writing a file, without derived outputs, has statistics that
-        accumulate run by run (``record``: the design's record, if at hand)."""
-        design = record or self.design.record()
+        accumulate run by run."""
+        design = self.design.record()
         if design.grid != "random" or design.basis is not None:
             fit = "" if design.grid != "random" else " with fit: regression"
             return f"method.kind {design.kind}{fit} needs every run at once"
@@ -1082,7 +1078,7 @@ class Study:
             streams
             or hasattr(self.design, "more")
             or hasattr(self.design, "solve")
-            or (self.places_held_out(record) and hasattr(self.design, "partition"))
+            or (self.places_held_out() and hasattr(self.design, "partition"))
         )
 
     def _run_joined(
@@ -1261,26 +1257,25 @@ class Study:
             f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
         )
 
-    def held_out_runs(self, design_runs: int, record: Design | None = None) -> tuple[int, int]:
+    def held_out_runs(self, design_runs: int) -> tuple[int, int]:
         """(first batch, most in all) of the held-out runs that check an expansion of
         ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
         at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
         in all, the rest drawn only where the verdict is undecided; placed runs
         (:meth:`places_held_out`) all at once, as half of them can call a wrong result
-        reliable (the double well at order 7 with 4). ``record``: the design's record, if at
-        hand."""
+        reliable (the double well at order 7 with 4)."""
         most = self._held_out_most(design_runs)
-        if self.method.validation is not None or self.places_held_out(record):
+        if self.method.validation is not None or self.places_held_out():
             return most, most
         return min(FIRST_BATCH, most), most
 
-    def places_held_out(self, record: Design | None = None) -> bool:
+    def places_held_out(self) -> bool:
         """Whether the held-out runs are placed to extend the design's nodes
         (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
         input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
         elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
-        wastes the few runs (``record``: the design's record, if at hand)."""
-        grid = (record or self.design.record()).grid
+        wastes the few runs."""
+        grid = self.design.record().grid
         if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
             return False
         if grid != "element-gauss":
@@ -1343,7 +1338,7 @@ class Study:
         """Where the ``count`` held-out runs of batch ``batch`` go (see :meth:`_run_held_out`),
         checked finite."""
         seed = self.method.seed + HELD_OUT_SEED + batch
-        placed = self.places_held_out(record)
+        placed = self.places_held_out()
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).

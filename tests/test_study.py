@@ -419,29 +419,6 @@ def test_a_configs_source_is_given_at_construction_and_kept_by_replace():
     assert plain.fingerprint(nodes, ["x1"]).digest != study.fingerprint(nodes, ["x1"]).digest
 
 
-@pytest.mark.parametrize(
-    ("method", "records"),
-    [
-        # Before the runs (what the design is), after the recovery (what the result stores:
-        # a sparse regression records there the runs it fitted).
-        ({"kind": "collocation", "order": 3}, 2),
-        # And after the rounds, which change an adaptive design's record.
-        ({"kind": "adaptive", "tolerance": 1e-3, "max_runs": 60}, 3),
-        ({"kind": "regression", "samples": 16, "order": 3, "tolerance": 1e-3}, 3),
-    ],
-)
-def test_a_run_asks_its_design_for_its_record_once_per_state(method, records, monkeypatch):
-    study = pcmb.Study(pointwise, INPUTS, TIMES, method=method, execution={"backend": "inprocess"})
-    asked = []
-    real = type(study.design).record
-    monkeypatch.setattr(
-        type(study.design), "record", lambda design: asked.append(1) or real(design)
-    )
-    result = study.run()
-    assert len(asked) == records
-    assert result.design == study.design.record()  # the runs its rounds and fits made
-
-
 def test_a_run_makes_and_checks_its_nodes_once(monkeypatch):
     """The design's nodes are made once and checked for overflow once; the held-out runs'
     nodes once too."""
