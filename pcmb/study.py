@@ -15,7 +15,7 @@ import threading
 import time
 import typing
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
@@ -1122,14 +1122,10 @@ class Study:
                 [(part, size) for (_, part), size in zip(sets, sizes, strict=True)]
             )
         params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
-        try:
+        with _removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
             runs = self._campaign(
                 params, facts, outputs, pool, joined, progress, counted=nodes.size
             )
-        except (UsageError, ModelDefinitionError):
-            if journal is not None and fresh_journal:
-                journal.remove()  # its held-out runs' folder with it
-            raise
         design_runs, *others = split_runs(runs, sizes)
         self._judge_failures(design_runs, journal)
         checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
@@ -1161,7 +1157,7 @@ class Study:
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study)."""
         journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
-        try:
+        with _removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
                 model_params(self.model_inputs, nodes.params),
                 facts,
@@ -1173,12 +1169,6 @@ class Study:
                 proven=proven,
                 keep=keep,
             )
-        except (UsageError, ModelDefinitionError):
-            # Rejected before any node ran, or a model broken at every node: leave nothing
-            # behind (a journal would block a rerun).
-            if journal is not None and fresh_journal:
-                journal.remove()
-            raise
         self._judge_failures(runs, journal)
         return runs, journal
 
@@ -1491,6 +1481,18 @@ class _Journaling:
     def folder(self, name: str) -> _Journaling:
         """The journaling of a folder of this journal (a round's, the held-out runs')."""
         return dataclasses.replace(self, directory=self.directory / name)
+
+
+@contextlib.contextmanager
+def _removed_if_rejected(journal: Journal | None, fresh: bool) -> Iterator[None]:
+    """Remove a ``fresh`` journal when its campaign is rejected before any node ran, or the
+    model is broken at every node: leave nothing behind (a journal would block a rerun)."""
+    try:
+        yield
+    except (UsageError, ModelDefinitionError):
+        if journal is not None and fresh:
+            journal.remove()
+        raise
 
 
 @dataclasses.dataclass(frozen=True)
