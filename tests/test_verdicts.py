@@ -637,22 +637,17 @@ def test_a_kink_whose_few_coefficients_look_geometric_is_told_to_use_elements():
     assert "sits inside the range of x" in remedy
 
 
-@pcmb.batched(outputs=("y",))
-def first_input_ramp(params, times):
-    """k0 t: exact at order 1; k1 and k2 do nothing."""
-    return {"y": np.outer(params["k0"], times)}
-
-
 def test_a_pdf_past_the_runs_outside_the_nodes_box_blames_the_surrogate_not_the_kernel():
-    # Order 2's nodes span k0 in [0.113, 0.887]; the 28 runs made reach 0.887 at t = 1, and
-    # the exact surrogate's draws with k0 > 0.926 (7.4 % of them, all outside the nodes'
-    # box) lie past 0.887 + 5 % of the range: a correct PDF, noted because no run checks it
-    # there; its kernel (a bandwidth of about 0.004) smears nothing of that.
+    # y = k t with two inputs it ignores: order 2's nodes span k in [0.113, 0.887]; the 28
+    # runs made reach 0.887 at t = 1, and the exact surrogate's draws with k > 0.926 (7.4 %
+    # of them, all outside the nodes' box) lie past 0.887 + 5 % of the range: a correct PDF,
+    # noted because no run checks it there; its kernel (a bandwidth of about 0.004) smears
+    # nothing of that.
     from pcmb.analysis.statistics import AnalysisSettings
 
     study = pcmb.Study(
-        first_input_ramp,
-        {name: pcmb.Uniform(0.0, 1.0) for name in ("k0", "k1", "k2")},
+        ramp,
+        {name: pcmb.Uniform(0.0, 1.0) for name in ("k", "u", "v")},
         np.linspace(0.0, 1.0, 11),
         method={"kind": "collocation", "order": 2, "validation": 0},
         execution={"backend": "inprocess"},
