@@ -398,6 +398,10 @@ def test_auto_stops_on_the_error_diagnostics_tolerance_names(case):
         ("kink", 5, 1e-3),  # 0.073x: stopped with the true error 6x the tolerance
         ("kink", 3, 1e-1),  # 96x careful: split on past the tolerance
         ("lognormal", 2, 1e-2),  # 130x careful: at order 2 the linear layer read as tail
+        # Before the check at the split elements' nodes: 0.032x, stopped at 3 elements with a
+        # true error 3.7x the tolerance (the element [-0.125, 0.125], odd about the jump, has
+        # no degree-2 term: its one ratio read a parity as a fast decay).
+        ("double well", 2, 1e-2),
     ],
 )
 def test_auto_ends_with_an_estimate_within_10x_of_the_true_error(case, order, tolerance):

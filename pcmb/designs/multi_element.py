@@ -158,7 +158,8 @@ class MultiElementCollocation:
         germs."""
         self.exhausted, self.estimate, self._fit = False, math.nan, "projection"
         self.factors, self._splits = np.full(self.start.size, np.nan), []
-        self.floors = np.zeros(self.start.size)
+        self.floors: dict[str, NDArray[np.float64]] = {}
+        self.node_weights = np.zeros(0)
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
@@ -168,6 +169,9 @@ class MultiElementCollocation:
         self.grids = tuple(TensorGrid(inputs, self.orders) for inputs in partition.inputs)
         grids = [self.grids[e] for e in new]
         self.node_elements = np.concatenate([kept, np.repeat(new, [g.size for g in grids])])
+        self.node_weights = np.concatenate(
+            [self.node_weights, *(partition.probability[e] * self.grids[e].weights for e in new)]
+        )
         params = np.concatenate([grid.params for grid in grids])
         germ = np.column_stack([d.to_germ(params[:, k]) for k, d in enumerate(self.distributions)])
         return NodeSet(self.distributions, germ, params)
@@ -186,8 +190,9 @@ class MultiElementCollocation:
             return None
         coefficients, _ = self._coefficients(values, ok)
         self._check_splits(coefficients)
+        missed = self._missed(coefficients, nodes, values, ok)
         errors = element_errors(
-            self.partition, coefficients, self.multi_index, self.factors, self.floors
+            self.partition, coefficients, self.multi_index, self.factors, self.floors, missed
         )
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
@@ -212,7 +217,7 @@ class MultiElementCollocation:
         self.exhausted = refused and not chosen
         if not chosen:
             return None
-        parents = self._parent_statistics(coefficients)
+        parents = self._parent_statistics(coefficients, missed)
         # Children replace their parent in place; the others keep their nodes.
         bounds, renumber, children = [], np.full(self.partition.size, -1), []
         for e in range(self.partition.size):
@@ -226,22 +231,31 @@ class MultiElementCollocation:
                 renumber[e] = len(bounds)
                 bounds.append(self.partition.bounds[e])
         kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
-        factors, floors = np.full(len(bounds), np.nan), np.zeros(len(bounds))
+        factors = np.full(len(bounds), np.nan)
         factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
-        floors[renumber[renumber >= 0]] = self.floors[renumber >= 0]
-        for family, parent in self._splits:
-            floors[family] = parent.decay / 4
+        floors = {
+            name: np.zeros((len(bounds), *decay.shape)) for name, decay in parents[0].decay.items()
+        }
+        for name, floor in floors.items():
+            if name in self.floors:
+                floor[renumber[renumber >= 0]] = self.floors[name][renumber >= 0]
+            for family, parent in self._splits:
+                floor[family] = parent.decay[name] / 4
         self.factors, self.floors = factors, floors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
 
-    def _parent_statistics(self, coefficients: Mapping[str, NDArray[np.float64]]) -> list[_Parent]:
+    def _parent_statistics(
+        self,
+        coefficients: Mapping[str, NDArray[np.float64]],
+        missed: Mapping[str, NDArray[np.float64]],
+    ) -> list[_Parent]:
         """Every element as the parent :meth:`_check_splits` compares its children with."""
         size = self.partition.size
-        parents = [_Parent({}, 0.0) for _ in range(size)]
+        parents = [_Parent({}, {}) for _ in range(size)]
         for name, c in coefficients.items():
             flat = c.reshape(*c.shape[:2], -1)
             errors = element_errors(
-                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors
+                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors, missed
             )
             if not errors.mean:
                 continue
@@ -250,7 +264,7 @@ class MultiElementCollocation:
             for e, parent in enumerate(parents):
                 model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
                 parent.outputs[name] = (moments[0][e], moments[1][e], model)
-                parent.decay = max(parent.decay, errors.decay[e])
+                parent.decay[name] = errors.decay[0][e]
         return parents
 
     def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
@@ -272,6 +286,31 @@ class MultiElementCollocation:
                     factor = max(factor, float(np.nanmax(shown) / np.max(model)))
             self.factors[children] = factor
         self._splits = []
+
+    def _missed(
+        self,
+        coefficients: Mapping[str, NDArray[np.float64]],
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> dict[str, NDArray[np.float64]]:
+        """Output name -> (E, ...) the mean square by which every element's expansion misses
+        the runs at the nodes of split elements inside it, weighted by their split elements'
+        quadrature (0 where there are none): runs its fit did not use."""
+        retired = (self.node_elements < 0) & ok
+        theta = nodes.params[retired]
+        inside = self.partition.locate(theta)[None, :] == np.arange(self.partition.size)[:, None]
+        inside = inside * self.node_weights[retired]
+        count = np.where(inside.any(axis=1), inside.sum(axis=1), 1.0)
+        missed = {}
+        for name, c in coefficients.items():
+            miss = values[name][retired] - PiecewiseExpansion(self.partition, c, self.multi_index)(
+                theta
+            )
+            missed[name] = np.tensordot(inside, miss**2, axes=1) / count.reshape(
+                -1, *[1] * (miss.ndim - 1)
+            )
+        return missed
 
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
         """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
@@ -326,7 +365,8 @@ class MultiElementCollocation:
                 )
             )
         if self.tolerance is not None:
-            warnings += self._decay_warnings(expansions)
+            missed = self._missed(coefficients, nodes, values, ok)
+            warnings += self._decay_warnings(expansions, missed)
         warnings += statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
 
@@ -369,7 +409,11 @@ class MultiElementCollocation:
             ]
         return coefficients, warnings
 
-    def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
+    def _decay_warnings(
+        self,
+        expansions: Mapping[str, PiecewiseExpansion],
+        missed: Mapping[str, NDArray[np.float64]],
+    ) -> list[WarningRecord]:
         """``element-decay`` for every output whose estimated error (:func:`element_errors`)
         is above the tolerance; sets :attr:`estimate` to the largest over outputs."""
         records, self.estimate = [], 0.0
@@ -380,6 +424,7 @@ class MultiElementCollocation:
                 self.multi_index,
                 self.factors,
                 self.floors,
+                missed,
             )
             estimate, each = errors.estimate(), errors.of_each()
             self.estimate = max(self.estimate, estimate)
@@ -404,10 +449,10 @@ class MultiElementCollocation:
 class _Parent:
     """An element as split: per output name its P_e μ_e, P_e E_e[y²] and the errors of the
     mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, in the
-    output's units, (P,) each; and its checked decay, the largest over outputs and times."""
+    output's units, and its checked decay per degree, (P,) each."""
 
     outputs: dict[str, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]
-    decay: float
+    decay: dict[str, NDArray[np.float64]]
 
 
 def _moments(
@@ -445,14 +490,13 @@ class TailErrors:
     along:
         (E, n) each element's tail energy along each input, at its worst output and time.
     decay:
-        (E,) each element's decay per degree as read (before ``floors``), the largest over
-        outputs and times.
+        Per output, (E, P) each element's decay per degree as read (before ``floors``).
     """
 
     mean: tuple[NDArray[np.float64], ...]
     std: tuple[NDArray[np.float64], ...]
     along: NDArray[np.float64]
-    decay: NDArray[np.float64]
+    decay: tuple[NDArray[np.float64], ...]
 
     def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
         """The estimated error of the mean and std, the largest over outputs and times, from
@@ -493,7 +537,8 @@ def element_errors(
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
     factors: NDArray[np.float64] | None = None,
-    floors: NDArray[np.float64] | None = None,
+    floors: Mapping[str, NDArray[np.float64]] | None = None,
+    missed: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> TailErrors:
     """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
 
@@ -507,10 +552,15 @@ def element_errors(
     - an element whose parent's split measured what this model missed on it (``factors``
       f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
       the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
-      its parent's: faster is a parity, not a decay), T the energy of the outer layer, of
-      degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
+      its parent's at the same time: faster is a parity, not a decay), T the energy of the
+      outer layer, of degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
       √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
       not integrate.
+
+    M is at least ``missed``, the mean square by which the element's expansion misses the runs
+    of its split ancestors inside it: what one ratio cannot tell (at order 2, an element odd
+    about a jump has no degree-2 term, and reads a parity as a fast decay), runs it did not fit
+    measure.
 
     With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
     unknown), std error Σ_e P_e M_e / (2σ).
@@ -526,7 +576,10 @@ def element_errors(
     factors:
         (E,) each element's factor f, NaN where no split checked it.
     floors:
-        (E,) each element's least decay per degree (default 0).
+        Output name -> (E, ...) each element's least decay per degree (default 0).
+    missed:
+        Output name -> (E, ...) each element's mean square miss at runs it did not fit, in the
+        output's units squared (default 0).
     """
     tails = _tails(multi_index)
     two = tails.any(axis=0)
@@ -538,10 +591,9 @@ def element_errors(
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
     checked = np.isfinite(factors)[:, None]
-    floors = np.zeros(size) if floors is None else floors
-    decays = np.zeros(size)
-    means, stds, along = [], [], np.zeros((size, n))
-    for c in coefficients.values():
+    floors = {} if floors is None else floors
+    means, stds, decays, along = [], [], [], np.zeros((size, n))
+    for name, c in coefficients.items():
         flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
         sigma = PiecewiseExpansion(partition, flat, multi_index).std()
         scale = float(np.max(sigma[np.isfinite(sigma)], initial=0.0))
@@ -556,11 +608,13 @@ def element_errors(
         fall = _decay(last, previous)
         if third.any():  # order 2 has one ratio
             fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
-        decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
-        fall = np.fmax(fall, floors[:, None])
+        decays.append(fall)
+        fall = np.fmax(fall, floors[name].reshape(size, -1) if name in floors else 0.0)
         last = np.fmax(last, previous * fall)
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
         missing = np.where(checked, factor * last * fall / (1 - fall), missing)
+        if missed is not None and name in missed:
+            missing = np.fmax(missing, missed[name].reshape(size, -1) / scale**2)
         aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
         weight = partition.probability[:, None]
         means.append(weight * aliased)
@@ -570,7 +624,7 @@ def element_errors(
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         larger = energy.sum(axis=1) > along.sum(axis=1)
         along = np.where(larger[:, None], energy, along)
-    return TailErrors(tuple(means), tuple(stds), along, decays)
+    return TailErrors(tuple(means), tuple(stds), along, tuple(decays))
 
 
 @dataclass(frozen=True)
