@@ -58,6 +58,9 @@ __all__ = ["ElementReport", "MultiElementCollocation", "TailErrors", "element_er
 #: (:func:`element_errors`; at it, the energy beyond the tail is taken to be the tail's own: no
 #: decay seen).
 DECAY_CAP = 0.5
+#: A degree layer whose energy is below this fraction squared of its element's mean square is
+#: round-off (as a parity's zeros are): it reads no decay.
+_ROUND_OFF = 1e-12
 
 
 class MultiElementCollocation:
@@ -546,9 +549,11 @@ def element_errors(
     a coefficient of energy A_e, both continued geometrically from its tail:
 
     - an element no split has checked (``factors`` NaN, the default): T the energy of the
-      outer two degree layers, ρ its ratio to the two layers before (at most
-      :data:`DECAY_CAP`), M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the decay carried two
-      layers only, since a kink's first degrees mimic a fast one;
+      outer two degree layers, ρ the decay per two degrees, the slower of the two parities'
+      (each its outer layer over the one two degrees before; a parity with no layer before,
+      the even one at order 3 and both at order 2, the two outer layers over the two before,
+      per layer), at most :data:`DECAY_CAP`; M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the
+      decay carried two layers only, since a kink's first degrees mimic a fast one;
     - an element whose parent's split measured what this model missed on it (``factors``
       f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
       the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
@@ -583,10 +588,10 @@ def element_errors(
     """
     tails = _tails(multi_index)
     two = tails.any(axis=0)
-    two_before = tail_terms(multi_index, 4, lowest=1) & ~two
     outer = tail_terms(multi_index, 1, lowest=1)
     second = tail_terms(multi_index, 2, lowest=1) & ~outer
     third = tail_terms(multi_index, 3, lowest=1) & ~outer & ~second
+    fourth = tail_terms(multi_index, 4, lowest=1) & ~outer & ~second & ~third
     degree = int(multi_index.sum(axis=1)[outer].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
@@ -601,10 +606,21 @@ def element_errors(
             continue
         squares = (flat / scale) ** 2
         tail = squares[:, two].sum(axis=1)
-        decay = _decay(tail, squares[:, two_before].sum(axis=1))
+        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
+        # Each parity's decay per two degrees, its outer layer over the one two degrees before
+        # (round-off reads as nothing); a parity with no layer before (the even one at order 3,
+        # both at order 2) reads the outer two layers over the two before, per layer.
+        noise = _ROUND_OFF**2 * squares.sum(axis=1)
+        before = squares[:, third].sum(axis=1), squares[:, fourth].sum(axis=1)
+        layer = [np.where(e > noise, e, 0.0) for e in (last, previous, *before)]
+        block = _decay(tail / 2, (layer[2] + layer[3]) / max(third.any() + fourth.any(), 1))
+        decay = np.zeros_like(tail)
+        for upper, lower, readable in ((0, 2, third.any()), (1, 3, fourth.any())):
+            read = _decay(layer[upper], layer[lower]) if readable else block
+            decay = np.fmax(decay, np.where(layer[upper] > 0, read, 0.0))
+        decay = np.where(np.isfinite(tail), decay, np.nan)
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
-        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
         fall = _decay(last, previous)
         if third.any():  # order 2 has one ratio
             fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
