@@ -12,8 +12,9 @@
 ``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
 std relative to the output's largest std, as estimated from the elements' tails
 (:func:`element_errors`: the decay of each element's outer degree layers, continued
-geometrically, converts to the error of its mean and of the std, and each split checks the
-model on the parent against what its children changed; ``docs/multi_element.md`` has the
+geometrically, converts to the error of its mean and of the std, each split checks the
+model on the parent against what its children changed, and each element's expansion is
+checked at the runs of its split ancestors inside it; ``docs/multi_element.md`` has the
 derivation and its calibration). ``auto`` starts from one element and, after each
 round, while the estimate exceeds the tolerance, splits the elements of largest share, the
 fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
