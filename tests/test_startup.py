@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.special as sp
+from cli_process import pcmb_cli
 
 import pcmb
 from pcmb.chaos.polynomials import NUMPY_RULE_POINTS, Hermite, Legendre
@@ -192,3 +193,50 @@ def test_the_held_out_check_imports_no_scipy():
         "holdout_error(np.zeros((8, 3)), np.ones((8, 3)), np.zeros(3), np.ones(3), 1.0)"
     )
     assert _loaded(code, ["scipy"]) == {"scipy": False}
+
+
+_COLLECTOR_MODEL = """
+import gc
+
+import numpy as np
+
+
+class Collector:
+    outputs = ("enabled",)
+
+    def __init__(self, a=1.0):
+        self.parameters = {"a": a}
+
+    def simulate(self, params, times):
+        return {"enabled": np.full((len(params["a"]), times.size), float(gc.isenabled()))}
+"""
+
+
+def test_the_command_collects_garbage_while_its_models_run(tmp_path):
+    """The command turns garbage collection off only while it imports and reads its config:
+    a long study's cycles are still collected (the model runs in pcmb's own process here)."""
+    (tmp_path / "collector.py").write_text(_COLLECTOR_MODEL)
+    config = tmp_path / "collector.yaml"
+    config.write_text(
+        "name: collector\n"
+        "model: {kind: python, entry: collector.py:Collector}\n"
+        "time: {start: 0.0, stop: 1.0, points: 3}\n"
+        "inputs: {a: {dist: uniform, low: 1.0, high: 2.0}}\n"
+        "method: {kind: collocation, order: 2}\n"
+    )
+    out = tmp_path / "out.h5"
+    done = pcmb_cli("run", str(config), "-o", str(out), "--quiet", "--backend", "inprocess")
+    assert done.returncode == 0, done.stderr
+    assert np.all(pcmb.load(out).values["enabled"] == 1.0)
+
+
+def test_main_called_from_python_leaves_the_collector_as_it_was(tmp_path, capsys):
+    """Only the command itself (``python -m pcmb.cli``, the console script) changes garbage
+    collection; a caller of :func:`pcmb.cli.main` keeps it on and nothing of theirs frozen."""
+    import gc
+
+    from pcmb.cli import main
+
+    frozen = gc.get_freeze_count()
+    assert main(["validate", str(tmp_path / "missing.yaml")]) == 2
+    assert gc.isenabled() and gc.get_freeze_count() == frozen
