@@ -246,7 +246,7 @@ class ChaosExpansion:
         out = np.empty((xi.shape[0], flat.shape[1]))
         for start in range(0, xi.shape[0], _BLOCK):
             block = slice(start, start + _BLOCK)
-            out[block] = self.basis.evaluate(xi[block]) @ flat
+            out[block] = self.basis.series(xi[block], flat)
         return out.reshape(xi.shape[0], *self.shape)
 
     def to_germ(self, theta: ArrayLike) -> NDArray[np.float64]:
