@@ -168,7 +168,8 @@ class MultiElementCollocation:
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
         """Move to ``partition``, the nodes run so far in its elements ``kept`` (-1: left out),
-        and return the nodes of its elements ``new``, which join the run."""
+        and return the nodes of its elements ``new``, which join the run (:attr:`node_weights`
+        gains their elements' P_e times Gauss weights)."""
         self.partition = partition
         self.grids = tuple(TensorGrid(inputs, self.orders) for inputs in partition.inputs)
         grids = [self.grids[e] for e in new]
@@ -319,10 +320,7 @@ class MultiElementCollocation:
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
         """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
         quadrature rule of the inputs' law."""
-        weights = np.zeros(self.node_elements.size)
-        for e, (p, grid) in enumerate(zip(self.partition.probability, self.grids, strict=True)):
-            weights[self.node_elements == e] = p * grid.weights
-        return weights
+        return np.where(self.node_elements >= 0, self.node_weights, 0.0)
 
     def record(self) -> Design:
         auto = self.elements == "auto"
