@@ -622,7 +622,7 @@ def element_errors(
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
         fall = _decay(last, previous)
         if third.any():  # order 2 has one ratio
-            fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
+            fall = np.fmax(fall, _decay(previous, before[0]))
         decays.append(fall)
         fall = np.fmax(fall, floors[name].reshape(size, -1) if name in floors else 0.0)
         last = np.fmax(last, previous * fall)
