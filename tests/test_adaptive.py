@@ -444,3 +444,22 @@ def test_a_tensor_grid_stops_at_its_budget_and_says_so():
 def test_kind_adaptive_refuses_another_basis():
     with pytest.raises(ValidationError, match=r"adaptive\.basis"):  # its section declares it
         method_section({"kind": "adaptive", "tolerance": 1e-3, "basis": "total"})
+
+
+@pytest.mark.filterwarnings("ignore:.*square-overflow:pcmb.errors.PcmbWarning")
+def test_the_estimate_does_not_depend_on_the_outputs_scale():
+    """The same response in units 1e300 times larger refines alike (the surpluses' squares
+    overflowed)."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    found = [
+        _adaptive(
+            lambda x, scale=scale: scale / (1.2 + x[:, 0] + 0.6 * x[:, 1]),
+            inputs,
+            method="adaptive",
+            tolerance=1e-4,
+            validation=0,
+        ).adaptive
+        for scale in (1.0, 1e300)
+    ]
+    np.testing.assert_array_equal(found[0].history[:, 0], found[1].history[:, 0])
+    np.testing.assert_allclose(found[0].indicators, found[1].indicators, rtol=1e-9)

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import RULES
 from pcmb.chaos.nodes import NodeSet
@@ -242,7 +242,7 @@ class AdaptiveCollocation(GrowingGrid):
         for level in self._index:
             if level not in self._norms:
                 surplus = self._grid.surplus(level, values)
-                self._norms[level] = np.sqrt(np.sum(surplus**2, axis=0)).max(axis=-1)
+                self._norms[level] = root_sum_of_squares(surplus).max(axis=-1)
         mean, std = self._statistics(self._grid, values)
         spread = std.max(axis=-1)
         norms = np.array([self._norms[level] for level in self._index])
