@@ -25,8 +25,9 @@ weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adap
 ``docs/methods.md``: there the estimate is within 10x of the true error in 29 of 30 cases,
 OTL at 1e-2 11x careful) and checked on functions it was not chosen on. The extrapolation
 assumes a smooth response: where an input's axis surpluses fall like a power of the degree no
-faster than a kink's (a jump or a kink) an ``adaptive-nonsmooth`` warning names it, and the
-estimate is the largest of the last three changes alone.
+faster than a kink's, and so do the changes of the mean they make (a jump or a kink; on an
+analytic response near a singularity these fall geometrically first), an ``adaptive-nonsmooth``
+warning names it, and the estimate is the largest of the last three changes alone.
 """
 
 from __future__ import annotations
