@@ -252,6 +252,32 @@ def test_smooth_functions_are_not_called_nonsmooth(function, inputs):
     assert not [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
 
 
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+def test_the_error_left_beyond_a_rules_last_level_is_not_ignored():
+    """|a - 0.3| + e^b: a reaches Gauss–Patterson's last level (degree 23) with its kink
+    unresolved, and the terms with b add nothing, so the changes vanish: the grid stopped at
+    97 runs with an estimate of 2e-15 for a true error of 2.9e-4, 29 times the tolerance. The
+    mean change a's last level made (the quadrature error of the level before) stays in the
+    estimate, which more runs cannot lower."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    mean = (0.3**2 + 0.7**2) / 2 + math.expm1(1.0)
+    variance = (0.3**3 + 0.7**3) / 3 - ((0.3**2 + 0.7**2) / 2) ** 2
+    std = np.sqrt(variance + math.expm1(2.0) / 2 - math.expm1(1.0) ** 2)
+    result = _adaptive(
+        lambda x: np.abs(x[:, 0] - 0.3) + np.exp(x[:, 1]),
+        inputs,
+        method="adaptive",
+        tolerance=1e-5,
+        validation=0,
+    )
+    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    estimate = result.adaptive.estimate
+    assert error > 10 * 1e-5 and estimate > 1e-5, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
+    (stopped,) = [w for w in result.warnings if w.code == "adaptive-budget"]
+    assert "last level" in stopped.message
+
+
 def test_a_response_near_a_singularity_is_not_called_nonsmooth():
     """sqrt(a + 0.002) e^b is analytic on the box, its branch point just outside: the norms of
     its surpluses along a fall like a kink's (p^-2.3) to degree 23, but the changes of the mean

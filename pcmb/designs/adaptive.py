@@ -199,10 +199,17 @@ class AdaptiveCollocation(GrowingGrid):
         while True:
             active = np.flatnonzero(self._active())
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
-            converged = self._estimate() <= self.tolerance
+            converged = self._reducible() <= self.tolerance
             if converged:
                 refinable = self._blind()
                 if not refinable:
+                    left, names = self._left_at_last_levels()
+                    if left > self.tolerance:
+                        self._stopped = (
+                            f"{' and '.join(names)} reached the last level of its rule with an "
+                            f"error of {left:.3g} left, which no refinement can lower: use rule "
+                            "clenshaw-curtis, or a larger tolerance"
+                        )
                     return None
             elif not refinable:
                 self._stopped = (
@@ -303,8 +310,29 @@ class AdaptiveCollocation(GrowingGrid):
         return np.array([level not in self._refined for level in self._index])
 
     def _estimate(self) -> float:
-        """The estimated error of the mean and std after the last round (see the module)."""
+        """The estimated error of the mean and std after the last round (see the module), at
+        least the error left beyond the rules' last levels."""
+        return max(self._reducible(), self._left_at_last_levels()[0])
+
+    def _reducible(self) -> float:
+        """The estimated error that refining can lower: the changes' tail (see the module)."""
         return estimated_error(self._changes, geometric=not self._nonsmooth())
+
+    def _left_at_last_levels(self) -> tuple[float, list[str]]:
+        """The error no refinement can lower, and the inputs it is in: the largest change of
+        the mean (relative to the std) that an index at its rule's last level in an input
+        made there, the error of the level below, which the changes no longer see once that
+        index counts as refined."""
+        left, names = 0.0, []
+        for level, change in zip(self._index, self._mean_changes, strict=True):
+            last = [
+                name
+                for name, rule, at in zip(self.names, self.rules, level, strict=True)
+                if at == rule.max_level
+            ]
+            if last and change > left:
+                left, names = float(change), last
+        return left, names
 
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
