@@ -27,7 +27,10 @@ OTL at 1e-2 11x careful) and checked on functions it was not chosen on. The extr
 assumes a smooth response: where an input's axis surpluses fall like a power of the degree no
 faster than a kink's, and so do the changes of the mean they make (a jump or a kink; on an
 analytic response near a singularity these fall geometrically first), an ``adaptive-nonsmooth``
-warning names it, and the estimate is the largest of the last three changes alone.
+warning names it, and the estimate is the largest of the last three changes alone. The estimate
+is at least the error no refinement can lower, beyond a rule's last level
+(:meth:`AdaptiveCollocation._left_at_last_levels`); where that alone exceeds the tolerance, an
+``adaptive-budget`` warning names the input.
 """
 
 from __future__ import annotations
