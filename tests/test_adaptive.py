@@ -253,6 +253,54 @@ def test_smooth_functions_are_not_called_nonsmooth(function, inputs):
 
 
 @pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+def test_the_error_left_beyond_a_rules_last_level_is_not_ignored():
+    """|a - 0.3| + e^b: a reaches Gauss–Patterson's last level (degree 23) with its kink
+    unresolved, and the terms with b add nothing, so the changes vanish: the grid stopped at
+    97 runs with an estimate of 2e-15 for a true error of 2.9e-4, 29 times the tolerance. The
+    mean change a's last level made (the quadrature error of the level before) stays in the
+    estimate, which more runs cannot lower."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    mean = (0.3**2 + 0.7**2) / 2 + math.expm1(1.0)
+    variance = (0.3**3 + 0.7**3) / 3 - ((0.3**2 + 0.7**2) / 2) ** 2
+    std = np.sqrt(variance + math.expm1(2.0) / 2 - math.expm1(1.0) ** 2)
+    result = _adaptive(
+        lambda x: np.abs(x[:, 0] - 0.3) + np.exp(x[:, 1]),
+        inputs,
+        method="adaptive",
+        tolerance=1e-5,
+        validation=0,
+    )
+    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    estimate = result.adaptive.estimate
+    assert error > 10 * 1e-5 and estimate > 1e-5, (estimate, error)
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
+    (stopped,) = [w for w in result.warnings if w.code == "adaptive-budget"]
+    assert "last level" in stopped.message
+
+
+def test_a_response_near_a_singularity_is_not_called_nonsmooth():
+    """sqrt(a + 0.002) e^b is analytic on the box, its branch point just outside: the norms of
+    its surpluses along a fall like a kink's (p^-2.3) to degree 23, but the changes of the mean
+    they make fall geometrically, as a quadrature's error does on an analytic response (they
+    fell like a power on the G-function's and a jump's, too): it was flagged, at 129 runs."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    delta = 0.002
+    root = 2 / 3 * ((1 + delta) ** 1.5 - delta**1.5)  # E sqrt(a + δ)
+    mean = root * math.expm1(1.0)
+    std = np.sqrt((0.5 + delta) * math.expm1(2.0) / 2 - mean**2)
+    result = _adaptive(
+        lambda x: np.sqrt(x[:, 0] + delta) * np.exp(x[:, 1]),
+        inputs,
+        method="adaptive",
+        tolerance=1e-4,
+        validation=0,
+    )
+    assert not [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
+    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    assert error / 10 <= result.adaptive.estimate <= 10 * error, (result.adaptive.estimate, error)
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
 @pytest.mark.parametrize(
     ("validation", "code"), [(None, "chaos-unreliable"), (0, "runs-all-equal")]
 )
@@ -444,3 +492,22 @@ def test_a_tensor_grid_stops_at_its_budget_and_says_so():
 def test_kind_adaptive_refuses_another_basis():
     with pytest.raises(ValidationError, match=r"adaptive\.basis"):  # its section declares it
         method_section({"kind": "adaptive", "tolerance": 1e-3, "basis": "total"})
+
+
+@pytest.mark.filterwarnings("ignore:.*square-overflow:pcmb.errors.PcmbWarning")
+def test_the_estimate_does_not_depend_on_the_outputs_scale():
+    """The same response in units 1e300 times larger refines alike (the surpluses' squares
+    overflowed)."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    found = [
+        _adaptive(
+            lambda x, scale=scale: scale / (1.2 + x[:, 0] + 0.6 * x[:, 1]),
+            inputs,
+            method="adaptive",
+            tolerance=1e-4,
+            validation=0,
+        ).adaptive
+        for scale in (1.0, 1e300)
+    ]
+    np.testing.assert_array_equal(found[0].history[:, 0], found[1].history[:, 0])
+    np.testing.assert_allclose(found[0].indicators, found[1].indicators, rtol=1e-9)
