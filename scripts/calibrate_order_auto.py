@@ -62,6 +62,19 @@ def exp_ab() -> Case:
     )
 
 
+def exp_mild() -> Case:
+    """exp(a t + b/5), a ~ U[0, 1], b ~ N(0, 1): entire, nearly linear."""
+    mean = _exponential_moment(1, 1.0, TIMES) * math.exp(1 / 50)
+    second = _exponential_moment(2, 1.0, TIMES) * math.exp(2 / 25)
+    return (
+        _ab(NORMAL),
+        lambda x: np.exp(np.outer(x[:, 0], TIMES) + 0.2 * x[:, 1:]),
+        TIMES,
+        mean,
+        np.sqrt(second - mean**2),
+    )
+
+
 def exp_a() -> Case:
     """exp(a t), a ~ U[0, 6] alone: entire."""
     mean = _exponential_moment(1, 6.0, TIMES)
@@ -158,6 +171,7 @@ def cosine() -> Case:
 
 CASES: dict[str, Callable[[], Case]] = {
     "exp(a t + b/2)": exp_ab,
+    "exp(a t + b/5)": exp_mild,
     "exp(6 a t)": exp_a,
     "double well": double_well,
     "|a - 0.3| + b": kink,

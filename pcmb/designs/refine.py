@@ -28,6 +28,7 @@ from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import gammaln
 
 from pcmb.chaos.expansion import ChaosExpansion, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
@@ -47,7 +48,7 @@ from pcmb.result import (
     WarningRecord,
 )
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "coefficient_decay"]
+__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "error_ratio"]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
@@ -56,9 +57,9 @@ MAX_ORDER = 24
 def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.float64]:
     """(n,) the estimated error of the mean and std left in each input of a tensor ``grid``
     (a box of levels L_k) from its (N, outputs, T) ``values``, relative to each output's
-    largest std over time: d_k ρ_k^(2 Δp_k), with d_k the largest change of the mean and std
-    between the box and the box one level lower in input k, Δp_k the degrees that level
-    added and ρ_k the decay per degree of the coefficients along k (:func:`coefficient_decay`).
+    largest std over time: d_k times :func:`error_ratio` along k, with d_k the largest change
+    of the mean and std between the box and the box one level lower in input k (the lower
+    box's error in k).
     """
     distributions, rules = grid.distributions, grid.rules
     coefficients = grid.project(values)
@@ -80,25 +81,46 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
             float(root_sum_of_squares(coefficients[degree[:, k] == p]).max())
             for p in range(int(degree[:, k].max()) + 1)
         ]
-        step = rule.projection_degree(int(top)) - rule.projection_degree(int(top) - 1)
-        errors[k] = relative.max() * coefficient_decay(norms) ** (2 * step)
+        errors[k] = relative.max() * error_ratio(norms, rule.projection_degree(int(top) - 1))
     return errors
 
 
-def coefficient_decay(norms: list[float]) -> float:
-    """The decay per degree of the coefficients along an input, from the norms n_0..n_p of
-    those of degree 0..p in it: exp of the least-squares slope of log n_q over the upper
-    half of the degrees, p/2 <= q <= p (q >= 1; a symmetry that zeroes every other degree, or
-    one lucky small norm, does not fool it), over the norms above round-off (:data:`BLIND`
-    of the largest); at most 1, and 1 with fewer than two such norms (it cannot be told)."""
+def error_ratio(norms: list[float], low: int) -> float:
+    """The error along an input of a grid of degree p against that of the grid of degree
+    ``low`` below it, from the norms n_0..n_p of the coefficients of degree 0..p in it.
+
+    A grid of degree p integrates degree 2p + 1 exactly, so its error is carried by the
+    coefficients from degree 2p + 2: the ratio is the product of the per-degree ratios
+    r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated from the upper half of
+    the degrees (p/2 <= q <= p, q >= 1) of the norms' upper envelope (max over degrees >= q:
+    a symmetry that zeroes every other degree, or a lucky small norm, does not fool it),
+    above round-off (:data:`BLIND` of the largest). r_q = ρ (p/q)^s: ρ = exp of the
+    least-squares slope of log n_q (at most 1); s in [0, 1] the ratios' least fall per log of
+    the degree where each ratio is below the one before (faster than geometric, as an entire
+    function's, whose r_q fall like 1/q), else 0. From one ratio (the first round: degrees
+    1 and 2) ρ is carried over p - low degrees only, not 2 (p - low): one ratio cannot tell a
+    decay that holds from one that slows (exp(a) from sqrt(a + 0.002) at 3 nodes). 1 where
+    fewer than two norms are above round-off (the decay cannot be told).
+    """
     top = len(norms) - 1
+    envelope = np.maximum.accumulate(np.array(norms)[::-1])[::-1]
     degrees = np.arange(max(1, top // 2), top + 1)
-    found = np.array(norms)[degrees]
+    found = envelope[degrees]
     kept = found > BLIND * found.max()
-    if np.count_nonzero(kept) < 2:
+    degrees, found = degrees[kept], found[kept]
+    if degrees.size < 2:
         return 1.0
-    slope = np.polyfit(degrees[kept], np.log(found[kept]), 1)[0]
-    return float(min(1.0, np.exp(slope)))
+    slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
+    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
+    if degrees.size == 2:
+        return float(np.exp(slope * (top - low)))
+    logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
+    falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
+    contiguous = np.all(np.diff(degrees) == 1)
+    s = float(np.clip(falls.min(), 0.0, 1.0)) if contiguous else 0.0
+    count = last - first + 1
+    log = slope * count - s * (gammaln(last + 1) - gammaln(first) - count * np.log(top))
+    return float(np.exp(min(0.0, log)))
 
 
 def _moments(
