@@ -97,10 +97,8 @@ def error_ratio(norms: list[float], low: int) -> float:
     above round-off (:data:`BLIND` of the largest). r_q = ρ (p/q)^s: ρ = exp of the
     least-squares slope of log n_q (at most 1); s in [0, 1] the ratios' least fall per log of
     the degree where each ratio is below the one before (faster than geometric, as an entire
-    function's, whose r_q fall like 1/q), else 0. From one ratio (the first round: degrees
-    1 and 2) ρ is carried over p - low degrees only, not 2 (p - low): one ratio cannot tell a
-    decay that holds from one that slows (exp(a) from sqrt(a + 0.002) at 3 nodes). 1 where
-    fewer than two norms are above round-off (the decay cannot be told).
+    function's, whose r_q fall like 1/q), else 0 (so from a single ratio). 1 where fewer than
+    two norms are above round-off (the decay cannot be told).
     """
     top = len(norms) - 1
     envelope = np.maximum.accumulate(np.array(norms)[::-1])[::-1]
@@ -111,13 +109,11 @@ def error_ratio(norms: list[float], low: int) -> float:
     if degrees.size < 2:
         return 1.0
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
-    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
-    if degrees.size == 2:
-        return float(np.exp(slope * (top - low)))
     logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
     falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
-    contiguous = np.all(np.diff(degrees) == 1)
-    s = float(np.clip(falls.min(), 0.0, 1.0)) if contiguous else 0.0
+    faster = falls.size > 0 and bool(np.all(np.diff(degrees) == 1))
+    s = float(np.clip(falls.min(), 0.0, 1.0)) if faster else 0.0
+    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
     count = last - first + 1
     log = slope * count - s * (gammaln(last + 1) - gammaln(first) - count * np.log(top))
     return float(np.exp(min(0.0, log)))
