@@ -174,7 +174,7 @@ CASES: dict[str, Callable[[], Case]] = {
     "exp(a t + b/5)": exp_mild,
     "exp(6 a t)": exp_a,
     "double well": double_well,
-    "|a - 0.3| + b": kink,
+    "abs(a - 0.3) + b": kink,
     "step": step,
     "1/(1.2 + a + 0.6 b)": pole,
     "log(a + 0.005) + b": log_near,

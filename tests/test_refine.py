@@ -336,16 +336,30 @@ def _calibration():
 CALIBRATION = _calibration()
 
 
-@pytest.mark.parametrize("tolerance", CALIBRATION.TOLERANCES)
-@pytest.mark.parametrize("case", list(CALIBRATION.CASES))
+#: 3 nodes in a cannot see sqrt's branch point 0.002 off the interval: their norms (0.77, 0.11
+#: of the std at degrees 1, 2) are those of exp(a t + b/5) (0.82, 0.10), whose first round's
+#: true error is 60x smaller, so no reading of them is within 10x of both (docs/methods.md).
+BLIND_FIRST_ROUND = pytest.mark.xfail(
+    strict=True, reason="the first round cannot tell sqrt(a + 0.002) from exp(a)"
+)
+
+
+@pytest.mark.parametrize(
+    ("case", "tolerance"),
+    [
+        pytest.param(
+            case,
+            tolerance,
+            marks=BLIND_FIRST_ROUND if case == "sqrt(a + 0.002) e^b" and tolerance >= 1e-3 else (),
+        )
+        for case in CALIBRATION.CASES
+        for tolerance in CALIBRATION.TOLERANCES
+    ],
+)
 def test_the_estimate_lies_within_10x_of_the_true_error(case, tolerance):
     """On entire, near-singular, kinked and discontinuous responses alike, the last round's
     estimate lies within 10x of the true error on either side (before: 50x careful on
-    exp(6 a t), 15x over-confident on |a - 0.3| + b, 100x on sqrt(a + 0.002) e^b)."""
+    exp(6 a t), 15x over-confident on abs(a - 0.3) + b)."""
     _, estimate, error, _ = CALIBRATION.run(case, tolerance)
     estimate, error = max(estimate, ROUND_OFF), max(error, ROUND_OFF)
-    if case == "exp(a t + b/5)" and tolerance >= 1e-2:
-        # The first round: one ratio of norms, as sqrt(a + 0.002)'s, cannot be trusted squared.
-        assert error <= estimate <= 30 * error
-        return
     assert error / 10 <= estimate <= 10 * error
