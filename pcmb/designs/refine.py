@@ -91,20 +91,20 @@ def error_ratio(norms: list[float], low: int) -> float:
     A grid of degree p integrates degree 2p + 1 exactly, so its error is carried by the
     coefficients from degree 2p + 2: the ratio is the product of the per-degree ratios
     r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated from the upper half of
-    the degrees (p/2 <= q <= p, q >= 1) of the norms' upper envelope (max over degrees >= q:
-    a symmetry that zeroes every other degree, or a lucky small norm, does not fool it),
-    above round-off (:data:`BLIND` of the largest). r_q = ρ (p/q)^s: ρ = exp of the
-    least-squares slope of log n_q (at most 1); s in [0, 1] the ratios' least fall per log of
-    the degree where each ratio is below the one before (faster than geometric, as an entire
-    function's, whose r_q fall like 1/q), else 0 (so from a single ratio). 1 where fewer than
-    two norms are above round-off (the decay cannot be told).
+    the degrees (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the
+    largest: a symmetry that zeroes every other degree does not fool it), read through their
+    upper envelope (max over degrees >= q: nor does a lucky small norm). r_q = ρ (p/q)^s:
+    ρ = exp of the least-squares slope of log n_q (at most 1); s in [0, 1] the ratios' least
+    fall per log of the degree where each ratio is below the one before (faster than
+    geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so from a single
+    ratio). 1 where fewer than two norms are above round-off (the decay cannot be told).
     """
     top = len(norms) - 1
-    envelope = np.maximum.accumulate(np.array(norms)[::-1])[::-1]
     degrees = np.arange(max(1, top // 2), top + 1)
-    found = envelope[degrees]
+    found = np.array(norms)[degrees]
     kept = found > BLIND * found.max()
-    degrees, found = degrees[kept], found[kept]
+    degrees = degrees[kept]
+    found = np.maximum.accumulate(found[kept][::-1])[::-1]  # the upper envelope
     if degrees.size < 2:
         return 1.0
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
