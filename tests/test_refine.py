@@ -24,7 +24,7 @@ from pcmb.chaos.nodes import join_nodes
 from pcmb.chaos.sparse import SparseGrid, box_index_set
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design
-from pcmb.designs.refine import box_errors
+from pcmb.designs.refine import box_errors, error_ratio
 from pcmb.designs.smolyak import nested_rules
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import double_well_moments
@@ -363,3 +363,17 @@ def test_the_estimate_lies_within_10x_of_the_true_error(case, tolerance):
     _, estimate, error, _ = CALIBRATION.run(case, tolerance)
     estimate, error = max(estimate, ROUND_OFF), max(error, ROUND_OFF)
     assert error / 10 <= estimate <= 10 * error
+
+
+def test_the_error_ratio_reads_geometric_faster_and_oscillating_decays():
+    """Geometric norms: ρ per degree over the 2 Δp degrees the error falls by; an entire
+    function's (ratios 1.5/q, exp(3x)'s) fall further; a lucky small norm does not."""
+    geometric = [0.5**q for q in range(6)]
+    assert error_ratio(geometric, 2) == pytest.approx(0.5**6)
+    entire = np.cumprod([1.0] + [1.5 / q for q in range(1, 6)])
+    assert error_ratio(list(entire), 2) < 0.1 * error_ratio(geometric, 2)
+    # abs(a - 0.3)'s norms at degree 5, whose true error fell 5x at that level: the raw
+    # slope read 0.0135 (15x over-confident), its envelope reads 0.022.
+    lucky = [1.0, 0.16, 0.098, 0.051, 0.0072, 0.017]
+    envelope = [1.0, 0.16, 0.098, 0.051, 0.017, 0.017]
+    assert error_ratio(lucky, 2) == error_ratio(envelope, 2) > 0.02
