@@ -21,13 +21,13 @@ the largest estimated error, one at a time).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import gammaln
 
 from pcmb.chaos.expansion import ChaosExpansion, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
@@ -94,10 +94,11 @@ def error_ratio(norms: list[float], low: int) -> float:
     the degrees (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the
     largest: a symmetry that zeroes every other degree does not fool it), read through their
     upper envelope (max over degrees >= q: nor does a lucky small norm). r_q = ρ (p/q)^s:
-    ρ = exp of the least-squares slope of log n_q (at most 1); s in [0, 1] the ratios' least
-    fall per log of the degree where each ratio is below the one before (faster than
-    geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so from a single
-    ratio). 1 where fewer than two norms are above round-off (the decay cannot be told).
+    ρ = exp of the least-squares slope of log n_q (at most 1); s, the steepening, in [0, 1]
+    the ratios' least fall per log of the degree where each ratio is below the one before
+    (faster than geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so
+    from a single ratio). 1 where fewer than two norms are above round-off (the decay cannot
+    be told).
     """
     top = len(norms) - 1
     degrees = np.arange(max(1, top // 2), top + 1)
@@ -110,11 +111,12 @@ def error_ratio(norms: list[float], low: int) -> float:
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
     logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
     falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
-    faster = falls.size > 0 and bool(np.all(np.diff(degrees) == 1))
-    s = float(np.clip(falls.min(), 0.0, 1.0)) if faster else 0.0
+    contiguous = falls.size > 0 and bool(np.all(np.diff(degrees) == 1))
+    steepening = float(np.clip(falls.min(), 0.0, 1.0)) if contiguous else 0.0
     first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
     count = last - first + 1
-    log = slope * count - s * (gammaln(last + 1) - gammaln(first) - count * np.log(top))
+    factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
+    log = slope * count - steepening * factorials
     return float(np.exp(min(0.0, log)))
 
 
