@@ -228,7 +228,7 @@ def _write(
         attrs[key] = provenance.get(key, "")
 
     file.create_group("design").attrs["record"] = result.design.describe()
-    _write_warnings(file, result.warnings)
+    _write_warnings(file, result)
     time_ = _scale(file, "time", result.times)
     node = _scale(file, "node", np.arange(n_nodes))
     input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
@@ -431,12 +431,18 @@ def _read_expansion(
     return PiecewiseExpansion(partition, coefficients, index, names)
 
 
-def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> None:
-    """Warning records as JSON attributes: the study's on /diagnostics, an output's on
-    /diagnostics/<output> (attributes, so no output name can collide with them)."""
+def _write_warnings(file: h5py.File, result: StudyResult) -> None:
+    """Warning records as JSON attributes, each with its severity (``StudyResult.severity``):
+    the study's on /diagnostics, an output's on /diagnostics/<output> (attributes, so no
+    output name can collide with them)."""
     group = file.create_group("diagnostics")
+    warnings = result.warnings
     for output in dict.fromkeys(w.output for w in warnings):
-        records = [dataclasses.asdict(w) for w in warnings if w.output == output]
+        records = [
+            {**dataclasses.asdict(w), "severity": result.severity(w)}
+            for w in warnings
+            if w.output == output
+        ]
         owner = group if output is None else group.require_group(output)
         owner.attrs["warnings"] = json.dumps(records)
 
