@@ -228,21 +228,22 @@ def test_the_file_holds_each_records_severity_as_inspect_shows_it(tmp_path):
     )
     with pytest.warns(pcmb.PcmbWarning, match="nominal"):
         result = study.run(path)
+    stored = _stored_severities(path)
+    assert stored[("nominal-failed", None)] == "warning"
+    assert stored[("sobol-undefined", "w")] == "note"
+    loaded = pcmb.load(path)
+    assert [w.severity for w in loaded.warnings] == [
+        stored[w.code, w.output] for w in loaded.warnings
+    ]
+    assert _inspected_records(path) == [f"{w.severity:<9}{w}" for w in loaded.warnings]
     # An indicator's severity follows the verdict: a note about an output it vouches for.
     assert result.diagnostics["y"].vouched
     indicator = WarningRecord("element-decay", "an indicator", output="y")
     store.write_result(
         path, dataclasses.replace(result, warnings=(*result.warnings, indicator)), provenance={}
     )
-    stored = _stored_severities(path)
-    assert stored[("nominal-failed", None)] == "warning"
-    assert stored[("sobol-undefined", "w")] == "note"
-    assert stored[("element-decay", "y")] == "note"
-    loaded = pcmb.load(path)
-    assert [w.severity for w in loaded.warnings] == [
-        stored[w.code, w.output] for w in loaded.warnings
-    ]
-    assert _inspected_records(path) == [f"{w.severity:<9}{w}" for w in loaded.warnings]
+    assert _stored_severities(path)[("element-decay", "y")] == "note"
+    assert "note     y: an indicator [element-decay]" in _inspected_records(path)
     # Read from the file, not derived again: a record the file calls a note is shown as one.
     with h5py.File(path, "r+") as file:
         records = json.loads(file["diagnostics"].attrs["warnings"])
