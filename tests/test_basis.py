@@ -97,3 +97,18 @@ def test_evaluate_is_the_product_of_the_factors_in_input_order(index):
             expected *= family.evaluate(xi[:, k], top)[:, index[:, k]]
     found = PolynomialBasis(families, index).evaluate(xi)
     assert found.tobytes() == expected.tobytes()
+
+
+@pytest.mark.parametrize(
+    "index", [tensor_index_set((5, 5, 5)), tensor_index_set((3, 0, 2)), total_index_set(3, 4)]
+)
+@pytest.mark.parametrize("columns", [1, 4, 7])
+def test_the_series_is_the_basis_matrix_times_the_coefficients(index, columns):
+    """Contracted input by input on a tensor set (few columns) or through Φ: the same sums."""
+    families = (Hermite(), Legendre(), Hermite())
+    basis = PolynomialBasis(families, index)
+    rng = np.random.default_rng(columns)
+    xi = rng.uniform(-1.0, 1.0, size=(500, 3))
+    coefficients = rng.normal(size=(basis.size, columns))
+    expected = basis.evaluate(xi) @ coefficients
+    assert np.allclose(basis.series(xi, coefficients), expected, rtol=0, atol=1e-12)

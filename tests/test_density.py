@@ -106,3 +106,16 @@ def test_a_far_outlier_leaves_the_bulk_s_mass_in_the_table():
     value, density, h = kernel_density(samples)
     assert h >= value[1] - value[0]
     assert np.trapezoid(density, value) == pytest.approx(1.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("size", [1, 2, 7, 4096])
+def test_the_bandwidths_cosine_transform_is_scipys_dct(size):
+    """The ISJ bandwidth's type-II cosine transform against scipy.fft's, an independent
+    implementation, to round-off."""
+    from scipy.fft import dct
+
+    from pcmb.chaos.density import _cosine_transform
+
+    values = np.random.default_rng(size).random(size)
+    expected = dct(values, type=2)
+    assert np.allclose(_cosine_transform(values), expected, rtol=0, atol=1e-13 * size)

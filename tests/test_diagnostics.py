@@ -19,6 +19,7 @@ from pcmb.analysis.diagnostics import (
     TOLERANCE,
     HeldOut,
     HeldOutCheck,
+    chi_square_quantile,
     diagnose,
     held_out_draws,
     holdout_error,
@@ -257,6 +258,16 @@ def test_the_held_out_bound_is_the_chi_square_bound_and_covers_at_its_level():
     # Each column is one experiment with true RMS error 1/2: the bound covers it in 90 %
     # of them, within 3 binomial standard deviations (0.0067) of 2000 experiments.
     assert np.mean(found.upper >= 0.5) == pytest.approx(0.9, abs=0.02)
+
+
+@pytest.mark.parametrize("dof", [*range(1, 41), 99, 100, 1001, 5000])
+def test_the_chi_square_quantile_is_scipys(dof):
+    """Against scipy.stats.chi2, an independent implementation, where the check uses it."""
+    from scipy.stats import chi2
+
+    for probability in (0.01, 0.1, 0.5, 0.9, 0.99):
+        expected = chi2.ppf(probability, dof)
+        assert chi_square_quantile(dof, probability) == pytest.approx(expected, rel=1e-11)
 
 
 def test_the_statistics_errors_are_estimated_without_bias_and_with_a_fair_standard_error():

@@ -18,8 +18,11 @@ from test_resume import (
 
 import pcmb
 from pcmb.chaos.nodes import join_nodes
+from pcmb.chaos.sparse import SparseGrid, box_index_set
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design
+from pcmb.designs.refine import box_errors
+from pcmb.designs.smolyak import nested_rules
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import double_well_moments
 from pcmb.store import load
@@ -306,3 +309,15 @@ def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
     assert record.code == "nodes-failed"
     assert "node(s) of level 1 failed" in record.message
     assert "method.max_runs" not in record.message
+
+
+@pytest.mark.parametrize("scale", [1e150, 1e300])
+def test_the_error_estimate_does_not_depend_on_the_outputs_scale(scale):
+    """The estimate is relative to the std: the same response in other units gives the same
+    estimate (near 1e300 the squares of the coefficients overflowed: 0.59 for 0.007)."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    grid = SparseGrid(tuple(inputs.values()), box_index_set((2, 2)), nested_rules(inputs, "auto"))
+    values = (1 / (1.2 + grid.params[:, 0] + 0.6 * grid.params[:, 1]))[:, None, None]
+    np.testing.assert_allclose(
+        box_errors(grid, scale * values), box_errors(grid, values), rtol=1e-9
+    )

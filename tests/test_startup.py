@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.special as sp
+from cli_process import pcmb_cli
 
 import pcmb
 from pcmb.chaos.polynomials import NUMPY_RULE_POINTS, Hermite, Legendre
@@ -172,3 +173,70 @@ def test_numpy_rules_equal_scipys(family, roots):
         np.testing.assert_allclose(rule.nodes, nodes, rtol=0, atol=1e-14 * max(1, nodes[-1]))
         weights = weights / weights.sum()
         np.testing.assert_allclose(rule.weights, weights, rtol=0, atol=1e-12 * weights.max())
+
+
+def test_a_pdf_imports_no_scipy():
+    """A study's PDFs take their bandwidth's cosine transform from numpy's FFT: scipy.fft's
+    import (0.2 s) doubled the cost of the first PDF of every run."""
+    code = (
+        "import numpy as np\nfrom pcmb.chaos.density import kernel_density\n"
+        "kernel_density(np.random.default_rng(0).normal(size=1000))"
+    )
+    assert _loaded(code, ["scipy"]) == {"scipy": False}
+
+
+def test_the_held_out_check_imports_no_scipy():
+    """The χ² bound of the held-out check comes from its closed form: scipy.special's import
+    (0.2 s) was most of a run's diagnostics."""
+    code = (
+        "import numpy as np\nfrom pcmb.analysis.diagnostics import holdout_error\n"
+        "holdout_error(np.zeros((8, 3)), np.ones((8, 3)), np.zeros(3), np.ones(3), 1.0)"
+    )
+    assert _loaded(code, ["scipy"]) == {"scipy": False}
+
+
+_COLLECTOR_MODEL = """
+import gc
+
+import numpy as np
+
+
+class Collector:
+    outputs = ("enabled",)
+
+    def __init__(self, a=1.0):
+        self.parameters = {"a": a}
+
+    def simulate(self, params, times):
+        return {"enabled": np.full((len(params["a"]), times.size), float(gc.isenabled()))}
+"""
+
+
+def test_the_command_collects_garbage_while_its_models_run(tmp_path):
+    """The command turns garbage collection off only while it imports and reads its config:
+    a long study's cycles are still collected (the model runs in pcmb's own process here)."""
+    (tmp_path / "collector.py").write_text(_COLLECTOR_MODEL)
+    config = tmp_path / "collector.yaml"
+    config.write_text(
+        "name: collector\n"
+        "model: {kind: python, entry: collector.py:Collector}\n"
+        "time: {start: 0.0, stop: 1.0, points: 3}\n"
+        "inputs: {a: {dist: uniform, low: 1.0, high: 2.0}}\n"
+        "method: {kind: collocation, order: 2}\n"
+    )
+    out = tmp_path / "out.h5"
+    done = pcmb_cli("run", str(config), "-o", str(out), "--quiet", "--backend", "inprocess")
+    assert done.returncode == 0, done.stderr
+    assert np.all(pcmb.load(out).values["enabled"] == 1.0)
+
+
+def test_main_called_from_python_leaves_the_collector_as_it_was(tmp_path, capsys):
+    """Only the command itself (``python -m pcmb.cli``, the console script) changes garbage
+    collection; a caller of :func:`pcmb.cli.main` keeps it on and nothing of theirs frozen."""
+    import gc
+
+    from pcmb.cli import main
+
+    frozen = gc.get_freeze_count()
+    assert main(["validate", str(tmp_path / "missing.yaml")]) == 2
+    assert gc.isenabled() and gc.get_freeze_count() == frozen

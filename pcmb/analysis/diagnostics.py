@@ -501,6 +501,37 @@ def statistics_error(
     return found.mean_error, found.std_error, found.spread
 
 
+def chi_square_quantile(dof: int, probability: float) -> float:
+    """The quantile of the χ² law of ``dof`` >= 1 (whole) degrees of freedom at
+    ``probability``, by bisection on its closed-form survival function: scipy.special's
+    ``gammaincinv`` gives the same to 1e-12 for probabilities in [0.01, 0.99], and its
+    import (0.2 s) was most of the held-out check's cost."""
+    low, high = 0.0, dof + 20.0 * math.sqrt(2.0 * dof) + 100.0
+    while high - low > 1e-13 * high:
+        middle = 0.5 * (low + high)
+        if _chi_square_survival(middle, dof) > 1.0 - probability:
+            low = middle
+        else:
+            high = middle
+    return 0.5 * (low + high)
+
+
+def _chi_square_survival(x: float, dof: int) -> float:
+    """P(χ²_dof > x): e^(-x/2) Σ_j (x/2)^(j+s) / Γ(j+s+1) over j < dof // 2 terms (s = 0),
+    plus erfc(√(x/2)) with s = ½ and (dof - 1) // 2 terms for an odd ``dof``; the terms in
+    logarithms, so that a large ``dof`` does not underflow."""
+    half = 0.5 * x
+    if half == 0.0:
+        return 1.0
+    offset = 0.5 * (dof % 2)
+    j = np.arange((dof - 1) // 2 if dof % 2 else dof // 2)
+    log_gamma = math.lgamma(offset + 1.0) + np.concatenate(
+        ([0.0], np.cumsum(np.log(j[1:] + offset)))
+    )
+    terms = np.exp(-half + (j + offset) * math.log(half) - log_gamma)
+    return float(terms.sum()) + (math.erfc(math.sqrt(half)) if dof % 2 else 0.0)
+
+
 def holdout_error(
     predicted: ArrayLike,
     observed: ArrayLike,
@@ -544,8 +575,6 @@ def holdout_error(
     HeldOutCheck
         Zeros if the scale is zero; NaN if no run is finite.
     """
-    from scipy.special import gammaincinv
-
     predicted, observed = np.atleast_2d(predicted), np.atleast_2d(observed)
     if predicted.shape != observed.shape:
         raise ValueError(f"predicted {predicted.shape} and observed {observed.shape} differ")
@@ -557,7 +586,7 @@ def holdout_error(
         nan = np.full(observed.shape[1:], np.nan)
         return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
     weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
-    quantile = 2.0 * gammaincinv(count / 2.0, 1.0 - confidence)  # χ²_K(1 - confidence)
+    quantile = chi_square_quantile(count, 1.0 - confidence)
     if not scale > 0 or not np.isfinite(scale):  # nothing varies: nothing to correct
         zeros = np.zeros(observed.shape[1:])
         corrected = (mean, std, zeros, zeros)

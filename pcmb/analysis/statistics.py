@@ -394,7 +394,7 @@ class _Surrogates:
                 step = _block_rows(basis.size)
                 for start in range(0, rows.size, step):
                     block = slice(start, start + step)
-                    values[rows[block]] = basis.evaluate(germ[block]) @ columns[e]
+                    values[rows[block]] = basis.series(germ[block], columns[e])
             offsets = np.cumsum([0, *(r[2].shape[2] for r in requests)])
             for (key, _, _), low, high in zip(requests, offsets[:-1], offsets[1:], strict=True):
                 found[key] = values[:, low:high]

@@ -117,11 +117,20 @@ def _default_bandwidth(samples: NDArray[np.float64]) -> float:
     width = 1.0 + 2.0 * _ISJ_PAD
     counts = _linear_binning((unit + _ISJ_PAD) / width * (_ISJ_CELLS - 1), _ISJ_CELLS)
     shortest = 1.0 / (DENSITY_POINTS - 7)
-    from scipy.fft import dct  # deferred: reading a config imports this module
-
-    time = _isj_time(dct(counts / samples.size, type=2), samples.size, (shortest / width) ** 2)
+    cosines = _cosine_transform(counts / samples.size)
+    time = _isj_time(cosines, samples.size, (shortest / width) ** 2)
     scott = np.std(unit, ddof=1) * unit.size**-0.2
     return float(max(width * np.sqrt(time) if np.isfinite(time) else scott, shortest) * span)
+
+
+def _cosine_transform(values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The unnormalized type-II cosine transform, 2 Σ_n x_n cos(π k (2n + 1) / 2N), by one
+    FFT of the even samples followed by the odd ones reversed (Makhoul 1980): scipy.fft's
+    ``dct`` gives the same to round-off, but its import (0.2 s) doubled a study's first PDF."""
+    size = values.size
+    shuffled = np.concatenate((values[::2], values[1::2][::-1]))
+    twiddle = np.exp(-0.5j * np.pi * np.arange(size) / size)
+    return 2.0 * (twiddle * np.fft.fft(shuffled)).real
 
 
 def _isj_time(cosines: NDArray[np.float64], size: int, shortest: float) -> float:

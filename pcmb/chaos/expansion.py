@@ -38,7 +38,13 @@ from pcmb.chaos.density import kernel_density
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import draw_germs
 
-__all__ = ["ChaosExpansion", "sample_mean", "sample_std", "unsafe_to_square"]
+__all__ = [
+    "ChaosExpansion",
+    "root_sum_of_squares",
+    "sample_mean",
+    "sample_std",
+    "unsafe_to_square",
+]
 
 #: A standard deviation below this fraction of the output's RMS is round-off: the output does
 #: not vary there (std 0, Sobol' NaN).
@@ -246,7 +252,7 @@ class ChaosExpansion:
         out = np.empty((xi.shape[0], flat.shape[1]))
         for start in range(0, xi.shape[0], _BLOCK):
             block = slice(start, start + _BLOCK)
-            out[block] = self.basis.evaluate(xi[block]) @ flat
+            out[block] = self.basis.series(xi[block], flat)
         return out.reshape(xi.shape[0], *self.shape)
 
     def to_germ(self, theta: ArrayLike) -> NDArray[np.float64]:
@@ -329,6 +335,19 @@ def unsafe_to_square(values: ArrayLike) -> bool:
     magnitude that their squares could overflow or lose digits to underflow."""
     values = np.asarray(values, dtype=float)
     return _power_of_two_scale(values.reshape(1, -1)) is not None
+
+
+def root_sum_of_squares(values: ArrayLike) -> NDArray[np.float64]:
+    """sqrt(Σ values²) over the first axis of (M, ...) values, computed on values scaled by a
+    power of two where their squares could overflow or underflow."""
+    values = np.asarray(values, dtype=float)
+    columns = values.reshape(values.shape[0], -1)
+    scale = _power_of_two_scale(columns)
+    if scale is None:
+        return np.sqrt(np.sum(values**2, axis=0))
+    with np.errstate(over="ignore"):
+        norms = np.sqrt(np.sum((columns / scale) ** 2, axis=0)) * scale
+    return norms.reshape(values.shape[1:])
 
 
 def sample_mean(values: ArrayLike) -> NDArray[np.float64]:

@@ -25,13 +25,18 @@ weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adap
 ``docs/methods.md``: there the estimate is within 10x of the true error in 29 of 30 cases,
 OTL at 1e-2 11x careful) and checked on functions it was not chosen on. The extrapolation
 assumes a smooth response: where an input's axis surpluses fall like a power of the degree no
-faster than a kink's (a jump or a kink) an ``adaptive-nonsmooth`` warning names it, and the
-estimate is the largest of the last three changes alone.
+faster than a kink's, and so do the changes of the mean they make (a jump or a kink; on an
+analytic response near a singularity these fall geometrically first), an ``adaptive-nonsmooth``
+warning names it, and the estimate is the largest of the last three changes alone. The estimate
+is at least the error no refinement can lower, beyond a rule's last level
+(:meth:`AdaptiveCollocation._left_at_last_levels`); where that alone exceeds the tolerance, an
+``adaptive-budget`` warning names the input.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar, Literal
@@ -40,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import RULES
 from pcmb.chaos.nodes import NodeSet
@@ -149,6 +154,7 @@ class AdaptiveCollocation(GrowingGrid):
         self._ids = self._first.node_ids
         self._norms: dict[tuple[int, ...], NDArray[np.float64]] = {}
         self._indicators = np.full(len(self._index), np.nan)
+        self._mean_changes = np.full(len(self._index), np.nan)
         self._history: list[tuple[int, float]] = []
         self._changes: list[float] = []
         self._stopped: str | None = None
@@ -196,10 +202,17 @@ class AdaptiveCollocation(GrowingGrid):
         while True:
             active = np.flatnonzero(self._active())
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
-            converged = self._estimate() <= self.tolerance
+            converged = self._reducible() <= self.tolerance
             if converged:
                 refinable = self._blind()
                 if not refinable:
+                    left, names = self._left_at_last_levels()
+                    if left > self.tolerance:
+                        self._stopped = (
+                            f"{' and '.join(names)} reached the last level of its rule with an "
+                            f"error of {left:.3g} left, which no refinement can lower: use rule "
+                            "clenshaw-curtis, or a larger tolerance"
+                        )
                     return None
             elif not refinable:
                 self._stopped = (
@@ -236,18 +249,21 @@ class AdaptiveCollocation(GrowingGrid):
         return True
 
     def _measure(self, values: NDArray[np.float64]) -> None:
-        """Surplus norms of the indices new since the last round, every indicator relative to
-        each output's largest std over time on the grid so far, and the change of the mean
-        and std the active indices make."""
+        """Surplus norms and mean changes of the indices new since the last round, both
+        relative to each output's largest std over time on the grid so far (the indicators
+        and :attr:`_mean_changes`), and the change of the mean and std the active indices
+        make."""
         for level in self._index:
             if level not in self._norms:
-                surplus = self._grid.surplus(level, values)
-                self._norms[level] = np.sqrt(np.sum(surplus**2, axis=0)).max(axis=-1)
+                surplus = self._grid.surplus(level, values)  # row 0: degree 0, the mean
+                self._norms[level] = np.stack(
+                    [root_sum_of_squares(surplus).max(axis=-1), np.abs(surplus[0]).max(axis=-1)]
+                )
         mean, std = self._statistics(self._grid, values)
         spread = std.max(axis=-1)
-        norms = np.array([self._norms[level] for level in self._index])
+        norms = np.array([self._norms[level] for level in self._index])  # (K, 2, outputs)
         relative = np.divide(norms, spread, out=np.zeros_like(norms), where=spread > 0)
-        self._indicators = relative.max(axis=1)
+        self._indicators, self._mean_changes = relative.max(axis=-1).T
         old = SparseGrid(self.distributions, np.array(self._index)[~self._active()], self.rules)
         old_mean, old_std = self._statistics(
             old, values[find_rows(self._grid.node_ids, old.node_ids)]
@@ -297,36 +313,50 @@ class AdaptiveCollocation(GrowingGrid):
         return np.array([level not in self._refined for level in self._index])
 
     def _estimate(self) -> float:
-        """The estimated error of the mean and std after the last round (see the module)."""
+        """The estimated error of the mean and std after the last round (see the module), at
+        least the error left beyond the rules' last levels."""
+        return max(self._reducible(), self._left_at_last_levels()[0])
+
+    def _reducible(self) -> float:
+        """The estimated error that refining can lower: the changes' tail (see the module)."""
         return estimated_error(self._changes, geometric=not self._nonsmooth())
+
+    def _left_at_last_levels(self) -> tuple[float, list[str]]:
+        """The error no refinement can lower, and the inputs it is in: the largest change of
+        the mean (relative to the std) that an index at its rule's last level in an input
+        made there, the error of the level below, which the changes no longer see once that
+        index counts as refined."""
+        left, names = 0.0, []
+        for level, change in zip(self._index, self._mean_changes, strict=True):
+            last = [
+                name
+                for name, rule, at in zip(self.names, self.rules, level, strict=True)
+                if at == rule.max_level
+            ]
+            if last and change > left:
+                left, names = float(change), last
+        return left, names
 
     def _nonsmooth(self) -> list[tuple[str, float]]:
         """Inputs whose axis surpluses decay algebraically in the degree (like p^-a, a kink's
-        spectrum) rather than geometrically (like e^-cp, an analytic response's), with a: over
-        the last three axis levels above :data:`ROUND_OFF`, a is steadier than c and at most
-        :data:`NONSMOOTH_DECAY`."""
+        spectrum) rather than geometrically (like e^-cp, an analytic response's), with a at
+        most :data:`NONSMOOTH_DECAY`, and so do the changes of the mean they make (or those
+        cannot be told): on an analytic response these, a quadrature's error, fall
+        geometrically well before the norms do (Borehole's log r, near-singular, has norms
+        falling like a kink's to degree 23, its mean changes 1.7e-4 to 4e-8 of the std)."""
         position = {level: k for k, level in enumerate(self._index)}
         found = []
         for k, (name, rule) in enumerate(zip(self.names, self.rules, strict=True)):
             axis = (
                 tuple(at * (j == k) for j in range(len(self.names))) for at in itertools.count(1)
             )
-            points = [
-                (rule.projection_degree(at), self._indicators[position[level]])
-                for at, level in enumerate(itertools.takewhile(position.__contains__, axis), 1)
-            ]
-            points = [(p, g) for p, g in points if g > ROUND_OFF][-3:]
-            if len(points) < 3:
+            rows = [position[level] for level in itertools.takewhile(position.__contains__, axis)]
+            degrees = [rule.projection_degree(at) for at in range(1, len(rows) + 1)]
+            norms = _algebraic_decay(degrees, self._indicators[rows])
+            if norms is None or norms > NONSMOOTH_DECAY:
                 continue
-            degree, norm = np.log(np.array(points, dtype=float)).T
-            algebraic = -np.diff(norm) / np.diff(degree)
-            geometric = -np.diff(norm) / np.diff(np.exp(degree))
-            if (
-                np.all(algebraic > 0)
-                and algebraic[-1] <= NONSMOOTH_DECAY
-                and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric))
-            ):
-                found.append((name, float(algebraic[-1])))
+            if _algebraic_decay(degrees, self._mean_changes[rows]) != math.inf:
+                found.append((name, norms))
         return found
 
     def _forward(self, level: tuple[int, ...], room: bool = False) -> list[tuple[int, ...]]:
@@ -367,6 +397,7 @@ class AdaptiveCollocation(GrowingGrid):
         """Add indices to the set; the nodes they bring."""
         self._index += added
         self._indicators = np.append(self._indicators, np.full(len(added), np.nan))
+        self._mean_changes = np.append(self._mean_changes, np.full(len(added), np.nan))
         return self._adopt(SparseGrid(self.distributions, np.array(self._index), self.rules))
 
     # -- recovery ----------------------------------------------------------------------------
@@ -425,6 +456,21 @@ def estimated_error(changes: list[float], geometric: bool) -> float:
     rate = min(SLOWEST, (guarded[-1] / guarded[-1 - GUARDED]) ** (1 / GUARDED))
     aged = max(change * rate**age for age, change in enumerate(reversed(changes[-GUARDED:])))
     return aged * rate**ROUNDS_AHEAD / (1 - rate)
+
+
+def _algebraic_decay(degrees: list[int], sizes: NDArray[np.float64]) -> float | None:
+    """The exponent a of sizes falling like degree^-a over their last three above
+    :data:`ROUND_OFF`, where that fits steadier than e^-c·degree (``math.inf`` where it does
+    not: geometric, or not falling), ``None`` with fewer than three such sizes."""
+    points = [(p, g) for p, g in zip(degrees, sizes, strict=True) if g > ROUND_OFF][-3:]
+    if len(points) < 3:
+        return None
+    degree, size = np.log(np.array(points, dtype=float)).T
+    algebraic = -np.diff(size) / np.diff(degree)
+    geometric = -np.diff(size) / np.diff(np.exp(degree))
+    if np.all(algebraic > 0) and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric)):
+        return float(algebraic[-1])
+    return math.inf
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:

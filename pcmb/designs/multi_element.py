@@ -12,8 +12,9 @@
 ``elements: auto`` stops on what ``diagnostics.tolerance`` names, the error of the mean and
 std relative to the output's largest std, as estimated from the elements' tails
 (:func:`element_errors`: the decay of each element's outer degree layers, continued
-geometrically, converts to the error of its mean and of the std, and each split checks the
-model on the parent against what its children changed; ``docs/multi_element.md`` has the
+geometrically, converts to the error of its mean and of the std, each split checks the
+model on the parent against what its children changed, and each element's expansion is
+checked at the runs of its split ancestors inside it; ``docs/multi_element.md`` has the
 derivation and its calibration). ``auto`` starts from one element and, after each
 round, while the estimate exceeds the tolerance, splits the elements of largest share, the
 fewest whose shares leave the rest within the tolerance, along the inputs that hold at least
@@ -58,6 +59,9 @@ __all__ = ["ElementReport", "MultiElementCollocation", "TailErrors", "element_er
 #: (:func:`element_errors`; at it, the energy beyond the tail is taken to be the tail's own: no
 #: decay seen).
 DECAY_CAP = 0.5
+#: A degree layer whose energy is below this fraction squared of its element's mean square is
+#: round-off (as a parity's zeros are): it reads no decay.
+_ROUND_OFF = 1e-12
 
 
 class MultiElementCollocation:
@@ -158,16 +162,21 @@ class MultiElementCollocation:
         germs."""
         self.exhausted, self.estimate, self._fit = False, math.nan, "projection"
         self.factors, self._splits = np.full(self.start.size, np.nan), []
-        self.floors = np.zeros(self.start.size)
+        self.floors: dict[str, NDArray[np.float64]] = {}
+        self.node_weights = np.zeros(0)
         return self._grow(self.start, np.zeros(0, dtype=np.intp), np.arange(self.start.size))
 
     def _grow(self, partition: Partition, kept: NDArray[np.intp], new: NDArray[np.intp]) -> NodeSet:
         """Move to ``partition``, the nodes run so far in its elements ``kept`` (-1: left out),
-        and return the nodes of its elements ``new``, which join the run."""
+        and return the nodes of its elements ``new``, which join the run (:attr:`node_weights`
+        gains their elements' P_e times Gauss weights)."""
         self.partition = partition
         self.grids = tuple(TensorGrid(inputs, self.orders) for inputs in partition.inputs)
         grids = [self.grids[e] for e in new]
         self.node_elements = np.concatenate([kept, np.repeat(new, [g.size for g in grids])])
+        self.node_weights = np.concatenate(
+            [self.node_weights, *(partition.probability[e] * self.grids[e].weights for e in new)]
+        )
         params = np.concatenate([grid.params for grid in grids])
         germ = np.column_stack([d.to_germ(params[:, k]) for k, d in enumerate(self.distributions)])
         return NodeSet(self.distributions, germ, params)
@@ -186,8 +195,9 @@ class MultiElementCollocation:
             return None
         coefficients, _ = self._coefficients(values, ok)
         self._check_splits(coefficients)
+        missed = self._missed(coefficients, nodes, values, ok)
         errors = element_errors(
-            self.partition, coefficients, self.multi_index, self.factors, self.floors
+            self.partition, coefficients, self.multi_index, self.factors, self.floors, missed
         )
         self.estimate = errors.estimate()
         if not self.estimate > self.tolerance:
@@ -212,7 +222,7 @@ class MultiElementCollocation:
         self.exhausted = refused and not chosen
         if not chosen:
             return None
-        parents = self._parent_statistics(coefficients)
+        parents = self._parent_statistics(coefficients, missed)
         # Children replace their parent in place; the others keep their nodes.
         bounds, renumber, children = [], np.full(self.partition.size, -1), []
         for e in range(self.partition.size):
@@ -226,22 +236,31 @@ class MultiElementCollocation:
                 renumber[e] = len(bounds)
                 bounds.append(self.partition.bounds[e])
         kept = np.where(self.node_elements >= 0, renumber[self.node_elements], -1)
-        factors, floors = np.full(len(bounds), np.nan), np.zeros(len(bounds))
+        factors = np.full(len(bounds), np.nan)
         factors[renumber[renumber >= 0]] = self.factors[renumber >= 0]
-        floors[renumber[renumber >= 0]] = self.floors[renumber >= 0]
-        for family, parent in self._splits:
-            floors[family] = parent.decay / 4
+        floors = {
+            name: np.zeros((len(bounds), *decay.shape)) for name, decay in parents[0].decay.items()
+        }
+        for name, floor in floors.items():
+            if name in self.floors:
+                floor[renumber[renumber >= 0]] = self.floors[name][renumber >= 0]
+            for family, parent in self._splits:
+                floor[family] = parent.decay[name] / 4
         self.factors, self.floors = factors, floors
         return self._grow(Partition(self.distributions, bounds), kept, np.array(children))
 
-    def _parent_statistics(self, coefficients: Mapping[str, NDArray[np.float64]]) -> list[_Parent]:
+    def _parent_statistics(
+        self,
+        coefficients: Mapping[str, NDArray[np.float64]],
+        missed: Mapping[str, NDArray[np.float64]],
+    ) -> list[_Parent]:
         """Every element as the parent :meth:`_check_splits` compares its children with."""
         size = self.partition.size
-        parents = [_Parent({}, 0.0) for _ in range(size)]
+        parents = [_Parent({}, {}) for _ in range(size)]
         for name, c in coefficients.items():
             flat = c.reshape(*c.shape[:2], -1)
             errors = element_errors(
-                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors
+                self.partition, {name: flat}, self.multi_index, np.ones(size), self.floors, missed
             )
             if not errors.mean:
                 continue
@@ -250,7 +269,7 @@ class MultiElementCollocation:
             for e, parent in enumerate(parents):
                 model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
                 parent.outputs[name] = (moments[0][e], moments[1][e], model)
-                parent.decay = max(parent.decay, errors.decay[e])
+                parent.decay[name] = errors.decay[0][e]
         return parents
 
     def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
@@ -273,13 +292,35 @@ class MultiElementCollocation:
             self.factors[children] = factor
         self._splits = []
 
+    def _missed(
+        self,
+        coefficients: Mapping[str, NDArray[np.float64]],
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+    ) -> dict[str, NDArray[np.float64]]:
+        """Output name -> (E, ...) the mean square by which every element's expansion misses
+        the runs at the nodes of split elements inside it, weighted by their split elements'
+        quadrature (0 where there are none): runs its fit did not use."""
+        retired = (self.node_elements < 0) & ok
+        theta = nodes.params[retired]
+        inside = self.partition.locate(theta)[None, :] == np.arange(self.partition.size)[:, None]
+        inside = inside * self.node_weights[retired]
+        count = np.where(inside.any(axis=1), inside.sum(axis=1), 1.0)
+        missed = {}
+        for name, c in coefficients.items():
+            miss = values[name][retired] - PiecewiseExpansion(self.partition, c, self.multi_index)(
+                theta
+            )
+            missed[name] = np.tensordot(inside, miss**2, axes=1) / count.reshape(
+                -1, *[1] * (miss.ndim - 1)
+            )
+        return missed
+
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
         """(N,) P_e times the element's Gauss weights (0 at the nodes of split elements): a
         quadrature rule of the inputs' law."""
-        weights = np.zeros(self.node_elements.size)
-        for e, (p, grid) in enumerate(zip(self.partition.probability, self.grids, strict=True)):
-            weights[self.node_elements == e] = p * grid.weights
-        return weights
+        return np.where(self.node_elements >= 0, self.node_weights, 0.0)
 
     def record(self) -> Design:
         auto = self.elements == "auto"
@@ -326,7 +367,8 @@ class MultiElementCollocation:
                 )
             )
         if self.tolerance is not None:
-            warnings += self._decay_warnings(expansions)
+            missed = self._missed(coefficients, nodes, values, ok)
+            warnings += self._decay_warnings(expansions, missed)
         warnings += statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, tuple(warnings), ElementReport(self.node_elements.copy()))
 
@@ -369,7 +411,11 @@ class MultiElementCollocation:
             ]
         return coefficients, warnings
 
-    def _decay_warnings(self, expansions: Mapping[str, PiecewiseExpansion]) -> list[WarningRecord]:
+    def _decay_warnings(
+        self,
+        expansions: Mapping[str, PiecewiseExpansion],
+        missed: Mapping[str, NDArray[np.float64]],
+    ) -> list[WarningRecord]:
         """``element-decay`` for every output whose estimated error (:func:`element_errors`)
         is above the tolerance; sets :attr:`estimate` to the largest over outputs."""
         records, self.estimate = [], 0.0
@@ -380,6 +426,7 @@ class MultiElementCollocation:
                 self.multi_index,
                 self.factors,
                 self.floors,
+                missed,
             )
             estimate, each = errors.estimate(), errors.of_each()
             self.estimate = max(self.estimate, estimate)
@@ -404,10 +451,10 @@ class MultiElementCollocation:
 class _Parent:
     """An element as split: per output name its P_e μ_e, P_e E_e[y²] and the errors of the
     mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, in the
-    output's units, (P,) each; and its checked decay, the largest over outputs and times."""
+    output's units, and its checked decay per degree, (P,) each."""
 
     outputs: dict[str, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]
-    decay: float
+    decay: dict[str, NDArray[np.float64]]
 
 
 def _moments(
@@ -445,14 +492,13 @@ class TailErrors:
     along:
         (E, n) each element's tail energy along each input, at its worst output and time.
     decay:
-        (E,) each element's decay per degree as read (before ``floors``), the largest over
-        outputs and times.
+        Per output, (E, P) each element's decay per degree as read (before ``floors``).
     """
 
     mean: tuple[NDArray[np.float64], ...]
     std: tuple[NDArray[np.float64], ...]
     along: NDArray[np.float64]
-    decay: NDArray[np.float64]
+    decay: tuple[NDArray[np.float64], ...]
 
     def estimate(self, among: NDArray[np.bool_] | slice = slice(None)) -> float:
         """The estimated error of the mean and std, the largest over outputs and times, from
@@ -493,7 +539,8 @@ def element_errors(
     coefficients: Mapping[str, NDArray[np.float64]],
     multi_index: NDArray[np.int64],
     factors: NDArray[np.float64] | None = None,
-    floors: NDArray[np.float64] | None = None,
+    floors: Mapping[str, NDArray[np.float64]] | None = None,
+    missed: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> TailErrors:
     """The error of the mean and std that the elements' tails indicate (``docs/multi_element.md``).
 
@@ -501,16 +548,23 @@ def element_errors(
     a coefficient of energy A_e, both continued geometrically from its tail:
 
     - an element no split has checked (``factors`` NaN, the default): T the energy of the
-      outer two degree layers, ρ its ratio to the two layers before (at most
-      :data:`DECAY_CAP`), M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the decay carried two
-      layers only, since a kink's first degrees mimic a fast one;
+      outer two degree layers, ρ the decay per two degrees, the slower of the two parities'
+      (each its outer layer over the one two degrees before; a parity with no layer before,
+      the even one at order 3 and both at order 2, the two outer layers over the two before,
+      per layer), at most :data:`DECAY_CAP`; M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the
+      decay carried two layers only, since a kink's first degrees mimic a fast one;
     - an element whose parent's split measured what this model missed on it (``factors``
       f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
       the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
-      its parent's: faster is a parity, not a decay), T the energy of the outer layer, of
-      degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
+      its parent's at the same time: faster is a parity, not a decay), T the energy of the
+      outer layer, of degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
       √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
       not integrate.
+
+    M is at least ``missed``, the mean square by which the element's expansion misses the runs
+    of its split ancestors inside it: what one ratio cannot tell (at order 2, an element odd
+    about a jump has no degree-2 term, and reads a parity as a fast decay), runs it did not fit
+    measure.
 
     With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
     unknown), std error Σ_e P_e M_e / (2σ).
@@ -526,22 +580,24 @@ def element_errors(
     factors:
         (E,) each element's factor f, NaN where no split checked it.
     floors:
-        (E,) each element's least decay per degree (default 0).
+        Output name -> (E, ...) each element's least decay per degree (default 0).
+    missed:
+        Output name -> (E, ...) each element's mean square miss at runs it did not fit, in the
+        output's units squared (default 0).
     """
     tails = _tails(multi_index)
     two = tails.any(axis=0)
-    two_before = tail_terms(multi_index, 4, lowest=1) & ~two
     outer = tail_terms(multi_index, 1, lowest=1)
     second = tail_terms(multi_index, 2, lowest=1) & ~outer
     third = tail_terms(multi_index, 3, lowest=1) & ~outer & ~second
+    fourth = tail_terms(multi_index, 4, lowest=1) & ~outer & ~second & ~third
     degree = int(multi_index.sum(axis=1)[outer].max(initial=0))
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
     checked = np.isfinite(factors)[:, None]
-    floors = np.zeros(size) if floors is None else floors
-    decays = np.zeros(size)
-    means, stds, along = [], [], np.zeros((size, n))
-    for c in coefficients.values():
+    floors = {} if floors is None else floors
+    means, stds, decays, along = [], [], [], np.zeros((size, n))
+    for name, c in coefficients.items():
         flat = c.reshape(*c.shape[:2], -1)  # (E, S, P)
         sigma = PiecewiseExpansion(partition, flat, multi_index).std()
         scale = float(np.max(sigma[np.isfinite(sigma)], initial=0.0))
@@ -549,18 +605,31 @@ def element_errors(
             continue
         squares = (flat / scale) ** 2
         tail = squares[:, two].sum(axis=1)
-        decay = _decay(tail, squares[:, two_before].sum(axis=1))
+        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
+        # Each parity's decay per two degrees, its outer layer over the one two degrees before
+        # (round-off reads as nothing); a parity with no layer before (the even one at order 3,
+        # both at order 2) reads the outer two layers over the two before, per layer.
+        noise = _ROUND_OFF**2 * squares.sum(axis=1)
+        before = squares[:, third].sum(axis=1), squares[:, fourth].sum(axis=1)
+        layer = [np.where(e > noise, e, 0.0) for e in (last, previous, *before)]
+        block = _decay(tail / 2, (layer[2] + layer[3]) / max(third.any() + fourth.any(), 1))
+        decay = np.zeros_like(tail)
+        for upper, lower, readable in ((0, 2, third.any()), (1, 3, fourth.any())):
+            read = _decay(layer[upper], layer[lower]) if readable else block
+            decay = np.fmax(decay, np.where(layer[upper] > 0, read, 0.0))
+        decay = np.where(np.isfinite(tail), decay, np.nan)
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
-        last, previous = squares[:, outer].sum(axis=1), squares[:, second].sum(axis=1)
         fall = _decay(last, previous)
         if third.any():  # order 2 has one ratio
-            fall = np.fmax(fall, _decay(previous, squares[:, third].sum(axis=1)))
-        decays = np.fmax(decays, np.nanmax(fall, axis=1, initial=0.0))
-        fall = np.fmax(fall, floors[:, None])
+            fall = np.fmax(fall, _decay(previous, before[0]))
+        decays.append(fall)
+        fall = np.fmax(fall, floors[name].reshape(size, -1) if name in floors else 0.0)
         last = np.fmax(last, previous * fall)
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
         missing = np.where(checked, factor * last * fall / (1 - fall), missing)
+        if missed is not None and name in missed:
+            missing = np.fmax(missing, missed[name].reshape(size, -1) / scale**2)
         aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
         weight = partition.probability[:, None]
         means.append(weight * aliased)
@@ -570,7 +639,7 @@ def element_errors(
         energy = np.einsum("ks,es->ek", tails.astype(float), squares[np.arange(size), :, worst])
         larger = energy.sum(axis=1) > along.sum(axis=1)
         along = np.where(larger[:, None], energy, along)
-    return TailErrors(tuple(means), tuple(stds), along, decays)
+    return TailErrors(tuple(means), tuple(stds), along, tuple(decays))
 
 
 @dataclass(frozen=True)

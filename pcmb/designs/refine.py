@@ -29,7 +29,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set, find_rows
@@ -77,7 +77,7 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
         change = np.maximum(np.abs(mean - low_mean), np.abs(std - low_std)).max(axis=-1)
         relative = np.divide(change, spread, out=np.zeros_like(change), where=spread > 0)
         norms = [
-            float(np.sqrt(np.sum(coefficients[degree[:, k] == p] ** 2, axis=0)).max())
+            float(root_sum_of_squares(coefficients[degree[:, k] == p]).max())
             for p in range(int(degree[:, k].max()) + 1)
         ]
         step = rule.projection_degree(int(top)) - rule.projection_degree(int(top) - 1)
