@@ -27,6 +27,8 @@ from pcmb.chaos.inputs import from_description
 from pcmb.chaos.process import RandomProcess, covariance_from_description, germ_names
 from pcmb.errors import ResultFileError
 from pcmb.result import (
+    NOTE,
+    WARNING,
     Design,
     DesignReport,
     ModelTraceback,
@@ -564,6 +566,11 @@ def _read_warnings(file: h5py.File) -> tuple[WarningRecord, ...]:
     records = []
     for owner in owners:
         for record in json.loads(_text(owner.attrs.get("warnings", "[]"))):
+            if record.get("severity") not in (None, WARNING, NOTE):
+                raise ValueError(
+                    f"warning record {record.get('code')!r} has severity "
+                    f"{record['severity']!r}, neither {WARNING!r} nor {NOTE!r}"
+                )
             span = record.pop("time_range")
             records.append(
                 WarningRecord(**record, time_range=None if span is None else tuple(span))

@@ -277,3 +277,19 @@ def test_a_file_without_severities_derives_them_as_before(written, tmp_path):
         "note     w: t in [0, 0]: w does not vary [sobol-undefined]",
         "note     y: an indicator [element-decay]",
     ]
+
+
+def test_a_stored_severity_that_is_neither_warning_nor_note_is_refused(written, tmp_path):
+    """A file's severity is read, not trusted: an unknown word is a result-file error naming
+    the record, never a record shown as neither."""
+    path = tmp_path / "odd.h5"
+    store.write_result(path, written[1], provenance={})
+    with h5py.File(path, "r+") as file:
+        owner = next(
+            g for g in (file["diagnostics"], *file["diagnostics"].values()) if "warnings" in g.attrs
+        )
+        kept = json.loads(owner.attrs["warnings"])
+        kept[0]["severity"] = "fatal"
+        owner.attrs["warnings"] = json.dumps(kept)
+    with pytest.raises(ResultFileError, match="severity 'fatal'"):
+        pcmb.load(path)
