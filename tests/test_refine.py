@@ -377,3 +377,9 @@ def test_the_error_ratio_reads_geometric_faster_and_oscillating_decays():
     lucky = [1.0, 0.16, 0.098, 0.051, 0.0072, 0.017]
     envelope = [1.0, 0.16, 0.098, 0.051, 0.017, 0.017]
     assert error_ratio(lucky, 2) == error_ratio(envelope, 2) > 0.02
+    # abs(a - 0.2)'s: ratios 0.67, 0.38, 0.15 fall far faster than an entire function's (a
+    # lucky small norm at the top; the next are 0.0026-0.0081): read geometrically, as
+    # before, not 1e-4 times lower.
+    steep = [1.1, 0.23, 0.058, 0.039, 0.015, 0.0022]
+    slope = np.polyfit(np.arange(2, 6), np.log(steep[2:]), 1)[0]
+    assert error_ratio(steep, 2) == pytest.approx(np.exp(6 * slope))

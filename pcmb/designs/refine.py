@@ -51,6 +51,9 @@ __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "er
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
+#: Steepest fall of the norms' ratios per log of the degree still read as an entire
+#: function's (exp's ratios fall like 1/q: 1); a steeper one is a lucky small norm at the top.
+MAX_STEEPENING = 1.5
 
 
 def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -97,8 +100,8 @@ def error_ratio(norms: list[float], low: int) -> float:
     ρ = exp of the least-squares slope of log n_q (at most 1); s, the steepening, in [0, 1]
     the ratios' least fall per log of the degree where each ratio is below the one before
     (faster than geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so
-    from a single ratio). 1 where fewer than two norms are above round-off (the decay cannot
-    be told).
+    from a single ratio, or where a fall passes :data:`MAX_STEEPENING`: a lucky small norm
+    at the top). 1 where fewer than two norms are above round-off (the decay cannot be told).
     """
     top = len(norms) - 1
     degrees = np.arange(max(1, top // 2), top + 1)
@@ -111,8 +114,13 @@ def error_ratio(norms: list[float], low: int) -> float:
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
     logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
     falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
-    contiguous = falls.size > 0 and bool(np.all(np.diff(degrees) == 1))
-    steepening = float(np.clip(falls.min(), 0.0, 1.0)) if contiguous else 0.0
+    entire = (
+        falls.size > 0
+        and bool(np.all(np.diff(degrees) == 1))
+        and falls.min() > 0.0
+        and falls.max() <= MAX_STEEPENING
+    )
+    steepening = min(float(falls.min()), 1.0) if entire else 0.0
     first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
     count = last - first + 1
     factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
