@@ -378,6 +378,37 @@ def test_an_element_without_placed_runs_extrapolates_no_tail_from_its_own_three_
     assert found.mean_error[0] < 1e-12
 
 
+def test_an_element_without_placed_runs_leaves_the_check_undecided_not_reliable():
+    # |x - 0.3| on (-1, 1) cut at 0, order 3: the first element is linear (exact), the second
+    # holds the kink. All 4 placed runs forced into the first: the second is unchecked, and
+    # its share once counted as zero error (estimates 2e-16 against true errors of the mean
+    # and std of 0.0135 and 0.0204 of the largest std, closed forms). Its share is now noise.
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
+    coefficients, nodes = [], []
+    for (conditional,) in partition.inputs:
+        grid = TensorGrid((conditional,), (3,))
+        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
+        coefficients.append(grid.weights @ (basis * abs(grid.params - 0.3)))
+        nodes.append(grid.params[:, 0])
+    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
+    physical = np.concatenate(nodes)
+    where = partition.locate(physical[:, None])
+    germ = partition.distributions[0].to_germ(physical)
+    draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0], 4)
+    assert np.bincount(partition.locate(draws.params), minlength=2).tolist() == [4, 0]
+    scale = float(expansion.std()[0])
+    values, observed = abs(physical[:, None] - 0.3), abs(draws.params - 0.3)
+    found = placed_check(expansion, germ, values, draws.nodes, observed, scale)
+    mean, square = (1.3**2 + 0.7**2) / 4, (1.3**3 + 0.7**3) / 6
+    true = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - np.sqrt(square - mean**2)))
+    assert true / scale == pytest.approx(0.0204, abs=1e-4)
+    # Not called reliable at a tolerance the truth passes (estimate + noise above the true
+    # error), not flagged at one it does not (0.05), uncertain by less than 10 times the truth.
+    assert found.statistics[0] + found.noise[0] > true / scale
+    assert np.isnan(verdict(np.zeros(1), found.statistics, 0.05, found.noise))
+    assert found.noise[0] < 10 * true / scale
+
+
 def test_the_noise_is_the_spread_times_the_normal_quantile():
     found = HeldOutCheck(*[np.full(1, 0.5)] * 9, count=8, confidence=0.975)
     assert found.noise[0] == pytest.approx(0.5 * 1.959963984540054, rel=1e-12)
