@@ -409,6 +409,37 @@ def test_an_element_without_placed_runs_leaves_the_check_undecided_not_reliable(
     assert found.noise[0] < 10 * true / scale
 
 
+@pytest.mark.parametrize(("order", "tolerance"), [(2, 1e-4), (3, 1e-3), (5, 1e-3)])
+def test_a_kink_in_a_sliver_no_node_reaches_is_never_called_reliable(order, tolerance):
+    # exp(x) + 2 max(x - 1/√5, 0) on (-1, 1) with elements: auto, whose own estimate reads
+    # 0.03-0.08 times the true error (the kink sits between an element's last node and its
+    # edge; docs/multi_element.md): the default placed check, whose Leja points start at the
+    # elements' edges, sees it (true errors 15, 4.2 and 8.1 times the tolerance: undecided,
+    # flagged, undecided). Truth: exact moments of the two analytic pieces.
+    cut = 1 / np.sqrt(5)
+
+    @pcmb.batched(outputs=("y",))
+    def kinked(params, times):
+        x = np.asarray(params["x"])
+        return {"y": np.outer(np.exp(x) + 2 * np.maximum(x - cut, 0.0), np.ones_like(times))}
+
+    mean = (np.e - np.exp(-1) + (1 - cut) ** 2) / 2
+    square = (np.e**2 - np.exp(-2)) / 4 + 2 * (np.exp(cut) - cut * np.e) + 2 * (1 - cut) ** 3 / 3
+    times = np.zeros(1)
+    result = _run(
+        kinked,
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        times,
+        order=order,
+        elements="auto",
+        diagnostics={"tolerance": tolerance},
+    )
+    found = result.diagnostics["y"]
+    true = _true_error(result, "y", mean, np.sqrt(square - mean**2))
+    assert true[0] > tolerance  # elements: auto stopped short of its tolerance
+    assert found.estimate[0] + found.noise[0] > tolerance  # flagged or undecided
+
+
 def test_the_noise_is_the_spread_times_the_normal_quantile():
     found = HeldOutCheck(*[np.full(1, 0.5)] * 9, count=8, confidence=0.975)
     assert found.noise[0] == pytest.approx(0.5 * 1.959963984540054, rel=1e-12)
