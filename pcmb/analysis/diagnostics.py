@@ -693,8 +693,9 @@ def placed_check(
     Gauss nodes), the design rule's error on the degrees beyond the interpolant's
     (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
-    than that), the spread that of the larger estimate (the corrected mean's adds the unseen
-    error); the surrogate error is the L2 distance of the two surrogates (their
+    than that), plus in quadrature the top coefficients of the elements without held-out runs
+    (which nothing checks), the spread that of the larger estimate (the corrected mean's adds
+    the unseen error); the surrogate error is the L2 distance of the two surrogates (their
     coefficients' difference), its upper bound that plus how far it moves. Runs that are not
     finite are left out; zeros if the scale is zero.
     """
