@@ -830,8 +830,15 @@ def _placed_moments(
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
         _unseen_mean_error(family, points[:size], rule, coefficients),
-        np.abs(coefficients[-1]) * (points.size == size),
+        _unchecked(coefficients) * (points.size == size),
     )
+
+
+def _unchecked(coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) the next coefficient beyond an element's (M, T) expansion, estimated from its top
+    one and the ratio to the one before (at most 1)."""
+    top, before = np.abs(coefficients[-1]), np.abs(coefficients[-2])
+    return top * np.where(before > top, top / np.where(before > 0, before, 1.0), 1.0)
 
 
 # -- range checks ------------------------------------------------------------------------------
