@@ -693,8 +693,8 @@ def placed_check(
     Gauss nodes), the design rule's error on the degrees beyond the interpolant's
     (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
-    than that), plus in quadrature the top coefficients of the elements without held-out runs
-    (which nothing checks), the spread that of the larger estimate (the corrected mean's adds
+    than that), plus in quadrature the next coefficient of each element without held-out runs
+    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the corrected mean's adds
     the unseen error); the surrogate error is the L2 distance of the two surrogates (their
     coefficients' difference), its upper bound that plus how far it moves. Runs that are not
     finite are left out; zeros if the scale is zero.
@@ -741,7 +741,7 @@ def placed_check(
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
-        # elements without runs, which nothing checks, add their top coefficients.
+        # elements without runs, which nothing checks, add their next coefficients.
         mean_se = np.hypot(mean_error - fewer_mean_error, unchecked)
         std_se = np.hypot(rich_std - fewer_std, unchecked)
         moved = np.abs(error - fewer_error)
@@ -814,12 +814,12 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
     mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
     and held-out runs without its last ``spare`` held-out runs, over the scale; and, for an
-    element without held-out runs (whose interpolant is its expansion), the |top coefficient|
-    of its expansion, the size of what nothing checks there (zeros for the others)."""
+    element without held-out runs (whose interpolant is its expansion), the estimated size of
+    its next coefficient (:func:`_unchecked`; zeros for the others)."""
     size = rule.size
     kept = max(size, points.size - spare)
     own = own / scale
@@ -835,9 +835,11 @@ def _placed_moments(
 
 
 def _unchecked(coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(T,) the next coefficient beyond an element's (M, T) expansion, estimated from its top
-    one and the ratio to the one before (at most 1)."""
-    top, before = np.abs(coefficients[-1]), np.abs(coefficients[-2])
+    """(T,) |the next coefficient| beyond an element's (M, T) expansion, what nothing checks
+    where no held-out run is: its top one times their ratio to the one before (at most 1; 1
+    where the one before is the mean)."""
+    top = np.abs(coefficients[-1])
+    before = np.abs(coefficients[-2]) if coefficients.shape[0] > 2 else np.zeros_like(top)
     return top * np.where(before > top, top / np.where(before > 0, before, 1.0), 1.0)
 
 
