@@ -694,10 +694,10 @@ def placed_check(
     (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
     than that), plus in quadrature the next coefficient of each element without held-out runs
-    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the corrected mean's adds
-    the unseen error); the surrogate error is the L2 distance of the two surrogates (their
-    coefficients' difference), its upper bound that plus how far it moves. Runs that are not
-    finite are left out; zeros if the scale is zero.
+    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the
+    corrected mean's adds the unseen error); the surrogate error is the L2 distance of the two
+    surrogates (their coefficients' difference), its upper bound that plus how far it moves.
+    Runs that are not finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
     kept = np.isfinite(observed).all(axis=1)
