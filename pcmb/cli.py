@@ -533,7 +533,7 @@ def _inspect(path: str) -> str:
         lines.append(
             f"analysis quantile bands, PDFs at t = {times}; spectra: {', '.join(spectra) or 'none'}"
         )
-    lines += [f"{'note' if result.is_note(w) else 'warning':<9}{w}" for w in result.warnings]
+    lines += [f"{result.severity(w):<9}{w}" for w in result.warnings]
     lines += failure_report(result.failures, "failed   ")
     return "\n".join(lines)
 

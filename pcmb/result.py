@@ -27,7 +27,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ATTRIBUTE",
+    "NOTE",
     "POINTS",
+    "WARNING",
     "AdaptiveFit",
     "Design",
     "DesignReport",
@@ -394,12 +396,18 @@ class WarningRecord:
         The output it concerns (``None``: the whole study).
     time_range:
         ``(start, stop)`` of the times it concerns (``None``: all times).
+    severity:
+        :data:`WARNING` or :data:`NOTE` as read from a result file, which stores the
+        severity :meth:`StudyResult.severity` decided when it was written; ``None`` until then
+        (and in files without it). Not part of what the record says: records equal but for it
+        compare equal.
     """
 
     code: str
     message: str
     output: str | None = None
     time_range: tuple[float, float] | None = None
+    severity: str | None = field(default=None, compare=False)
 
     def __str__(self) -> str:
         where = f"{self.output}: " if self.output else ""
@@ -408,6 +416,10 @@ class WarningRecord:
         return f"{where}{self.message} [{self.code}]"
 
 
+#: The two severities of a warning record (stored with it in the result file): a warning is
+#: issued (``Study.run``, ``pcmb run``); a note only informs (``pcmb inspect``, the report).
+WARNING = "warning"
+NOTE = "note"
 #: Codes of the cautions on what is drawn from the surrogate (PDFs, quantiles, Sobol'
 #: indices) while its mean and std hold: recorded only, shown beside those figures.
 SURROGATE_CAUTIONS = frozenset({"surrogate-inaccurate", "pdf-outside-runs"})
@@ -636,11 +648,21 @@ class StudyResult(ReportedByDesign):
             raise ValueError("sobol_process needs one global chaos expansion (not multi-element)")
         return expansion.sobol_total_group(group)
 
+    def severity(self, record: WarningRecord) -> str:
+        """:data:`NOTE` when a record only informs (:data:`RECORDED_ONLY`, or an
+        :data:`INDICATORS` record about an output the diagnostics vouch for — reliable and
+        nowhere undecided — or about the whole study when they vouch for every output): kept in
+        the result and its file, not issued as a warning; else :data:`WARNING`. A record read
+        from a file keeps the severity stored there."""
+        if record.severity is not None:
+            return record.severity
+        return NOTE if self._informs(record) else WARNING
+
     def is_note(self, record: WarningRecord) -> bool:
-        """Whether a record only informs (:data:`RECORDED_ONLY`, or an :data:`INDICATORS`
-        record about an output the diagnostics vouch for — reliable and nowhere undecided — or
-        about the whole study when they vouch for every output): kept in the result and its
-        file, not issued as a warning."""
+        """Whether a record's :meth:`severity` is :data:`NOTE`."""
+        return self.severity(record) == NOTE
+
+    def _informs(self, record: WarningRecord) -> bool:
         if record.code in RECORDED_ONLY:
             return True
         if record.code not in INDICATORS:

@@ -27,6 +27,8 @@ from pcmb.chaos.inputs import from_description
 from pcmb.chaos.process import RandomProcess, covariance_from_description, germ_names
 from pcmb.errors import ResultFileError
 from pcmb.result import (
+    NOTE,
+    WARNING,
     Design,
     DesignReport,
     ModelTraceback,
@@ -228,7 +230,7 @@ def _write(
         attrs[key] = provenance.get(key, "")
 
     file.create_group("design").attrs["record"] = result.design.describe()
-    _write_warnings(file, result.warnings)
+    _write_warnings(file, result)
     time_ = _scale(file, "time", result.times)
     node = _scale(file, "node", np.arange(n_nodes))
     input_ = _scale(file, "input", np.array(result.input_names, dtype=h5py.string_dtype()))
@@ -431,12 +433,18 @@ def _read_expansion(
     return PiecewiseExpansion(partition, coefficients, index, names)
 
 
-def _write_warnings(file: h5py.File, warnings: tuple[WarningRecord, ...]) -> None:
-    """Warning records as JSON attributes: the study's on /diagnostics, an output's on
-    /diagnostics/<output> (attributes, so no output name can collide with them)."""
+def _write_warnings(file: h5py.File, result: StudyResult) -> None:
+    """Warning records as JSON attributes, each with its severity (``StudyResult.severity``):
+    the study's on /diagnostics, an output's on /diagnostics/<output> (attributes, so no
+    output name can collide with them)."""
     group = file.create_group("diagnostics")
+    warnings = result.warnings
     for output in dict.fromkeys(w.output for w in warnings):
-        records = [dataclasses.asdict(w) for w in warnings if w.output == output]
+        records = [
+            {**dataclasses.asdict(w), "severity": result.severity(w)}
+            for w in warnings
+            if w.output == output
+        ]
         owner = group if output is None else group.require_group(output)
         owner.attrs["warnings"] = json.dumps(records)
 
@@ -558,6 +566,11 @@ def _read_warnings(file: h5py.File) -> tuple[WarningRecord, ...]:
     records = []
     for owner in owners:
         for record in json.loads(_text(owner.attrs.get("warnings", "[]"))):
+            if record.get("severity") not in (None, WARNING, NOTE):
+                raise ValueError(
+                    f"warning record {record.get('code')!r} has severity "
+                    f"{record['severity']!r}, neither {WARNING!r} nor {NOTE!r}"
+                )
             span = record.pop("time_range")
             records.append(
                 WarningRecord(**record, time_range=None if span is None else tuple(span))

@@ -125,6 +125,8 @@ def _check_inputs(
 
 #: The method of a study given none: tensor collocation of order 3.
 DEFAULT_METHOD: Mapping[str, Any] = {"kind": "collocation", "order": 3}
+#: What the errors call a held-out run (numbered among those runs, not the design's nodes).
+_HELD_OUT_RUN = "held-out run"
 #: Order of a method of pcmb 0.x's keywords that takes one and was given neither order nor
 #: level (their default then).
 _KEYWORD_ORDER = 3
@@ -1133,7 +1135,7 @@ class Study:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            self._judge_failures(found, held_journal)
+            self._judge_failures(found, held_journal, _HELD_OUT_RUN)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
@@ -1149,13 +1151,15 @@ class Study:
         *,
         proven: bool = False,
         keep: bool = True,
+        runs_of: str = "node",
     ) -> tuple[RunResult, Journal | None]:
         """Run every node (checked by the caller, :meth:`_check_finite`), journaled by
         ``journaling`` if given (the journal is returned, to be removed once the result is
         written); raise by the failure policy. ``chunk_size`` overrides the study's;
         ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
-        only (a streamed study)."""
+        only (a streamed study); ``runs_of``: what the runs are, for the error
+        (:meth:`_judge_failures`)."""
         journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
         with _removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
@@ -1169,7 +1173,7 @@ class Study:
                 proven=proven,
                 keep=keep,
             )
-        self._judge_failures(runs, journal)
+        self._judge_failures(runs, journal, runs_of)
         return runs, journal
 
     def _journal(
@@ -1224,26 +1228,29 @@ class Study:
             counted=counted,
         )
 
-    def _judge_failures(self, runs: RunResult, journal: Journal | None) -> None:
-        """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on."""
+    def _judge_failures(
+        self, runs: RunResult, journal: Journal | None, runs_of: str = "node"
+    ) -> None:
+        """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on;
+        ``runs_of``: what the runs are (``"held-out run"``: numbered among those)."""
         if not runs.failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
         kept = (
-            f"; the {finished} finished node(s) are kept in {journal.directory}"
+            f"; the {finished} finished {runs_of}(s) are kept in {journal.directory}"
             if journal is not None and finished
             else ""
         )
         pending = int(np.sum(runs.status == Status.PENDING))
         stopped = (
-            f"; stopped at the first failure, {pending} node(s) not run"
+            f"; stopped at the first failure, {pending} {runs_of}(s) not run"
             + (" (--resume runs them)" if journal is not None else "")
             if pending
             else ""
         )
         raise ModelRunError(
             runs.failures,
-            f"the model failed at {len(runs.failures)} of {runs.status.size} node(s) "
+            f"the model failed at {len(runs.failures)} of {runs.status.size} {runs_of}(s) "
             f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
         )
 
@@ -1311,7 +1318,15 @@ class Study:
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            draws.nodes, facts, outputs, pool, folder, progress, halves, proven=proven
+            draws.nodes,
+            facts,
+            outputs,
+            pool,
+            folder,
+            progress,
+            halves,
+            proven=proven,
+            runs_of=_HELD_OUT_RUN,
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end

@@ -72,6 +72,11 @@ def _adaptive(function, inputs, **method) -> pcmb.StudyResult:
     return study.run()
 
 
+def _statistics_error(result: pcmb.StudyResult, mean: float, std: float) -> float:
+    """The error of a scalar output's mean and std against the true ones, over the std."""
+    return max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+
+
 def _smolyak_runs(function, inputs, error: float, exact: float) -> int:
     """Runs of the smallest isotropic Smolyak grid (rule auto) whose variance is as accurate."""
     for level in range(1, 8):
@@ -119,7 +124,7 @@ def test_the_estimate_is_within_ten_times_the_true_error_of_mean_and_std(toleran
     )
     mean = float(np.prod(_moments(VALIDATION_RATES)))
     std = np.sqrt(float(np.prod(_moments(2 * VALIDATION_RATES))) - mean**2)
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert estimate == result.adaptive.history[-1, 1] <= tolerance
     assert error / 10 <= estimate <= 10 * error
@@ -158,7 +163,7 @@ def test_the_tolerance_is_the_error_delivered(function, inputs, moments, toleran
     careful while the guard held the largest raw change of the last three)."""
     (mean, std), max_runs = moments, 6000
     result = _adaptive(function, inputs, method="adaptive", tolerance=tolerance, max_runs=max_runs)
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert tolerance / 100 <= error <= 10 * tolerance, error
     assert error / 10 <= estimate <= 10 * error, (estimate, error)
@@ -194,7 +199,7 @@ def test_slowly_falling_changes_are_summed_not_believed_to_be_the_error():
         tolerance=1e-4,
         max_runs=6000,
     )
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert estimate <= 1e-4
     assert 1e-6 <= error <= 1e-3, error
@@ -235,7 +240,7 @@ def test_the_g_function_does_not_stop_while_its_error_is_ten_times_the_tolerance
     inputs = {f"x{k}": pcmb.Uniform(0.0, 1.0) for k in range(G_WEIGHTS.size)}
     std = np.sqrt(np.prod(1 + 1 / (3 * (1 + G_WEIGHTS) ** 2)) - 1)
     result = _adaptive(_g_function, inputs, method="adaptive", tolerance=tolerance, max_runs=2000)
-    error = max(abs(result.mean("y")[0] - 1), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, 1.0, std)
     estimate = result.adaptive.estimate
     assert not (estimate <= tolerance and error > 10 * tolerance), (estimate, error)
     assert error / 10 <= estimate <= 10 * error
@@ -270,7 +275,7 @@ def test_the_error_left_beyond_a_rules_last_level_is_not_ignored():
         tolerance=1e-5,
         validation=0,
     )
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert error > 10 * 1e-5 and estimate > 1e-5, (estimate, error)
     assert error / 10 <= estimate <= 10 * error, (estimate, error)
@@ -296,7 +301,7 @@ def test_a_response_near_a_singularity_is_not_called_nonsmooth():
         validation=0,
     )
     assert not [w for w in result.warnings if w.code == "adaptive-nonsmooth"]
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     assert error / 10 <= result.adaptive.estimate <= 10 * error, (result.adaptive.estimate, error)
 
 
@@ -328,7 +333,7 @@ def test_one_lucky_small_change_does_not_stop_the_grid():
     Gauss–Legendre rule of 12^7 points."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-5, max_runs=3000)
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert estimate <= 1e-5 and error <= 1e-4
     assert error / 10 <= estimate <= 10 * error
@@ -343,7 +348,7 @@ def test_two_lucky_small_changes_in_a_row_do_not_stop_the_grid():
     within 10 ε and within 10x of the estimate either way."""
     mean, std = piston_moments()
     result = _adaptive(piston, PISTON, method="adaptive", tolerance=1e-6, max_runs=6000)
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     estimate = result.adaptive.estimate
     assert error <= 1e-5
     assert error / 10 <= estimate <= 10 * error, (estimate, error)
@@ -463,7 +468,7 @@ def test_a_tensor_grid_raised_one_input_at_a_time_meets_the_tolerance(tolerance)
     # Honest: the estimate is within 10x of the true error of the mean and std (it was 1e9
     # times careful: the top faces' change is the error of the box one level lower in all).
     std = np.sqrt(variance)
-    error = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    error = _statistics_error(result, mean, std)
     assert error / 10 <= fit.estimate <= 10 * error, (fit.estimate, error)
     assert result.design.basis == "tensor"
     # One input per round: each round adds one level of one input.

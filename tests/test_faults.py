@@ -112,12 +112,14 @@ def _study(
     how: str = "exit",
     sleep: float = 0.0,
     timeout: float | None = None,
+    chunk_size: int | None = None,
 ) -> Path:
     """A study whose model misbehaves (``how``) at node ``index`` (``None``: never); returns
     the config."""
     (folder / "faulty.py").write_text(MODEL)
     low, high = _window(index)
     limit = "" if timeout is None else f", timeout: {timeout}"
+    limit += "" if chunk_size is None else f", chunk_size: {chunk_size}"
     config = folder / "study.yaml"
     config.write_text(
         textwrap.dedent(
@@ -262,6 +264,23 @@ def test_a_crash_in_the_nominal_run_is_a_warning(tmp_path: Path) -> None:
     assert "nominal-failed" in {w.code for w in result.warnings}
     assert (result.status == Status.OK).all()
     _check_where_it_ran(tmp_path, pid)
+
+
+@pytest.mark.slow
+def test_a_nominal_run_past_the_timeout_leaves_no_design_node_unrun(tmp_path: Path) -> None:
+    # Chunks [0-2] [3-5] [6-8] [nominal], one call each: the nominal run (2 s allowed) hangs
+    # while [6-8] (4.5 s of 7 allowed) runs beside it; the kill of both workers must not cost
+    # [6-8] its run, as a failed nominal run never stops a study.
+    config = _study(
+        tmp_path, NOMINAL, 0, 2, "abort", how="hang", sleep=1.5, timeout=2.0, chunk_size=3
+    )
+    returncode, stderr, _ = _run(config)
+    assert returncode == 0, stderr
+    assert "the nominal run failed, so none is stored: timed out after 2 s" in stderr
+    result = pcmb.load(tmp_path / "out" / "result.h5")
+    assert (result.status == Status.OK).all(), result.status
+    assert result.design.fit == "projection"
+    np.testing.assert_allclose(result.mean("y"), 0.5 * result.times, atol=1e-12)
 
 
 @pytest.mark.slow

@@ -192,3 +192,104 @@ def test_a_registered_design_report_is_written_read_and_inspected(written, tmp_p
     np.testing.assert_array_equal(back.surpluses, np.arange(16.0))
     assert "surplus  largest 15" in _inspect(str(tmp_path / "r.h5")).splitlines()
     assert pcmb.load(path).report is None  # a file without it: none
+
+
+@pcmb.pointwise(outputs=("y", "w"))
+def model_failing_at_nominal(params, times):
+    if params["a"] == 2.0:  # the nominal value, never a node nor a drawn held-out run
+        raise ValueError("no run at the nominal point")
+    return model(params, times)
+
+
+def _stored_severities(path):
+    """(code, output) -> the severity stored with each warning record of the file."""
+    with h5py.File(path) as file:
+        group = file["diagnostics"]
+        owners = [group, *(g for g in group.values() if isinstance(g, h5py.Group))]
+        return {
+            (record["code"], record["output"]): record["severity"]
+            for owner in owners
+            for record in json.loads(owner.attrs.get("warnings", "[]"))
+        }
+
+
+def _inspected_records(path):
+    from pcmb.cli import _inspect
+
+    return [
+        line for line in _inspect(str(path)).splitlines() if line.startswith(("note ", "warning "))
+    ]
+
+
+def test_the_file_holds_each_records_severity_as_inspect_shows_it(tmp_path):
+    path = tmp_path / "r.h5"
+    study = pcmb.Study(
+        model_failing_at_nominal, INPUTS, TIMES, order=3, params={"a": 2.0, "b": 0.0}, jobs=1
+    )
+    with pytest.warns(pcmb.PcmbWarning, match="nominal"):
+        result = study.run(path)
+    stored = _stored_severities(path)
+    assert stored[("nominal-failed", None)] == "warning"
+    assert stored[("sobol-undefined", "w")] == "note"
+    loaded = pcmb.load(path)
+    assert [w.severity for w in loaded.warnings] == [
+        stored[w.code, w.output] for w in loaded.warnings
+    ]
+    assert _inspected_records(path) == [f"{w.severity:<9}{w}" for w in loaded.warnings]
+    # An indicator's severity follows the verdict: a note about an output it vouches for.
+    assert result.diagnostics["y"].vouched
+    indicator = WarningRecord("element-decay", "an indicator", output="y")
+    store.write_result(
+        path, dataclasses.replace(result, warnings=(*result.warnings, indicator)), provenance={}
+    )
+    assert _stored_severities(path)[("element-decay", "y")] == "note"
+    assert "note     y: an indicator [element-decay]" in _inspected_records(path)
+    # Read from the file, not derived again: a record the file calls a note is shown as one.
+    with h5py.File(path, "r+") as file:
+        records = json.loads(file["diagnostics"].attrs["warnings"])
+        (failed,) = [record for record in records if record["code"] == "nominal-failed"]
+        failed["severity"] = "note"
+        file["diagnostics"].attrs["warnings"] = json.dumps(records)
+    assert any(
+        line.startswith("note ") and "[nominal-failed]" in line for line in _inspected_records(path)
+    )
+
+
+def test_a_file_without_severities_derives_them_as_before(written, tmp_path):
+    result = written[1]
+    records = (
+        WarningRecord("nominal-failed", "the nominal run failed"),
+        WarningRecord("sobol-undefined", "w does not vary", output="w", time_range=(0.0, 0.0)),
+        WarningRecord("element-decay", "an indicator", output="y"),
+    )
+    old = tmp_path / "old.h5"
+    store.write_result(old, dataclasses.replace(result, warnings=records), provenance={})
+    with h5py.File(old, "r+") as file:
+        for owner in (file["diagnostics"], file["diagnostics/w"], file["diagnostics/y"]):
+            kept = json.loads(owner.attrs["warnings"])
+            for record in kept:
+                record.pop("severity", None)
+            owner.attrs["warnings"] = json.dumps(kept)
+    loaded = pcmb.load(old)
+    assert [loaded.is_note(w) for w in loaded.warnings] == [False, True, True]
+    assert _inspected_records(old) == [
+        "warning  the nominal run failed [nominal-failed]",
+        "note     w: t in [0, 0]: w does not vary [sobol-undefined]",
+        "note     y: an indicator [element-decay]",
+    ]
+
+
+def test_a_stored_severity_that_is_neither_warning_nor_note_is_refused(written, tmp_path):
+    """A file's severity is read, not trusted: an unknown word is a result-file error naming
+    the record, never a record shown as neither."""
+    path = tmp_path / "odd.h5"
+    store.write_result(path, written[1], provenance={})
+    with h5py.File(path, "r+") as file:
+        owner = next(
+            g for g in (file["diagnostics"], *file["diagnostics"].values()) if "warnings" in g.attrs
+        )
+        kept = json.loads(owner.attrs["warnings"])
+        kept[0]["severity"] = "fatal"
+        owner.attrs["warnings"] = json.dumps(kept)
+    with pytest.raises(ResultFileError, match="severity 'fatal'"):
+        pcmb.load(path)

@@ -525,26 +525,35 @@ def _run_pooled(
     A task past its deadline has its workers killed (the pool is rebuilt); the other tasks
     in flight then are run again, and the late task is isolated like one whose worker died.
     With ``stop_on_failure``, no task is started once a node has failed; the tasks in flight
-    finish (and are journaled), the others stay pending. While the model has broken the
+    finish (and are journaled; those a kill of the workers cut short run again), the others
+    stay pending. While the model has broken the
     protocol at every node it tried, no task is started either: if the tasks in flight do
     not show it working somewhere, the loop ends there (a model error, see
     :func:`run_nodes`); if they do, the campaign goes on under the failure policy.
     """
     queue = deque(tasks)
+    # The tasks in flight when a late one had every worker killed: started, so they finish
+    # even after a failure, as every task in flight does.
+    restarted: deque[_Task] = deque()
     # One task queued beyond the workers hides the round trip between tasks (no more: loky's
     # queue takes one extra, and a kill must not find tasks waiting outside it). With a
     # timeout each task's clock must start when the task does: no task waits then.
     most = pool.slots + (1 if limits.timeout is None else 0)
     in_flight: dict[Future[Outcome], tuple[_Task, float]] = {}
     lost: list[_Task] = []
-    while queue or in_flight:
+    while queue or restarted or in_flight:
         if campaign.broken_everywhere and not in_flight:
             break
         # After a death, feed nothing more: let the chunks in flight finish or fail first.
         if stop_on_failure and campaign.messages:
             queue.clear()
-        while queue and not lost and len(in_flight) < most and not campaign.broken_everywhere:
-            task = queue.popleft()
+        while (
+            (restarted or queue)
+            and not lost
+            and len(in_flight) < most
+            and not campaign.broken_everywhere
+        ):
+            task = (restarted or queue).popleft()
             future = pool.submit(run_task, *campaign.arguments(task))
             in_flight[future] = (task, limits.deadline(task, time.monotonic()))
         first = min((deadline for _, deadline in in_flight.values()), default=0.0)
@@ -563,7 +572,7 @@ def _run_pooled(
         late = [task for task, deadline in in_flight.values() if deadline <= now]
         if late:
             # The pool cannot kill one worker: all go, and the tasks on time run again.
-            queue.extendleft(t for t, d in reversed(in_flight.values()) if d > now)
+            restarted.extend(t for t, d in in_flight.values() if d > now)
             in_flight.clear()
             pool.rebuild()
             for task in late:
