@@ -16,6 +16,7 @@ import pytest
 import pcmb
 from pcmb.analysis.diagnostics import (
     HeldOutCheck,
+    element_importance,
     held_out_budget,
     held_out_draws,
     held_out_placed,
@@ -438,6 +439,33 @@ def test_a_kink_in_a_sliver_no_node_reaches_is_never_called_reliable(order, tole
     true = _true_error(result, "y", mean, np.sqrt(square - mean**2))
     assert true[0] > tolerance  # elements: auto stopped short of its tolerance
     assert found.estimate[0] + found.noise[0] > tolerance  # flagged or undecided
+
+
+def test_an_element_whose_top_coefficient_a_parity_zeroes_is_neither_skipped_nor_exact():
+    # |x| on (-1, 1) cut at ±0.5, order 3: the outer elements are linear (exact), the middle
+    # one holds the kink, and |x| is even there: its top (odd) coefficient is 0 and read it
+    # as needing no run (importance 0) and, without runs, as exact (estimate and noise
+    # 1e-16 against a true std error of 0.034 of the largest std; closed forms: 1/2, 1/12).
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[-0.5, 0.5]])
+    coefficients, nodes = [], []
+    for (conditional,) in partition.inputs:
+        grid = TensorGrid((conditional,), (3,))
+        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
+        coefficients.append(grid.weights @ (basis * abs(grid.params)))
+        nodes.append(grid.params[:, 0])
+    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
+    physical = np.concatenate(nodes)
+    where = partition.locate(physical[:, None])
+    germ = partition.distributions[0].to_germ(physical)
+    values = abs(physical[:, None])
+    importance = element_importance(partition, germ, where, {"y": values})
+    assert importance[1] > 1e6 * max(importance[0], importance[2])
+    scale = float(expansion.std()[0])
+    true = abs(expansion.std()[0] - np.sqrt(1 / 12)) / scale
+    assert true == pytest.approx(0.034, abs=1e-3)
+    draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0, 1.0], 4)
+    found = placed_check(expansion, germ, values, draws.nodes, abs(draws.params), scale)
+    assert true < found.statistics[0] + found.noise[0] < 10 * true
 
 
 def test_the_noise_is_the_spread_times_the_normal_quantile():

@@ -153,6 +153,9 @@ PDF_MARGIN = 0.05
 _ROUND_OFF = 1e-12
 #: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
 _EXACT = 1e-8
+#: A top coefficient below this share of the one before is a parity's zero (a response even
+#: or odd about an element's centre), not a converged tail.
+_PARITY = 1e-8
 #: A tail holding more than this share of its energy in one input is "concentrated".
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
@@ -274,8 +277,9 @@ def element_importance(
     values: Mapping[str, ArrayLike],
 ) -> NDArray[np.float64]:
     """(E,) how much each element of a one-input design may err: its probability times the
-    largest |top coefficient| of the interpolant through its nodes (``where``: each node's
-    element; over outputs and times, each output over its runs' largest spread)."""
+    largest |top coefficient| (:func:`_top_layer`) of the interpolant through its nodes
+    (``where``: each node's element; over outputs and times, each output over its runs'
+    largest spread)."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
     importance = np.zeros(partition.size)
@@ -287,8 +291,8 @@ def element_importance(
             rows = (where == e) & finite
             if spread > 0 and rows.sum() > 1:
                 local = conditional.to_germ(physical[rows])
-                top = _interpolated(conditional.family, local, y[rows] / spread)[-1]
-                importance[e] = max(importance[e], partition.probability[e] * np.max(abs(top)))
+                top, _ = _top_layer(_interpolated(conditional.family, local, y[rows] / spread))
+                importance[e] = max(importance[e], partition.probability[e] * np.max(top))
     return importance
 
 
@@ -834,13 +838,28 @@ def _placed_moments(
     )
 
 
+def _top_layer(coefficients: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """(T,) |top coefficient| of (M, T) ``coefficients`` by degree, or, where a parity zeroes
+    it (below ``_PARITY`` of the one before), of the one before; and (T,) its ratio to the
+    coefficient of its parity before it, at most 1 (1 where only the mean is before it)."""
+    size = np.abs(coefficients[1:])  # degrees 1 to M - 1
+    zero = np.zeros(size.shape[1:])
+
+    def degree_below(steps: int) -> NDArray[np.float64]:
+        return size[-1 - steps] if size.shape[0] > steps else zero
+
+    parity = size[-1] <= _PARITY * degree_below(1)
+    top = np.where(parity, degree_below(1), size[-1])
+    before = np.where(parity, degree_below(3), degree_below(1))
+    return top, np.where(before > top, top / np.where(before > 0, before, 1.0), 1.0)
+
+
 def _unchecked(coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
     """(T,) |the next coefficient| beyond an element's (M, T) expansion, what nothing checks
-    where no held-out run is: its top one times their ratio to the one before (at most 1; 1
-    where the one before is the mean)."""
-    top = np.abs(coefficients[-1])
-    before = np.abs(coefficients[-2]) if coefficients.shape[0] > 2 else np.zeros_like(top)
-    return top * np.where(before > top, top / np.where(before > 0, before, 1.0), 1.0)
+    where no held-out run is: its top one times their ratio to the one before of its parity
+    (at most 1; :func:`_top_layer`)."""
+    top, ratio = _top_layer(coefficients)
+    return top * ratio
 
 
 # -- range checks ------------------------------------------------------------------------------
