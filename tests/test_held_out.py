@@ -16,6 +16,7 @@ import pytest
 import pcmb
 from pcmb.analysis.diagnostics import (
     HeldOutCheck,
+    element_importance,
     held_out_budget,
     held_out_draws,
     held_out_placed,
@@ -376,6 +377,95 @@ def test_an_element_without_placed_runs_extrapolates_no_tail_from_its_own_three_
     found = placed_check(expansion, germ, values, draws.nodes, observed, 1.0)
     assert found.corrected_mean[0] == pytest.approx(7.0 / 12.0, rel=1e-12)
     assert found.mean_error[0] < 1e-12
+
+
+def test_an_element_without_placed_runs_leaves_the_check_undecided_not_reliable():
+    # |x - 0.3| on (-1, 1) cut at 0, order 3: the first element is linear (exact), the second
+    # holds the kink. All 4 placed runs forced into the first: the second is unchecked, and
+    # its share once counted as zero error (estimates 2e-16 against true errors of the mean
+    # and std of 0.0135 and 0.0204 of the largest std, closed forms). Its share is now noise.
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
+    coefficients, nodes = [], []
+    for (conditional,) in partition.inputs:
+        grid = TensorGrid((conditional,), (3,))
+        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
+        coefficients.append(grid.weights @ (basis * abs(grid.params - 0.3)))
+        nodes.append(grid.params[:, 0])
+    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
+    physical = np.concatenate(nodes)
+    where = partition.locate(physical[:, None])
+    germ = partition.distributions[0].to_germ(physical)
+    draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0], 4)
+    assert np.bincount(partition.locate(draws.params), minlength=2).tolist() == [4, 0]
+    scale = float(expansion.std()[0])
+    values, observed = abs(physical[:, None] - 0.3), abs(draws.params - 0.3)
+    found = placed_check(expansion, germ, values, draws.nodes, observed, scale)
+    mean, square = (1.3**2 + 0.7**2) / 4, (1.3**3 + 0.7**3) / 6
+    true = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - np.sqrt(square - mean**2)))
+    assert true / scale == pytest.approx(0.0204, abs=1e-4)
+    # Not called reliable at a tolerance the truth passes (estimate + noise above the true
+    # error), not flagged at one it does not (0.05), uncertain by less than 10 times the truth.
+    assert found.statistics[0] + found.noise[0] > true / scale
+    assert np.isnan(verdict(np.zeros(1), found.statistics, 0.05, found.noise))
+    assert found.noise[0] < 10 * true / scale
+
+
+@pytest.mark.parametrize(("order", "tolerance"), [(2, 1e-4), (3, 1e-3), (5, 1e-3)])
+def test_a_kink_in_a_sliver_no_node_reaches_is_never_called_reliable(order, tolerance):
+    # exp(x) + 2 max(x - 1/√5, 0) on (-1, 1) with elements: auto, whose own estimate reads
+    # 0.03-0.08 times the true error (the kink sits between an element's last node and its
+    # edge; docs/multi_element.md): the default placed check, whose Leja points start at the
+    # elements' edges, sees it (true errors 15, 4.2 and 8.1 times the tolerance: undecided,
+    # flagged, undecided). Truth: exact moments of the two analytic pieces.
+    cut = 1 / np.sqrt(5)
+
+    @pcmb.batched(outputs=("y",))
+    def kinked(params, times):
+        x = np.asarray(params["x"])
+        return {"y": np.outer(np.exp(x) + 2 * np.maximum(x - cut, 0.0), np.ones_like(times))}
+
+    mean = (np.e - np.exp(-1) + (1 - cut) ** 2) / 2
+    square = (np.e**2 - np.exp(-2)) / 4 + 2 * (np.exp(cut) - cut * np.e) + 2 * (1 - cut) ** 3 / 3
+    times = np.zeros(1)
+    result = _run(
+        kinked,
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        times,
+        order=order,
+        elements="auto",
+        diagnostics={"tolerance": tolerance},
+    )
+    found = result.diagnostics["y"]
+    true = _true_error(result, "y", mean, np.sqrt(square - mean**2))
+    assert true[0] > tolerance  # elements: auto stopped short of its tolerance
+    assert found.estimate[0] + found.noise[0] > tolerance  # flagged or undecided
+
+
+def test_an_element_whose_top_coefficient_a_parity_zeroes_is_neither_skipped_nor_exact():
+    # |x| on (-1, 1) cut at ±0.5, order 3: the outer elements are linear (exact), the middle
+    # one holds the kink, and |x| is even there: its top (odd) coefficient is 0 and read it
+    # as needing no run (importance 0) and, without runs, as exact (estimate and noise
+    # 1e-16 against a true std error of 0.034 of the largest std; closed forms: 1/2, 1/12).
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[-0.5, 0.5]])
+    coefficients, nodes = [], []
+    for (conditional,) in partition.inputs:
+        grid = TensorGrid((conditional,), (3,))
+        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
+        coefficients.append(grid.weights @ (basis * abs(grid.params)))
+        nodes.append(grid.params[:, 0])
+    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
+    physical = np.concatenate(nodes)
+    where = partition.locate(physical[:, None])
+    germ = partition.distributions[0].to_germ(physical)
+    values = abs(physical[:, None])
+    importance = element_importance(partition, germ, where, {"y": values})
+    assert importance[1] > 1e6 * max(importance[0], importance[2])
+    scale = float(expansion.std()[0])
+    true = abs(expansion.std()[0] - np.sqrt(1 / 12)) / scale
+    assert true == pytest.approx(0.034, abs=1e-3)
+    draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0, 1.0], 4)
+    found = placed_check(expansion, germ, values, draws.nodes, abs(draws.params), scale)
+    assert true < found.statistics[0] + found.noise[0] < 10 * true
 
 
 def test_the_noise_is_the_spread_times_the_normal_quantile():

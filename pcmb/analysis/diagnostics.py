@@ -153,6 +153,9 @@ PDF_MARGIN = 0.05
 _ROUND_OFF = 1e-12
 #: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
 _EXACT = 1e-8
+#: A top coefficient below this share of the one before is a parity's zero (a response even
+#: or odd about an element's centre), not a converged tail.
+_PARITY = 1e-8
 #: A tail holding more than this share of its energy in one input is "concentrated".
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
@@ -274,8 +277,9 @@ def element_importance(
     values: Mapping[str, ArrayLike],
 ) -> NDArray[np.float64]:
     """(E,) how much each element of a one-input design may err: its probability times the
-    largest |top coefficient| of the interpolant through its nodes (``where``: each node's
-    element; over outputs and times, each output over its runs' largest spread)."""
+    largest |top coefficient| (:func:`_top_layer`) of the interpolant through its nodes
+    (``where``: each node's element; over outputs and times, each output over its runs'
+    largest spread)."""
     distribution = partition.distributions[0]
     physical = distribution.to_physical(np.ravel(design_germ))
     importance = np.zeros(partition.size)
@@ -287,8 +291,8 @@ def element_importance(
             rows = (where == e) & finite
             if spread > 0 and rows.sum() > 1:
                 local = conditional.to_germ(physical[rows])
-                top = _interpolated(conditional.family, local, y[rows] / spread)[-1]
-                importance[e] = max(importance[e], partition.probability[e] * np.max(abs(top)))
+                top, _ = _top_layer(_interpolated(conditional.family, local, y[rows] / spread))
+                importance[e] = max(importance[e], partition.probability[e] * np.max(top))
     return importance
 
 
@@ -693,10 +697,11 @@ def placed_check(
     Gauss nodes), the design rule's error on the degrees beyond the interpolant's
     (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
     ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
-    than that), the spread that of the larger estimate (the corrected mean's adds the unseen
-    error); the surrogate error is the L2 distance of the two surrogates (their
-    coefficients' difference), its upper bound that plus how far it moves. Runs that are not
-    finite are left out; zeros if the scale is zero.
+    than that), plus in quadrature the next coefficient of each element without held-out runs
+    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the
+    corrected mean's adds the unseen error); the surrogate error is the L2 distance of the two
+    surrogates (their coefficients' difference), its upper bound that plus how far it moves.
+    Runs that are not finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
     kept = np.isfinite(observed).all(axis=1)
@@ -715,9 +720,11 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
-        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
+        means, stds, errors, unseen, unchecked = (
+            np.array(column) for column in zip(*found, strict=True)
+        )
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         return (
@@ -725,20 +732,23 @@ def placed_check(
             np.sqrt(variance),
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
+            np.sqrt(np.sum((probability * unchecked) ** 2, axis=0)),
         )
 
-    rich_mean, rich_std, error, unseen = moments(0)
+    rich_mean, rich_std, error, unseen, unchecked = moments(0)
     mean_error, std_error = (
         np.abs(rich_mean - mean / scale) + unseen,
         np.abs(rich_std - std / scale),
     )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen, _ = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
-        # size is a bias, which the corrected mean, leaving it out, adds to that noise).
-        mean_se = np.abs(mean_error - fewer_mean_error)
-        std_se, moved = np.abs(rich_std - fewer_std), np.abs(error - fewer_error)
+        # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
+        # elements without runs, which nothing checks, add their next coefficients.
+        mean_se = np.hypot(mean_error - fewer_mean_error, unchecked)
+        std_se = np.hypot(rich_std - fewer_std, unchecked)
+        moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return HeldOutCheck(
@@ -808,10 +818,12 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
     mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
-    and held-out runs without its last ``spare`` held-out runs, over the scale."""
+    and held-out runs without its last ``spare`` held-out runs, over the scale; and, for an
+    element without held-out runs (whose interpolant is its expansion), the estimated size of
+    its next coefficient (:func:`_unchecked`; zeros for the others)."""
     size = rule.size
     kept = max(size, points.size - spare)
     own = own / scale
@@ -822,7 +834,32 @@ def _placed_moments(
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
         _unseen_mean_error(family, points[:size], rule, coefficients),
+        _unchecked(coefficients) * (points.size == size),
     )
+
+
+def _top_layer(coefficients: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """(T,) |top coefficient| of (M, T) ``coefficients`` by degree, or, where a parity zeroes
+    it (below ``_PARITY`` of the one before), of the one before; and (T,) its ratio to the
+    coefficient of its parity before it, at most 1 (1 where only the mean is before it)."""
+    size = np.abs(coefficients[1:])  # degrees 1 to M - 1
+    zero = np.zeros(size.shape[1:])
+
+    def degree_below(steps: int) -> NDArray[np.float64]:
+        return size[-1 - steps] if size.shape[0] > steps else zero
+
+    parity = size[-1] <= _PARITY * degree_below(1)
+    top = np.where(parity, degree_below(1), size[-1])
+    before = np.where(parity, degree_below(3), degree_below(1))
+    return top, np.where(before > top, top / np.where(before > 0, before, 1.0), 1.0)
+
+
+def _unchecked(coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) |the next coefficient| beyond an element's (M, T) expansion, what nothing checks
+    where no held-out run is: its top one times their ratio to the one before of its parity
+    (at most 1; :func:`_top_layer`)."""
+    top, ratio = _top_layer(coefficients)
+    return top * ratio
 
 
 # -- range checks ------------------------------------------------------------------------------
