@@ -4,7 +4,8 @@ The driver of :mod:`pcmb.designs.adaptive`, kept to tensor grids: the index set 
 box, levels 0..L_k in input k, on the same nested rules. It starts at level 1 in every input
 (3^n runs on Gauss–Patterson or Genz–Keister rules). After each round the error left in each
 input is ``order: auto``'s (:func:`pcmb.designs.refine.box_errors`: the change its last level
-makes, carried to the box's degree by the coefficients' decay along it, squared), and the
+makes, scaled by the fall of the coefficients along it from the lower box's degree to the
+box's, :func:`pcmb.designs.refine.error_ratio`), and the
 estimated error is the largest over the inputs. While it exceeds the tolerance, the input with the
 largest estimated error is raised by one level — one input direction at a time — within the
 budget of runs. The nested rules reuse every run; the result is the tensor projection on the
