@@ -145,6 +145,29 @@ def oblique_step() -> Case:
     )
 
 
+def cosine() -> Case:
+    """cos(2x) on U[-1, 1]: analytic, even (mean sin(2) / 2, E y² = (1 + sin(4) / 4) / 2)."""
+    mean = np.sin(2.0) / 2
+    return (
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        lambda x, t: np.cos(2 * x[:, :1]),
+        (np.array([mean]), np.sqrt(np.array([(1 + np.sin(4.0) / 4) / 2 - mean**2]))),
+    )
+
+
+def exp_sine() -> Case:
+    """exp(x1) sin(2 x2) on U[-1, 1]²: analytic in both inputs (mean 0, E y² = sinh(2) / 2
+    times (1 - sin(4) / 4) / 2)."""
+    square = np.sinh(2.0) / 2 * (1 - np.sin(4.0) / 4) / 2
+    return (
+        {"x1": pcmb.Uniform(-1.0, 1.0), "x2": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        lambda x, t: np.exp(x[:, :1]) * np.sin(2 * x[:, 1:2]),
+        (np.zeros(1), np.sqrt(np.array([square]))),
+    )
+
+
 CASES = {
     f.__name__: f
     for f in (
@@ -157,6 +180,8 @@ CASES = {
         signed_square,
         derivative_jump,
         oblique_step,
+        cosine,
+        exp_sine,
     )
 }
 
