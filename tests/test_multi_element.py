@@ -367,6 +367,16 @@ AUTO_CASES = {
         np.zeros(1),
         (np.array([0.35]), np.array([np.sqrt(0.35 * 0.65)])),
     ),
+    # cos(2x) on U[-1, 1]: analytic and even (mean sin(2) / 2, E y² = (1 + sin(4) / 4) / 2).
+    "cosine": (
+        lambda p, t: np.cos(2 * p[:, :1]) + 0.0 * t,
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        np.zeros(1),
+        (
+            np.array([np.sin(2) / 2]),
+            np.array([np.sqrt((1 + np.sin(4) / 4) / 2 - np.sin(2) ** 2 / 4)]),
+        ),
+    ),
     # exp(z t / 2), z ~ N(0, 1): heavy tails (pcmb.references.lognormal_moments).
     "lognormal": (
         lambda p, t: np.exp(0.5 * np.outer(p[:, 0], t)),
@@ -402,6 +412,10 @@ def test_auto_stops_on_the_error_diagnostics_tolerance_names(case):
         # true error 3.7x the tolerance (the element [-0.125, 0.125], odd about the jump, has
         # no degree-2 term: its one ratio read a parity as a fast decay).
         ("double well", 2, 1e-2),
+        # Before each parity's decay per two degrees (where both have a layer two degrees
+        # below their outer one): 410x careful, the halves of an even response read the
+        # slower of the last two ratios per degree, alternating with the parities.
+        ("cosine", 5, 1e-4),
     ],
 )
 def test_auto_ends_with_an_estimate_within_10x_of_the_true_error(case, order, tolerance):

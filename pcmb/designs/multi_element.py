@@ -621,7 +621,12 @@ def element_errors(
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
         fall = _decay(last, previous)
-        if third.any():  # order 2 has one ratio
+        if fourth.any():  # both parities have a layer two degrees before the outer one
+            fall = np.zeros_like(tail)
+            for upper, lower in ((0, 2), (1, 3)):
+                read = np.minimum(np.sqrt(_decay(layer[upper], layer[lower])), DECAY_CAP)
+                fall = np.fmax(fall, np.where(layer[upper] > 0, read, 0.0))
+        elif third.any():  # order 2 has one ratio
             fall = np.fmax(fall, _decay(previous, before[0]))
         decays.append(fall)
         fall = np.fmax(fall, floors[name].reshape(size, -1) if name in floors else 0.0)
