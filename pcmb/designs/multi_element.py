@@ -620,15 +620,22 @@ def element_errors(
         decay = np.where(np.isfinite(tail), decay, np.nan)
         missing = tail * decay / (1 - decay)
         aliased = np.sqrt(tail * decay**2 / (1 - decay))
-        fall = _decay(last, previous)
-        if fourth.any():  # both parities have a layer two degrees before the outer one
-            fall = np.zeros_like(tail)
-            for upper, lower in ((0, 2), (1, 3)):
-                read = np.minimum(np.sqrt(_decay(layer[upper], layer[lower])), DECAY_CAP)
-                fall = np.fmax(fall, np.where(layer[upper] > 0, read, 0.0))
-        elif third.any():  # order 2 has one ratio
-            fall = np.fmax(fall, _decay(previous, before[0]))
-        decays.append(fall)
+        # The decay per degree: each parity's per two degrees where both parities have a layer
+        # two degrees below their outer one (order >= 4), else the slower of the last two
+        # ratios (one at order 2). Over a zero layer ``fall`` reads the cap, no decay seen (a
+        # step between nodes symmetric about it zeroes the even layers); ``seen``, the decay
+        # that floors the children, reads none: a parity is not a decay.
+        if fourth.any():
+            pairs, power = ((0, 2), (1, 3)), 0.5
+        else:
+            pairs, power = ((0, 1), (1, 2)) if third.any() else ((0, 1),), 1.0
+        fall, seen = np.zeros_like(tail), np.zeros_like(tail)
+        for upper, lower in pairs:
+            read = np.minimum(_decay(layer[upper], layer[lower]) ** power, DECAY_CAP)
+            fall = np.fmax(fall, read)
+            seen = np.fmax(seen, np.where(layer[lower] > 0, read, 0.0))
+        fall, seen = (np.where(np.isfinite(tail), f, np.nan) for f in (fall, seen))
+        decays.append(seen)
         fall = np.fmax(fall, floors[name].reshape(size, -1) if name in floors else 0.0)
         last = np.fmax(last, previous * fall)
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
