@@ -6,8 +6,8 @@ workers, no held-out check) with ``max_elements`` 64; the true error is the larg
 of max(|Δmean|, |Δstd|) over the largest std, against the closed form (double well:
 :func:`pcmb.references.double_well_moments`; |x - 0.3| and the step at 0.3 on U[-1, 1];
 exp(z t / 2): :func:`pcmb.references.lognormal_moments`; the cases no test tunes on,
-|x1 - x2| + sin(x1 + x2), sign(x) x², exp(x) + 2 max(x - 1/√5, 0) and a step along
-x1 + x2 / 2 = 0.1, in their docstrings) or, for the bouncing ball, a
+|x1 - x2| + sin(x1 + x2), sign(x) x², exp(x) + 2 max(x - 1/√5, 0), a step along
+x1 + x2 / 2 = 0.1, cos(2x) and exp(x1) sin(2 x2), in their docstrings) or, for the bouncing ball, a
 4000-point Gauss–Legendre rule over its closed-form heights. ``estimate/true`` > 1 is a
 careful estimate, < 1 an over-confident one.
 

@@ -492,7 +492,8 @@ class TailErrors:
     along:
         (E, n) each element's tail energy along each input, at its worst output and time.
     decay:
-        Per output, (E, P) each element's decay per degree as read (before ``floors``).
+        Per output, (E, P) each element's decay per degree as read (before ``floors``; no
+        decay over a zero layer), which floors its children.
     """
 
     mean: tuple[NDArray[np.float64], ...]
@@ -554,9 +555,12 @@ def element_errors(
       per layer), at most :data:`DECAY_CAP`; M = T ρ / (1 - ρ) and A = T ρ² / (1 - ρ), the
       decay carried two layers only, since a kink's first degrees mimic a fast one;
     - an element whose parent's split measured what this model missed on it (``factors``
-      f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the slower of
-      the last two (a kink's coefficients oscillate) and at least ``floors`` (a quarter of
-      its parent's at the same time: faster is a parity, not a decay), T the energy of the
+      f >= 1, :meth:`MultiElementCollocation.more`): ρ the decay per degree, the square
+      root of the slower parity's decay per two degrees where both parities have a layer two
+      degrees below their outer one (a response's halves alternate per degree), else the
+      slower of the last two ratios (a kink's coefficients oscillate), the cap over a zero
+      layer, and at least ``floors`` (a quarter of its parent's at the same time, read with
+      no decay over a zero layer: faster is a parity, not a decay), T the energy of the
       outer layer, of degree p (at least ρ times the layer before), M = f T ρ / (1 - ρ) and
       √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
       not integrate.
