@@ -44,9 +44,10 @@ import numpy as np
 from scipy.special import erf
 
 import pcmb
+from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
-from pcmb.designs.adaptive import GUARDED, estimated_error
+from pcmb.designs.adaptive import GUARDED, AdaptiveCollocation, estimated_error
 from pcmb.designs.refine import error_ratio
 from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import borehole as borehole_flow
@@ -441,11 +442,11 @@ def replayed_rounds(case: str, max_runs: int) -> list[Round]:
         values = np.concatenate([values, function(more.params)[:, None]])
 
 
-def _axis_fall(design) -> float:
+def _axis_fall(design: AdaptiveCollocation) -> float:
     """The largest over the inputs of the fall of the axis surpluses' norms over their last
     two measured levels (upper envelope), 1 where no input has two."""
     position = {level: k for k, level in enumerate(design._index)}
-    n, falls = len(design.names), [1.0]
+    n, falls = len(design.names), []
     for k in range(n):
         axis = (tuple(at * (j == k) for j in range(n)) for at in itertools.count(1))
         rows = [position[level] for level in itertools.takewhile(position.__contains__, axis)]
@@ -454,14 +455,14 @@ def _axis_fall(design) -> float:
         if norms.size >= 2 and norms[-2] > 0:
             envelope = np.maximum.accumulate(norms[::-1])[::-1]
             falls.append(min(1.0, envelope[-1] / envelope[-2]))
-    return max(falls[1:], default=1.0)
+    return max(falls, default=1.0)
 
 
-def _coefficient_fall(design, expansion) -> float:
+def _coefficient_fall(design: AdaptiveCollocation, expansion: ChaosExpansion) -> float:
     """The largest over the inputs of :func:`~pcmb.designs.refine.error_ratio` of the
     coefficients' norms per degree of that input, from the degree of its last level but one."""
     coefficients = expansion.coefficients.reshape(len(expansion.multi_index), -1)[:, 0]
-    levels, falls = np.array(design._index), [1.0]
+    levels, falls = np.array(design._index), []
     for k, rule in enumerate(design.rules):
         degree = expansion.multi_index[:, k]
         if levels[:, k].max() >= 1:
@@ -469,7 +470,7 @@ def _coefficient_fall(design, expansion) -> float:
                 math.sqrt(np.sum(coefficients[degree == q] ** 2)) for q in range(degree.max() + 1)
             ]
             falls.append(error_ratio(norms, rule.projection_degree(levels[:, k].max() - 1)))
-    return max(falls[1:], default=1.0)
+    return max(falls, default=1.0)
 
 
 def _history(rounds: list[Round]) -> float:
