@@ -422,7 +422,8 @@ def replayed_rounds(case: str, max_runs: int) -> list[Round]:
     found = []
     while True:
         nodes, ok = NodeSet(first.distributions, germ, params), np.ones(len(germ), bool)
-        expansion = design.recover(nodes, {"y": values}, ok, np.zeros(1)).expansions["y"]
+        recovery = design.recover(nodes, {"y": values}, ok, np.zeros(1))
+        expansion, levels = recovery.expansions["y"], recovery.adaptive.index_set
         error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
         more = design.more(nodes, {"y": values}, ok)
         found.append(
@@ -433,7 +434,7 @@ def replayed_rounds(case: str, max_runs: int) -> list[Round]:
                 nonsmooth=bool(design._nonsmooth()),
                 left=design._left_at_last_levels()[0],
                 axis_fall=_axis_fall(design),
-                coefficient_fall=_coefficient_fall(design, expansion),
+                coefficient_fall=_coefficient_fall(design, expansion, levels),
             )
         )
         if more is None:
@@ -458,11 +459,14 @@ def _axis_fall(design: AdaptiveCollocation) -> float:
     return max(falls, default=1.0)
 
 
-def _coefficient_fall(design: AdaptiveCollocation, expansion: ChaosExpansion) -> float:
+def _coefficient_fall(
+    design: AdaptiveCollocation, expansion: ChaosExpansion, levels: np.ndarray
+) -> float:
     """The largest over the inputs of :func:`~pcmb.designs.refine.error_ratio` of the
-    coefficients' norms per degree of that input, from the degree of its last level but one."""
+    coefficients' norms per degree of that input in ``expansion``, from the degree of its last
+    level but one in ``levels``, the grid's index set."""
     coefficients = expansion.coefficients.reshape(len(expansion.multi_index), -1)[:, 0]
-    levels, falls = np.array(design._index), []
+    falls = []
     for k, rule in enumerate(design.rules):
         degree = expansion.multi_index[:, k]
         if levels[:, k].max() >= 1:
