@@ -18,13 +18,18 @@ validate it (g_function is not smooth: the estimate cannot see its kink, the war
 ``--held-out`` runs functions no rule was chosen on (Genz product peak and corner peak,
 Borehole, cos of 5 normal inputs) instead, to check that the rules generalise.
 
+``--replay`` runs every function once to ``--max-runs`` (the near-singular sqrt(a + 0.002) e^b
+and log(a + 0.005) + b too) and replays each stopping rule of :data:`REPLAYED` (today's, and
+readings of the decay from the surpluses themselves) over its rounds: per rule, the rows outside
+the band and those that differ from today's (``docs/methods.md``).
+
 ``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
 corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
 then ``max_samples``).
 
     python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--held-out]
-        [--max-runs 6000] [--method adaptive|tensor|regression]
+        [--max-runs 6000] [--method adaptive|tensor|regression] [--replay]
 """
 
 from __future__ import annotations
@@ -33,13 +38,17 @@ import argparse
 import itertools
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.special import erf
 
 import pcmb
+from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
+from pcmb.designs.adaptive import GUARDED, AdaptiveCollocation, estimated_error
+from pcmb.designs.refine import error_ratio
 from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import borehole as borehole_flow
 from pcmb.references import (
@@ -216,6 +225,37 @@ def cosine5n() -> Case:
     return inputs, lambda x: np.cos(1 + x @ b), mean, np.sqrt(second - mean**2)
 
 
+def sqrt_exp() -> Case:
+    """sqrt(a + 0.002) e^b, 2 uniform inputs (``--replay``): analytic on the box, its branch
+    point 0.2 % of the width beyond it."""
+    delta = 0.002
+    mean = 2 / 3 * ((1 + delta) ** 1.5 - delta**1.5) * math.expm1(1.0)
+    return (
+        _unit(2),
+        lambda x: np.sqrt(x[:, 0] + delta) * np.exp(x[:, 1]),
+        mean,
+        np.sqrt((0.5 + delta) * math.expm1(2.0) / 2 - mean**2),
+    )
+
+
+def log_plus() -> Case:
+    """log(a + 0.005) + b, 2 uniform inputs (``--replay``): its singularity 0.5 % of the width
+    beyond the box; E log(a + δ) and E log² from their antiderivatives."""
+    delta = 0.005
+
+    def moments(x: float) -> np.ndarray:
+        log = math.log(x)
+        return np.array([x * log - x, x * log**2 - 2 * x * log + 2 * x])
+
+    first, second = moments(1 + delta) - moments(delta)
+    return (
+        _unit(2),
+        lambda x: np.log(x[:, 0] + delta) + x[:, 1],
+        first + 0.5,
+        np.sqrt(second - first**2 + 1 / 12),
+    )
+
+
 #: Gauss–Legendre points per input of g in :func:`borehole`'s reference.
 BOREHOLE_POINTS = (24, 80, 6, 8, 8, 8)
 
@@ -259,7 +299,9 @@ CASES = {
 }
 #: Functions no rule was chosen on, to check that it generalises (``--held-out``).
 HELD_OUT = {f.__name__: f for f in (genz_product_peak, genz_corner_peak, borehole, cosine5n)}
-FUNCTIONS = CASES | HELD_OUT
+#: Analytic responses near a singularity, outside both tables, only replayed (``--replay``).
+NEAR_SINGULAR = {f.__name__: f for f in (sqrt_exp, log_plus)}
+FUNCTIONS = CASES | HELD_OUT | NEAR_SINGULAR
 #: Candidate order of the regression's hyperbolic set.
 REGRESSION_ORDER = 6
 #: Most runs of a chaospy Smolyak grid tried.
@@ -342,15 +384,186 @@ def chaospy_runs(errors: list[tuple[int, float]], error: float) -> str:
     return str(runs[0]) if runs else f">{errors[-1][0]}"
 
 
+#: Tolerances of both tables.
+TOLERANCES = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6)
+#: Functions whose stops the replay cannot follow: once the estimate meets ε, the grid probes
+#: blind axes (:meth:`~pcmb.designs.adaptive.AdaptiveCollocation.more`), a path a run to
+#: ``max_runs`` never takes, and these two stop only through it.
+NOT_REPLAYED = ("ishigami3", "g_function")
+
+
+@dataclass(frozen=True)
+class Round:
+    """One round of a run to ``max_runs``: its runs, the true error of its grid, the changes
+    so far (:func:`~pcmb.designs.adaptive.estimated_error`), whether the ``adaptive-nonsmooth``
+    test fired, the error left beyond the rules' last levels, and two readings of the decay
+    from the surpluses themselves: the largest over the inputs of the fall of the axis
+    surpluses' norms from the last level but one to the last (their upper envelope), and of
+    ``order: auto``'s :func:`~pcmb.designs.refine.error_ratio` on the coefficients' norms per
+    degree of that input, from its last level but one."""
+
+    runs: int
+    true: float
+    changes: tuple[float, ...]
+    nonsmooth: bool
+    left: float
+    axis_fall: float
+    coefficient_fall: float
+
+
+def replayed_rounds(case: str, max_runs: int) -> list[Round]:
+    """Every round of one adaptive run of ``case`` to ``max_runs`` (a tolerance no round
+    meets, so the stop is the replayed rule's)."""
+    inputs, function, mean, std = FUNCTIONS[case]()
+    design = make_design(inputs, settings("adaptive", inputs, 1e-300, max_runs))
+    first = design.nodes()
+    germ, params = first.nodes, first.params
+    values = function(params)[:, None]
+    found = []
+    while True:
+        nodes, ok = NodeSet(first.distributions, germ, params), np.ones(len(germ), bool)
+        recovery = design.recover(nodes, {"y": values}, ok, np.zeros(1))
+        expansion, levels = recovery.expansions["y"], recovery.adaptive.index_set
+        error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
+        more = design.more(nodes, {"y": values}, ok)
+        found.append(
+            Round(
+                runs=len(germ),
+                true=float(error),
+                changes=tuple(design._changes),
+                nonsmooth=bool(design._nonsmooth()),
+                left=design._left_at_last_levels()[0],
+                axis_fall=_axis_fall(design),
+                coefficient_fall=_coefficient_fall(design, expansion, levels),
+            )
+        )
+        if more is None:
+            return found
+        germ, params = np.vstack([germ, more.nodes]), np.vstack([params, more.params])
+        values = np.concatenate([values, function(more.params)[:, None]])
+
+
+def _axis_fall(design: AdaptiveCollocation) -> float:
+    """The largest over the inputs of the fall of the axis surpluses' norms over their last
+    two measured levels (upper envelope), 1 where no input has two."""
+    position = {level: k for k, level in enumerate(design._index)}
+    n, falls = len(design.names), []
+    for k in range(n):
+        axis = (tuple(at * (j == k) for j in range(n)) for at in itertools.count(1))
+        rows = [position[level] for level in itertools.takewhile(position.__contains__, axis)]
+        norms = design._indicators[rows]
+        norms = norms[np.isfinite(norms)]
+        if norms.size >= 2 and norms[-2] > 0:
+            envelope = np.maximum.accumulate(norms[::-1])[::-1]
+            falls.append(min(1.0, envelope[-1] / envelope[-2]))
+    return max(falls, default=1.0)
+
+
+def _coefficient_fall(
+    design: AdaptiveCollocation, expansion: ChaosExpansion, levels: np.ndarray
+) -> float:
+    """The largest over the inputs of :func:`~pcmb.designs.refine.error_ratio` of the
+    coefficients' norms per degree of that input in ``expansion``, from the degree of its last
+    level but one in ``levels``, the grid's index set."""
+    coefficients = expansion.coefficients.reshape(len(expansion.multi_index), -1)[:, 0]
+    falls = []
+    for k, rule in enumerate(design.rules):
+        degree = expansion.multi_index[:, k]
+        if levels[:, k].max() >= 1:
+            norms = [
+                math.sqrt(np.sum(coefficients[degree == q] ** 2)) for q in range(degree.max() + 1)
+            ]
+            falls.append(error_ratio(norms, rule.projection_degree(levels[:, k].max() - 1)))
+    return max(falls, default=1.0)
+
+
+def _history(rounds: list[Round]) -> float:
+    """Today's estimate that refining can lower (:func:`~pcmb.designs.adaptive.estimated_error`)."""
+    return estimated_error(list(rounds[-1].changes), geometric=not rounds[-1].nonsmooth)
+
+
+def _bounded(fall: Callable[[Round], float], factor: float) -> Callable[[list[Round]], float]:
+    """d_k times ``fall``, within [H / ``factor``, H] of today's estimate H (smooth rounds)."""
+
+    def rule(rounds: list[Round]) -> float:
+        history, last = _history(rounds), rounds[-1]
+        if last.nonsmooth:
+            return history
+        return min(history, max(history / factor, last.changes[-1] * fall(last)))
+
+    return rule
+
+
+def _early(factor: float) -> Callable[[list[Round]], float]:
+    """d_k times the axis fall within [G_k / ``factor``, G_k] while ρ cannot be measured yet
+    (at most GUARDED changes), then today's rule."""
+
+    def rule(rounds: list[Round]) -> float:
+        last = rounds[-1]
+        if last.nonsmooth or len(last.changes) > GUARDED:
+            return _history(rounds)
+        guarded = max(last.changes[-GUARDED:])
+        return min(guarded, max(guarded / factor, last.changes[-1] * last.axis_fall))
+
+    return rule
+
+
+#: The stopping rules replayed (``--replay``): today's, and readings of the decay from the
+#: surpluses, each as one rule for every function.
+REPLAYED = {
+    "today": _history,
+    "d_k x axis fall in [H/3, H]": _bounded(lambda r: r.axis_fall, 3.0),
+    "d_k x axis fall in [H/10, H]": _bounded(lambda r: r.axis_fall, 10.0),
+    "d_k x error_ratio in [H/3, H]": _bounded(lambda r: r.coefficient_fall, 3.0),
+    "d_k x error_ratio in [H/10, H]": _bounded(lambda r: r.coefficient_fall, 10.0),
+    "axis fall before rho, in [G/10, G]": _early(10.0),
+    "axis fall before rho, in [G/100, G]": _early(100.0),
+}
+
+
+def replay(max_runs: int) -> None:
+    """Each rule of :data:`REPLAYED` over every round of one run of every function: the stop
+    at the first round whose estimate meets ε; per rule, the rows outside the band (estimate
+    within 10x of the true error; where it met ε, a true error in [ε/100, 10 ε]) and the rows
+    that differ from today's."""
+    runs = {case: replayed_rounds(case, max_runs) for case in FUNCTIONS if case not in NOT_REPLAYED}
+    stops = {name: {} for name in REPLAYED}
+    for name, rule in REPLAYED.items():
+        for case, rounds in runs.items():
+            estimates = [rule(rounds[: k + 1]) for k in range(len(rounds))]
+            for tolerance in TOLERANCES:
+                k = next((k for k, e in enumerate(estimates) if e <= tolerance), len(rounds) - 1)
+                estimate = max(estimates[k], rounds[k].left)
+                stops[name][case, tolerance] = (rounds[k].runs, estimate, rounds[k].true)
+    for name, found in stops.items():
+        print(f"## {name}")
+        for (case, tolerance), (size, estimate, true) in found.items():
+            ratio, delivered = estimate / true, true / tolerance
+            outside = not 0.1 <= ratio <= 10 or (
+                estimate <= tolerance and not 0.01 <= delivered <= 10
+            )
+            if outside or found[case, tolerance] != stops["today"][case, tolerance]:
+                print(
+                    f"{'OUT' if outside else 'in '} {case} {tolerance:.0e}: {size} runs, "
+                    f"estimate/true {ratio:.2g}, true/tolerance {delivered:.2g}"
+                )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="?", default=",".join(CASES))
     parser.add_argument("--held-out", action="store_true", help="the held-out functions")
+    parser.add_argument(
+        "--replay", action="store_true", help="replay the stopping rules over one run each"
+    )
     parser.add_argument("--max-runs", type=int, default=6000)
     parser.add_argument(
         "--method", choices=("adaptive", "tensor", "regression"), default="adaptive"
     )
     args = parser.parse_args()
+    if args.replay:
+        replay(args.max_runs)
+        return
     print(
         "| function | tolerance | runs | estimate | true error | estimate/true | true/tolerance |"
         " nonsmooth | chaospy |"
