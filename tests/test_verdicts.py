@@ -450,19 +450,24 @@ def sine(params, times):
     return {"x": np.sin(np.outer(params["k"], times))}
 
 
-def test_a_converged_surrogate_raises_no_surrogate_caution():
+def _sine_result(pdf_times: tuple[float, ...], validation: int) -> pcmb.StudyResult:
+    """sin(k t), k ~ U[1, 2], order 10, PDFs at ``pdf_times``: no warning, as the suite turns
+    warnings into errors."""
     from pcmb.analysis.statistics import AnalysisSettings
 
-    study = pcmb.Study(
+    return pcmb.Study(
         sine,
         {"k": pcmb.Uniform(1.0, 2.0)},
         np.linspace(0.0, 10.0, 101),
         order=10,
         backend="inprocess",
-        analysis=AnalysisSettings(psd=(), pdf_times=(2.0, 5.0, 10.0)),
-        validation=32,
-    )
-    result = study.run()  # no warning: the suite turns warnings into errors
+        analysis=AnalysisSettings(psd=(), pdf_times=pdf_times),
+        validation=validation,
+    ).run()
+
+
+def test_a_converged_surrogate_raises_no_surrogate_caution():
+    result = _sine_result((2.0, 5.0, 10.0), validation=32)
     codes = {w.code for w in result.warnings}
     assert not codes & {"pdf-outside-runs", "surrogate-inaccurate", "chaos-unreliable"}
 
@@ -471,18 +476,7 @@ def test_a_pdf_beyond_few_runs_by_the_mass_they_are_expected_to_miss_is_not_note
     # With 8 held-out runs, the 20 runs made miss the peak of sin(10 k) near k = 1.41: 4.8 %
     # of the PDF at t = 10 lies beyond their range, about 1/21, what the largest of 20
     # exchangeable draws leaves above it on average.
-    from pcmb.analysis.statistics import AnalysisSettings
-
-    study = pcmb.Study(
-        sine,
-        {"k": pcmb.Uniform(1.0, 2.0)},
-        np.linspace(0.0, 10.0, 101),
-        order=10,
-        backend="inprocess",
-        analysis=AnalysisSettings(psd=(), pdf_times=(10.0,)),
-        validation=8,
-    )
-    result = study.run()  # no warning: the suite turns warnings into errors
+    result = _sine_result((10.0,), validation=8)
     assert "pdf-outside-runs" not in {w.code for w in result.warnings}
 
 
