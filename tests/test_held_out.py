@@ -332,20 +332,26 @@ def test_the_mean_error_of_a_lognormal_response_is_estimated_within_ten_times_th
     assert true / 10 <= np.max(found.holdout.mean_error) <= 10 * true
 
 
-def test_an_element_with_fewer_placed_runs_than_the_spare_leaves_out_only_those():
-    # Two elements of x³ on (-1, 1) at order 3 (exact in each) and 3 placed runs, 2 and 1: the
-    # noise leaves out at most the element's own runs, never its nodes: the interpolant stays.
-    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
+def _order_3_elements(cuts, function):
+    """``function`` on U(-1, 1) cut at ``cuts``, projected at order 3 on each element's Gauss
+    rule: the partition, the piecewise expansion, and the nodes' x, elements and germ."""
+    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [cuts])
     coefficients, nodes = [], []
     for (conditional,) in partition.inputs:
         grid = TensorGrid((conditional,), (3,))
         basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
-        coefficients.append(grid.weights @ (basis * grid.params**3))
+        coefficients.append(grid.weights @ (basis * function(grid.params)))
         nodes.append(grid.params[:, 0])
     expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
     physical = np.concatenate(nodes)
     where = partition.locate(physical[:, None])
-    germ = partition.distributions[0].to_germ(physical)
+    return partition, expansion, physical, where, partition.distributions[0].to_germ(physical)
+
+
+def test_an_element_with_fewer_placed_runs_than_the_spare_leaves_out_only_those():
+    # Two elements of x³ on (-1, 1) at order 3 (exact in each) and 3 placed runs, 2 and 1: the
+    # noise leaves out at most the element's own runs, never its nodes: the interpolant stays.
+    partition, expansion, physical, where, germ = _order_3_elements([0.0], lambda x: x**3)
     draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.5], 3)
     assert np.bincount(partition.locate(draws.params)).tolist() == [2, 1]
     found = placed_check(expansion, germ, physical[:, None] ** 3, draws.nodes, draws.params**3, 1.0)
@@ -360,17 +366,7 @@ def test_an_element_without_placed_runs_extrapolates_no_tail_from_its_own_three_
     # spectrum decays; a line through their two neighbour averages is flat and once put the
     # 4-point rule's errors on degrees 8-12 into the mean: 0.037, 6 % of its std 0.65 (the MR
     # damper's remedy, issue 23).
-    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
-    coefficients, nodes = [], []
-    for (conditional,) in partition.inputs:
-        grid = TensorGrid((conditional,), (3,))
-        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
-        coefficients.append(grid.weights @ (basis * (grid.params - 0.5) ** 2))
-        nodes.append(grid.params[:, 0])
-    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
-    physical = np.concatenate(nodes)
-    where = partition.locate(physical[:, None])
-    germ = partition.distributions[0].to_germ(physical)
+    partition, expansion, physical, where, germ = _order_3_elements([0.0], lambda x: (x - 0.5) ** 2)
     draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0], 2)
     assert np.bincount(partition.locate(draws.params), minlength=2).tolist() == [2, 0]
     values, observed = (physical[:, None] - 0.5) ** 2, (draws.params - 0.5) ** 2
@@ -384,17 +380,7 @@ def test_an_element_without_placed_runs_leaves_the_check_undecided_not_reliable(
     # holds the kink. All 4 placed runs forced into the first: the second is unchecked, and
     # its share once counted as zero error (estimates 2e-16 against true errors of the mean
     # and std of 0.0135 and 0.0204 of the largest std, closed forms). Its share is now noise.
-    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[0.0]])
-    coefficients, nodes = [], []
-    for (conditional,) in partition.inputs:
-        grid = TensorGrid((conditional,), (3,))
-        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
-        coefficients.append(grid.weights @ (basis * abs(grid.params - 0.3)))
-        nodes.append(grid.params[:, 0])
-    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
-    physical = np.concatenate(nodes)
-    where = partition.locate(physical[:, None])
-    germ = partition.distributions[0].to_germ(physical)
+    partition, expansion, physical, where, germ = _order_3_elements([0.0], lambda x: abs(x - 0.3))
     draws, _ = held_out_placed_elements(partition, germ, where, [1.0, 0.0], 4)
     assert np.bincount(partition.locate(draws.params), minlength=2).tolist() == [4, 0]
     scale = float(expansion.std()[0])
@@ -446,17 +432,7 @@ def test_an_element_whose_top_coefficient_a_parity_zeroes_is_neither_skipped_nor
     # one holds the kink, and |x| is even there: its top (odd) coefficient is 0 and read it
     # as needing no run (importance 0) and, without runs, as exact (estimate and noise
     # 1e-16 against a true std error of 0.034 of the largest std; closed forms: 1/2, 1/12).
-    partition = Partition.from_splits([pcmb.Uniform(-1.0, 1.0)], [[-0.5, 0.5]])
-    coefficients, nodes = [], []
-    for (conditional,) in partition.inputs:
-        grid = TensorGrid((conditional,), (3,))
-        basis = conditional.family.evaluate(grid.nodes[:, 0], 3)
-        coefficients.append(grid.weights @ (basis * abs(grid.params)))
-        nodes.append(grid.params[:, 0])
-    expansion = PiecewiseExpansion(partition, np.array(coefficients)[..., None], np.c_[:4])
-    physical = np.concatenate(nodes)
-    where = partition.locate(physical[:, None])
-    germ = partition.distributions[0].to_germ(physical)
+    partition, expansion, physical, where, germ = _order_3_elements([-0.5, 0.5], abs)
     values = abs(physical[:, None])
     importance = element_importance(partition, germ, where, {"y": values})
     assert importance[1] > 1e6 * max(importance[0], importance[2])
