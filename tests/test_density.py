@@ -119,3 +119,16 @@ def test_the_bandwidths_cosine_transform_is_scipys_dct(size):
     values = np.random.default_rng(size).random(size)
     expected = dct(values, type=2)
     assert np.allclose(_cosine_transform(values), expected, rtol=0, atol=1e-13 * size)
+
+
+def test_a_tail_that_thins_out_is_not_taken_for_a_hard_bound():
+    """A normal's ends thin out: its table runs three bandwidths past the draws on both sides,
+    with no kernel mass reflected back (a sign slip once called every end of 30 or more draws
+    piled up, so every PDF stopped at its extreme draws)."""
+    samples = np.random.default_rng(8).standard_normal(DRAWS)
+    value, density, h = kernel_density(samples)
+    assert value[0] == pytest.approx(samples.min() - 3 * h, rel=1e-12)
+    assert value[-1] == pytest.approx(samples.max() + 3 * h, rel=1e-12)
+    # The mass past the extreme draws is the kernel's own: a few 1e-5 of it, not zero.
+    below, above = _mass_beyond(value, density, samples.min(), samples.max())
+    assert below > 0 and above > 0

@@ -63,8 +63,8 @@ def kernel_density(
     if bandwidth is None:
         bandwidth = _default_bandwidth(samples)
     lowest, highest = samples.min(), samples.max()
-    low = lowest if _piled(lowest - samples, bandwidth) else lowest - 3.0 * bandwidth
-    high = highest if _piled(samples - highest, bandwidth) else highest + 3.0 * bandwidth
+    low = lowest if _piled(samples - lowest, bandwidth) else lowest - 3.0 * bandwidth
+    high = highest if _piled(highest - samples, bandwidth) else highest + 3.0 * bandwidth
     if nonnegative:
         low = max(low, 0.0)
     value = np.linspace(low, high, DENSITY_POINTS)
