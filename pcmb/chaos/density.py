@@ -145,7 +145,7 @@ def _isj_time(cosines: NDArray[np.float64], size: int, shortest: float) -> float
 
     def functional(s: int, t: float) -> float:
         """The sum over the waves whose factor e^(-k² π² t) is above 1e-20 (k² < 4.67 / t)."""
-        count = int(min(wave.size, 4.67 / t + 1.0))
+        count = int(min(wave.size, np.sqrt(4.67 / t) + 1.0))
         return float(weights[s][:count] @ np.exp(-(np.pi**2) * t * wave[:count]))
 
     def constant(s: int) -> float:
