@@ -391,9 +391,10 @@ def _load(path: str):
 
 
 def _report(args: argparse.Namespace) -> int:
-    _collect_from_here()
     from pcmb.analysis.report import write_report
     from pcmb.sweep.table import is_sweep_file
+
+    _collect_from_here()
 
     if is_sweep_file(args.result):
         from pcmb.sweep.report import write_sweep_report
@@ -414,8 +415,9 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    _collect_from_here()
     from pcmb.analysis.comparison import compare, method_label
+
+    _collect_from_here()
 
     reference = _load(args.reference)
     others = [_load(path) for path in args.others]
