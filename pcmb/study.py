@@ -760,7 +760,7 @@ class Study:
                     f"continue with --resume, or delete it or {FRESH} (which discards them)"
                 )
             journaling = _Journaling(journal_dir, self._file_digests(facts.loaded_files))
-        joined = self._joins_runs(record, streaming is not None)
+        joined = self._joins_runs(streaming is not None)
         early = None if joined else self._start_nominal(facts, outputs, pool)
         intrusive = hasattr(self.design, "solve")
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
@@ -1071,7 +1071,7 @@ class Study:
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
         return nodes, runs
 
-    def _joins_runs(self, record: Design, streams: bool) -> bool:
+    def _joins_runs(self, streams: bool) -> bool:
         """Whether the design's runs, its first held-out runs and the nominal run go to the
         workers as one campaign (:meth:`_run_joined`): all of them known before any node runs
         (no rounds, no intrusive solve, held-out runs not placed by the element nodes' values),

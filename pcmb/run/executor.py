@@ -335,6 +335,7 @@ class _Campaign:
         axes: Mapping[str, OutputAxis | None] | None = None,
         proven: bool = False,
         keep_values: bool = True,
+        counted: int | None = None,
     ) -> None:
         layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
@@ -353,7 +354,7 @@ class _Campaign:
         self.proven = proven
         self.resumed = 0
         self.progress: Progress | None = None
-        self.counted = n_nodes  # the first nodes, those the progress line counts
+        self.counted = n_nodes if counted is None else counted  # those the progress counts
 
     def resume(self, journal: Journal | JoinedJournal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
@@ -822,6 +823,7 @@ def run_nodes(
         facts.axes,
         proven=proven,
         keep_values=keep_values,
+        counted=counted,
     )
     if journal is not None:
         campaign.resume(journal)
@@ -831,8 +833,6 @@ def run_nodes(
     tasks = campaign.plan(chunk_bounds(n_nodes, chunk_size or _balanced(n_nodes, facts.chunk_size)))
     limits = _Limits(timeout, pool.startup_seconds + 2 * facts.build_seconds)
     show = sys.stderr.isatty() if progress is None else progress
-    if counted is not None:
-        campaign.counted = counted
     reused = int(np.count_nonzero(campaign.status[: campaign.counted] == Status.OK))
     campaign.progress = Progress(campaign.counted, reused, sys.stderr if show else None)
     try:
