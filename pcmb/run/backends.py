@@ -25,6 +25,7 @@ from contextvars import ContextVar
 from typing import Any, Protocol, TypeVar
 
 from pcmb.errors import ClusterError, ConfigProblem, MissingDependencyError, UsageError
+from pcmb.run.files import process_running
 from pcmb.run.lifeline import die_with_parent, tag
 from pcmb.run.threads import THREAD_LIMITS, one_thread_here
 from pcmb.wording import plural, signal_name
@@ -184,7 +185,7 @@ def remove_orphaned_semaphores(folder: str | os.PathLike[str] = "/dev/shm") -> i
             continue
         pid = int(match[1])
         if pid not in ended:
-            ended[pid] = _ended(pid)
+            ended[pid] = not process_running(pid)
         try:
             if not (
                 ended[pid]
@@ -197,17 +198,6 @@ def remove_orphaned_semaphores(folder: str | os.PathLike[str] = "/dev/shm") -> i
             continue
         removed += 1
     return removed
-
-
-def _ended(pid: int) -> bool:
-    """Whether no process has this pid (another user's counts as alive)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    except (OSError, OverflowError):  # another user's, or no pid this system has
-        pass
-    return False
 
 
 def _died(codes: Iterable[int]) -> str:

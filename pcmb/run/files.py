@@ -12,7 +12,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["durable_temporary", "remove_stale_temporaries", "replace_durably", "write_durably"]
+__all__ = [
+    "durable_temporary",
+    "process_running",
+    "remove_stale_temporaries",
+    "replace_durably",
+    "write_durably",
+]
 
 
 def write_durably(path: Path, data: bytes) -> None:
@@ -93,16 +99,17 @@ def remove_stale_temporaries(path: Path) -> None:
         return
     for name in names:
         found = pattern.fullmatch(name)
-        if found is None or (found[1] is not None and _running(int(found[1]))):
+        if found is None or (found[1] is not None and process_running(int(found[1]))):
             continue
         with contextlib.suppress(OSError):
             _remove_if_unlocked(path.parent / name)
 
 
-def _running(pid: int) -> bool:
+def process_running(pid: int) -> bool:
+    """Whether a process has this pid (another user's counts; a pid no system has does not)."""
     try:
         os.kill(pid, 0)  # no signal: only whether the process exists
-    except ProcessLookupError:
+    except (ProcessLookupError, OverflowError):
         return False
     except PermissionError:  # another user's process
         pass
@@ -114,7 +121,7 @@ def _remove_if_unlocked(temporary: Path) -> None:
     handle = os.open(temporary, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     try:
         status = os.fstat(handle)
-        if not stat.S_ISREG(status.st_mode) or status.st_uid != os.getuid():
+        if not stat.S_ISREG(status.st_mode) or status.st_uid != os.geteuid():
             return
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
