@@ -211,7 +211,7 @@ class AdaptiveCollocation(GrowingGrid):
                         self._stopped = (
                             f"{' and '.join(names)} reached the last level of its rule with an "
                             f"error of {left:.3g} left, which no refinement can lower: use rule "
-                            "clenshaw-curtis, or a larger tolerance"
+                            "clenshaw-curtis or leja, or a larger tolerance"
                         )
                     return None
             elif not refinable:

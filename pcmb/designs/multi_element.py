@@ -349,7 +349,6 @@ class MultiElementCollocation:
         per-element least-squares fit where nodes of the element failed (reported), and
         ``element-decay`` and ``element-budget`` warnings (see the module)."""
         coefficients, warnings = self._coefficients(values, ok)
-        self._check_splits(coefficients)
         expansions = {
             name: PiecewiseExpansion(self.partition, c, self.multi_index, self.names)
             for name, c in coefficients.items()
