@@ -518,3 +518,16 @@ def refine(design, run, failed=None):
             for name, y in values.items()
         }
     return (nodes, values) if failed is None else (nodes, values, ok)
+
+
+def test_auto_reads_the_same_estimate_in_any_units():
+    """The estimate is relative to the std: the step in units 1e200 times larger stops at the
+    same runs with the same estimate (the split checks' squared misses overflowed: an
+    OverflowError in more())."""
+    response, inputs, times, (mean, std) = AUTO_CASES["step"]
+    runs, estimate, _ = _auto_error(response, inputs, times, (mean, std), 1e-3)
+    large = _auto_error(
+        lambda p, t: 1e200 * response(p, t), inputs, times, (1e200 * mean, 1e200 * std), 1e-3
+    )
+    assert large[0] == runs
+    assert large[1] == pytest.approx(estimate, rel=1e-9)

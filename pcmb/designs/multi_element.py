@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
+from pcmb.chaos.expansion import root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import project_tensor
@@ -256,7 +257,7 @@ class MultiElementCollocation:
     ) -> list[_Parent]:
         """Every element as the parent :meth:`_check_splits` compares its children with."""
         size = self.partition.size
-        parents = [_Parent({}, {}) for _ in range(size)]
+        parents = [_Parent({}, {}, {}) for _ in range(size)]
         for name, c in coefficients.items():
             flat = c.reshape(*c.shape[:2], -1)
             errors = element_errors(
@@ -264,12 +265,15 @@ class MultiElementCollocation:
             )
             if not errors.mean:
                 continue
-            scale = np.nanmax(PiecewiseExpansion(self.partition, flat, self.multi_index).std())
-            moments = _moments(self.partition.probability, flat)
+            unit = _unit(flat)
+            scaled = flat / unit
+            scale = np.nanmax(PiecewiseExpansion(self.partition, scaled, self.multi_index).std())
+            moments = _moments(self.partition.probability, scaled)
             for e, parent in enumerate(parents):
                 model = scale * np.fmax(errors.mean[0][e], errors.std[0][e])
                 parent.outputs[name] = (moments[0][e], moments[1][e], model)
                 parent.decay[name] = errors.decay[0][e]
+                parent.units[name] = unit
         return parents
 
     def _check_splits(self, coefficients: Mapping[str, NDArray[np.float64]]) -> None:
@@ -280,6 +284,7 @@ class MultiElementCollocation:
             factor = 1.0
             for name, (mean, square, model) in parent.outputs.items():
                 flat = coefficients[name].reshape(*coefficients[name].shape[:2], -1)
+                flat = flat / parent.units[name]
                 expansion = PiecewiseExpansion(self.partition, flat, self.multi_index)
                 moments = _moments(self.partition.probability, flat)
                 shift = moments[0][children].sum(axis=0) - mean
@@ -299,10 +304,14 @@ class MultiElementCollocation:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
     ) -> dict[str, NDArray[np.float64]]:
-        """Output name -> (E, ...) the mean square by which every element's expansion misses
-        the runs at the nodes of split elements inside it, weighted by their split elements'
-        quadrature (0 where there are none): runs its fit did not use."""
+        """Output name -> (E, ...) the root mean square by which every element's expansion
+        misses the runs at the nodes of split elements inside it, weighted by their split
+        elements' quadrature (0 where there are none): runs its fit did not use. Summed as
+        root_sum_of_squares does, so that outputs near 1e300 do not overflow."""
         retired = (self.node_elements < 0) & ok
+        if not retired.any():
+            size = self.partition.size
+            return {name: np.zeros((size, *values[name].shape[1:])) for name in coefficients}
         theta = nodes.params[retired]
         inside = self.partition.locate(theta)[None, :] == np.arange(self.partition.size)[:, None]
         inside = inside * self.node_weights[retired]
@@ -312,9 +321,11 @@ class MultiElementCollocation:
             miss = values[name][retired] - PiecewiseExpansion(self.partition, c, self.multi_index)(
                 theta
             )
-            missed[name] = np.tensordot(inside, miss**2, axes=1) / count.reshape(
-                -1, *[1] * (miss.ndim - 1)
+            # (R, E, ...): each run's miss, weighted for each element it counts in.
+            share = np.sqrt(inside / count[:, None]).T.reshape(
+                *inside.shape[::-1], *[1] * (miss.ndim - 1)
             )
+            missed[name] = root_sum_of_squares(share * miss[:, None])
         return missed
 
     def weights(self, nodes: NodeSet) -> NDArray[np.float64]:
@@ -449,11 +460,13 @@ class MultiElementCollocation:
 @dataclass
 class _Parent:
     """An element as split: per output name its P_e μ_e, P_e E_e[y²] and the errors of the
-    mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, in the
-    output's units, and its checked decay per degree, (P,) each."""
+    mean and std the checked model (:func:`element_errors`, factor 1) estimates for it, (P,)
+    each, in a unit of the output (a power of two, ``units``: squares of outputs near 1e300
+    do not overflow), and its checked decay per degree."""
 
     outputs: dict[str, tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]]
     decay: dict[str, NDArray[np.float64]]
+    units: dict[str, float]
 
 
 def _moments(
@@ -463,6 +476,13 @@ def _moments(
     term first, the basis orthonormal)."""
     weight = probability[:, None]
     return weight * coefficients[:, 0], weight * (coefficients**2).sum(axis=1)
+
+
+def _unit(coefficients: NDArray[np.float64]) -> float:
+    """A power of two near the largest finite coefficient (1 if none): its unit."""
+    finite = np.abs(coefficients[np.isfinite(coefficients)])
+    largest = float(np.max(finite, initial=0.0))
+    return float(2.0 ** np.floor(np.log2(largest))) if largest > 0 else 1.0
 
 
 def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:
@@ -564,9 +584,10 @@ def element_errors(
       √A = f √T ρ^((p+2)/2), the coefficient of degree 2p + 2, the first its Gauss rule does
       not integrate.
 
-    M is at least ``missed``, the mean square by which the element's expansion misses the runs
-    of its split ancestors inside it: what one ratio cannot tell (at order 2, an element odd
-    about a jump has no degree-2 term, and reads a parity as a fast decay), runs it did not fit
+    M is at least the square of ``missed``, the root mean square by which the element's
+    expansion misses the runs of its split ancestors inside it: what one ratio cannot tell (at
+    order 2, an element odd about a jump has no degree-2 term, and reads a parity as a fast
+    decay), runs it did not fit
     measure.
 
     With σ the piecewise surrogate's std: mean error (Σ_e (P_e √A_e)²)^½ (their signs
@@ -585,8 +606,8 @@ def element_errors(
     floors:
         Output name -> (E, ...) each element's least decay per degree (default 0).
     missed:
-        Output name -> (E, ...) each element's mean square miss at runs it did not fit, in the
-        output's units squared (default 0).
+        Output name -> (E, ...) each element's root mean square miss at runs it did not fit,
+        in the output's units (default 0).
     """
     tails = _tails(multi_index)
     two = tails.any(axis=0)
@@ -644,7 +665,7 @@ def element_errors(
         factor = np.nan_to_num(factors, nan=1.0)[:, None]
         missing = np.where(checked, factor * last * fall / (1 - fall), missing)
         if missed is not None and name in missed:
-            missing = np.fmax(missing, missed[name].reshape(size, -1) / scale**2)
+            missing = np.fmax(missing, (missed[name].reshape(size, -1) / scale) ** 2)
         aliased = np.where(checked, factor * np.sqrt(last) * fall ** ((degree + 2) / 2), aliased)
         weight = partition.probability[:, None]
         means.append(weight * aliased)
