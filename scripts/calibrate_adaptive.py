@@ -571,7 +571,7 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---|---:|")
     for case in ",".join(HELD_OUT).split(",") if args.held_out else args.cases.split(","):
         peer = chaospy_errors(case)
-        for tolerance in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6):
+        for tolerance in TOLERANCES:
             runs, estimate, error, nonsmooth = run(case, tolerance, args.max_runs, args.method)
             print(
                 f"| {case} | {tolerance:.0e} | {runs} | {estimate:.2e} | {error:.2e} | "

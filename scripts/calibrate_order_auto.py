@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 import pcmb
+from pcmb import references
 from pcmb.chaos.nodes import join_nodes
 from pcmb.designs import MethodSettings, make_design
 from pcmb.references import double_well_moments
@@ -91,15 +92,9 @@ def double_well() -> Case:
     """x' = x - x³ to t = 8, x0 ~ U[-0.625, 0.375] (its exact solution): the runs split
     between the wells ever more sharply."""
     times = np.linspace(0.0, 8.0, 81)
-    decay = np.exp(-2 * times)
-
-    def well(x: np.ndarray) -> np.ndarray:
-        x0 = x[:, :1]
-        return x0 / np.sqrt(-np.expm1(-2 * times) * x0**2 + decay)
-
     return (
         {"x0": pcmb.Uniform(-0.625, 0.375)},
-        well,
+        lambda x: references.double_well(times, x[:, 0]),
         times,
         *double_well_moments(times, -0.625, 0.375),
     )

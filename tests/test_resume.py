@@ -136,7 +136,8 @@ def run_and_kill(
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet", *args],
         cwd=folder,
-        # The nodes come first, then the held-out runs and the nominal run (not journaled).
+        # Without rounds the nodes come first, then the held-out runs and the nominal run
+        # (not journaled); with rounds the nominal run comes first (``nominal_first``).
         env={**os.environ, "BLOCK_AFTER": str(after + nominal_first), **env},
         stderr=subprocess.PIPE,
         start_new_session=True,
