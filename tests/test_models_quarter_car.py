@@ -222,8 +222,21 @@ def test_eq_10_reconstruction_gives_the_surviving_characters():
     assert text == "( ) ( ) ( )vIvIF 3.14tanh1015453195.701 ⋅+++⋅="
 
 
+@pytest.fixture(scope="module")
+def mr_damper_remedy():
+    """The MR damper to t = 6 s (61 times) and its remedy's result, ``elements: auto`` at
+    order 3 to 1 % of the largest std: the study of both Fig. 11 tests, run once."""
+    config = pcmb.load_config(CONFIGS_DIR / "mr_damper.yaml")
+    study = pcmb.Study.from_config(config).replace(
+        times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        return study, study.replace(elements="auto", diagnostics_tolerance=0.01).run()
+
+
 @pytest.mark.slow
-def test_mr_damper_fig_11_holds_only_with_the_remedy():
+def test_mr_damper_fig_11_holds_only_with_the_remedy(mr_damper_remedy):
     """Part II Fig. 11 (x1 at t = 6 s), each method against 1000 Monte Carlo runs, judged by
     the Monte Carlo's standard errors (docs/paper_cases.md §3). The paper's departures grow as
     the square root of the runs: at 1000 the smallest (the distribution's) is about 6.5.
@@ -234,17 +247,13 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
     within 3 standard errors for the mean and the std and within the 99 % two-sample
     Kolmogorov–Smirnov distance for the distribution.
     """
-    config = pcmb.load_config(CONFIGS_DIR / "mr_damper.yaml")
-    study = pcmb.Study.from_config(config).replace(
-        times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
-    )
+    study, remedy = mr_damper_remedy
     runs = 1000
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
         # All runs in one stacked solve: its per-step overhead once, not once per 128 runs.
         carlo = study.replace(method="montecarlo", samples=runs, seed=1, chunk_size=runs).run()
         paper = study.run()
-        remedy = study.replace(elements="auto", diagnostics_tolerance=0.01).run()
     sampled = carlo.values["x1"][carlo.ok][:, -1]
     std = sampled.std(ddof=1)
     kurtosis = np.mean((sampled - sampled.mean()) ** 4) / sampled.var() ** 2
@@ -267,7 +276,7 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy():
 
 
 @pytest.mark.slow
-def test_mr_damper_remedy_is_not_flagged_by_its_held_out_check():
+def test_mr_damper_remedy_is_not_flagged_by_its_held_out_check(mr_damper_remedy):
     """The remedy of Fig. 11 (``elements: auto``, order 3, to 1 %: 10 elements, 76 runs) is
     0.24 % off at worst over t in [0, 6] (against 64 elements of order 7, which 39 elements
     of order 9 match to 1e-5). Its held-out check once flagged it from t = 2.3: "mean off by
@@ -275,13 +284,7 @@ def test_mr_damper_remedy_is_not_flagged_by_its_held_out_check():
     two elements without placed runs (I in [0.375, 0.5] and [0.75, 1]), extrapolated from
     their own degrees 1-3, whose two neighbour averages read flat: 560 and 960 times their
     true errors (issue 23; the unit case in tests/test_held_out.py)."""
-    config = pcmb.load_config(CONFIGS_DIR / "mr_damper.yaml")
-    study = pcmb.Study.from_config(config).replace(
-        times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        remedy = study.replace(elements="auto", diagnostics_tolerance=0.01).run()
+    _, remedy = mr_damper_remedy
     assert np.isnan(remedy.diagnostics["x1"].failing_from)
 
 
