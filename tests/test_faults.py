@@ -50,7 +50,8 @@ class Faulty:
     endless loop), or "segfault-on-build" (in the constructor, whatever the nodes). Each call
     sleeps ``sleep`` s per node; the process that misbehaves writes its pid to ``marker``.
     With ``BLOCK_ABOVE`` in the run's environment, a call with a node above it waits until
-    the run is stopped.
+    the run is stopped; with ``HOLD_ABOVE``, the first such call waits until its worker is
+    killed, and the calls after it run.
     """
 
     outputs = ("y",)
@@ -68,6 +69,12 @@ class Faulty:
         block = os.environ.get("BLOCK_ABOVE")
         if block is not None and np.any(a > float(block)):
             time.sleep(3600)
+        hold = os.environ.get("HOLD_ABOVE")
+        if hold is not None and np.any(a > float(hold)):
+            held = self.marker + ".held"
+            if not os.path.exists(held):
+                open(held, "w").close()
+                time.sleep(3600)
         if np.any((a > self.low) & (a < self.high)):
             with open(self.marker, "a") as marker:
                 marker.write(f"{os.getpid()}\\n")
@@ -144,13 +151,14 @@ def _study(
     return config
 
 
-def _run(config: Path) -> tuple[int, str, int]:
-    """Exit code, stderr and pid of ``python -m pcmb.cli run CONFIG --quiet``."""
+def _run(config: Path, env: dict[str, str] | None = None) -> tuple[int, str, int]:
+    """Exit code, stderr and pid of ``python -m pcmb.cli run CONFIG --quiet`` (in ``env``)."""
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env=env,
     )
     _, stderr = process.communicate(timeout=300)
     return process.returncode, stderr, process.pid
@@ -268,14 +276,16 @@ def test_a_crash_in_the_nominal_run_is_a_warning(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_nominal_run_past_the_timeout_leaves_no_design_node_unrun(tmp_path: Path) -> None:
-    # Chunks [0-2] [3-5] [6-8] [nominal], one call each: the nominal run (2 s allowed) hangs
-    # while [6-8] (4.5 s of 7 allowed) runs beside it; the kill of both workers must not cost
-    # [6-8] its run, as a failed nominal run never stops a study.
-    config = _study(
-        tmp_path, NOMINAL, 0, 2, "abort", how="hang", sleep=1.5, timeout=2.0, chunk_size=3
-    )
-    returncode, stderr, _ = _run(config)
+    # Chunks [0-2] [3-5] [6-8] [nominal], one call each, two workers: the nominal run (2 s
+    # allowed) hangs; [6-8] (6 s allowed) starts before it and, the first time, waits until
+    # its worker is killed (HOLD_ABOVE), so it is in flight when the nominal run's timeout
+    # kills both workers, however loaded the machine. That kill must not cost [6-8] its run,
+    # as a failed nominal run never stops a study.
+    config = _study(tmp_path, NOMINAL, 0, 2, "abort", how="hang", timeout=2.0, chunk_size=3)
+    held = {**os.environ, "HOLD_ABOVE": str(0.5 * (NODES[5] + NODES[6]))}
+    returncode, stderr, _ = _run(config, held)
     assert returncode == 0, stderr
+    assert (tmp_path / "marker.held").exists()  # [6-8] was held, and run again
     assert "the nominal run failed, so none is stored: timed out after 2 s" in stderr
     result = pcmb.load(tmp_path / "out" / "result.h5")
     assert (result.status == Status.OK).all(), result.status
