@@ -1135,7 +1135,8 @@ class Study:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            self._judge_failures(found, held_journal, _HELD_OUT_RUN)
+            design_journal = None if journaling is None else journaling.directory
+            self._judge_failures(found, held_journal, _HELD_OUT_RUN, design_journal)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
@@ -1152,14 +1153,15 @@ class Study:
         proven: bool = False,
         keep: bool = True,
         runs_of: str = "node",
+        design_journal: Path | None = None,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node (checked by the caller, :meth:`_check_finite`), journaled by
         ``journaling`` if given (the journal is returned, to be removed once the result is
         written); raise by the failure policy. ``chunk_size`` overrides the study's;
         ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
-        only (a streamed study); ``runs_of``: what the runs are, for the error
-        (:meth:`_judge_failures`)."""
+        only (a streamed study); ``runs_of``, ``design_journal``: what the runs are and where
+        the design's nodes are kept, for the error (:meth:`_judge_failures`)."""
         journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
         with _removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
@@ -1173,7 +1175,7 @@ class Study:
                 proven=proven,
                 keep=keep,
             )
-        self._judge_failures(runs, journal, runs_of)
+        self._judge_failures(runs, journal, runs_of, design_journal)
         return runs, journal
 
     def _journal(
@@ -1229,18 +1231,29 @@ class Study:
         )
 
     def _judge_failures(
-        self, runs: RunResult, journal: Journal | None, runs_of: str = "node"
+        self,
+        runs: RunResult,
+        journal: Journal | None,
+        runs_of: str = "node",
+        design_journal: Path | None = None,
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on;
-        ``runs_of``: what the runs are (``"held-out run"``: numbered among those)."""
+        ``runs_of``: what the runs are (``"held-out run"``: numbered among those);
+        ``design_journal``: where the design's nodes are kept, when the runs are held-out
+        runs journaled beside them (named too: ``--resume`` keeps both)."""
         if not runs.failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
-        kept = (
-            f"; the {finished} finished {runs_of}(s) are kept in {journal.directory}"
-            if journal is not None and finished
-            else ""
+        places = [] if design_journal is None else [("the design's nodes", design_journal)]
+        if journal is not None and finished:
+            places.append((f"the {finished} finished {runs_of}(s)", journal.directory))
+        kept = " and ".join(
+            f"{what} {'are kept in' if i == 0 else 'in'} {where}"
+            for i, (what, where) in enumerate(places)
         )
+        if design_journal is not None:
+            kept += f" (--resume keeps {'both' if len(places) == 2 else 'them'})"
+        kept = f"; {kept}" if kept else ""
         pending = int(np.sum(runs.status == Status.PENDING))
         stopped = (
             f"; stopped at the first failure, {pending} {runs_of}(s) not run"
@@ -1327,6 +1340,7 @@ class Study:
             halves,
             proven=proven,
             runs_of=_HELD_OUT_RUN,
+            design_journal=None if journaling is None else journaling.directory,
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
