@@ -15,7 +15,7 @@ import threading
 import time
 import typing
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
@@ -29,17 +29,9 @@ from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
-    ELEMENT_POINTS,
-    FIRST_BATCH,
-    HELD_OUT_SEED,
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
-    element_importance,
-    held_out_budget,
-    held_out_draws,
-    held_out_placed,
-    held_out_placed_elements,
     more_runs,
     pdf_outside_runs,
 )
@@ -58,13 +50,13 @@ from pcmb.errors import (
     ConfigError,
     ConfigProblem,
     IllPosedError,
-    ModelDefinitionError,
     ModelError,
     ModelRunError,
     PcmbError,
     PcmbWarning,
     UsageError,
 )
+from pcmb.held_out import HeldOutDraws, HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -81,6 +73,7 @@ from pcmb.run.executor import (
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
 from pcmb.run.journal import FRESH, Journal
+from pcmb.run.journaling import Journaling, removed_if_rejected
 from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
@@ -352,6 +345,9 @@ class Study:
         if unknown:
             raise _usage("nominal", f"values given for unknown input(s) {unknown}")
         self.design = self._design()
+        self._held_out = HeldOutPlan(
+            self.design, self.inputs, self.method.seed, self.method.validation
+        )
 
     def _design(self) -> NodeDesign:
         settings = self.method.settings(self.orders, self.diagnostics.tolerance)
@@ -522,13 +518,10 @@ class Study:
         Execution settings that cannot change a node's values (jobs, backend, failure
         policy) and the analysis are left out: changing them keeps the finished work.
         """
-        return self._fingerprint(nodes, outputs, self._file_digests(loaded))
+        return Fingerprint(self._digest(nodes, outputs), self._file_digests(loaded))
 
-    def _fingerprint(
-        self, nodes: TensorGrid | NodeSet, outputs: Sequence[str], files: Mapping[str, str]
-    ) -> Fingerprint:
-        """:meth:`fingerprint`, with the digests of the model's files taken already
-        (:meth:`_file_digests`)."""
+    def _digest(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> str:
+        """The ``digest`` of :meth:`fingerprint`."""
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array))  # its buffer, not a copy of it
@@ -542,7 +535,7 @@ class Study:
             settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
-        return Fingerprint(digest.hexdigest(), files)
+        return digest.hexdigest()
 
     def _file_digests(self, loaded: Sequence[str]) -> dict[str, str]:
         """The SHA-256 of every file the model depends on, ``loaded`` too (see
@@ -759,31 +752,26 @@ class Study:
                     f"{journal_dir} holds the finished nodes of an interrupted run: "
                     f"continue with --resume, or delete it or {FRESH} (which discards them)"
                 )
-            journaling = _Journaling(journal_dir, self._file_digests(facts.loaded_files))
+            journaling = Journaling(journal_dir, self._file_digests(facts.loaded_files))
+        run = _RunContext(pool, facts, outputs, journaling, progress)
         joined = self._joins_runs(streaming is not None)
-        early = None if joined else self._start_nominal(facts, outputs, pool)
+        early = None if joined else self._start_nominal(run)
         intrusive = hasattr(self.design, "solve")
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
         nominal = None
         try:
             if joined:
                 first = self.held_out_runs(nodes.size)[0]
-                runs, journal, checked, nominal = self._run_joined(
-                    nodes, facts, outputs, pool, journaling, progress, record, first
-                )
+                runs, journal, checked, nominal = self._run_joined(run, nodes, record, first)
             elif intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
                 # held-out runs, which are few and run again on a resume.
-                journal, journaling = None, None
-                found = self._solve(nodes, outputs, pool, record)
+                journal, run = None, dataclasses.replace(run, journaling=None)
+                found = self._solve(run, nodes, record)
             else:
-                runs, journal = self._run_nodes(
-                    nodes, facts, outputs, pool, journaling, progress, keep=streaming is None
-                )
+                runs, journal = self._run_nodes(run, nodes, keep=streaming is None)
                 if hasattr(self.design, "more"):
-                    nodes, runs = self._run_rounds(
-                        nodes, runs, facts, outputs, pool, journaling, progress
-                    )
+                    nodes, runs = self._run_rounds(run, nodes, runs)
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size)
             # Runs joined: made already. Else the workers make the held-out runs while this
@@ -798,11 +786,8 @@ class Study:
                 if joined
                 else functools.partial(
                     self._run_held_out,
-                    facts,
-                    outputs,
-                    pool,
-                    journaling,
-                    False if beside else progress,  # no bar beside the phases' lines
+                    # No bar beside the phases' lines.
+                    dataclasses.replace(run, progress=False) if beside else run,
                     record,
                     first,
                     nodes.nodes,
@@ -818,15 +803,14 @@ class Study:
             if early is not None:
                 nominal = early.result()
             if self.execution.nominal_run and nominal is None:
-                nominal = self._run_nominal(facts, outputs, pool)
+                nominal = self._run_nominal(run)
             if streaming is not None:
                 return self._finish_streamed(
+                    run,
                     nodes,
                     runs,
                     journal,
                     nominal,
-                    facts,
-                    outputs,
                     streaming,
                     output,
                     provenance,
@@ -860,11 +844,7 @@ class Study:
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
             if held_out is not None and min(wanted, most - first) > 0:
                 more, more_failed = self._run_held_out(
-                    facts,
-                    outputs,
-                    pool,
-                    journaling,
-                    progress,
+                    run,
                     record,
                     min(wanted, most - first),
                     nodes.nodes,
@@ -905,12 +885,11 @@ class Study:
 
     def _finish_streamed(
         self,
+        run: _RunContext,
         nodes: NodeSet,
         runs: RunResult,
         journal: Journal,
         nominal: RunResult | None,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
         plan: StreamPlan,
         output: str | Path,
         provenance: Mapping[str, str] | None,
@@ -924,13 +903,14 @@ class Study:
         The result holds the statistics and no runs (``values`` without rows)."""
         from pcmb.store import write_streamed  # h5py only when a file is written
 
-        layout = Layout.of(outputs, self.times, facts.axes)
+        outputs, axes = run.outputs, run.facts.axes
+        layout = Layout.of(outputs, self.times, axes)
         widths = dict(zip(outputs, layout.widths, strict=True))
         with phase(f"statistics of {nodes.size} streamed runs", stream):
             moments, reservoir = stream_statistics(
                 journal.chunks(), widths, plan.block_rows, plan.reservoir_rows, self.method.seed
             )
-        axes = {name: axis for name, axis in facts.axes.items() if name in outputs}
+        axes = {name: axis for name, axis in axes.items() if name in outputs}
         kept = reservoir.index
         sample_runs = RunResult(
             values=layout.split(reservoir.rows),
@@ -1002,14 +982,12 @@ class Study:
         found = derive(self.derived, self.times, runs.values)
         return dataclasses.replace(runs, values={**runs.values, **found})
 
-    def _solve(
-        self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool, record: Design
-    ) -> StudyResult:
+    def _solve(self, run: _RunContext, nodes: NodeSet, record: Design) -> StudyResult:
         """The result of an intrusive design (:class:`~pcmb.designs.base.IntrusiveDesign`),
         ``record`` its record, checked and solved in a worker with the model built there."""
-        design = self.design
+        design, outputs = self.design, run.outputs
         kind = record.kind
-        problems = run_in_worker(self.model_factory, pool, design.check, outputs)
+        problems = run_in_worker(self.model_factory, run.pool, design.check, outputs)
         if self.derived:
             problems = [
                 *problems,
@@ -1019,7 +997,9 @@ class Study:
             raise UsageError([ConfigProblem(key, message) for key, message in problems], "Study")
         start = time.perf_counter()
         try:
-            recovery = run_in_worker(self.model_factory, pool, design.solve, self.times, outputs)
+            recovery = run_in_worker(
+                self.model_factory, run.pool, design.solve, self.times, outputs
+            )
         except ModelError as error:
             raise ModelRunError((), f"the {kind} solve failed: {error}") from error
         return StudyResult(
@@ -1040,14 +1020,7 @@ class Study:
         )
 
     def _run_rounds(
-        self,
-        nodes: TensorGrid | NodeSet,
-        runs: RunResult,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, runs: RunResult
     ) -> tuple[TensorGrid | NodeSet, RunResult]:
         """Run the further rounds an adaptive design asks for (its ``more`` method, see
         :class:`~pcmb.designs.base.AdaptiveDesign`), each journaled in its own folder of the
@@ -1056,16 +1029,13 @@ class Study:
         round_number = 0
         while more is not None:
             # Rounds are steered by the outputs of one axis (time first): see _by_axis.
-            steering = _by_axis(runs.values, facts.axes)[0][2]
+            steering = _by_axis(runs.values, run.facts.axes)[0][2]
             batch = more(nodes, steering, runs.status == Status.OK)
             if batch is None:
                 break
             self._check_finite(batch)
             round_number += 1
-            folder = None if journaling is None else journaling.folder(f"round-{round_number}")
-            found, journal = self._run_nodes(
-                batch, facts, outputs, pool, folder, progress, proven=True
-            )
+            found, journal = self._run_nodes(run, batch, f"round-{round_number}", proven=True)
             if journal is not None:
                 journal.close()  # the folder goes with the whole journal at the end
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
@@ -1084,15 +1054,7 @@ class Study:
         )
 
     def _run_joined(
-        self,
-        nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
-        record: Design,
-        count: int,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, record: Design, count: int
     ) -> tuple[
         RunResult,
         Journal | None,
@@ -1105,15 +1067,13 @@ class Study:
         set is journaled where it would be alone (the nominal run not at all) and judged by
         the failure policy as it would be, the design's runs first: (design runs, their
         journal, the held-out check as :meth:`_run_held_out` makes it, the nominal run)."""
-        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
+        journal, fresh_journal = self._journal(run, nodes)
         # (model parameters, journal) of each set of runs, in order.
         sets = [(model_params(self.model_inputs, nodes.params), journal)]
         draws, held_journal = None, None
         if count and record.basis is not None:
-            draws = self._held_out_draws(record, count, nodes.nodes)
-            if journaling is not None:
-                folder = journaling.folder("validation")
-                held_journal, _ = self._journal(draws.nodes, facts, outputs, folder)
+            draws = self._held_out_draws(count, nodes.nodes)
+            held_journal, _ = self._journal(run, draws.nodes, "validation")
             sets.append((model_params(self.model_inputs, draws.nodes.params), held_journal))
         if self.execution.nominal_run:
             sets.append((self._nominal_node(), None))
@@ -1124,84 +1084,67 @@ class Study:
                 [(part, size) for (_, part), size in zip(sets, sizes, strict=True)]
             )
         params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
-        with _removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
-            runs = self._campaign(
-                params, facts, outputs, pool, joined, progress, counted=nodes.size
-            )
+        with removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
+            runs = self._campaign(run, params, joined, counted=nodes.size)
         design_runs, *others = split_runs(runs, sizes)
-        self._judge_failures(design_runs, journal)
+        self._judge_failures(run, design_runs, journal)
         checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
         if draws is not None:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            design_journal = None if journaling is None else journaling.directory
-            self._judge_failures(found, held_journal, _HELD_OUT_RUN, design_journal)
+            self._judge_failures(run, found, held_journal, _HELD_OUT_RUN)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
     def _run_nodes(
         self,
+        run: _RunContext,
         nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        folder: str | None = None,
         chunk_size: int | None = None,
         *,
         proven: bool = False,
         keep: bool = True,
         runs_of: str = "node",
-        design_journal: Path | None = None,
     ) -> tuple[RunResult, Journal | None]:
-        """Run every node (checked by the caller, :meth:`_check_finite`), journaled by
-        ``journaling`` if given (the journal is returned, to be removed once the result is
-        written); raise by the failure policy. ``chunk_size`` overrides the study's;
-        ``proven``: the model ran at the study's nodes already (see
+        """Run every node (checked by the caller, :meth:`_check_finite`), journaled in the
+        run's journal (its ``folder``, if given) when it has one (the journal is returned, to
+        be removed once the result is written); raise by the failure policy. ``chunk_size``
+        overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
-        only (a streamed study); ``runs_of``, ``design_journal``: what the runs are and where
-        the design's nodes are kept, for the error (:meth:`_judge_failures`)."""
-        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
-        with _removed_if_rejected(journal, fresh_journal):
+        only (a streamed study); ``runs_of``: what the runs are, for the error
+        (:meth:`_judge_failures`)."""
+        journal, fresh_journal = self._journal(run, nodes, folder)
+        with removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
+                run,
                 model_params(self.model_inputs, nodes.params),
-                facts,
-                outputs,
-                pool,
                 journal,
-                progress,
                 chunk_size,
                 proven=proven,
                 keep=keep,
             )
-        self._judge_failures(runs, journal, runs_of, design_journal)
+        self._judge_failures(run, runs, journal, runs_of)
         return runs, journal
 
     def _journal(
-        self,
-        nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        journaling: _Journaling | None,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, folder: str | None = None
     ) -> tuple[Journal | None, bool]:
-        """The journal of ``nodes`` by ``journaling`` (``None``: none), and whether it is
-        new."""
-        if journaling is None:
+        """The journal of ``nodes`` in the run's journal (its ``folder``, if given; ``None``:
+        the run journals nothing), and whether it is new."""
+        if run.journaling is None:
             return None, False
-        fresh = not Journal.exists(journaling.directory)
-        widths = Layout.of(outputs, self.times, facts.axes).widths
-        fingerprint = self._fingerprint(nodes, outputs, journaling.files)
-        return Journal(journaling.directory, fingerprint, nodes.size, outputs, widths), fresh
+        journaling = run.journaling if folder is None else run.journaling.folder(folder)
+        widths = Layout.of(run.outputs, self.times, run.facts.axes).widths
+        digest = self._digest(nodes, run.outputs)
+        return journaling.open(digest, nodes.size, run.outputs, widths)
 
     def _campaign(
         self,
+        run: _RunContext,
         params: dict[str, NDArray[np.float64]],
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
         journal: Journal | JoinedJournal | None,
-        progress: bool | None,
         chunk_size: int | None = None,
         *,
         proven: bool = False,
@@ -1215,16 +1158,16 @@ class Study:
             self.model_factory,
             params,
             self.times,
-            outputs,
+            run.outputs,
             execution=self.execution,
             address=self.address,
             chunk_size=chunk_size,
             retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
             journal=journal,
-            progress=progress,
+            progress=run.progress,
             stop_on_failure=self.execution.on_failure == "abort",
-            pool=pool,
-            facts=facts,
+            pool=run.pool,
+            facts=run.facts,
             proven=proven,
             keep_values=keep,
             counted=counted,
@@ -1232,26 +1175,28 @@ class Study:
 
     def _judge_failures(
         self,
+        run: _RunContext,
         runs: RunResult,
         journal: Journal | None,
         runs_of: str = "node",
-        design_journal: Path | None = None,
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on;
-        ``runs_of``: what the runs are (``"held-out run"``: numbered among those);
-        ``design_journal``: where the design's nodes are kept, when the runs are held-out
-        runs journaled beside them (named too: ``--resume`` keeps both)."""
+        ``runs_of``: what the runs are (``"held-out run"``: numbered among those, and kept
+        beside the design's nodes, which the error names too: ``--resume`` keeps both)."""
         if not runs.failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
-        places = [] if design_journal is None else [("the design's nodes", design_journal)]
+        places = []
+        if runs_of == _HELD_OUT_RUN and run.journaling is not None:
+            places.append(("the design's nodes", run.journaling.directory))
+        beside = bool(places)
         if journal is not None and finished:
             places.append((f"the {finished} finished {runs_of}(s)", journal.directory))
         kept = " and ".join(
             f"{what} {'are kept in' if i == 0 else 'in'} {where}"
             for i, (what, where) in enumerate(places)
         )
-        if design_journal is not None:
+        if beside:
             kept += f" (--resume keeps {'both' if len(places) == 2 else 'them'})"
         kept = f"; {kept}" if kept else ""
         pending = int(np.sum(runs.status == Status.PENDING))
@@ -1269,43 +1214,17 @@ class Study:
 
     def held_out_runs(self, design_runs: int) -> tuple[int, int]:
         """(first batch, most in all) of the held-out runs that check an expansion of
-        ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
-        at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
-        in all, the rest drawn only where the verdict is undecided; placed runs
-        (:meth:`places_held_out`) all at once, as half of them can call a wrong result
-        reliable (the double well at order 7 with 4)."""
-        most = self._held_out_most(design_runs)
-        if self.method.validation is not None or self.places_held_out():
-            return most, most
-        return min(FIRST_BATCH, most), most
+        ``design_runs`` runs (:meth:`pcmb.held_out.HeldOutPlan.runs`)."""
+        return self._held_out.runs(design_runs)
 
     def places_held_out(self) -> bool:
-        """Whether the held-out runs are placed to extend the design's nodes
-        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
-        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
-        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
-        wastes the few runs."""
-        grid = self.design.record().grid
-        if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
-            return False
-        if grid != "element-gauss":
-            return True
-        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
-        return self._held_out_most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
-
-    def _held_out_most(self, design_runs: int) -> int:
-        """The most held-out runs of the check: ``method.validation``, else the budget."""
-        if self.method.validation is not None:
-            return self.method.validation
-        return held_out_budget(design_runs)
+        """Whether the held-out runs are placed to extend the design's nodes rather than
+        drawn (:meth:`pcmb.held_out.HeldOutPlan.placed`)."""
+        return self._held_out.placed()
 
     def _run_held_out(
         self,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        run: _RunContext,
         record: Design,
         count: int,
         design: NDArray[np.float64],
@@ -1313,34 +1232,21 @@ class Study:
         batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
-        by the design's ``record``),
-        batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
-        design's nodes ``design`` (germ points) where
-        :meth:`places_held_out` (per element of a multi-element design, where its node
-        ``values`` say it may err most), else drawn; journaled in the
-        journal's ``validation`` folder (``validation-<batch>`` after the first), under the
-        failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
-        leaves them out)."""
+        by the design's ``record``), batch ``batch`` of the check, placed to extend the
+        design's nodes ``design`` (germ points) or drawn (:meth:`_held_out_draws`); journaled
+        in the journal's ``validation`` folder (``validation-<batch>`` after the first), under
+        the failure policy; and a ``nodes-failed`` record naming those that failed
+        (``regress`` leaves them out)."""
         if not count or record.basis is None:
             return None, ()
-        draws = self._held_out_draws(record, count, design, values, batch)
+        draws = self._held_out_draws(count, design, values, batch)
         name = "validation" if batch == 0 else f"validation-{batch}"
-        folder = None if journaling is None else journaling.folder(name)
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            draws.nodes,
-            facts,
-            outputs,
-            pool,
-            folder,
-            progress,
-            halves,
-            proven=proven,
-            runs_of=_HELD_OUT_RUN,
-            design_journal=None if journaling is None else journaling.directory,
+            run, draws.nodes, name, halves, proven=proven, runs_of=_HELD_OUT_RUN
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
@@ -1348,36 +1254,16 @@ class Study:
 
     def _held_out_draws(
         self,
-        record: Design,
         count: int,
         design: NDArray[np.float64],
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
-    ) -> _HeldOutDraws:
-        """Where the ``count`` held-out runs of batch ``batch`` go (see :meth:`_run_held_out`),
-        checked finite."""
-        seed = self.method.seed + HELD_OUT_SEED + batch
-        placed = self.places_held_out()
-        partition = getattr(self.design, "partition", None)
-        if placed and partition is not None:
-            # Each element's own nodes (not those of the elements split on the way).
-            where = self.design.node_elements
-            own = where >= 0
-            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
-            importance = element_importance(partition, design, where[own], values)
-            draws, weights = held_out_placed_elements(
-                partition, design, where[own], importance, count
-            )
-        elif placed:
-            # Leja points extending the nodes: with them, a far richer interpolant.
-            draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
-        else:
-            # A Latin hypercube, normal inputs widened into their tails (weighted back): each
-            # input's range is met evenly, which steadies the estimated errors of the
-            # statistics against a few runs missing where the error sits.
-            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
-        self._check_finite(draws)
-        return _HeldOutDraws(seed, draws, weights, placed)
+    ) -> HeldOutDraws:
+        """Where the ``count`` held-out runs of batch ``batch`` go
+        (:meth:`pcmb.held_out.HeldOutPlan.draws`), checked finite."""
+        draws = self._held_out.draws(count, design, values, batch)
+        self._check_finite(draws.nodes)
+        return draws
 
     def _diagnosed(
         self,
@@ -1415,32 +1301,31 @@ class Study:
             warnings=(*warnings, *records),
         )
 
-    def _start_nominal(
-        self, facts: ModelFacts, outputs: Sequence[str], pool: Pool
-    ) -> PendingRun | None:
+    def _start_nominal(self, run: _RunContext) -> PendingRun | None:
         """The nominal run sent to the pool ahead of the nodes, to run beside them
         (:func:`~pcmb.run.executor.start_run`); ``None`` if not wanted, or with a timeout,
         when chunks must not wait behind it (it runs after them, :meth:`_run_nominal`)."""
         if not self.execution.nominal_run or self.execution.timeout is not None:
             return None
-        return start_run(self.model_factory, self._nominal_node(), self.times, outputs, pool, facts)
+        node = self._nominal_node()
+        return start_run(self.model_factory, node, self.times, run.outputs, run.pool, run.facts)
 
     def _nominal_node(self) -> dict[str, NDArray[np.float64]]:
         """The nominal parameters as a one-node batch of the model's inputs."""
         return model_params(self.model_inputs, [list(self.nominal_params().values())])
 
-    def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
+    def _run_nominal(self, run: _RunContext) -> RunResult:
         """The deterministic run at the nominal parameters (not part of any statistic)."""
         return run_nodes(
             self.model_factory,
             self._nominal_node(),
             self.times,
-            outputs,
+            run.outputs,
             execution=self.execution,
             address=self.address,
             progress=False,
-            pool=pool,
-            facts=facts,
+            pool=run.pool,
+            facts=run.facts,
             proven=True,  # its failure is a warning (_with_nominal)
         )
 
@@ -1499,62 +1384,17 @@ class Study:
 
 
 @dataclasses.dataclass(frozen=True)
-class _Journaling:
-    """Where a run journals (``directory``: ``<output>.journal``) and the digests of the
-    model's files that every journal of the run records (:meth:`Study.fingerprint`), taken
-    once."""
+class _RunContext:
+    """What the steps of one :meth:`Study.run` share: the workers (``pool``), what the model
+    says of itself (``facts``), the ``outputs`` kept, where the runs are journaled
+    (``journaling``; ``None``: nowhere) and whether a progress bar is shown (``progress``, as
+    :meth:`Study.run` takes it)."""
 
-    directory: Path
-    files: Mapping[str, str]
-
-    def folder(self, name: str) -> _Journaling:
-        """The journaling of a folder of this journal (a round's, the held-out runs')."""
-        return dataclasses.replace(self, directory=self.directory / name)
-
-
-@contextlib.contextmanager
-def _removed_if_rejected(journal: Journal | None, fresh: bool) -> Iterator[None]:
-    """Remove a ``fresh`` journal when its campaign is rejected before any node ran, or the
-    model is broken at every node: leave nothing behind (a journal would block a rerun)."""
-    try:
-        yield
-    except (UsageError, ModelDefinitionError):
-        if journal is not None and fresh:
-            journal.remove()
-        raise
-
-
-@dataclasses.dataclass(frozen=True)
-class _HeldOutDraws:
-    """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
-    ``placed`` or drawn (:meth:`Study._held_out_draws`)."""
-
-    seed: int
-    nodes: NodeSet
-    weights: NDArray[np.float64]
-    placed: bool
-
-    def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
-        """The held-out runs made (``found``), and a ``nodes-failed`` record naming those that
-        failed (``regress`` leaves them out)."""
-        ok = found.status == Status.OK
-        held_out = HeldOut(
-            self.seed,
-            self.nodes.nodes,
-            self.nodes.params,
-            found.values,
-            ok,
-            self.weights,
-            self.placed,
-        )
-        if not found.failures:
-            return held_out, ()
-        failed = WarningRecord(
-            "nodes-failed",
-            f"{len(found.failures)} of {self.nodes.size} held-out run(s) failed and were left out "
-            f"of the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
-        )
-        return held_out, (failed,)
+    pool: Pool
+    facts: ModelFacts
+    outputs: tuple[str, ...]
+    journaling: Journaling | None
+    progress: bool | None
 
 
 def _merged_reports(parts: list[Recovery]) -> DesignReport | None:
@@ -1607,12 +1447,6 @@ def _run_settings(config: StudyConfig) -> str:
     # The held-out runs have their own journal folder, fingerprinted by their own nodes.
     data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
-
-
-#: The grids of one input whose held-out runs are placed (:meth:`Study.places_held_out`).
-_PLACED_GRIDS = frozenset(
-    {"tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor", "element-gauss"}
-)
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:
