@@ -72,7 +72,7 @@ from pcmb.run.executor import (
     start_run,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
-from pcmb.run.journal import FRESH, Journal
+from pcmb.run.journal import Journal
 from pcmb.run.journaling import Journaling, removed_if_rejected
 from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
@@ -743,16 +743,8 @@ class Study:
                 from pcmb.store import check_replaceable
 
                 check_replaceable(output)
-            journal_dir = Path(f"{output}.journal")
-            if fresh:
-                Journal.discard(journal_dir)
-            Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
-            if Journal.exists(journal_dir) and not resume:
-                raise UsageError(
-                    f"{journal_dir} holds the finished nodes of an interrupted run: "
-                    f"continue with --resume, or delete it or {FRESH} (which discards them)"
-                )
-            journaling = Journaling(journal_dir, self._file_digests(facts.loaded_files))
+            files = self._file_digests(facts.loaded_files)
+            journaling = Journaling.start(output, files, resume=resume, fresh=fresh)
         run = _RunContext(pool, facts, outputs, journaling, progress)
         joined = self._joins_runs(streaming is not None)
         early = None if joined else self._start_nominal(run)

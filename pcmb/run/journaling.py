@@ -11,7 +11,7 @@ from pathlib import Path
 
 from pcmb.errors import ModelDefinitionError, UsageError
 from pcmb.run.fingerprint import Fingerprint
-from pcmb.run.journal import Journal
+from pcmb.run.journal import FRESH, Journal
 
 __all__ = ["Journaling", "removed_if_rejected"]
 
@@ -24,6 +24,25 @@ class Journaling:
 
     directory: Path
     files: Mapping[str, str]
+
+    @classmethod
+    def start(
+        cls, output: str | Path, files: Mapping[str, str], *, resume: bool, fresh: bool
+    ) -> Journaling:
+        """The journaling of a run writing ``output``, in ``<output>.journal``: discarded
+        first when ``fresh``, refused while another run writes it, or when it holds an
+        interrupted run's nodes and the run does not ``resume``; ``files``: the digests of
+        the model's files."""
+        directory = Path(f"{output}.journal")
+        if fresh:
+            Journal.discard(directory)
+        Journal.check_free(directory)  # another run writing it: refuse, touch nothing
+        if Journal.exists(directory) and not resume:
+            raise UsageError(
+                f"{directory} holds the finished nodes of an interrupted run: "
+                f"continue with --resume, or delete it or {FRESH} (which discards them)"
+            )
+        return cls(directory, files)
 
     def folder(self, name: str) -> Journaling:
         """The journaling of a folder of this journal (a round's, the held-out runs')."""
