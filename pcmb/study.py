@@ -56,7 +56,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.held_out import HeldOutDraws, HeldOutPlan
+from pcmb.held_out import HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -1064,7 +1064,8 @@ class Study:
         sets = [(model_params(self.model_inputs, nodes.params), journal)]
         draws, held_journal = None, None
         if count and record.basis is not None:
-            draws = self._held_out_draws(count, nodes.nodes)
+            draws = self._held_out.draws(count, nodes.nodes)
+            self._check_finite(draws.nodes)
             held_journal, _ = self._journal(run, draws.nodes, "validation")
             sets.append((model_params(self.model_inputs, draws.nodes.params), held_journal))
         if self.execution.nominal_run:
@@ -1225,13 +1226,14 @@ class Study:
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
         by the design's ``record``), batch ``batch`` of the check, placed to extend the
-        design's nodes ``design`` (germ points) or drawn (:meth:`_held_out_draws`); journaled
-        in the journal's ``validation`` folder (``validation-<batch>`` after the first), under
-        the failure policy; and a ``nodes-failed`` record naming those that failed
-        (``regress`` leaves them out)."""
+        design's nodes ``design`` (germ points) or drawn
+        (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
+        folder (``validation-<batch>`` after the first), under the failure policy; and a
+        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not count or record.basis is None:
             return None, ()
-        draws = self._held_out_draws(count, design, values, batch)
+        draws = self._held_out.draws(count, design, values, batch)
+        self._check_finite(draws.nodes)
         name = "validation" if batch == 0 else f"validation-{batch}"
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.execution.chunk_size or -(-count // 2)
@@ -1243,19 +1245,6 @@ class Study:
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         return draws.checked(found)
-
-    def _held_out_draws(
-        self,
-        count: int,
-        design: NDArray[np.float64],
-        values: Mapping[str, NDArray[np.float64]] | None = None,
-        batch: int = 0,
-    ) -> HeldOutDraws:
-        """Where the ``count`` held-out runs of batch ``batch`` go
-        (:meth:`pcmb.held_out.HeldOutPlan.draws`), checked finite."""
-        draws = self._held_out.draws(count, design, values, batch)
-        self._check_finite(draws.nodes)
-        return draws
 
     def _diagnosed(
         self,
