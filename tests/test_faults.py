@@ -164,8 +164,9 @@ def _run(config: Path, env: dict[str, str] | None = None) -> tuple[int, str, int
     return process.returncode, stderr, process.pid
 
 
-CASES = [
-    pytest.param(index, code, jobs, id=f"{where}-exit{code}-jobs{jobs}")
+#: Where the model calls ``sys.exit(code)``, with how many workers (slow: each runs a study).
+EXITS = [
+    pytest.param(index, code, jobs, id=f"{where}-exit{code}-jobs{jobs}", marks=pytest.mark.slow)
     for index, where in ((FIRST, "first"), (MIDDLE, "middle"))
     for code in (0, 3)
     for jobs in (1, 2)
@@ -178,16 +179,20 @@ def _check_where_it_ran(folder: Path, pid: int) -> None:
     assert exited and pid not in exited
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+def _exit_run(folder: Path, index: int, code: int, jobs: int, policy: str) -> tuple[int, str]:
+    """Exit code and stderr of ``pcmb run`` of a study whose model calls ``sys.exit(code)`` at
+    node ``index``, in this process: a ``sys.exit`` run here by mistake fails the test rather
+    than ending it."""
+    done = pcmb_here("run", str(_study(folder, index, code, jobs, policy)), "--quiet")
+    return done.returncode, done.stderr
+
+
+@pytest.mark.parametrize(("index", "code", "jobs"), EXITS)
 def test_sys_exit_in_the_model_aborts_with_exit_3(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
-    config = _study(tmp_path, index, code, jobs, "abort")
-    # In this process: a model's sys.exit run here by mistake would fail the test, not end it.
-    done = pcmb_here("run", str(config), "--quiet")
-    stderr = done.stderr
-    assert done.returncode == 3, stderr
+    returncode, stderr = _exit_run(tmp_path, index, code, jobs, "abort")
+    assert returncode == 3, stderr
     assert "the model failed at 1 of 9 node(s) (on_failure: abort)" in stderr
     assert f"  node {index} (a={NODES[index]:.6g}): SystemExit: {code} at faulty.py:" in stderr
     # The model's traceback is shown, not one of pcmb's own.
@@ -197,15 +202,12 @@ def test_sys_exit_in_the_model_aborts_with_exit_3(
     _check_where_it_ran(tmp_path, os.getpid())
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+@pytest.mark.parametrize(("index", "code", "jobs"), EXITS)
 def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
-    config = _study(tmp_path, index, code, jobs, "regress")
-    done = pcmb_here("run", str(config), "--quiet")
-    stderr = done.stderr
-    assert done.returncode == 0, stderr
+    returncode, stderr = _exit_run(tmp_path, index, code, jobs, "regress")
+    assert returncode == 0, stderr
     assert f"node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
     assert "pcmb: wrote" in stderr
     # A complete file and nothing else: no journal, no temporary file.
