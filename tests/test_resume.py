@@ -24,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from cli_process import pcmb_here
+from cli_process import gated_pcmb, pcmb_here
 
 from pcmb.result import StudyResult
 from pcmb.store import load
@@ -315,24 +315,14 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
 ) -> None:
     folder = python_study
     journal = folder / "out.h5.journal"
-    gate = folder / "gate"
-    gate.touch()
-    first = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet"],
-        cwd=folder,
-        env={**os.environ, "GATE": str(gate)},
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 60
-        # The first run journals its first two nodes (the model's first two calls), then
-        # holds the lock and waits at the gate.
-        while len(records(folder)) < 2:
-            assert first.poll() is None, first.stderr.read()
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
+    run = ("run", "study.yaml", "--quiet")
+
+    def journaled() -> bool:
+        """The first run journaled its first two nodes (the model's first two calls): it
+        holds the lock and waits at the gate."""
+        return len(records(folder)) >= 2
+
+    with gated_pcmb(*run, cwd=folder, gate=folder / "gate", ready=journaled) as first:
         before = snapshot(journal)
         for args in ((), ("--resume",)):
             second = pcmb_run(folder, *args)
@@ -343,13 +333,6 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
             )
             assert "Traceback" not in second.stderr and "interrupted" not in second.stderr
             assert snapshot(journal) == before
-        gate.unlink()
-        _, err = first.communicate(timeout=60)
-        assert first.returncode == 0, err
-    finally:
-        if first.poll() is None:
-            os.killpg(first.pid, signal.SIGKILL)
-            first.communicate()
     assert not journal.exists()
     with h5py.File(folder / "out.h5", "r") as file:
         params, times = file["nodes/params"][()], file["time"][()]
