@@ -84,19 +84,15 @@ def test_explicit_chunk_size_and_bad_values() -> None:
 
 def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     params = ramp_params(24)
-    serial = run_nodes(
-        em.Ramp,
-        params,
-        TIMES,
-        ["batch_size", "batch_first", "pid"],
-        execution=ExecutionSpec(jobs=1),
-    )
-    pooled = run_nodes(
-        em.Ramp,
-        params,
-        TIMES,
-        ["batch_size", "batch_first", "pid"],
-        execution=ExecutionSpec(jobs=2),
+    serial, pooled = (
+        run_nodes(
+            em.Ramp,
+            params,
+            TIMES,
+            ["batch_size", "batch_first", "pid"],
+            execution=ExecutionSpec(jobs=jobs),
+        )
+        for jobs in (1, 2)
     )
     expected_size = np.empty(24)
     expected_first = np.empty(24)
