@@ -50,12 +50,8 @@ def line(params, times):
     return {"y": params["a"] * times + params["b"] ** 2}
 """
 
-PYTHON_CONFIG = """\
-name: resume
-model:
-  kind: python
-  entry: model.py:line
-  params: {a: 1.0, b: 0.0}
+#: What the python and command studies share after their model section.
+STUDY = """\
 time: {start: 0.0, stop: 2.0, points: 5}
 inputs:
   a: {dist: uniform, low: 1.0, high: 3.0}
@@ -64,6 +60,15 @@ method: {kind: collocation, order: 3}
 execution: {jobs: 1, chunk_size: 1}
 output: out.h5
 """
+
+PYTHON_CONFIG = """\
+name: resume
+model:
+  kind: python
+  entry: model.py:line
+  params: {a: 1.0, b: 0.0}
+"""
+PYTHON_CONFIG += STUDY
 
 # A command model: program ./sim.py (a path), a template rendered per node and a data file
 # linked into every work directory. With BLOCK_AFTER it counts its runs in CALLS_FILE and
@@ -106,14 +111,8 @@ model:
   templates: [input.txt]
   files: [data/scale.txt]
   run_dir: runs
-time: {start: 0.0, stop: 2.0, points: 5}
-inputs:
-  a: {dist: uniform, low: 1.0, high: 3.0}
-  b: {dist: normal, mean: 0.0, std: 1.0}
-method: {kind: collocation, order: 3}
-execution: {jobs: 1, chunk_size: 1}
-output: out.h5
 """
+COMMAND_CONFIG += STUDY
 
 
 def pcmb_run(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
