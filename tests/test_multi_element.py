@@ -552,3 +552,18 @@ def test_an_input_the_response_ignores_leaves_the_estimate_unchanged(order):
     nodes, _ = refine(design, lambda p: {"y": response(p, times)})
     assert nodes.size == runs * (order + 1)
     assert design.estimate == pytest.approx(estimate, rel=1e-9)
+
+
+@pytest.mark.parametrize(("elements", "wording"), [({}, "would split"), ("auto", "splits on it")])
+def test_element_decay_says_whether_auto_split_on_it(elements, wording):
+    """A fixed partition's element-decay says what elements: auto would do, not that it did."""
+    design = _design(
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        (3,),
+        elements=elements,
+        max_elements=1,
+        diagnostics_tolerance=1e-4,
+    )
+    recovery = _recover(design, lambda x: np.abs(x[:, :1] - 0.3))
+    (record,) = [w for w in recovery.warnings if w.code == "element-decay"]
+    assert wording in record.message

@@ -448,9 +448,9 @@ class MultiElementCollocation:
                         f"the error of the mean and std that the elements' outer degree "
                         f"layers indicate is {estimate:.3g} of the largest std, above the "
                         f"tolerance {self.tolerance:g} (diagnostics.tolerance; most of it in "
-                        f"element {worst}, {each[worst]:.3g} alone); elements: auto splits on "
-                        "it; an indicator, not a verdict: the held-out check judges the mean "
-                        "and std",
+                        f"element {worst}, {each[worst]:.3g} alone); elements: auto "
+                        f"{'splits' if self.elements == 'auto' else 'would split'} on it; an "
+                        "indicator, not a verdict: the held-out check judges the mean and std",
                         name,
                     )
                 )
