@@ -50,8 +50,8 @@ class Faulty:
     endless loop), or "segfault-on-build" (in the constructor, whatever the nodes). Each call
     sleeps ``sleep`` s per node; the process that misbehaves writes its pid to ``marker``.
     With ``BLOCK_ABOVE`` in the run's environment, a call with a node above it waits until
-    the run is stopped; with ``HOLD_ABOVE``, the first such call waits until its worker is
-    killed, and the calls after it run.
+    the run is stopped; with ``HOLD_ABOVE``, such calls log their batch size to
+    ``marker.held``, and the first waits until its worker is killed.
     """
 
     outputs = ("y",)
@@ -72,8 +72,10 @@ class Faulty:
         hold = os.environ.get("HOLD_ABOVE")
         if hold is not None and np.any(a > float(hold)):
             held = self.marker + ".held"
-            if not os.path.exists(held):
-                open(held, "w").close()
+            first = not os.path.exists(held)
+            with open(held, "a") as log:
+                log.write(f"{a.size}\\n")
+            if first:
                 time.sleep(3600)
         if np.any((a > self.low) & (a < self.high)):
             with open(self.marker, "a") as marker:
@@ -278,16 +280,18 @@ def test_a_crash_in_the_nominal_run_is_a_warning(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_nominal_run_past_the_timeout_leaves_no_design_node_unrun(tmp_path: Path) -> None:
-    # Chunks [0-2] [3-5] [6-8] [nominal], one call each, two workers: the nominal run (2 s
-    # allowed) hangs; [6-8] (6 s allowed) starts before it and, the first time, waits until
-    # its worker is killed (HOLD_ABOVE), so it is in flight when the nominal run's timeout
-    # kills both workers, however loaded the machine. That kill must not cost [6-8] its run,
-    # as a failed nominal run never stops a study.
+    # Chunks [0-2] [3-5] [6-8] [nominal], one call each, two workers: [6-8] runs beside the
+    # nominal run and, the first time, waits until its worker is killed (HOLD_ABOVE); the
+    # nominal run hangs, and its timeout (2 s against [6-8]'s 6 s) kills both workers with
+    # [6-8] in flight: no sleep races the timeout. That kill must not cost [6-8] its run, as
+    # a failed nominal run never stops a study.
     config = _study(tmp_path, NOMINAL, 0, 2, "abort", how="hang", timeout=2.0, chunk_size=3)
     held = {**os.environ, "HOLD_ABOVE": str(0.5 * (NODES[5] + NODES[6]))}
     returncode, stderr, _ = _run(config, held)
     assert returncode == 0, stderr
-    assert (tmp_path / "marker.held").exists()  # [6-8] was held, and run again
+    # [6-8] was held and run again whole: the nominal run's timeout killed it (had its own
+    # come first, its nodes would have run one by one, and this test proved nothing).
+    assert (tmp_path / "marker.held").read_text().split() == ["3", "3"]
     assert "the nominal run failed, so none is stored: timed out after 2 s" in stderr
     result = pcmb.load(tmp_path / "out" / "result.h5")
     assert (result.status == Status.OK).all(), result.status
