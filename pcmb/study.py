@@ -13,7 +13,6 @@ import json
 import sys
 import threading
 import time
-import typing
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
@@ -23,7 +22,6 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar
 import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import TypeAdapter, ValidationError
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
@@ -41,9 +39,7 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
-from pcmb.config.messages import schema_problems
 from pcmb.config.schema import DiagnosticsSpec, ExecutionSpec
-from pcmb.config.types import Section
 from pcmb.designs import MethodSection, MethodSpec, NodeDesign, make_design
 from pcmb.designs.base import MomentReport, Recovery
 from pcmb.errors import (
@@ -78,6 +74,13 @@ from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memo
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
 from pcmb.run.worker import Layout, ModelFacts
+from pcmb.study_arguments import (
+    DEPRECATED,
+    from_keywords,
+    keys_of,
+    usage_error,
+    validated_section,
+)
 from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
@@ -87,10 +90,6 @@ if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
 
 __all__ = ["DEPRECATED", "Study"]
-
-
-def _usage(key: str, message: str) -> UsageError:
-    return UsageError([ConfigProblem(key, message)], source="Study")
 
 
 def _derived(entries: Mapping[str, Any]) -> dict[str, DerivedOutput]:
@@ -107,10 +106,10 @@ def _check_inputs(
     inputs: Mapping[str, Distribution | RandomProcess],
 ) -> dict[str, Distribution | RandomProcess]:
     if not inputs:
-        raise _usage("inputs", "a study needs at least one input")
+        raise usage_error("inputs", "a study needs at least one input")
     for name, dist in inputs.items():
         if not isinstance(dist, Distribution | RandomProcess):
-            raise _usage(
+            raise usage_error(
                 f"inputs.{name}", f"must be a pcmb distribution or random process, got {dist!r}"
             )
     return dict(inputs)
@@ -120,77 +119,6 @@ def _check_inputs(
 DEFAULT_METHOD: Mapping[str, Any] = {"kind": "collocation", "order": 3}
 #: What the errors call a held-out run (numbered among those runs, not the design's nodes).
 _HELD_OUT_RUN = "held-out run"
-#: Order of a method of pcmb 0.x's keywords that takes one and was given neither order nor
-#: level (their default then).
-_KEYWORD_ORDER = 3
-#: The keyword arguments of pcmb 0.x -> the (section, key) each now sets; accepted for one
-#: release with a DeprecationWarning.
-DEPRECATED: dict[str, tuple[str, str]] = {
-    **{
-        key: ("method", key)
-        for member in typing.get_args(typing.get_args(MethodSpec)[0])
-        for key in member.model_fields
-        if key != "kind"
-    },
-    **{key: ("execution", key) for key in ExecutionSpec.model_fields if key != "address"},
-    "diagnostics_tolerance": ("diagnostics", "tolerance"),
-    "diagnosed": ("diagnostics", "outputs"),
-}
-
-
-def _from_keywords(
-    kind: str | None,
-    execution: ExecutionSpec | Mapping[str, Any] | None,
-    diagnostics: DiagnosticsSpec | Mapping[str, Any] | None,
-    keywords: Mapping[str, Any],
-    method: MethodSection | Mapping[str, Any] | None,
-) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
-    """The ``method``, ``execution`` and ``diagnostics`` keys that pcmb 0.x's keyword
-    arguments (and ``method="<kind>"``) describe, on top of the given sections; the keys of
-    ``method`` that a new kind does not take are dropped."""
-    unknown = sorted(set(keywords) - set(DEPRECATED))
-    if unknown:
-        raise _usage(unknown[0], f"unknown argument(s) {unknown}")
-    warnings.warn(
-        "Study's keyword arguments of pcmb 0.x (order=, samples=, jobs=, method='<kind>', ...) "
-        "are deprecated: give method=, execution= and diagnostics= sections (or mappings of "
-        "their config keys)",
-        DeprecationWarning,
-        stacklevel=3,
-    )
-    given: dict[str, dict[str, Any]] = {
-        "method": {},
-        "execution": _dump(execution),
-        "diagnostics": _dump(diagnostics),
-    }
-    for key, value in keywords.items():
-        section, name = DEPRECATED[key]
-        if value is not None:  # None was "not set" in pcmb 0.x
-            given[section][name] = value
-    current = _dump(method) if method is not None else {"kind": "collocation"}
-    kind = kind or current["kind"]
-    takes = type(_section("method", MethodSpec, {"kind": kind})).model_fields
-    data = {key: value for key, value in current.items() if key in takes}
-    data.update(given["method"], kind=kind)
-    if "order" in takes and "order" not in data and "level" not in data:
-        data["order"] = _KEYWORD_ORDER
-    return data, given["execution"], given["diagnostics"]
-
-
-def _dump(section: Section | Mapping[str, Any] | None) -> dict[str, Any]:
-    """A section's keys (those set or not default), a mapping's copy, or nothing."""
-    if section is None:
-        return {}
-    return section.model_dump(exclude_unset=True) if isinstance(section, Section) else dict(section)
-
-
-def _section(key: str, root: Any, value: Any) -> Any:
-    """The validated section at ``key`` (``root``: its class or union) of a section or its
-    keys; a refusal is a UsageError at the section's keys."""
-    try:
-        return TypeAdapter(root).validate_python(value)
-    except ValidationError as error:
-        raise UsageError(schema_problems(error, root, prefix=(key,)), source="Study") from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -296,7 +224,7 @@ class Study:
         if isinstance(method, str) or deprecated:
             kind = method if isinstance(method, str) else None
             current = None if isinstance(method, str) else method
-            method, execution, diagnostics = _from_keywords(
+            method, execution, diagnostics = from_keywords(
                 kind, execution, diagnostics, deprecated, current
             )
         #: What the model receives, by name: distributions and random processes.
@@ -310,14 +238,18 @@ class Study:
         self.inputs = germ_inputs(self.model_inputs)
         self.times = np.asarray(times, dtype=float)
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
-            raise _usage("times", "must be a non-empty increasing 1-D grid")
-        self.method: MethodSection = _section("method", MethodSpec, method or DEFAULT_METHOD)
+            raise usage_error("times", "must be a non-empty increasing 1-D grid")
+        self.method: MethodSection = validated_section(
+            "method", MethodSpec, method or DEFAULT_METHOD
+        )
         if isinstance(address, str):  # an address is an execution setting, checked there
-            execution, address = {**_dump(execution), "address": address}, None
-        self.execution: ExecutionSpec = _section("execution", ExecutionSpec, execution or {})
+            execution, address = {**keys_of(execution), "address": address}, None
+        self.execution: ExecutionSpec = validated_section(
+            "execution", ExecutionSpec, execution or {}
+        )
         #: ``execution.memory`` (:class:`~pcmb.run.memory.MemoryBudget`).
         self.memory = parse_memory(self.execution.memory)
-        self.diagnostics: DiagnosticsSpec = _section(
+        self.diagnostics: DiagnosticsSpec = validated_section(
             "diagnostics", DiagnosticsSpec, diagnostics or {}
         )
         self.analysis = analysis
@@ -343,7 +275,7 @@ class Study:
         self.source = source
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
-            raise _usage("nominal", f"values given for unknown input(s) {unknown}")
+            raise usage_error("nominal", f"values given for unknown input(s) {unknown}")
         self.design = self._design()
         self._held_out = HeldOutPlan(
             self.design, self.inputs, self.method.seed, self.method.validation
@@ -355,7 +287,7 @@ class Study:
             return make_design(self.inputs, settings)
         except ValueError as error:
             key, _, message = str(error).partition(": ")
-            raise _usage(key, message) from None
+            raise usage_error(key, message) from None
 
     # -- construction from a config -----------------------------------------------------------
 
@@ -372,7 +304,7 @@ class Study:
         ``--jobs``, ``--backend``, ``--address``), checked with it; ``address_key``: where
         the dask address was given (:class:`StudySource`).
         """
-        settings = _dump(config.execution) | dict(execution) if execution else config.execution
+        settings = keys_of(config.execution) | dict(execution) if execution else config.execution
         return cls(
             config.model_factory(),
             config.study_inputs,
@@ -430,7 +362,7 @@ class Study:
             raise UsageError(f"unknown argument(s) {unknown}", source="Study.replace")
         arguments.update(changes)
         if old:
-            arguments["method"], arguments["execution"], arguments["diagnostics"] = _from_keywords(
+            arguments["method"], arguments["execution"], arguments["diagnostics"] = from_keywords(
                 old.pop("method", None),
                 arguments["execution"],
                 arguments["diagnostics"],
@@ -460,7 +392,7 @@ class Study:
             order = per_germ(order, self.model_inputs)
             missing = set(self.inputs) - set(order)
             if missing:
-                raise _usage("method.order", f"no order given for input(s) {sorted(missing)}")
+                raise usage_error("method.order", f"no order given for input(s) {sorted(missing)}")
             return tuple(int(order[name]) for name in self.inputs)
         return (int(order),) * len(self.inputs)
 
@@ -606,14 +538,14 @@ class Study:
         declared = facts.outputs
         unknown = [name for name in self.outputs or () if name not in declared]
         if unknown:
-            raise _usage(
+            raise usage_error(
                 "outputs", f"the model has no output(s) {unknown}; it has {list(declared)}"
             )
         parameters = facts.parameters
         if parameters is not None:
             strangers = [name for name in self.model_inputs if name not in parameters]
             if strangers:
-                raise _usage(
+                raise usage_error(
                     "inputs",
                     f"input(s) {strangers} name no parameter of the model; "
                     f"it has {sorted(parameters)}",
@@ -684,7 +616,7 @@ class Study:
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
         if resume and fresh:
-            raise _usage("fresh", "resume continues the journal, fresh discards it: give one")
+            raise usage_error("fresh", "resume continues the journal, fresh discards it: give one")
         nodes = self.node_set()
         with contextlib.ExitStack() as stack:
             if pool is None:
