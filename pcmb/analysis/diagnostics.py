@@ -26,8 +26,9 @@ raises false alarms.
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
   the design saw none of the spread (nodes symmetric about a kink) and the verdict fails
-  there; without held-out runs, runs all equal at every time are reported
-  (``runs-all-equal``, or ``output-constant`` when the nominal run equals them too).
+  there, unless the held-out check says the error holds within the tolerance; without
+  held-out runs, runs all equal at every time are reported (``runs-all-equal``, or
+  ``output-constant`` when the nominal run equals them too).
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
@@ -1144,8 +1145,8 @@ class OutputDiagnostics:
         The accepted error, relative to the scale.
     failing_from:
         :func:`verdict` of the estimate: the first time it exceeds the tolerance by more than
-        its noise, or where the design's runs are all equal while the held-out runs vary; NaN
-        if never.
+        its noise, or where the design's runs are all equal while the held-out runs vary and
+        do not show the error within the tolerance; NaN if never.
     warnings:
         ``chaos-unreliable`` (when ``failing_from`` is a time), ``chaos-undecided`` (where
         the noise is too large to tell) and the range checks' records (:func:`range_checks`).
@@ -1265,6 +1266,9 @@ def diagnose(
         else np.where(np.isnan(checked.noise), np.inf, checked.noise)
     )
     failing_from = verdict(times, estimate, tolerance, noise)
+    # A blind time fails unless the held-out runs, which saw the spread there, say it holds
+    # beyond their noise (a switch the nodes have not reached yet, its spread still small).
+    blind &= estimate + noise > tolerance
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
