@@ -531,7 +531,7 @@ def ramp(params, times):
     return {"y": np.outer(params["k"], times)}
 
 
-def test_a_stored_pdf_smeared_past_every_run_is_noted_though_no_draw_goes_there():
+def test_a_stored_pdf_smeared_past_every_run_is_noted_though_no_draw_goes_there(monkeypatch):
     # y = k t, k ~ U[0, 1]: the surrogate is exact, so no draw leaves [0, 1], the range of the
     # 41 runs (the held-out ones reach 0 and 1). A PDF whose kernel (h = 0.2) smears that
     # hard-edged law, Φ(y / h) - Φ((y - 1) / h), puts 5.7 % of its mass above 1.05 (1 + the
@@ -560,7 +560,18 @@ def test_a_stored_pdf_smeared_past_every_run_is_noted_though_no_draw_goes_there(
     smeared = Density(np.array([1.0]), value[None], density[None], np.array([0.2]))
     outputs = {"y": dataclasses.replace(result.analysis.outputs["y"], pdf=smeared)}
     analysis = dataclasses.replace(result.analysis, outputs=outputs)
+    # The record names its cause from the draws inside the nodes' box and from anywhere: one
+    # evaluation of the surrogate's draws serves both.
+    expansion = result.expansions["y"]
+    evaluations = []
+    evaluate = type(expansion).evaluate_germ
+    monkeypatch.setattr(
+        type(expansion),
+        "evaluate_germ",
+        lambda self, germ: evaluations.append(len(germ)) or evaluate(self, germ),
+    )
     (record,) = pdf_outside_runs(dataclasses.replace(result, analysis=analysis))
+    assert len(evaluations) == 1
     assert record.code == "pdf-outside-runs" and record.time_range == (1.0, 1.0)
     assert "puts 13 % of its mass (0 % of the surrogate's draws)" in record.message
     assert "kernel (bandwidth 0.2) smears" in record.message

@@ -44,7 +44,6 @@ the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -887,27 +886,41 @@ def out_of_range(
     also held to be non-negative: draws below 0 by more than ``RANGE_BELOW_ZERO`` times the
     range count too.
     """
-    return _outside_sides(expansion, node_values, draws, seed, node_germ, margin).sum(axis=0)
+    germ, samples = _surrogate_draws(expansion, draws, seed)
+    values = np.asarray(node_values, dtype=float)
+    return _outside_sides(expansion, values, margin, samples, _in_box(germ, node_germ)).sum(axis=0)
+
+
+def _surrogate_draws(
+    expansion: Expansion, draws: int, seed: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(D, n) germ drawn from the inputs' distribution and (D, T) the surrogate there."""
+    germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
+    return germ, expansion.evaluate_germ(germ)
+
+
+def _in_box(germ: NDArray[np.float64], node_germ: ArrayLike | None) -> NDArray[np.bool_]:
+    """(D,) whether each draw lies inside the box the (N, n) ``node_germ`` spans (all of them
+    without it)."""
+    if node_germ is None:
+        return np.ones(germ.shape[0], dtype=bool)
+    box = np.asarray(node_germ, dtype=float)
+    return np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)
 
 
 def _outside_sides(
     expansion: Expansion,
-    node_values: ArrayLike,
-    draws: int,
-    seed: int,
-    node_germ: ArrayLike | None,
+    values: NDArray[np.float64],
     margin: float,
+    samples: NDArray[np.float64],
+    kept: NDArray[np.bool_],
 ) -> NDArray[np.float64]:
-    """(2, T) the shares of :func:`out_of_range` below and above the runs' range."""
-    values = np.asarray(node_values, dtype=float)
-    floor, ceiling = _far_bounds(values, margin)
-    germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
-    if node_germ is not None:
-        box = np.asarray(node_germ, dtype=float)
-        germ = germ[np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)]
-    if germ.shape[0] == 0:
+    """(2, T) the shares of :func:`out_of_range` below and above the (N, T) runs' range,
+    among the (D, T) surrogate ``samples`` where ``kept``."""
+    if not kept.any():
         return np.zeros((2, values.shape[1]))
-    samples = expansion.evaluate_germ(germ)
+    floor, ceiling = _far_bounds(values, margin)
+    samples = samples[kept]
     sides = np.stack([(samples < floor).mean(axis=0), (samples > ceiling).mean(axis=0)])
     return np.where(expansion.varies() & (ceiling > floor), sides, 0.0)
 
@@ -963,15 +976,9 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         made = _finite_rows(np.vstack(runs))
         pdf = analysis.outputs[name].pdf
         points = nearest_indices(result.grid(name), pdf.at)
-        drawn = _outside_sides(
-            expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
-        )
-        # The draws from the whole input space, only where a record needs its cause.
-        anywhere = functools.cache(
-            functools.partial(
-                _outside_sides, expansion, made, RANGE_DRAWS, RANGE_SEED, None, PDF_MARGIN
-            )
-        )
+        germ, samples = _surrogate_draws(expansion, RANGE_DRAWS, RANGE_SEED)
+        drawn = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, result.germ[ok]))
+        anywhere = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, None))
         floor, ceiling = _far_bounds(made, PDF_MARGIN)
         allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
@@ -984,7 +991,7 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                 continue
             if drawn[:, k].max() > allowed:
                 cause = "the surrogate overshoots (see its held-out error)"
-            elif 2 * anywhere()[:, k].sum() >= stored.sum():
+            elif 2 * anywhere[:, k].sum() >= stored.sum():
                 cause = (
                     "the surrogate's draws go there from outside the box the design's nodes "
                     "span, where it extrapolates and no run checks it"
