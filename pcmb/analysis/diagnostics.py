@@ -720,11 +720,9 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
-        means, stds, errors, unseen, unchecked = (
-            np.array(column) for column in zip(*found, strict=True)
-        )
+        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         return (
@@ -732,16 +730,23 @@ def placed_check(
             np.sqrt(variance),
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
-            np.sqrt(np.sum((probability * unchecked) ** 2, axis=0)),
         )
 
-    rich_mean, rich_std, error, unseen, unchecked = moments(0)
+    rich_mean, rich_std, error, unseen = moments(0)
+    # The elements without held-out runs, which nothing checks, add their next coefficients.
+    unchecked = np.sqrt(
+        sum(
+            (p * _unchecked(own / scale)) ** 2
+            for p, (_, points, _, rule, own) in zip(probability[:, 0], pieces, strict=True)
+            if points.size == rule.size
+        )
+    )
     mean_error, std_error = (
         np.abs(rich_mean - mean / scale) + unseen,
         np.abs(rich_std - std / scale),
     )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error, fewer_unseen, _ = moments(PLACED_SPARE)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
@@ -818,12 +823,10 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
     mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
-    and held-out runs without its last ``spare`` held-out runs, over the scale; and, for an
-    element without held-out runs (whose interpolant is its expansion), the estimated size of
-    its next coefficient (:func:`_unchecked`; zeros for the others)."""
+    and held-out runs without its last ``spare`` held-out runs, over the scale."""
     size = rule.size
     kept = max(size, points.size - spare)
     own = own / scale
@@ -834,7 +837,6 @@ def _placed_moments(
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
         _unseen_mean_error(family, points[:size], rule, coefficients),
-        _unchecked(coefficients) * (points.size == size),
     )
 
 
