@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 import pcmb
-from pcmb import Study
+from pcmb import Study, StudyResult
 from pcmb.analysis.diagnostics import TOLERANCE, diagnose, verdict
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.config import load_config
@@ -75,10 +75,13 @@ def _outcome(flagged: float, true: float) -> str:
     return "FALSE ALARM" if np.isnan(true) else "ok"
 
 
-def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> list[str]:
-    """Table rows for one config: output, flagged, true crossing, outcome, spread, pointwise."""
+def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float | None) -> list[str]:
+    """Table rows for one config: output, flagged, true crossing, outcome, spread, pointwise;
+    judged at the config's ``diagnostics.tolerance``, or at ``tolerance`` if given."""
     config = load_config(ROOT / "configs" / f"{case}.yaml")
     base = Study.from_config(config).replace(jobs=jobs, analysis=None)
+    if tolerance is not None:
+        base = base.replace(diagnostics={**base.diagnostics.model_dump(), "tolerance": tolerance})
     plain = base.replace(validation=0, nominal_run=False)
     reference = plain.replace(**REFERENCES[case]).run(progress=False)
     pointwise = plain.replace(method="montecarlo", samples=twin, seed=TWIN_SEED).run(progress=False)
@@ -102,9 +105,10 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
                 abs(expansion.mean() - reference.mean(name)),
                 abs(expansion.std() - reference.std(name)),
             )
-            true_from = verdict(times, true / scale, tolerance)
+            true_from = verdict(times, true / scale, found.tolerance)
             error = expansion.evaluate_germ(pointwise.germ) - pointwise.values[name]
-            surrogate_from = verdict(times, np.sqrt(np.nanmean(error**2, axis=0)) / scale)
+            pointwise_error = np.sqrt(np.nanmean(error**2, axis=0)) / scale
+            surrogate_from = verdict(times, pointwise_error, found.tolerance)
             others = [
                 diagnose(
                     name,
@@ -112,7 +116,7 @@ def calibrate(case: str, seeds: int, twin: int, jobs: int, tolerance: float) -> 
                     result.values[name][result.ok],
                     times,
                     (expansion.evaluate_germ(c.germ), c.values[name]),
-                    tolerance,
+                    found.tolerance,
                     holdout_germ=c.germ,  # a Latin hypercube, as the study's own check
                 ).failing_from
                 for c in checks
@@ -214,8 +218,8 @@ def sliver_moments(times):
     return mean, np.sqrt(square - mean**2)
 
 
-#: Case -> (model, inputs, times, exact (mean, std) of times, studies' settings by label; a
-#: study's own ``diagnostics.tolerance``, if it sets one, is the one its truth is judged by).
+#: Case -> (model, inputs, times, exact (mean, std) of times, studies' settings by label; the
+#: truth is judged at the tolerance of the study's own verdict).
 CASES = {
     "lognormal": (
         lognormal,
@@ -282,32 +286,43 @@ CASES = {
 }
 
 
+def _run_case(case: str, label: str, tolerance: float | None, **changes) -> StudyResult:
+    """One study of a closed-form case, its diagnostics at its own ``diagnostics.tolerance``,
+    else at ``tolerance`` if given (else the tool's default)."""
+    model, inputs, times, _, studies = CASES[case]
+    settings = studies[label]
+    if tolerance is not None and "diagnostics" not in settings:
+        settings = {**settings, "diagnostics": {"tolerance": tolerance}}
+    study = Study(model, inputs, times, backend="inprocess", **settings, **changes)
+    return study.run(progress=False)
+
+
 def calibrate_case(
-    case: str, seeds: int, tolerance: float, validation: int | None = None
+    case: str, seeds: int, tolerance: float | None, validation: int | None = None
 ) -> list[str]:
     """Table rows of one closed-form case: each study over ``seeds`` held-out seeds, its
-    check sized by default or of ``validation`` runs."""
-    model, inputs, times, exact, studies = CASES[case]
+    check sized by default or of ``validation`` runs; the truth judged at the tolerance the
+    study's verdict uses."""
+    _, _, times, exact, studies = CASES[case]
     mean, std = exact(times)
     horizon = times[-1] - times[0]
     late = 0.05 * horizon
     rows = []
-    for label, settings in studies.items():
-        judged = settings.get("diagnostics", {}).get("tolerance", tolerance)
+    for label in studies:
         flags, runs, undecided, true_from, worst = [], [], 0, np.nan, 0.0
         alarms = misses = silent = 0
         fixed = {} if validation is None else {"validation": validation}
         for seed in range(seeds):
-            study = Study(model, inputs, times, backend="inprocess", seed=seed, **settings, **fixed)
-            result = study.run(progress=False)
+            result = _run_case(case, label, tolerance, seed=seed, **fixed)
             (name,) = result.diagnostics
             found = result.diagnostics[name]
+            judged = found.tolerance
             true = np.fmax(abs(result.mean(name) - mean), abs(result.std(name) - std))
             true_from = verdict(times, true / found.scale, judged)
             flag = found.failing_from
             flags.append(flag)
             runs.append(0 if result.held_out is None else result.held_out.ok.size)
-            open_ = np.asarray(getattr(found, "undecided", np.zeros(times.size, dtype=bool)))
+            open_ = found.undecided
             undecided += bool(open_.any())
             if np.isnan(true_from):
                 alarms += not np.isnan(flag)
@@ -332,22 +347,21 @@ def calibrate_case(
     return rows
 
 
-def mean_error_rows(case: str, tolerance: float) -> list[str]:
+def mean_error_rows(case: str, tolerance: float | None) -> list[str]:
     """Table rows of one closed-form case: per study (seed 0), the mean's true and estimated
     errors (``/diagnostics/<output>/mean_error``) over the largest std, where the truth first
-    crosses the tolerance (else where the true mean error is largest), and the largest of each."""
-    model, inputs, times, exact, studies = CASES[case]
+    crosses the tolerance the study's verdict uses (else where the true mean error is
+    largest), and the largest of each."""
+    _, _, times, exact, studies = CASES[case]
     mean, std = exact(times)
     rows = []
-    for label, settings in studies.items():
-        result = Study(model, inputs, times, backend="inprocess", seed=0, **settings).run(
-            progress=False
-        )
+    for label in studies:
+        result = _run_case(case, label, tolerance, seed=0)
         (name,) = result.diagnostics
         found = result.diagnostics[name]
         true_mean = abs(result.mean(name) - mean) / found.scale
         true = np.fmax(true_mean, abs(result.std(name) - std) / found.scale)
-        crossing = np.flatnonzero(true > tolerance)
+        crossing = np.flatnonzero(true > found.tolerance)
         k = crossing[0] if crossing.size else int(np.argmax(true_mean))
         estimate = found.holdout.mean_error
         rows.append(
@@ -368,7 +382,13 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=10, help="extra held-out checks")
     parser.add_argument("--twin", type=int, default=400, help="runs of the pointwise twin")
     parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--tolerance", type=float, default=TOLERANCE)
+    parser.add_argument(
+        "--tolerance",
+        type=float,
+        default=None,
+        help=f"diagnostics.tolerance of every study that sets none (default: a config's own; "
+        f"{TOLERANCE:g}, the tool's default, for the closed forms)",
+    )
     parser.add_argument(
         "--validation", type=int, default=None, help="closed-form cases: fix the check's runs"
     )
