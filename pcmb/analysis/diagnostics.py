@@ -1338,37 +1338,50 @@ def diagnose(
 def more_runs(found: OutputDiagnostics) -> int:
     """How many held-out runs, beyond those made, would decide every undecided time of
     ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
-    undecided): the noise falls as 1/√K. Too few runs to measure any noise (one): the
-    first batch."""
-    undecided = found.undecided
-    if not undecided.any():
+    undecided, at least 1 otherwise): the noise falls as 1/√K. Too few runs to measure any
+    noise (one): the first batch."""
+    if not found.undecided.any():
         return 0
     count = found.holdout.count  # a time is undecided only by a held-out check's noise
-    margin = np.abs(found.estimate - found.tolerance)[undecided]
-    margin = np.maximum(margin, found.tolerance / 10)
-    needed = count * np.max(found.noise[undecided] / margin) ** 2
+    needed = _runs_needed(found)
     if not np.isfinite(needed):
         return max(FIRST_BATCH - count, 1)
     return max(int(np.ceil(needed)) - count, 1)
 
 
+def _runs_needed(found: OutputDiagnostics) -> float:
+    """Held-out runs in all whose noise would decide every undecided time of ``found``, those
+    within a tenth of the tolerance of it to that tenth (:func:`more_runs`)."""
+    undecided = found.undecided
+    margin = np.abs(found.estimate - found.tolerance)[undecided]
+    margin = np.maximum(margin, found.tolerance / 10)
+    return found.holdout.count * float(np.max(found.noise[undecided] / margin)) ** 2
+
+
 def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) -> WarningRecord:
     """The ``chaos-undecided`` record: where the held-out check cannot tell whether the
-    statistics hold, the estimate at the worst such time and the runs that would decide."""
+    statistics hold, the estimate at the worst such time and the runs that would decide, or,
+    where the runs made resolve every such time to a tenth of the tolerance, that the
+    estimate sits at the tolerance itself."""
     undecided = found.undecided
     worst = int(np.flatnonzero(undecided)[np.argmax(found.estimate[undecided])])
     holdout = found.holdout
     where = f" at {axis} = {times[worst]:.4g}" if axis else ""
     count = holdout.count
-    more = more_runs(found)
+    if _runs_needed(found) <= count:
+        decide = (
+            "its estimate lies within a tenth of the tolerance of it there, at the tolerance "
+            "itself, which more held-out runs resolve only slowly"
+        )
+    else:
+        more = more_runs(found)
+        decide = f"about {more} more held-out runs would decide (method.validation: {count + more})"
     return WarningRecord(
         "chaos-undecided",
         f"the held-out check cannot tell whether mean and std hold within the tolerance "
         f"{_percent(found.tolerance)} of the largest std at {_count(undecided)}: estimated "
         f"error {_percent(found.estimate[worst])} ± {_percent(found.noise[worst])}{where} "
-        f"({_percent(holdout.confidence)} confidence, {count} "
-        f"held-out runs); about {more} more held-out runs would decide (method.validation: "
-        f"{count + more})",
+        f"({_percent(holdout.confidence)} confidence, {count} held-out runs); {decide}",
         found.output,
         _span(times, undecided),
     )
