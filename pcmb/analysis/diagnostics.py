@@ -82,6 +82,7 @@ __all__ = [
     "held_out_placed",
     "held_out_placed_elements",
     "holdout_error",
+    "linear_in_widened",
     "more_runs",
     "out_of_range",
     "pdf_outside_runs",
@@ -122,6 +123,9 @@ UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
+#: The surrogate is linear in the widened inputs where the terms of degree 2 or more along
+#: them hold at most this share of its variance (:func:`linear_in_widened`).
+LINEAR_SHARE = 1e-6
 #: Most points (nodes and placed held-out runs) in one element of a one-input multi-element
 #: design (:func:`held_out_placed_elements`): a truncated family's Leja points need four
 #: times as many recurrence terms as points.
@@ -254,6 +258,50 @@ def held_out_draws(
     z = germ[:, normal]
     log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
     return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+
+
+def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
+    """(T,) the times at which the terms of degree 2 or more along the inputs
+    :func:`held_out_draws` widens (the normal ones) hold at most ``LINEAR_SHARE`` of the
+    expansion's variance: the response is linear in them (a damped oscillator in its initial
+    displacement), not heavy-tailed; all False without normal inputs."""
+    normal = [isinstance(d.family, Hermite) for d in expansion.distributions]
+    index = np.asarray(expansion.multi_index)
+    if not any(normal) or not scale > 0 or not np.isfinite(scale):
+        return np.zeros(expansion.shape, dtype=bool)
+    energy = _energies(expansion, scale)
+    curved = np.sum(energy[np.any(index[:, normal] >= 2, axis=1)], axis=0)
+    return curved <= LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0], axis=0)
+
+
+def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
+    """(K,) weights ω = Π (a + b z²) over the normal germs z of draws from N(0, λ²)
+    (:func:`held_out_draws`), with a = (3λ² - 1) / (2λ²) and b = (1 - λ²) / (2λ⁴): E ω g(z)
+    = E_N(0, 1) g for every g of degree 3 or less in each, at E ω² = 1.44 per germ (λ = 4.2)
+    where the importance weights' is 3."""
+    normal = [isinstance(d.family, Hermite) for d in distributions]
+    width2 = _tail_width(sum(normal)) ** 2
+    z2 = np.asarray(germ, dtype=float)[:, normal] ** 2
+    return np.prod((3 * width2 - 1) / (2 * width2) + (1 - width2) / (2 * width2**2) * z2, axis=1)
+
+
+def _judging_weights(
+    expansion: Expansion, scale: float, weights: ArrayLike | None, germ: ArrayLike | None
+) -> NDArray[np.float64] | None:
+    """The weights the held-out check judges drawn runs by: (K, T) the moment weights
+    (:func:`_moment_weights`) at the times at which the surrogate is linear in every widened
+    input (:func:`linear_in_widened`), the residual and the control variate's terms then
+    being of degree 2 at most along them, else the importance ``weights``; ``weights`` as
+    given without draws widened (``germ`` or ``weights`` missing)."""
+    if weights is None or germ is None:
+        return weights
+    weights = np.asarray(weights, dtype=float)
+    linear = linear_in_widened(expansion, scale)
+    if not linear.any():
+        return weights
+    moment = _moment_weights(expansion.distributions, germ)
+    shape = (-1,) + (1,) * linear.ndim
+    return np.where(linear, moment.reshape(shape), weights.reshape(shape))
 
 
 def held_out_placed(
@@ -436,9 +484,10 @@ def _control_variate(
     weights: NDArray[np.float64],
     germ: NDArray[np.float64] | None,
 ) -> _ControlVariate:
-    """The corrected mean and std over the scale (see :func:`statistics_error`)."""
+    """The corrected mean and std over the scale (see :func:`statistics_error`); ``weights``
+    (K,) or, per time, (K, T)."""
     count = predicted.shape[0]
-    weight = weights[:, None]
+    weight = weights[:, None] if weights.ndim == 1 else weights
     residual = (observed - predicted) / scale
     centred = (predicted - np.asarray(mean, dtype=float)) / scale
     sigma = np.asarray(std, dtype=float) / scale
@@ -1263,7 +1312,12 @@ def diagnose(
         checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
     elif holdout is not None:
         checked = holdout_error(
-            *holdout, expansion.mean(), std, scale, weights=weights, germ=holdout_germ
+            *holdout,
+            expansion.mean(),
+            std,
+            scale,
+            weights=_judging_weights(expansion, scale, weights, holdout_germ),
+            germ=holdout_germ,
         )
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
