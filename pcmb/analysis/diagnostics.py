@@ -14,7 +14,8 @@ raises false alarms.
   alone can be empty while the expansion is far from converged.
 - **Held-out check** (:func:`holdout_error`): the surrogate against K extra model runs at
   random inputs (:func:`held_out_draws`: a Latin hypercube of the inputs' distribution, normal
-  inputs widened into their tails and weighted back; K sized to the design,
+  inputs widened into their tails and weighted back, by moment weights where the surrogate is
+  linear in them; K sized to the design,
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
@@ -620,8 +621,9 @@ def holdout_error(
     confidence:
         Level of the upper bound, in (0, 1).
     weights:
-        (K,) importance weights of the runs (:func:`held_out_draws`; default: 1); the RMS
-        error is that of the draws as they fell.
+        (K,) importance weights of the runs (:func:`held_out_draws`; default: 1), or (K, T)
+        per time (:func:`diagnose`'s moment weights); the RMS error is that of the draws as
+        they fell.
     germ:
         (K, n) germ of the runs when they are a Latin hypercube (:func:`_standard_error`;
         default: independent draws).
