@@ -62,6 +62,7 @@ from pcmb.references import (
 )
 from pcmb.references import piston as piston_time
 from pcmb.references import wing_weight as wing_weight_lb
+from pcmb.result import AdaptiveFit
 
 Case = tuple[dict, Callable[[np.ndarray], np.ndarray], float, float]
 
@@ -413,45 +414,52 @@ class Round:
 
 def replayed_rounds(case: str, max_runs: int) -> list[Round]:
     """Every round of one adaptive run of ``case`` to ``max_runs`` (a tolerance no round
-    meets, so the stop is the replayed rule's)."""
+    meets, so the stop is the replayed rule's), from the design's public round records
+    (:attr:`~pcmb.designs.adaptive.AdaptiveCollocation.rounds`) and recoveries."""
     inputs, function, mean, std = FUNCTIONS[case]()
     design = make_design(inputs, settings("adaptive", inputs, 1e-300, max_runs))
     first = design.nodes()
     germ, params = first.nodes, first.params
     values = function(params)[:, None]
-    found = []
+    measured, fits = [], []
     while True:
         nodes, ok = NodeSet(first.distributions, germ, params), np.ones(len(germ), bool)
         recovery = design.recover(nodes, {"y": values}, ok, np.zeros(1))
         expansion, levels = recovery.expansions["y"], recovery.adaptive.index_set
         error = max(abs(expansion.mean()[0] - mean), abs(expansion.std()[0] - std)) / std
         more = design.more(nodes, {"y": values}, ok)
-        found.append(
-            Round(
-                runs=len(germ),
-                true=float(error),
-                changes=tuple(design._changes),
-                nonsmooth=bool(design._nonsmooth()),
-                left=design._left_at_last_levels()[0],
-                axis_fall=_axis_fall(design),
-                coefficient_fall=_coefficient_fall(design, expansion, levels),
-            )
-        )
+        measured.append((error, _coefficient_fall(design, expansion, levels)))
+        # A recovery holds the indicators the last call of more() measured.
+        fits.append(recovery.adaptive)
         if more is None:
-            return found
+            fits.append(design.recover(nodes, {"y": values}, ok, np.zeros(1)).adaptive)
+            break
         germ, params = np.vstack([germ, more.nodes]), np.vstack([params, more.params])
         values = np.concatenate([values, function(more.params)[:, None]])
+    rounds = design.rounds
+    return [
+        Round(
+            runs=record.runs,
+            true=float(error),
+            changes=tuple(r.change for r in rounds[: k + 1]),
+            nonsmooth=bool(record.nonsmooth),
+            left=record.left,
+            axis_fall=_axis_fall(fits[k + 1]),
+            coefficient_fall=fall,
+        )
+        for k, (record, (error, fall)) in enumerate(zip(rounds, measured, strict=True))
+    ]
 
 
-def _axis_fall(design: AdaptiveCollocation) -> float:
+def _axis_fall(fit: AdaptiveFit) -> float:
     """The largest over the inputs of the fall of the axis surpluses' norms over their last
     two measured levels (upper envelope), 1 where no input has two."""
-    position = {level: k for k, level in enumerate(design._index)}
-    n, falls = len(design.names), []
+    position = {tuple(level): k for k, level in enumerate(fit.index_set.tolist())}
+    n, falls = fit.index_set.shape[1], []
     for k in range(n):
         axis = (tuple(at * (j == k) for j in range(n)) for at in itertools.count(1))
         rows = [position[level] for level in itertools.takewhile(position.__contains__, axis)]
-        norms = design._indicators[rows]
+        norms = fit.indicators[rows]
         norms = norms[np.isfinite(norms)]
         if norms.size >= 2 and norms[-2] > 0:
             envelope = np.maximum.accumulate(norms[::-1])[::-1]

@@ -19,9 +19,11 @@ from test_resume import (
 )
 
 import pcmb
+from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
-from pcmb.designs import method_section
+from pcmb.designs import MethodSettings, make_design, method_section
+from pcmb.designs.adaptive import estimated_error
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import (
     ishigami,
@@ -516,3 +518,29 @@ def test_the_estimate_does_not_depend_on_the_outputs_scale():
     ]
     np.testing.assert_array_equal(found[0].history[:, 0], found[1].history[:, 0])
     np.testing.assert_allclose(found[0].indicators, found[1].indicators, rtol=1e-9)
+
+
+def test_each_round_is_a_public_record_the_history_is_made_of():
+    """``design.rounds``: one record per round, whose runs and estimates are the result's
+    history, each estimate the tail of the changes so far (at least the error beyond the
+    rules' last levels); a kink's input is named where it is measured."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    design = make_design(inputs, MethodSettings("adaptive", tolerance=1e-5, max_runs=400))
+    first = design.nodes()
+    germ, params = first.nodes, first.params
+    while True:
+        values = {"y": (np.abs(params[:, 0] - 0.3) + np.exp(params[:, 1]))[:, None]}
+        nodes, ok = NodeSet(first.distributions, germ, params), np.ones(len(germ), bool)
+        more = design.more(nodes, values, ok)
+        if more is None:
+            break
+        germ, params = np.vstack([germ, more.nodes]), np.vstack([params, more.params])
+    rounds = design.rounds
+    history = design.recover(nodes, values, ok, np.zeros(1)).adaptive.history
+    np.testing.assert_array_equal(history, [(r.runs, r.estimate) for r in rounds])
+    assert [r.runs for r in rounds] == sorted({r.runs for r in rounds})
+    for k, record in enumerate(rounds):
+        changes = [r.change for r in rounds[: k + 1]]
+        tail = estimated_error(changes, geometric=not record.nonsmooth)
+        assert record.estimate == max(tail, record.left)
+    assert [name for name, _ in rounds[-1].nonsmooth] == ["a"]
