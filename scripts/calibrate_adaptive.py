@@ -226,6 +226,54 @@ def cosine5n() -> Case:
     return inputs, lambda x: np.cos(1 + x @ b), mean, np.sqrt(second - mean**2)
 
 
+def rosenbrock4() -> Case:
+    """Rosenbrock's Σ 100 (x_{k+1} - x_k²)² + (1 - x_k)² in 4 uniform inputs on [-2, 2]
+    (held out): a polynomial of degree 4, so its moments are those of a tensor Gauss–Legendre
+    rule of 5 points per input (exact to degree 9, the square's degree 8)."""
+    inputs = {f"x{k}": pcmb.Uniform(-2.0, 2.0) for k in range(4)}
+
+    def rosenbrock(x: np.ndarray) -> np.ndarray:
+        return np.sum(100 * (x[:, 1:] - x[:, :-1] ** 2) ** 2 + (1 - x[:, :-1]) ** 2, axis=1)
+
+    germ, weight = np.polynomial.legendre.leggauss(5)
+    points = np.array(list(itertools.product(2 * germ, repeat=4)))
+    weights = np.prod(np.array(list(itertools.product(weight / 2, repeat=4))), axis=1)
+    values = rosenbrock(points)
+    mean = float(weights @ values)
+    return inputs, rosenbrock, mean, float(np.sqrt(weights @ (values - mean) ** 2))
+
+
+def exp_normal3() -> Case:
+    """exp(0.3 (z0 + z1 + z2)), 3 standard normal inputs (held out): lognormal, E = e^(s/2),
+    var = e^(2s) - e^s with s = 3 · 0.3²."""
+    s = 3 * 0.3**2
+    inputs = {f"z{k}": pcmb.Normal(0.0, 1.0) for k in range(3)}
+    return (
+        inputs,
+        lambda x: np.exp(0.3 * x.sum(axis=1)),
+        math.exp(s / 2),
+        math.sqrt(math.exp(2 * s) - math.exp(s)),
+    )
+
+
+def genz_continuous() -> Case:
+    """Genz's continuous exp(-Σ a_k |x_k - w_k|) in 6 uniform inputs (held out): a kink in
+    every input; per input ∫ e^(-a|x - w|) dx = (2 - e^(-a w) - e^(-a (1 - w))) / a."""
+    a = np.array([2.0, 1.5, 1.2, 1.0, 0.8, 0.5])
+    w = np.array([0.35, 0.45, 0.55, 0.4, 0.6, 0.5])
+
+    def integral(b: np.ndarray) -> float:
+        return float(np.prod((2 - np.exp(-b * w) - np.exp(-b * (1 - w))) / b))
+
+    mean, second = integral(a), integral(2 * a)
+    return (
+        _unit(6),
+        lambda x: np.exp(-np.abs(x - w) @ a),
+        mean,
+        math.sqrt(second - mean**2),
+    )
+
+
 def sqrt_exp() -> Case:
     """sqrt(a + 0.002) e^b, 2 uniform inputs (``--replay``): analytic on the box, its branch
     point 0.2 % of the width beyond it."""
@@ -299,7 +347,18 @@ CASES = {
     )
 }
 #: Functions no rule was chosen on, to check that it generalises (``--held-out``).
-HELD_OUT = {f.__name__: f for f in (genz_product_peak, genz_corner_peak, borehole, cosine5n)}
+HELD_OUT = {
+    f.__name__: f
+    for f in (
+        genz_product_peak,
+        genz_corner_peak,
+        borehole,
+        cosine5n,
+        rosenbrock4,
+        exp_normal3,
+        genz_continuous,
+    )
+}
 #: Analytic responses near a singularity, outside both tables, only replayed (``--replay``).
 NEAR_SINGULAR = {f.__name__: f for f in (sqrt_exp, log_plus)}
 FUNCTIONS = CASES | HELD_OUT | NEAR_SINGULAR
