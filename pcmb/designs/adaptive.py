@@ -240,11 +240,13 @@ class AdaptiveCollocation(GrowingGrid):
         while True:
             active = np.flatnonzero(self._active())
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
-            converged = self._reducible() <= self.tolerance
+            # Refining lowers only the reducible error: below the error left beyond the rules'
+            # last levels, more runs cannot lower the estimate.
+            left, names = self._left_at_last_levels()
+            converged = self._reducible() <= max(self.tolerance, left)
             if converged:
                 refinable = self._blind()
                 if not refinable:
-                    left, names = self._left_at_last_levels()
                     if left > self.tolerance:
                         self._stopped = (
                             f"{' and '.join(names)} reached the last level of its rule with an "
