@@ -28,9 +28,10 @@ assumes a smooth response: where an input's axis surpluses fall like a power of 
 faster than a kink's, and so do the changes of the mean they make (a jump or a kink; on an
 analytic response near a singularity these fall geometrically first), an ``adaptive-nonsmooth``
 warning names it, and the estimate is the largest of the last three changes alone. The estimate
-is at least the error no refinement can lower, beyond a rule's last level; where that alone
-exceeds the tolerance, an ``adaptive-budget`` warning names the input. Each round's figures are
-kept as an :class:`AdaptiveRound` (:attr:`AdaptiveCollocation.rounds`).
+is at least the error no refinement can lower, beyond a rule's last level; the rounds end once
+the error refining can lower is below it, and where it exceeds the tolerance, an
+``adaptive-budget`` warning names the input. Each round's figures are kept as an
+:class:`AdaptiveRound` (:attr:`AdaptiveCollocation.rounds`).
 """
 
 from __future__ import annotations
