@@ -195,7 +195,8 @@ class AdaptiveCollocation(GrowingGrid):
 
     @property
     def rounds(self) -> tuple[AdaptiveRound, ...]:
-        """The rounds measured so far, in order (:meth:`more` adds one each call)."""
+        """The rounds measured so far, in order (each call of :meth:`more` whose nodes all ran
+        adds one)."""
         return tuple(self._rounds)
 
     @property
