@@ -299,6 +299,22 @@ def test_a_non_finite_output_at_a_node_run_ends_the_rounds_naming_the_output_and
     assert "order-budget" not in {w.code for w in recovery.warnings}
 
 
+def test_a_non_finite_output_is_recorded_once():
+    """The rounds' end and the statistics each recorded ``statistic-non-finite`` for the
+    same output: two records of one problem."""
+
+    def values_at(nodes):
+        y = np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])
+        y[nodes.params[:, 0] == 3.0, 4] = np.nan
+        return {"y": y}
+
+    *_, recovery = _refined(_inputs(6.0), values_at)
+    (record,) = [w for w in recovery.warnings if w.code == "statistic-non-finite"]
+    assert record.output == "y" and record.time_range == (TIMES[4], TIMES[4])
+    assert "order refinement ended at order 2 after 9 runs" in record.message
+    assert "its Sobol' indices there are NaN" in record.message
+
+
 def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
     def values_at(nodes):
         return {"y": np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])}

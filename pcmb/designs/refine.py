@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -332,8 +332,28 @@ class OrderRefinement(GrowingGrid):
             runs=np.array([h[1] for h in history], dtype=np.int64),
             indicator=np.array([h[2] for h in history], dtype=float),
         )
-        warnings = recovery.warnings + self._stopped
-        return Recovery(recovery.expansions, warnings, RefinementReport(refinement))
+        return Recovery(
+            recovery.expansions,
+            _folded(recovery.warnings, self._stopped),
+            RefinementReport(refinement),
+        )
+
+
+def _folded(
+    found: tuple[WarningRecord, ...], ended: tuple[WarningRecord, ...]
+) -> tuple[WarningRecord, ...]:
+    """``found`` and the records of what ended the rounds, each of these joined to the record
+    of its code and output found already (the statistics' ``statistic-non-finite`` of an
+    output that ended them): one record per problem."""
+    records = list(found)
+    for record in ended:
+        keys = [(w.code, w.output) for w in records]
+        if (record.code, record.output) in keys:
+            i = keys.index((record.code, record.output))
+            records[i] = replace(records[i], message=f"{records[i].message}; {record.message}")
+        else:
+            records.append(record)
+    return tuple(records)
 
 
 @dataclass(frozen=True)
