@@ -328,6 +328,36 @@ def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
     assert "method.max_runs" not in record.message
 
 
+def _cubic(nodes) -> dict[str, np.ndarray]:
+    """a³ t + a b² - b t², of degrees 3 in a and 2 in b: exact on the grid of level 2."""
+    a, b = nodes.params[:, :1], nodes.params[:, 1:]
+    return {"y": a**3 * TIMES + a * b**2 - b * TIMES**2}
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        MethodSettings("collocation", orders="auto", diagnostics_tolerance=1e-6),
+        MethodSettings("adaptive", tolerance=1e-6, basis="tensor"),
+    ],
+    ids=["order-auto", "adaptive-tensor"],
+)
+def test_a_polynomial_response_stops_on_the_grid_that_resolves_it(settings):
+    """The grid of level 2 (orders 5, 7) holds the response exactly: along a, odd, its norms
+    of degrees 2, 4 and 5 are round-off, and the single norm left (degree 3) told no decay, so
+    the estimate stayed at the change from level 1 (4.5e-3) and both variants ran a level
+    more (285 and 135 runs)."""
+    inputs = {"a": pcmb.Uniform(-1.0, 1.0), "b": pcmb.Normal(0.0, 1.0)}
+    design = make_design(inputs, settings)
+    nodes = design.nodes()
+    values, ok = _cubic(nodes), np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, values, ok)) is not None:
+        nodes = join_nodes(nodes, batch)
+        values = {"y": np.vstack([values["y"], _cubic(batch)["y"]])}
+        ok = np.ones(nodes.size, dtype=bool)
+    assert nodes.size == 63 and design.record().orders == (5, 7)
+
+
 def test_the_error_estimate_does_not_depend_on_the_outputs_scale():
     """The estimate is relative to the std: the same response in other units gives the same
     estimate (near 1e300 the squares of the coefficients overflowed: 2.1e-3 for 2.1e-7; at

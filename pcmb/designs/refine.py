@@ -101,9 +101,14 @@ def error_ratio(norms: list[float], low: int) -> float:
     the ratios' least fall per log of the degree where each ratio is below the one before
     (faster than geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so
     from a single ratio, or where a fall passes :data:`MAX_STEEPENING`: a lucky small norm
-    at the top). 1 where fewer than two norms are above round-off (the decay cannot be told).
+    at the top). Where the norms of the top two degrees are round-off (:data:`BLIND` of the
+    largest from degree 1), the grid holds a polynomial response exactly along k: their size.
+    Else 1 where fewer than two norms are above round-off (the decay cannot be told).
     """
     top = len(norms) - 1
+    variation, last = max(norms[1:], default=0.0), max(norms[-2:])
+    if top >= 2 and variation > 0.0 and last <= BLIND * variation:  # a lower-degree polynomial
+        return last / variation
     degrees = np.arange(max(1, top // 2), top + 1)
     found = np.array(norms)[degrees]
     kept = found > BLIND * found.max()
