@@ -358,6 +358,29 @@ def test_a_polynomial_response_stops_on_the_grid_that_resolves_it(settings):
     assert nodes.size == 63 and design.record().orders == (5, 7)
 
 
+def test_a_converging_response_at_the_last_level_is_not_called_discontinuous():
+    """1/(1.05 - a): analytic, its estimate falls ~1e-4 per level to the rule's last; the
+    record told it order alone may not converge, "a steep, discontinuous or chaotic response"
+    (the kink of test_verdicts keeps that advice: its estimate stalls)."""
+    settings = MethodSettings("collocation", orders="auto", diagnostics_tolerance=1e-14)
+    design = make_design({"a": pcmb.Uniform(0.0, 1.0)}, settings)
+    nodes = design.nodes()
+
+    def pole(nodes):
+        return 1 / (1.05 - nodes.params) + 0 * TIMES
+
+    values = pole(nodes)
+    while (batch := design.more(nodes, {"y": values}, np.ones(nodes.size, bool))) is not None:
+        nodes, values = join_nodes(nodes, batch), np.vstack([values, pole(batch)])
+    recovery = design.recover(nodes, {"y": values}, np.ones(nodes.size, bool), TIMES)
+    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    indicator = recovery.report.refinement.indicator
+    assert indicator[-1] < 1e-3 * indicator[-2]
+    assert "discontinuous" not in record.message
+    assert f"fell from {indicator[-2]:.3g} to {indicator[-1]:.3g}" in record.message
+    assert "method.elements" in record.message
+
+
 def test_the_error_estimate_does_not_depend_on_the_outputs_scale():
     """The estimate is relative to the std: the same response in other units gives the same
     estimate (near 1e300 the squares of the coefficients overflowed: 2.1e-3 for 2.1e-7; at

@@ -51,6 +51,8 @@ __all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "er
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
+#: The fall of the estimate over the last level that says a response converges with order.
+CONVERGING = 10.0
 #: Steepest fall of the norms' ratios per log of the degree still read as an entire
 #: function's (exp's ratios fall like 1/q: 1); a steeper one is a lucky small norm at the top.
 MAX_STEEPENING = 1.5
@@ -273,12 +275,7 @@ class OrderRefinement(GrowingGrid):
                 "highest order auto tries (pcmb.designs.refine.MAX_ORDER)"
             )
             self._stopped = (
-                self._ended(
-                    "order-budget",
-                    f"{nodes.size} runs, as {limit}",
-                    "more runs would not help: order alone may not converge (a steep, "
-                    "discontinuous or chaotic response), follow the diagnostics' remedy",
-                ),
+                self._ended("order-budget", f"{nodes.size} runs, as {limit}", self._top_advice()),
             )
             return None
         if grid.size > self.max_runs:
@@ -293,6 +290,23 @@ class OrderRefinement(GrowingGrid):
             )
             return None
         return self._adopt(grid)
+
+    def _top_advice(self) -> str:
+        """What to do at the highest order: a last level that cut the estimate by
+        :data:`CONVERGING` or more says the response converges with order (an analytic one),
+        else order alone may not converge."""
+        if len(self._history) >= 2:
+            before, last = self._history[-2][2], self._history[-1][2]
+            if last * CONVERGING <= before:
+                return (
+                    f"the estimate fell from {before:.3g} to {last:.3g} with the last level: the "
+                    "response converges with order, but not within the highest; split it into "
+                    "elements (method.elements: auto) or loosen diagnostics.tolerance"
+                )
+        return (
+            "more runs would not help: order alone may not converge (a steep, discontinuous or "
+            "chaotic response), follow the diagnostics' remedy"
+        )
 
     def _named(self, nodes: NodeSet, rows: NDArray[np.intp], shown: int = 5) -> str:
         """``node 3 (a=0.5, b=2), ...``: the first ``shown`` of ``nodes``' ``rows``."""
