@@ -13,7 +13,8 @@ lower in k alone), carried to the grid's degree by the decay of the coefficients
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` (or its rule has no next
 level) or its grid ``method.max_runs``; a failed node ends them with a ``nodes-failed`` record,
-a value that is not finite at a node counted as run with a ``statistic-non-finite`` one.
+a value that is not finite at a node counted as run with a ``statistic-non-finite`` one (joined
+to the statistics' record of that output).
 
 All inputs are raised together (kind ``adaptive`` with ``basis: tensor`` raises the one with
 the largest estimated error, one at a time).
