@@ -48,12 +48,21 @@ from pcmb.result import (
     WarningRecord,
 )
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "error_ratio"]
+__all__ = [
+    "MAX_ORDER",
+    "OrderRefinement",
+    "RefinementReport",
+    "box_errors",
+    "error_ratio",
+    "tail_share",
+]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
 #: The fall of the estimate over the last level that says a response converges with order.
 CONVERGING = 10.0
+#: Degrees past a grid's own over which :func:`tail_share` sums the extrapolated norms.
+TAIL_DEGREES = 80
 #: Steepest fall of the norms' ratios per log of the degree still read as an entire
 #: function's (exp's ratios fall like 1/q: 1); a steeper one is a lucky small norm at the top.
 MAX_STEEPENING = 1.5
@@ -64,7 +73,8 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
     (a box of levels L_k) from its (N, outputs, T) ``values``, relative to each output's
     largest std over time: d_k times :func:`error_ratio` along k, with d_k the largest change
     of the mean and std between the box and the box one level lower in input k (the lower
-    box's error in k).
+    box's error in k), or, where larger, the std's truncation along k: what the squared norms
+    past the box's degree in k (:func:`tail_share`) add to its std.
     """
     distributions, rules = grid.distributions, grid.rules
     coefficients = grid.project(values)
@@ -86,7 +96,14 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
             float(root_sum_of_squares(coefficients[degree[:, k] == p]).max())
             for p in range(int(degree[:, k].max()) + 1)
         ]
-        errors[k] = relative.max() * error_ratio(norms, rule.projection_degree(int(top) - 1))
+        ratio = error_ratio(norms, rule.projection_degree(int(top) - 1))
+        # The std's truncation: sqrt(std² + the squared norms past the top degree) - std.
+        missing = math.sqrt(tail_share(norms)) * root_sum_of_squares(
+            coefficients[degree[:, k] == len(norms) - 1]
+        )
+        truncation = (np.hypot(std, missing) - std).max(axis=-1)
+        truncated = np.divide(truncation, spread, out=np.zeros_like(truncation), where=spread > 0)
+        errors[k] = max(relative.max() * ratio, truncated.max())
     return errors
 
 
@@ -96,29 +113,74 @@ def error_ratio(norms: list[float], low: int) -> float:
 
     A grid of degree p integrates degree 2p + 1 exactly, so its error is carried by the
     coefficients from degree 2p + 2: the ratio is the product of the per-degree ratios
-    r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated from the upper half of
-    the degrees (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the
-    largest: a symmetry that zeroes every other degree does not fool it), read through their
-    upper envelope (max over degrees >= q: nor does a lucky small norm). r_q = ρ (p/q)^s:
-    ρ = exp of the least-squares slope of log n_q (at most 1); s, the steepening, in [0, 1]
-    the ratios' least fall per log of the degree where each ratio is below the one before
-    (faster than geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so
-    from a single ratio, or where a fall passes :data:`MAX_STEEPENING`: a lucky small norm
-    at the top). Where the norms of the top two degrees are round-off (:data:`BLIND` of the
+    r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated by :func:`_decay`'s
+    r_q = ρ (p/q)^s. Where the norms of the top two degrees are round-off (:data:`BLIND` of the
     largest from degree 1), the grid holds a polynomial response exactly along k: their size.
     Else 1 where fewer than two norms are above round-off (the decay cannot be told).
     """
+    resolved = _resolved(norms)
+    if resolved is not None:
+        return resolved
+    decay = _decay(norms)
+    if decay is None:
+        return 1.0
+    slope, steepening = decay
     top = len(norms) - 1
+    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
+    count = last - first + 1
+    factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
+    log = slope * count - steepening * factorials
+    return float(np.exp(min(0.0, log)))
+
+
+def tail_share(norms: list[float]) -> float:
+    """Σ_(q > p) n_q² / n_p²: the squared norms past the grid's degree p, which its std
+    misses, against the top one's, from the norms n_0..n_p of the coefficients of degree
+    0..p along an input. They are extrapolated as r_q = r_p (p/q)^s from the last ratio r_p of
+    the upper envelope of the upper half of the degrees (s: :func:`_decay`'s steepening) over
+    :data:`TAIL_DEGREES` degrees; 0 where the grid holds the response exactly, the decay
+    cannot be told or the top norm does not fall.
+    """
+    decay = _decay(norms)
+    if _resolved(norms) is not None or decay is None:
+        return 0.0
+    top = len(norms) - 1
+    upper = np.maximum.accumulate(np.array(norms[max(1, top // 2) :])[::-1])[::-1]
+    if not 0.0 < upper[-1] < upper[-2]:
+        return 0.0
+    degrees = np.arange(top + 1, top + 1 + TAIL_DEGREES)
+    logs = 2 * (math.log(upper[-1] / upper[-2]) - decay[1] * np.log(degrees / top))
+    return float(np.exp(np.cumsum(logs)).sum())
+
+
+def _resolved(norms: list[float]) -> float | None:
+    """The size of the norms of the top two degrees against the largest from degree 1 where
+    they are round-off (a polynomial response of lower degree along the input, held
+    exactly), else ``None``."""
     variation, last = max(norms[1:], default=0.0), max(norms[-2:])
-    if top >= 2 and variation > 0.0 and last <= BLIND * variation:  # a lower-degree polynomial
+    if len(norms) > 2 and variation > 0.0 and last <= BLIND * variation:
         return last / variation
+    return None
+
+
+def _decay(norms: list[float]) -> tuple[float, float] | None:
+    """(log ρ, s) of the norms' decay r_q = ρ (p/q)^s, read from the upper half of the degrees
+    (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the largest: a
+    symmetry that zeroes every other degree does not fool it), through their upper envelope
+    (max over degrees >= q: nor does a lucky small norm): ρ = exp of the least-squares slope
+    of log n_q (at most 1); s, the steepening, in [0, 1] the ratios' least fall per log of the
+    degree where each ratio is below the one before (faster than geometric, as an entire
+    function's, whose r_q fall like 1/q), else 0 (so from a single ratio, or where a fall
+    passes :data:`MAX_STEEPENING`: a lucky small norm at the top). ``None`` where fewer than
+    two norms are above round-off."""
+    top = len(norms) - 1
     degrees = np.arange(max(1, top // 2), top + 1)
     found = np.array(norms)[degrees]
     kept = found > BLIND * found.max()
     degrees = degrees[kept]
     found = np.maximum.accumulate(found[kept][::-1])[::-1]  # the upper envelope
     if degrees.size < 2:
-        return 1.0
+        return None
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
     logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
     falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
@@ -128,12 +190,7 @@ def error_ratio(norms: list[float], low: int) -> float:
         and falls.min() > 0.0
         and falls.max() <= MAX_STEEPENING
     )
-    steepening = min(float(falls.min()), 1.0) if entire else 0.0
-    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
-    count = last - first + 1
-    factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
-    log = slope * count - steepening * factorials
-    return float(np.exp(min(0.0, log)))
+    return slope, min(float(falls.min()), 1.0) if entire else 0.0
 
 
 def _moments(
