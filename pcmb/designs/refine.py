@@ -9,7 +9,8 @@ estimated error of the mean and std, relative to the output's largest std over t
 diagnostics' scale, ``docs/diagnostics.md``), is :func:`box_errors`' largest over the inputs:
 the change d_k the grid's last level in input k makes (the grid against the grid one level
 lower in k alone), carried to the grid's degree by the decay of the coefficients along k
-(:func:`error_ratio`). The first round (level 1) can so stop on its own.
+(:func:`error_ratio`), or, where larger, what the squared coefficients past the grid's degree
+in k add to its std (:func:`tail_share`). The first round (level 1) can so stop on its own.
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` (or its rule has no next
 level) or its grid ``method.max_runs``; a failed node ends them with a ``nodes-failed`` record,
