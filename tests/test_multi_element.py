@@ -531,3 +531,39 @@ def test_auto_reads_the_same_estimate_in_any_units():
     )
     assert large[0] == runs
     assert large[1] == pytest.approx(estimate, rel=1e-9)
+
+
+@pytest.mark.parametrize("order", [3, 5])
+def test_an_input_the_response_ignores_leaves_the_estimate_unchanged(order):
+    """|x - 0.3| with a second input it does not depend on: the same elements, the same
+    estimate. A checked element's mean error is its tail continued to degree 2p + 2 in one
+    input, the first term the tensor Gauss rule misses (it was continued to the outer shell's
+    total degree, 2p with two inputs, plus 2: 0.066x the true error at order 5 on
+    |x1| + |x2 - 0.3|)."""
+    response, inputs, times, truth = AUTO_CASES["kink"]
+    runs, estimate, _ = _auto_error(response, inputs, times, truth, 1e-2, order=order)
+    design = _design(
+        {**inputs, "ignored": pcmb.Uniform(-1.0, 1.0)},
+        (order, order),
+        elements="auto",
+        max_elements=64,
+        diagnostics_tolerance=1e-2,
+    )
+    nodes, _ = refine(design, lambda p: {"y": response(p, times)})
+    assert nodes.size == runs * (order + 1)
+    assert design.estimate == pytest.approx(estimate, rel=1e-9)
+
+
+@pytest.mark.parametrize(("elements", "wording"), [({}, "would split"), ("auto", "splits on it")])
+def test_element_decay_says_whether_auto_split_on_it(elements, wording):
+    """A fixed partition's element-decay says what elements: auto would do, not that it did."""
+    design = _design(
+        {"x": pcmb.Uniform(-1.0, 1.0)},
+        (3,),
+        elements=elements,
+        max_elements=1,
+        diagnostics_tolerance=1e-4,
+    )
+    recovery = _recover(design, lambda x: np.abs(x[:, :1] - 0.3))
+    (record,) = [w for w in recovery.warnings if w.code == "element-decay"]
+    assert wording in record.message

@@ -448,9 +448,9 @@ class MultiElementCollocation:
                         f"the error of the mean and std that the elements' outer degree "
                         f"layers indicate is {estimate:.3g} of the largest std, above the "
                         f"tolerance {self.tolerance:g} (diagnostics.tolerance; most of it in "
-                        f"element {worst}, {each[worst]:.3g} alone); elements: auto splits on "
-                        "it; an indicator, not a verdict: the held-out check judges the mean "
-                        "and std",
+                        f"element {worst}, {each[worst]:.3g} alone); elements: auto "
+                        f"{'splits' if self.elements == 'auto' else 'would split'} on it; an "
+                        "indicator, not a verdict: the held-out check judges the mean and std",
                         name,
                     )
                 )
@@ -615,7 +615,10 @@ def element_errors(
     second = tail_terms(multi_index, 2, lowest=1) & ~outer
     third = tail_terms(multi_index, 3, lowest=1) & ~outer & ~second
     fourth = tail_terms(multi_index, 4, lowest=1) & ~outer & ~second & ~third
-    degree = int(multi_index.sum(axis=1)[outer].max(initial=0))
+    # The outer layer's degree in one input (the least of the inputs that vary): the tensor
+    # Gauss rule first misses the term of degree 2p + 2 in one input.
+    orders = multi_index.max(axis=0, initial=0)
+    degree = int(min(orders[orders >= 1], default=0))
     size, n = partition.size, multi_index.shape[1]
     factors = np.full(size, np.nan) if factors is None else factors
     checked = np.isfinite(factors)[:, None]
