@@ -381,6 +381,35 @@ def test_a_converging_response_at_the_last_level_is_not_called_discontinuous():
     assert "method.elements" in record.message
 
 
+def test_a_converging_response_stopped_by_max_runs_is_told_to_raise_it_only():
+    """A damped oscillator's phase drift to t = 8: its estimate falls 1.6 -> 7.8e-3 over
+    level 2; the record stopped by max_runs added "order alone may not converge for a steep,
+    discontinuous or chaotic response"."""
+    times = np.linspace(0.0, 8.0, 81)
+    inputs = {"omega": pcmb.Uniform(1.5, 2.5), "zeta": pcmb.Uniform(0.02, 0.1)}
+    settings = MethodSettings(
+        "collocation", orders="auto", diagnostics_tolerance=1e-4, max_runs=100
+    )
+    design = make_design(inputs, settings)
+
+    def swing(nodes):
+        omega, zeta = nodes.params[:, :1], nodes.params[:, 1:]
+        return np.exp(-zeta * omega * times) * np.cos(omega * np.sqrt(1 - zeta**2) * times)
+
+    nodes = design.nodes()
+    values = swing(nodes)
+    while (batch := design.more(nodes, {"y": values}, np.ones(nodes.size, bool))) is not None:
+        nodes, values = join_nodes(nodes, batch), np.vstack([values, swing(batch)])
+    recovery = design.recover(nodes, {"y": values}, np.ones(nodes.size, bool), times)
+    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    before, last = recovery.report.refinement.indicator
+    assert nodes.size == 49 and "49 of 100 runs (method.max_runs)" in record.message
+    assert f"raise method.max_runs: the estimate fell from {before:.3g} to {last:.3g}" in (
+        record.message
+    )
+    assert "discontinuous" not in record.message
+
+
 def test_the_error_estimate_does_not_depend_on_the_outputs_scale():
     """The estimate is relative to the std: the same response in other units gives the same
     estimate (near 1e300 the squares of the coefficients overflowed: 2.1e-3 for 2.1e-7; at

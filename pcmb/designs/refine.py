@@ -338,30 +338,43 @@ class OrderRefinement(GrowingGrid):
             )
             return None
         if grid.size > self.max_runs:
+            fell = self._fell()
+            advice = (
+                f"raise method.max_runs: {fell}: the response converges with order"
+                if fell
+                else "raise method.max_runs, or follow the diagnostics' remedy (order alone may "
+                "not converge for a steep, discontinuous or chaotic response)"
+            )
             self._stopped = (
                 self._ended(
                     "order-budget",
                     f"{nodes.size} of {self.max_runs} runs (method.max_runs), as level {level + 1} "
                     f"would take {grid.size - nodes.size} more",
-                    "raise method.max_runs, or follow the diagnostics' remedy (order alone may not "
-                    "converge for a steep, discontinuous or chaotic response)",
+                    advice,
                 ),
             )
             return None
         return self._adopt(grid)
 
+    def _fell(self) -> str:
+        """``the estimate fell from A to B with the last level`` where the last level cut it by
+        :data:`CONVERGING` or more (the response converges with order: an analytic one), else
+        ""."""
+        if len(self._history) < 2:
+            return ""
+        before, last = self._history[-2][2], self._history[-1][2]
+        if last * CONVERGING > before:
+            return ""
+        return f"the estimate fell from {before:.3g} to {last:.3g} with the last level"
+
     def _top_advice(self) -> str:
-        """What to do at the highest order: a last level that cut the estimate by
-        :data:`CONVERGING` or more says the response converges with order (an analytic one),
-        else order alone may not converge."""
-        if len(self._history) >= 2:
-            before, last = self._history[-2][2], self._history[-1][2]
-            if last * CONVERGING <= before:
-                return (
-                    f"the estimate fell from {before:.3g} to {last:.3g} with the last level: the "
-                    "response converges with order, but not within the highest; split it into "
-                    "elements (method.elements: auto) or loosen diagnostics.tolerance"
-                )
+        """What to do at the highest order: elements or the tolerance for a response that
+        converges with order (:meth:`_fell`), else order alone may not converge."""
+        if fell := self._fell():
+            return (
+                f"{fell}: the response converges with order, but not within the highest; split "
+                "it into elements (method.elements: auto) or loosen diagnostics.tolerance"
+            )
         return (
             "more runs would not help: order alone may not converge (a steep, discontinuous or "
             "chaotic response), follow the diagnostics' remedy"
