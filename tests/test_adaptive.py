@@ -19,9 +19,10 @@ from test_resume import (
 )
 
 import pcmb
+from pcmb.chaos.nodes import join_nodes
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
-from pcmb.designs import method_section
+from pcmb.designs import MethodSettings, make_design, method_section
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import (
     ishigami,
@@ -516,3 +517,27 @@ def test_the_estimate_does_not_depend_on_the_outputs_scale():
     ]
     np.testing.assert_array_equal(found[0].history[:, 0], found[1].history[:, 0])
     np.testing.assert_allclose(found[0].indicators, found[1].indicators, rtol=1e-9)
+
+
+def test_a_tensor_grid_does_not_raise_a_resolved_input_past_another_at_its_last_level():
+    """log(a + 0.005) + b: a reaches Gauss–Patterson's last level (31 points) with its error
+    above 1e-6; b, linear, reads exact at level 2 (its top two degrees at round-off). Raising
+    b further cannot lower the estimate, yet the grid raised it to the last level too:
+    31 x 31 = 961 runs where 31 x 7 = 217 say as much."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    design = make_design(inputs, MethodSettings("adaptive", tolerance=1e-6, basis="tensor"))
+    nodes = design.nodes()
+
+    def values(batch):
+        a, b = batch.params[:, :1], batch.params[:, 1:]
+        return np.log(a + 0.005) + b + 0 * TIMES
+
+    found, ok = {"y": values(nodes)}, np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, found, ok)) is not None:
+        nodes = join_nodes(nodes, batch)
+        found = {"y": np.vstack([found["y"], values(batch)])}
+        ok = np.ones(nodes.size, dtype=bool)
+    recovery = design.recover(nodes, found, ok, TIMES)
+    assert nodes.size == 31 * 7
+    (record,) = [w for w in recovery.warnings if w.code == "adaptive-budget"]
+    assert "a is at its rule's last level" in record.message
