@@ -19,7 +19,7 @@ from test_resume import (
 )
 
 import pcmb
-from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.nodes import NodeSet, join_nodes
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design, method_section
@@ -571,3 +571,27 @@ def test_each_round_is_a_public_record_the_history_is_made_of():
         tail = estimated_error(changes, geometric=not record.nonsmooth)
         assert record.estimate == max(tail, record.left)
     assert [name for name, _ in rounds[-1].nonsmooth] == ["a"]
+
+
+def test_a_tensor_grid_does_not_raise_a_resolved_input_past_another_at_its_last_level():
+    """log(a + 0.005) + b: a reaches Gauss–Patterson's last level (31 points) with its error
+    above 1e-6; b, linear, reads exact at level 2 (its top two degrees at round-off). Raising
+    b further cannot lower the estimate, yet the grid raised it to the last level too:
+    31 x 31 = 961 runs where 31 x 7 = 217 say as much."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    design = make_design(inputs, MethodSettings("adaptive", tolerance=1e-6, basis="tensor"))
+    nodes = design.nodes()
+
+    def values(batch):
+        a, b = batch.params[:, :1], batch.params[:, 1:]
+        return np.log(a + 0.005) + b + 0 * TIMES
+
+    found, ok = {"y": values(nodes)}, np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, found, ok)) is not None:
+        nodes = join_nodes(nodes, batch)
+        found = {"y": np.vstack([found["y"], values(batch)])}
+        ok = np.ones(nodes.size, dtype=bool)
+    recovery = design.recover(nodes, found, ok, TIMES)
+    assert nodes.size == 31 * 7
+    (record,) = [w for w in recovery.warnings if w.code == "adaptive-budget"]
+    assert "a is at its rule's last level" in record.message
