@@ -1253,6 +1253,7 @@ def diagnose(
     holdout_germ: ArrayLike | None = None,
     weights: ArrayLike | None = None,
     placed: bool = False,
+    design_error: float | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -1295,6 +1296,10 @@ def diagnose(
     placed:
         Whether the held-out runs extend the nodes of a one-input expansion
         (:func:`held_out_placed`): judged by :func:`placed_check` instead.
+    design_error:
+        The design's own calibrated estimate of the statistics' error
+        (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out
+        runs, where it meets the tolerance it bounds the decay's reading.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -1322,6 +1327,11 @@ def diagnose(
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.statistics
+    # Without them, a design that measured its own convergence (an adaptive grid, order:
+    # auto) outweighs the decay, which reads an exact polynomial's top terms (or a sparse
+    # set's edge) as a tail.
+    if checked is None and design_error is not None and design_error <= tolerance:
+        estimate = np.minimum(decay, design_error)
     noise = (
         np.zeros(times.size)
         if checked is None
@@ -1837,6 +1847,7 @@ def diagnose_all(
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
     budgets: Collection[str] = (),
+    design_error: float | None = None,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -1845,7 +1856,8 @@ def diagnose_all(
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
     holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
-    ``budgets`` the codes of the design's budget records (:func:`diagnose`).
+    ``budgets`` the codes of the design's budget records and ``design_error`` its own
+    estimate of the statistics' error (:func:`diagnose`).
     """
     found = {}
     for name, expansion in expansions.items():
@@ -1873,5 +1885,6 @@ def diagnose_all(
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
             held_out is not None and held_out.placed,
+            design_error,
         )
     return found
