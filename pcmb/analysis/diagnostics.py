@@ -622,8 +622,8 @@ def holdout_error(
         Level of the upper bound, in (0, 1).
     weights:
         (K,) importance weights of the runs (:func:`held_out_draws`; default: 1), or (K, T)
-        per time (:func:`diagnose`'s moment weights); the RMS error is that of the draws as
-        they fell.
+        per time (:func:`diagnose`'s moment weights), which weight the RMS error too: that of
+        the inputs' distribution, not of the widened draws.
     germ:
         (K, n) germ of the runs when they are a Latin hypercube (:func:`_standard_error`;
         default: independent draws).
@@ -637,13 +637,16 @@ def holdout_error(
     if predicted.shape != observed.shape:
         raise ValueError(f"predicted {predicted.shape} and observed {observed.shape} differ")
     kept = np.isfinite(observed).all(axis=tuple(range(1, observed.ndim)))
-    differences = predicted[kept] - observed[kept]
     count = int(kept.sum())
     mean, std = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
         return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
     weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
+    # Weighted back to the inputs' distribution: a widened draw far in a tail counts as
+    # little as the distribution makes it (a moment weight below zero, as nothing).
+    share = np.clip(weights[kept], 0.0, None)
+    differences = (predicted[kept] - observed[kept]) * np.sqrt(share.reshape(count, -1))
     quantile = chi_square_quantile(count, 1.0 - confidence)
     if not scale > 0 or not np.isfinite(scale):  # nothing varies: nothing to correct
         zeros = np.zeros(observed.shape[1:])
