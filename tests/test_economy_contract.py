@@ -21,7 +21,7 @@ from scipy.stats import norm
 
 pytestmark = pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
 
-MODELS = '''
+MODELS = """
 import numpy as np
 import pcmb
 
@@ -46,7 +46,7 @@ def sinh_growth(params, times):
 def jump(params, times):
     x0 = np.asarray(params["x1"])[:, None]
     return {"y": np.where(x0 > 0.2, 1.0, -1.0) * (1 - np.exp(-times)) + 0.1 * x0}
-'''
+"""
 
 UNIFORM = "{dist: uniform, low: -1.0, high: 1.0}"
 
@@ -95,9 +95,7 @@ def _true_error(path: Path, response, *, normal: bool = False, cut: float = 0.0)
         values = response(x[:, None], times[None, :])
         mean = w @ values
         std = np.sqrt(np.maximum(w @ values**2 - mean**2, 0.0))
-        error = np.fmax(
-            abs(file["outputs/y/mean"][:] - mean), abs(file["outputs/y/std"][:] - std)
-        )
+        error = np.fmax(abs(file["outputs/y/mean"][:] - mean), abs(file["outputs/y/std"][:] - std))
     return times, error / verdict["scale"], verdict
 
 
