@@ -208,3 +208,40 @@ def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_p
     (fit,) = [line for line in shown.splitlines() if line.startswith("fit")]
     loo = float(re.search(r"leave-one-out error up to (\S+),", fit).group(1))
     assert loo < 0.01 and "[regression-loo]" not in shown, shown
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="the sequential drawn check (pcmb/analysis/diagnostics.py) understates its noise "
+    "once a second batch joins the first (two Latin hypercubes of 8 read as one of 16 by the "
+    "neighbour pairing): 2 silent misses and 3 flags 0.5-0.7 early over 10 seeds, where one "
+    "batch of 16 (validation: 16) makes 1 miss and none early",
+)
+def test_the_sequential_check_of_two_kinks_is_right_at_its_stated_confidence(tmp_path):
+    """Item 4: |x1| |x2| (1 + t) on U[-1, 1]², tensor order 7 (64 runs), tolerance 0.02: its
+    true error, 3.16 % of the largest std at t = 2 (8-point Gauss on |x|, in closed form),
+    passes 2 % at t = 0.9. Over seeds 0-9 of the default check (8 runs, then 8 more where
+    undecided), at 90 % one-sided confidence at most one seed may call a time past the crossing
+    reliable, and at most one may flag 5 % of the horizon or more before it."""
+    misses = early = 0
+    for seed in range(10):
+        folder = tmp_path / str(seed)
+        folder.mkdir()
+        method = f"{{kind: collocation, order: 7, seed: {seed}}}"
+        path = _study(folder, "kinks", 2, method, 2.0, "diagnostics: {tolerance: 0.02}")
+        with h5py.File(path) as file:
+            times = file["time"][:]
+            found = file["diagnostics/y"]
+            mean, std = 0.25 * (1 + times), np.sqrt(1 / 9 - 1 / 16) * (1 + times)
+            error = (
+                np.fmax(abs(file["outputs/y/mean"][:] - mean), abs(file["outputs/y/std"][:] - std))
+                / found.attrs["scale"]
+            )
+            flagged = found.attrs["failing_from"]
+            judged = found["undecided"][:] | (times >= flagged)
+        crossing = times[np.argmax(error > 0.02)]
+        assert 0.85 < crossing < 0.95
+        misses += bool(np.any((error > 0.02) & ~judged))
+        early += bool(flagged < crossing - 0.05 * times[-1])
+    assert misses <= 1 and early <= 1, (misses, early)
