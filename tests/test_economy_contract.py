@@ -245,3 +245,30 @@ def test_the_sequential_check_of_two_kinks_is_right_at_its_stated_confidence(tmp
         misses += bool(np.any((error > 0.02) & ~judged))
         early += bool(flagged < crossing - 0.05 * times[-1])
     assert misses <= 1 and early <= 1, (misses, early)
+
+
+@pytest.mark.parametrize(
+    ("code", "exit_code", "named"),
+    [
+        ('raise RuntimeError("broken at import")', 2, "model.entry: importing"),
+        (
+            "import os\n\n\nclass Entry:\n    def __init__(self, x1=0.0):\n        os._exit(7)",
+            3,
+            "",
+        ),
+    ],
+)
+def test_a_model_that_cannot_be_built_exits_as_documented(tmp_path, code, exit_code, named):
+    """README, exit codes: a python entry whose import raises is an invalid config at
+    ``model.entry`` (2); a model whose building kills its worker could not be built (3)."""
+    (tmp_path / "entry.py").write_text(code + "\n\n\ndef f():\n    pass\n")
+    entry = "f" if exit_code == 2 else "Entry"
+    (tmp_path / "study.yaml").write_text(
+        f"name: broken\nmodel: {{kind: python, entry: entry.py:{entry}, params: {{x1: 0.0}}, "
+        "outputs: [y]}\n"
+        f"time: {{start: 0.0, stop: 1.0, points: 3}}\ninputs: {{x1: {UNIFORM}}}\n"
+        "method: {kind: collocation, order: 1}\noutput: out.h5\n"
+    )
+    done = pcmb_here("run", "study.yaml", "--quiet", cwd=tmp_path)
+    assert done.returncode == exit_code and named in done.stderr, done.stderr
+    assert not (tmp_path / "out.h5").exists()
