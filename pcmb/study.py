@@ -13,9 +13,8 @@ import json
 import sys
 import threading
 import time
-import typing
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
@@ -23,23 +22,14 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar
 import cloudpickle
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import TypeAdapter, ValidationError
 
 from pcmb.adapters.protocol import ModelFactory
 from pcmb.adapters.python import is_function_model, model_factory
 from pcmb.analysis.derived import DerivedOutput, derive, derived_problems, parse_derived
 from pcmb.analysis.diagnostics import (
-    ELEMENT_POINTS,
-    FIRST_BATCH,
-    HELD_OUT_SEED,
     RANGE_DRAWS,
     HeldOut,
     diagnose_all,
-    element_importance,
-    held_out_budget,
-    held_out_draws,
-    held_out_placed,
-    held_out_placed_elements,
     more_runs,
     pdf_outside_runs,
 )
@@ -49,22 +39,20 @@ from pcmb.axes import OutputAxis
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid, join_nodes, overflowing_inputs
 from pcmb.chaos.process import RandomProcess, germ_inputs, model_params, per_germ
-from pcmb.config.messages import schema_problems
 from pcmb.config.schema import DiagnosticsSpec, ExecutionSpec
-from pcmb.config.types import Section
 from pcmb.designs import MethodSection, MethodSpec, NodeDesign, make_design
 from pcmb.designs.base import MomentReport, Recovery
 from pcmb.errors import (
     ConfigError,
     ConfigProblem,
     IllPosedError,
-    ModelDefinitionError,
     ModelError,
     ModelRunError,
     PcmbError,
     PcmbWarning,
     UsageError,
 )
+from pcmb.held_out import HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -80,11 +68,19 @@ from pcmb.run.executor import (
     start_run,
 )
 from pcmb.run.fingerprint import Fingerprint, digest_files, model_files
-from pcmb.run.journal import FRESH, Journal
+from pcmb.run.journal import Journal
+from pcmb.run.journaling import Journaling, removed_if_rejected
 from pcmb.run.memory import MemoryEstimate, StreamPlan, check_memory, parse_memory
 from pcmb.run.output import SizeEstimate, check_output, estimate_size
 from pcmb.run.progress import phase
 from pcmb.run.worker import Layout, ModelFacts
+from pcmb.study_arguments import (
+    DEPRECATED,
+    from_keywords,
+    keys_of,
+    usage_error,
+    validated_section,
+)
 from pcmb.wording import plural
 
 _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
@@ -94,10 +90,6 @@ if TYPE_CHECKING:
     from pcmb.config.schema import StudyConfig
 
 __all__ = ["DEPRECATED", "Study"]
-
-
-def _usage(key: str, message: str) -> UsageError:
-    return UsageError([ConfigProblem(key, message)], source="Study")
 
 
 def _derived(entries: Mapping[str, Any]) -> dict[str, DerivedOutput]:
@@ -114,10 +106,10 @@ def _check_inputs(
     inputs: Mapping[str, Distribution | RandomProcess],
 ) -> dict[str, Distribution | RandomProcess]:
     if not inputs:
-        raise _usage("inputs", "a study needs at least one input")
+        raise usage_error("inputs", "a study needs at least one input")
     for name, dist in inputs.items():
         if not isinstance(dist, Distribution | RandomProcess):
-            raise _usage(
+            raise usage_error(
                 f"inputs.{name}", f"must be a pcmb distribution or random process, got {dist!r}"
             )
     return dict(inputs)
@@ -127,77 +119,6 @@ def _check_inputs(
 DEFAULT_METHOD: Mapping[str, Any] = {"kind": "collocation", "order": 3}
 #: What the errors call a held-out run (numbered among those runs, not the design's nodes).
 _HELD_OUT_RUN = "held-out run"
-#: Order of a method of pcmb 0.x's keywords that takes one and was given neither order nor
-#: level (their default then).
-_KEYWORD_ORDER = 3
-#: The keyword arguments of pcmb 0.x -> the (section, key) each now sets; accepted for one
-#: release with a DeprecationWarning.
-DEPRECATED: dict[str, tuple[str, str]] = {
-    **{
-        key: ("method", key)
-        for member in typing.get_args(typing.get_args(MethodSpec)[0])
-        for key in member.model_fields
-        if key != "kind"
-    },
-    **{key: ("execution", key) for key in ExecutionSpec.model_fields if key != "address"},
-    "diagnostics_tolerance": ("diagnostics", "tolerance"),
-    "diagnosed": ("diagnostics", "outputs"),
-}
-
-
-def _from_keywords(
-    kind: str | None,
-    execution: ExecutionSpec | Mapping[str, Any] | None,
-    diagnostics: DiagnosticsSpec | Mapping[str, Any] | None,
-    keywords: Mapping[str, Any],
-    method: MethodSection | Mapping[str, Any] | None,
-) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
-    """The ``method``, ``execution`` and ``diagnostics`` keys that pcmb 0.x's keyword
-    arguments (and ``method="<kind>"``) describe, on top of the given sections; the keys of
-    ``method`` that a new kind does not take are dropped."""
-    unknown = sorted(set(keywords) - set(DEPRECATED))
-    if unknown:
-        raise _usage(unknown[0], f"unknown argument(s) {unknown}")
-    warnings.warn(
-        "Study's keyword arguments of pcmb 0.x (order=, samples=, jobs=, method='<kind>', ...) "
-        "are deprecated: give method=, execution= and diagnostics= sections (or mappings of "
-        "their config keys)",
-        DeprecationWarning,
-        stacklevel=3,
-    )
-    given: dict[str, dict[str, Any]] = {
-        "method": {},
-        "execution": _dump(execution),
-        "diagnostics": _dump(diagnostics),
-    }
-    for key, value in keywords.items():
-        section, name = DEPRECATED[key]
-        if value is not None:  # None was "not set" in pcmb 0.x
-            given[section][name] = value
-    current = _dump(method) if method is not None else {"kind": "collocation"}
-    kind = kind or current["kind"]
-    takes = type(_section("method", MethodSpec, {"kind": kind})).model_fields
-    data = {key: value for key, value in current.items() if key in takes}
-    data.update(given["method"], kind=kind)
-    if "order" in takes and "order" not in data and "level" not in data:
-        data["order"] = _KEYWORD_ORDER
-    return data, given["execution"], given["diagnostics"]
-
-
-def _dump(section: Section | Mapping[str, Any] | None) -> dict[str, Any]:
-    """A section's keys (those set or not default), a mapping's copy, or nothing."""
-    if section is None:
-        return {}
-    return section.model_dump(exclude_unset=True) if isinstance(section, Section) else dict(section)
-
-
-def _section(key: str, root: Any, value: Any) -> Any:
-    """The validated section at ``key`` (``root``: its class or union) of a section or its
-    keys; a refusal is a UsageError at the section's keys."""
-    try:
-        return TypeAdapter(root).validate_python(value)
-    except ValidationError as error:
-        raise UsageError(schema_problems(error, root, prefix=(key,)), source="Study") from None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -303,7 +224,7 @@ class Study:
         if isinstance(method, str) or deprecated:
             kind = method if isinstance(method, str) else None
             current = None if isinstance(method, str) else method
-            method, execution, diagnostics = _from_keywords(
+            method, execution, diagnostics = from_keywords(
                 kind, execution, diagnostics, deprecated, current
             )
         #: What the model receives, by name: distributions and random processes.
@@ -317,14 +238,18 @@ class Study:
         self.inputs = germ_inputs(self.model_inputs)
         self.times = np.asarray(times, dtype=float)
         if self.times.ndim != 1 or self.times.size < 1 or np.any(np.diff(self.times) <= 0):
-            raise _usage("times", "must be a non-empty increasing 1-D grid")
-        self.method: MethodSection = _section("method", MethodSpec, method or DEFAULT_METHOD)
+            raise usage_error("times", "must be a non-empty increasing 1-D grid")
+        self.method: MethodSection = validated_section(
+            "method", MethodSpec, method or DEFAULT_METHOD
+        )
         if isinstance(address, str):  # an address is an execution setting, checked there
-            execution, address = {**_dump(execution), "address": address}, None
-        self.execution: ExecutionSpec = _section("execution", ExecutionSpec, execution or {})
+            execution, address = {**keys_of(execution), "address": address}, None
+        self.execution: ExecutionSpec = validated_section(
+            "execution", ExecutionSpec, execution or {}
+        )
         #: ``execution.memory`` (:class:`~pcmb.run.memory.MemoryBudget`).
         self.memory = parse_memory(self.execution.memory)
-        self.diagnostics: DiagnosticsSpec = _section(
+        self.diagnostics: DiagnosticsSpec = validated_section(
             "diagnostics", DiagnosticsSpec, diagnostics or {}
         )
         self.analysis = analysis
@@ -350,8 +275,11 @@ class Study:
         self.source = source
         unknown = sorted(set(self.nominal) - set(self.inputs))
         if unknown:
-            raise _usage("nominal", f"values given for unknown input(s) {unknown}")
+            raise usage_error("nominal", f"values given for unknown input(s) {unknown}")
         self.design = self._design()
+        self._held_out = HeldOutPlan(
+            self.design, self.inputs, self.method.seed, self.method.validation
+        )
 
     def _design(self) -> NodeDesign:
         settings = self.method.settings(self.orders, self.diagnostics.tolerance)
@@ -359,7 +287,7 @@ class Study:
             return make_design(self.inputs, settings)
         except ValueError as error:
             key, _, message = str(error).partition(": ")
-            raise _usage(key, message) from None
+            raise usage_error(key, message) from None
 
     # -- construction from a config -----------------------------------------------------------
 
@@ -376,7 +304,7 @@ class Study:
         ``--jobs``, ``--backend``, ``--address``), checked with it; ``address_key``: where
         the dask address was given (:class:`StudySource`).
         """
-        settings = _dump(config.execution) | dict(execution) if execution else config.execution
+        settings = keys_of(config.execution) | dict(execution) if execution else config.execution
         return cls(
             config.model_factory(),
             config.study_inputs,
@@ -434,7 +362,7 @@ class Study:
             raise UsageError(f"unknown argument(s) {unknown}", source="Study.replace")
         arguments.update(changes)
         if old:
-            arguments["method"], arguments["execution"], arguments["diagnostics"] = _from_keywords(
+            arguments["method"], arguments["execution"], arguments["diagnostics"] = from_keywords(
                 old.pop("method", None),
                 arguments["execution"],
                 arguments["diagnostics"],
@@ -464,7 +392,7 @@ class Study:
             order = per_germ(order, self.model_inputs)
             missing = set(self.inputs) - set(order)
             if missing:
-                raise _usage("method.order", f"no order given for input(s) {sorted(missing)}")
+                raise usage_error("method.order", f"no order given for input(s) {sorted(missing)}")
             return tuple(int(order[name]) for name in self.inputs)
         return (int(order),) * len(self.inputs)
 
@@ -522,13 +450,10 @@ class Study:
         Execution settings that cannot change a node's values (jobs, backend, failure
         policy) and the analysis are left out: changing them keeps the finished work.
         """
-        return self._fingerprint(nodes, outputs, self._file_digests(loaded))
+        return Fingerprint(self._digest(nodes, outputs), self._file_digests(loaded))
 
-    def _fingerprint(
-        self, nodes: TensorGrid | NodeSet, outputs: Sequence[str], files: Mapping[str, str]
-    ) -> Fingerprint:
-        """:meth:`fingerprint`, with the digests of the model's files taken already
-        (:meth:`_file_digests`)."""
+    def _digest(self, nodes: TensorGrid | NodeSet, outputs: Sequence[str]) -> str:
+        """The ``digest`` of :meth:`fingerprint`."""
         digest = hashlib.sha256()
         for array in (nodes.params, self.times):
             digest.update(np.ascontiguousarray(array))  # its buffer, not a copy of it
@@ -542,7 +467,7 @@ class Study:
             settings.append({name: p.describe() for name, p in self.processes.items()})
         digest.update(json.dumps(settings).encode())
         digest.update(cloudpickle.dumps(self.model_factory))
-        return Fingerprint(digest.hexdigest(), files)
+        return digest.hexdigest()
 
     def _file_digests(self, loaded: Sequence[str]) -> dict[str, str]:
         """The SHA-256 of every file the model depends on, ``loaded`` too (see
@@ -613,14 +538,14 @@ class Study:
         declared = facts.outputs
         unknown = [name for name in self.outputs or () if name not in declared]
         if unknown:
-            raise _usage(
+            raise usage_error(
                 "outputs", f"the model has no output(s) {unknown}; it has {list(declared)}"
             )
         parameters = facts.parameters
         if parameters is not None:
             strangers = [name for name in self.model_inputs if name not in parameters]
             if strangers:
-                raise _usage(
+                raise usage_error(
                     "inputs",
                     f"input(s) {strangers} name no parameter of the model; "
                     f"it has {sorted(parameters)}",
@@ -691,7 +616,7 @@ class Study:
             Nodes failed and the policy does not allow going on; the journal is kept.
         """
         if resume and fresh:
-            raise _usage("fresh", "resume continues the journal, fresh discards it: give one")
+            raise usage_error("fresh", "resume continues the journal, fresh discards it: give one")
         nodes = self.node_set()
         with contextlib.ExitStack() as stack:
             if pool is None:
@@ -750,40 +675,27 @@ class Study:
                 from pcmb.store import check_replaceable
 
                 check_replaceable(output)
-            journal_dir = Path(f"{output}.journal")
-            if fresh:
-                Journal.discard(journal_dir)
-            Journal.check_free(journal_dir)  # another run writing it: refuse, touch nothing
-            if Journal.exists(journal_dir) and not resume:
-                raise UsageError(
-                    f"{journal_dir} holds the finished nodes of an interrupted run: "
-                    f"continue with --resume, or delete it or {FRESH} (which discards them)"
-                )
-            journaling = _Journaling(journal_dir, self._file_digests(facts.loaded_files))
+            files = self._file_digests(facts.loaded_files)
+            journaling = Journaling.start(output, files, resume=resume, fresh=fresh)
+        run = _RunContext(pool, facts, outputs, journaling, progress)
         joined = self._joins_runs(streaming is not None)
-        early = None if joined else self._start_nominal(facts, outputs, pool)
+        early = None if joined else self._start_nominal(run)
         intrusive = hasattr(self.design, "solve")
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
         nominal = None
         try:
             if joined:
                 first = self.held_out_runs(nodes.size)[0]
-                runs, journal, checked, nominal = self._run_joined(
-                    nodes, facts, outputs, pool, journaling, progress, record, first
-                )
+                runs, journal, checked, nominal = self._run_joined(run, nodes, record, first)
             elif intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
                 # held-out runs, which are few and run again on a resume.
-                journal, journaling = None, None
-                found = self._solve(nodes, outputs, pool, record)
+                journal, run = None, dataclasses.replace(run, journaling=None)
+                found = self._solve(run, nodes, record)
             else:
-                runs, journal = self._run_nodes(
-                    nodes, facts, outputs, pool, journaling, progress, keep=streaming is None
-                )
+                runs, journal = self._run_nodes(run, nodes, keep=streaming is None)
                 if hasattr(self.design, "more"):
-                    nodes, runs = self._run_rounds(
-                        nodes, runs, facts, outputs, pool, journaling, progress
-                    )
+                    nodes, runs = self._run_rounds(run, nodes, runs)
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size)
             # Runs joined: made already. Else the workers make the held-out runs while this
@@ -798,11 +710,8 @@ class Study:
                 if joined
                 else functools.partial(
                     self._run_held_out,
-                    facts,
-                    outputs,
-                    pool,
-                    journaling,
-                    False if beside else progress,  # no bar beside the phases' lines
+                    # No bar beside the phases' lines.
+                    dataclasses.replace(run, progress=False) if beside else run,
                     record,
                     first,
                     nodes.nodes,
@@ -818,15 +727,14 @@ class Study:
             if early is not None:
                 nominal = early.result()
             if self.execution.nominal_run and nominal is None:
-                nominal = self._run_nominal(facts, outputs, pool)
+                nominal = self._run_nominal(run)
             if streaming is not None:
                 return self._finish_streamed(
+                    run,
                     nodes,
                     runs,
                     journal,
                     nominal,
-                    facts,
-                    outputs,
                     streaming,
                     output,
                     provenance,
@@ -860,11 +768,7 @@ class Study:
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
             if held_out is not None and min(wanted, most - first) > 0:
                 more, more_failed = self._run_held_out(
-                    facts,
-                    outputs,
-                    pool,
-                    journaling,
-                    progress,
+                    run,
                     record,
                     min(wanted, most - first),
                     nodes.nodes,
@@ -905,12 +809,11 @@ class Study:
 
     def _finish_streamed(
         self,
+        run: _RunContext,
         nodes: NodeSet,
         runs: RunResult,
         journal: Journal,
         nominal: RunResult | None,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
         plan: StreamPlan,
         output: str | Path,
         provenance: Mapping[str, str] | None,
@@ -924,13 +827,14 @@ class Study:
         The result holds the statistics and no runs (``values`` without rows)."""
         from pcmb.store import write_streamed  # h5py only when a file is written
 
-        layout = Layout.of(outputs, self.times, facts.axes)
+        outputs, axes = run.outputs, run.facts.axes
+        layout = Layout.of(outputs, self.times, axes)
         widths = dict(zip(outputs, layout.widths, strict=True))
         with phase(f"statistics of {nodes.size} streamed runs", stream):
             moments, reservoir = stream_statistics(
                 journal.chunks(), widths, plan.block_rows, plan.reservoir_rows, self.method.seed
             )
-        axes = {name: axis for name, axis in facts.axes.items() if name in outputs}
+        axes = {name: axis for name, axis in axes.items() if name in outputs}
         kept = reservoir.index
         sample_runs = RunResult(
             values=layout.split(reservoir.rows),
@@ -1002,14 +906,12 @@ class Study:
         found = derive(self.derived, self.times, runs.values)
         return dataclasses.replace(runs, values={**runs.values, **found})
 
-    def _solve(
-        self, nodes: NodeSet, outputs: tuple[str, ...], pool: Pool, record: Design
-    ) -> StudyResult:
+    def _solve(self, run: _RunContext, nodes: NodeSet, record: Design) -> StudyResult:
         """The result of an intrusive design (:class:`~pcmb.designs.base.IntrusiveDesign`),
         ``record`` its record, checked and solved in a worker with the model built there."""
-        design = self.design
+        design, outputs = self.design, run.outputs
         kind = record.kind
-        problems = run_in_worker(self.model_factory, pool, design.check, outputs)
+        problems = run_in_worker(self.model_factory, run.pool, design.check, outputs)
         if self.derived:
             problems = [
                 *problems,
@@ -1019,7 +921,9 @@ class Study:
             raise UsageError([ConfigProblem(key, message) for key, message in problems], "Study")
         start = time.perf_counter()
         try:
-            recovery = run_in_worker(self.model_factory, pool, design.solve, self.times, outputs)
+            recovery = run_in_worker(
+                self.model_factory, run.pool, design.solve, self.times, outputs
+            )
         except ModelError as error:
             raise ModelRunError((), f"the {kind} solve failed: {error}") from error
         return StudyResult(
@@ -1040,14 +944,7 @@ class Study:
         )
 
     def _run_rounds(
-        self,
-        nodes: TensorGrid | NodeSet,
-        runs: RunResult,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, runs: RunResult
     ) -> tuple[TensorGrid | NodeSet, RunResult]:
         """Run the further rounds an adaptive design asks for (its ``more`` method, see
         :class:`~pcmb.designs.base.AdaptiveDesign`), each journaled in its own folder of the
@@ -1056,16 +953,13 @@ class Study:
         round_number = 0
         while more is not None:
             # Rounds are steered by the outputs of one axis (time first): see _by_axis.
-            steering = _by_axis(runs.values, facts.axes)[0][2]
+            steering = _by_axis(runs.values, run.facts.axes)[0][2]
             batch = more(nodes, steering, runs.status == Status.OK)
             if batch is None:
                 break
             self._check_finite(batch)
             round_number += 1
-            folder = None if journaling is None else journaling.folder(f"round-{round_number}")
-            found, journal = self._run_nodes(
-                batch, facts, outputs, pool, folder, progress, proven=True
-            )
+            found, journal = self._run_nodes(run, batch, f"round-{round_number}", proven=True)
             if journal is not None:
                 journal.close()  # the folder goes with the whole journal at the end
             nodes, runs = join_nodes(nodes, batch), join_runs(runs, found)
@@ -1084,15 +978,7 @@ class Study:
         )
 
     def _run_joined(
-        self,
-        nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
-        record: Design,
-        count: int,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, record: Design, count: int
     ) -> tuple[
         RunResult,
         Journal | None,
@@ -1105,15 +991,14 @@ class Study:
         set is journaled where it would be alone (the nominal run not at all) and judged by
         the failure policy as it would be, the design's runs first: (design runs, their
         journal, the held-out check as :meth:`_run_held_out` makes it, the nominal run)."""
-        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
+        journal, fresh_journal = self._journal(run, nodes)
         # (model parameters, journal) of each set of runs, in order.
         sets = [(model_params(self.model_inputs, nodes.params), journal)]
         draws, held_journal = None, None
         if count and record.basis is not None:
-            draws = self._held_out_draws(record, count, nodes.nodes)
-            if journaling is not None:
-                folder = journaling.folder("validation")
-                held_journal, _ = self._journal(draws.nodes, facts, outputs, folder)
+            draws = self._held_out.draws(count, nodes.nodes)
+            self._check_finite(draws.nodes)
+            held_journal, _ = self._journal(run, draws.nodes, "validation")
             sets.append((model_params(self.model_inputs, draws.nodes.params), held_journal))
         if self.execution.nominal_run:
             sets.append((self._nominal_node(), None))
@@ -1124,82 +1009,67 @@ class Study:
                 [(part, size) for (_, part), size in zip(sets, sizes, strict=True)]
             )
         params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
-        with _removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
-            runs = self._campaign(
-                params, facts, outputs, pool, joined, progress, counted=nodes.size
-            )
+        with removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
+            runs = self._campaign(run, params, joined, counted=nodes.size)
         design_runs, *others = split_runs(runs, sizes)
-        self._judge_failures(design_runs, journal)
+        self._judge_failures(run, design_runs, journal)
         checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
         if draws is not None:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            self._judge_failures(found, held_journal, _HELD_OUT_RUN)
+            self._judge_failures(run, found, held_journal, _HELD_OUT_RUN)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
     def _run_nodes(
         self,
+        run: _RunContext,
         nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        folder: str | None = None,
         chunk_size: int | None = None,
         *,
         proven: bool = False,
         keep: bool = True,
         runs_of: str = "node",
     ) -> tuple[RunResult, Journal | None]:
-        """Run every node (checked by the caller, :meth:`_check_finite`), journaled by
-        ``journaling`` if given (the journal is returned, to be removed once the result is
-        written); raise by the failure policy. ``chunk_size`` overrides the study's;
-        ``proven``: the model ran at the study's nodes already (see
+        """Run every node (checked by the caller, :meth:`_check_finite`), journaled in the
+        run's journal (its ``folder``, if given) when it has one (the journal is returned, to
+        be removed once the result is written); raise by the failure policy. ``chunk_size``
+        overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study); ``runs_of``: what the runs are, for the error
         (:meth:`_judge_failures`)."""
-        journal, fresh_journal = self._journal(nodes, facts, outputs, journaling)
-        with _removed_if_rejected(journal, fresh_journal):
+        journal, fresh_journal = self._journal(run, nodes, folder)
+        with removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
+                run,
                 model_params(self.model_inputs, nodes.params),
-                facts,
-                outputs,
-                pool,
                 journal,
-                progress,
                 chunk_size,
                 proven=proven,
                 keep=keep,
             )
-        self._judge_failures(runs, journal, runs_of)
+        self._judge_failures(run, runs, journal, runs_of)
         return runs, journal
 
     def _journal(
-        self,
-        nodes: TensorGrid | NodeSet,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        journaling: _Journaling | None,
+        self, run: _RunContext, nodes: TensorGrid | NodeSet, folder: str | None = None
     ) -> tuple[Journal | None, bool]:
-        """The journal of ``nodes`` by ``journaling`` (``None``: none), and whether it is
-        new."""
-        if journaling is None:
+        """The journal of ``nodes`` in the run's journal (its ``folder``, if given; ``None``:
+        the run journals nothing), and whether it is new."""
+        if run.journaling is None:
             return None, False
-        fresh = not Journal.exists(journaling.directory)
-        widths = Layout.of(outputs, self.times, facts.axes).widths
-        fingerprint = self._fingerprint(nodes, outputs, journaling.files)
-        return Journal(journaling.directory, fingerprint, nodes.size, outputs, widths), fresh
+        journaling = run.journaling if folder is None else run.journaling.folder(folder)
+        widths = Layout.of(run.outputs, self.times, run.facts.axes).widths
+        digest = self._digest(nodes, run.outputs)
+        return journaling.open(digest, nodes.size, run.outputs, widths)
 
     def _campaign(
         self,
+        run: _RunContext,
         params: dict[str, NDArray[np.float64]],
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
         journal: Journal | JoinedJournal | None,
-        progress: bool | None,
         chunk_size: int | None = None,
         *,
         proven: bool = False,
@@ -1213,34 +1083,47 @@ class Study:
             self.model_factory,
             params,
             self.times,
-            outputs,
+            run.outputs,
             execution=self.execution,
             address=self.address,
             chunk_size=chunk_size,
             retries=self.execution.retries if self.execution.on_failure == "retry" else 0,
             journal=journal,
-            progress=progress,
+            progress=run.progress,
             stop_on_failure=self.execution.on_failure == "abort",
-            pool=pool,
-            facts=facts,
+            pool=run.pool,
+            facts=run.facts,
             proven=proven,
             keep_values=keep,
             counted=counted,
         )
 
     def _judge_failures(
-        self, runs: RunResult, journal: Journal | None, runs_of: str = "node"
+        self,
+        run: _RunContext,
+        runs: RunResult,
+        journal: Journal | None,
+        runs_of: str = "node",
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on;
-        ``runs_of``: what the runs are (``"held-out run"``: numbered among those)."""
+        ``runs_of``: what the runs are (``"held-out run"``: numbered among those, and kept
+        beside the design's nodes, which the error names too: ``--resume`` keeps both)."""
         if not runs.failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
-        kept = (
-            f"; the {finished} finished {runs_of}(s) are kept in {journal.directory}"
-            if journal is not None and finished
-            else ""
+        places = []
+        if runs_of == _HELD_OUT_RUN and run.journaling is not None:
+            places.append(("the design's nodes", run.journaling.directory))
+        beside = bool(places)
+        if journal is not None and finished:
+            places.append((f"the {finished} finished {runs_of}(s)", journal.directory))
+        kept = " and ".join(
+            f"{what} {'are kept in' if i == 0 else 'in'} {where}"
+            for i, (what, where) in enumerate(places)
         )
+        if beside:
+            kept += f" (--resume keeps {'both' if len(places) == 2 else 'them'})"
+        kept = f"; {kept}" if kept else ""
         pending = int(np.sum(runs.status == Status.PENDING))
         stopped = (
             f"; stopped at the first failure, {pending} {runs_of}(s) not run"
@@ -1256,43 +1139,17 @@ class Study:
 
     def held_out_runs(self, design_runs: int) -> tuple[int, int]:
         """(first batch, most in all) of the held-out runs that check an expansion of
-        ``design_runs`` runs: ``method.validation`` both when it is set, else a first batch of
-        at most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
-        in all, the rest drawn only where the verdict is undecided; placed runs
-        (:meth:`places_held_out`) all at once, as half of them can call a wrong result
-        reliable (the double well at order 7 with 4)."""
-        most = self._held_out_most(design_runs)
-        if self.method.validation is not None or self.places_held_out():
-            return most, most
-        return min(FIRST_BATCH, most), most
+        ``design_runs`` runs (:meth:`pcmb.held_out.HeldOutPlan.runs`)."""
+        return self._held_out.runs(design_runs)
 
     def places_held_out(self) -> bool:
-        """Whether the held-out runs are placed to extend the design's nodes
-        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
-        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
-        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
-        wastes the few runs."""
-        grid = self.design.record().grid
-        if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
-            return False
-        if grid != "element-gauss":
-            return True
-        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
-        return self._held_out_most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
-
-    def _held_out_most(self, design_runs: int) -> int:
-        """The most held-out runs of the check: ``method.validation``, else the budget."""
-        if self.method.validation is not None:
-            return self.method.validation
-        return held_out_budget(design_runs)
+        """Whether the held-out runs are placed to extend the design's nodes rather than
+        drawn (:meth:`pcmb.held_out.HeldOutPlan.placed`)."""
+        return self._held_out.placed()
 
     def _run_held_out(
         self,
-        facts: ModelFacts,
-        outputs: tuple[str, ...],
-        pool: Pool,
-        journaling: _Journaling | None,
-        progress: bool | None,
+        run: _RunContext,
         record: Design,
         count: int,
         design: NDArray[np.float64],
@@ -1300,70 +1157,26 @@ class Study:
         batch: int = 0,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
-        by the design's ``record``),
-        batch ``batch`` of the check (seed ``seed + 7919 + batch``), placed to extend the
-        design's nodes ``design`` (germ points) where
-        :meth:`places_held_out` (per element of a multi-element design, where its node
-        ``values`` say it may err most), else drawn; journaled in the
-        journal's ``validation`` folder (``validation-<batch>`` after the first), under the
-        failure policy; and a ``nodes-failed`` record naming those that failed (``regress``
-        leaves them out)."""
+        by the design's ``record``), batch ``batch`` of the check, placed to extend the
+        design's nodes ``design`` (germ points) or drawn
+        (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
+        folder (``validation-<batch>`` after the first), under the failure policy; and a
+        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
         if not count or record.basis is None:
             return None, ()
-        draws = self._held_out_draws(record, count, design, values, batch)
+        draws = self._held_out.draws(count, design, values, batch)
+        self._check_finite(draws.nodes)
         name = "validation" if batch == 0 else f"validation-{batch}"
-        folder = None if journaling is None else journaling.folder(name)
         # Two chunks, whatever the workers: a few runs do not pay one model call each.
         halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            draws.nodes,
-            facts,
-            outputs,
-            pool,
-            folder,
-            progress,
-            halves,
-            proven=proven,
-            runs_of=_HELD_OUT_RUN,
+            run, draws.nodes, name, halves, proven=proven, runs_of=_HELD_OUT_RUN
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
         return draws.checked(found)
-
-    def _held_out_draws(
-        self,
-        record: Design,
-        count: int,
-        design: NDArray[np.float64],
-        values: Mapping[str, NDArray[np.float64]] | None = None,
-        batch: int = 0,
-    ) -> _HeldOutDraws:
-        """Where the ``count`` held-out runs of batch ``batch`` go (see :meth:`_run_held_out`),
-        checked finite."""
-        seed = self.method.seed + HELD_OUT_SEED + batch
-        placed = self.places_held_out()
-        partition = getattr(self.design, "partition", None)
-        if placed and partition is not None:
-            # Each element's own nodes (not those of the elements split on the way).
-            where = self.design.node_elements
-            own = where >= 0
-            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
-            importance = element_importance(partition, design, where[own], values)
-            draws, weights = held_out_placed_elements(
-                partition, design, where[own], importance, count
-            )
-        elif placed:
-            # Leja points extending the nodes: with them, a far richer interpolant.
-            draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
-        else:
-            # A Latin hypercube, normal inputs widened into their tails (weighted back): each
-            # input's range is met evenly, which steadies the estimated errors of the
-            # statistics against a few runs missing where the error sits.
-            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
-        self._check_finite(draws)
-        return _HeldOutDraws(seed, draws, weights, placed)
 
     def _diagnosed(
         self,
@@ -1401,32 +1214,31 @@ class Study:
             warnings=(*warnings, *records),
         )
 
-    def _start_nominal(
-        self, facts: ModelFacts, outputs: Sequence[str], pool: Pool
-    ) -> PendingRun | None:
+    def _start_nominal(self, run: _RunContext) -> PendingRun | None:
         """The nominal run sent to the pool ahead of the nodes, to run beside them
         (:func:`~pcmb.run.executor.start_run`); ``None`` if not wanted, or with a timeout,
         when chunks must not wait behind it (it runs after them, :meth:`_run_nominal`)."""
         if not self.execution.nominal_run or self.execution.timeout is not None:
             return None
-        return start_run(self.model_factory, self._nominal_node(), self.times, outputs, pool, facts)
+        node = self._nominal_node()
+        return start_run(self.model_factory, node, self.times, run.outputs, run.pool, run.facts)
 
     def _nominal_node(self) -> dict[str, NDArray[np.float64]]:
         """The nominal parameters as a one-node batch of the model's inputs."""
         return model_params(self.model_inputs, [list(self.nominal_params().values())])
 
-    def _run_nominal(self, facts: ModelFacts, outputs: Sequence[str], pool: Pool) -> RunResult:
+    def _run_nominal(self, run: _RunContext) -> RunResult:
         """The deterministic run at the nominal parameters (not part of any statistic)."""
         return run_nodes(
             self.model_factory,
             self._nominal_node(),
             self.times,
-            outputs,
+            run.outputs,
             execution=self.execution,
             address=self.address,
             progress=False,
-            pool=pool,
-            facts=facts,
+            pool=run.pool,
+            facts=run.facts,
             proven=True,  # its failure is a warning (_with_nominal)
         )
 
@@ -1485,62 +1297,17 @@ class Study:
 
 
 @dataclasses.dataclass(frozen=True)
-class _Journaling:
-    """Where a run journals (``directory``: ``<output>.journal``) and the digests of the
-    model's files that every journal of the run records (:meth:`Study.fingerprint`), taken
-    once."""
+class _RunContext:
+    """What the steps of one :meth:`Study.run` share: the workers (``pool``), what the model
+    says of itself (``facts``), the ``outputs`` kept, where the runs are journaled
+    (``journaling``; ``None``: nowhere) and whether a progress bar is shown (``progress``, as
+    :meth:`Study.run` takes it)."""
 
-    directory: Path
-    files: Mapping[str, str]
-
-    def folder(self, name: str) -> _Journaling:
-        """The journaling of a folder of this journal (a round's, the held-out runs')."""
-        return dataclasses.replace(self, directory=self.directory / name)
-
-
-@contextlib.contextmanager
-def _removed_if_rejected(journal: Journal | None, fresh: bool) -> Iterator[None]:
-    """Remove a ``fresh`` journal when its campaign is rejected before any node ran, or the
-    model is broken at every node: leave nothing behind (a journal would block a rerun)."""
-    try:
-        yield
-    except (UsageError, ModelDefinitionError):
-        if journal is not None and fresh:
-            journal.remove()
-        raise
-
-
-@dataclasses.dataclass(frozen=True)
-class _HeldOutDraws:
-    """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
-    ``placed`` or drawn (:meth:`Study._held_out_draws`)."""
-
-    seed: int
-    nodes: NodeSet
-    weights: NDArray[np.float64]
-    placed: bool
-
-    def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
-        """The held-out runs made (``found``), and a ``nodes-failed`` record naming those that
-        failed (``regress`` leaves them out)."""
-        ok = found.status == Status.OK
-        held_out = HeldOut(
-            self.seed,
-            self.nodes.nodes,
-            self.nodes.params,
-            found.values,
-            ok,
-            self.weights,
-            self.placed,
-        )
-        if not found.failures:
-            return held_out, ()
-        failed = WarningRecord(
-            "nodes-failed",
-            f"{len(found.failures)} of {self.nodes.size} held-out run(s) failed and were left out "
-            f"of the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
-        )
-        return held_out, (failed,)
+    pool: Pool
+    facts: ModelFacts
+    outputs: tuple[str, ...]
+    journaling: Journaling | None
+    progress: bool | None
 
 
 def _merged_reports(parts: list[Recovery]) -> DesignReport | None:
@@ -1593,12 +1360,6 @@ def _run_settings(config: StudyConfig) -> str:
     # The held-out runs have their own journal folder, fingerprinted by their own nodes.
     data["method"] = config.method.model_dump(mode="json", exclude={"validation"})
     return json.dumps(data)
-
-
-#: The grids of one input whose held-out runs are placed (:meth:`Study.places_held_out`).
-_PLACED_GRIDS = frozenset(
-    {"tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor", "element-gauss"}
-)
 
 
 def _tuple(values: Sequence[str] | None) -> tuple[str, ...] | None:

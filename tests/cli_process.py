@@ -12,10 +12,12 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import signal
 import subprocess
 import sys
+import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 from pcmb.cli import main
@@ -67,3 +69,37 @@ def pcmb_here(*args: str, cwd: Path | None = None) -> subprocess.CompletedProces
         warnings.showwarning = _show_warning
         code = main(list(args))
     return subprocess.CompletedProcess(list(args), code, stdout.getvalue(), stderr.getvalue())
+
+
+@contextlib.contextmanager
+def gated_pcmb(
+    *args: str, cwd: Path, gate: Path, ready: Callable[[], bool]
+) -> Iterator[subprocess.Popen[str]]:
+    """``pcmb ARGS`` started in ``cwd`` (a child in a session of its own) with ``GATE=gate``
+    in its environment, its model waiting while that file exists: the process, once
+    ``ready()`` holds (within a minute, the process still running). On leaving the block the
+    gate opens and the process must end with exit 0; a block that fails kills it and its
+    workers."""
+    gate.touch()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pcmb.cli", *args],
+        cwd=cwd,
+        env={**os.environ, "GATE": str(gate)},
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not ready():
+            assert process.poll() is None, process.stderr.read()
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        yield process
+        gate.unlink()
+        _, err = process.communicate(timeout=120)
+        assert process.returncode == 0, err
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.communicate()

@@ -119,6 +119,13 @@ def tmpfs(tmp_path: Path) -> Iterator[callable]:
                 subprocess.run(["umount", "-l", str(folder)], capture_output=True)
 
 
+@pytest.fixture
+def small_disk(tmp_path: Path, tmpfs) -> tuple[Path, Path]:
+    """A 1 MB file system, and the config of a study writing its ``out.h5`` there."""
+    folder = tmpfs("1m")
+    return folder, write_config(tmp_path, folder / "out.h5")
+
+
 def fill(folder: Path) -> Path:
     """Fill the file system of ``folder`` to the last byte; returns the filler file."""
     filler = folder / "filler"
@@ -231,11 +238,10 @@ def test_check_output_creates_the_folder_only_when_asked(tmp_path):
 
 @pytest.mark.slow
 def test_disk_full_before_the_result_file_keeps_the_journal_for_resume(
-    tmp_path, tmpfs, monkeypatch, capsys
+    tmp_path, small_disk, monkeypatch, capsys
 ):
-    folder = tmpfs("1m")
+    folder, config = small_disk
     out = folder / "out.h5"
-    config = write_config(tmp_path, out)
     image = store._image
     filler: list[Path] = []
 
@@ -264,9 +270,8 @@ def test_disk_full_before_the_result_file_keeps_the_journal_for_resume(
 
 
 @pytest.mark.slow
-def test_a_journal_moved_to_another_disk_resumes_there(tmp_path, tmpfs, monkeypatch, capsys):
-    folder = tmpfs("1m")
-    config = write_config(tmp_path, folder / "out.h5")
+def test_a_journal_moved_to_another_disk_resumes_there(tmp_path, small_disk, monkeypatch, capsys):
+    folder, config = small_disk
     image = store._image
     with monkeypatch.context() as patch:
         patch.setattr(store, "_image", lambda *a, **k: (fill(folder), image(*a, **k))[1])
@@ -283,11 +288,10 @@ def test_a_journal_moved_to_another_disk_resumes_there(tmp_path, tmpfs, monkeypa
 
 @pytest.mark.slow
 def test_disk_full_during_the_journal_keeps_the_finished_records(
-    tmp_path, tmpfs, monkeypatch, capsys
+    tmp_path, small_disk, monkeypatch, capsys
 ):
-    folder = tmpfs("1m")
+    folder, config = small_disk
     out = folder / "out.h5"
-    config = write_config(tmp_path, out)
     record = Journal.record
     calls = []
 

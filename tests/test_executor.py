@@ -13,6 +13,7 @@ import time
 import uuid
 from concurrent.futures import Future
 from pathlib import Path
+from typing import Any
 
 import executor_models as em
 import numpy as np
@@ -23,7 +24,7 @@ from pcmb.errors import ModelError, UsageError
 from pcmb.references import damped_oscillator
 from pcmb.result import NodeFailure, Status
 from pcmb.run import executor
-from pcmb.run.executor import chunk_bounds, run_nodes
+from pcmb.run.executor import RunResult, chunk_bounds, run_nodes
 from pcmb.run.journal import Journal
 
 TESTS = Path(__file__).resolve().parent
@@ -84,19 +85,15 @@ def test_explicit_chunk_size_and_bad_values() -> None:
 
 def test_batches_depend_only_on_the_node_count_not_on_jobs() -> None:
     params = ramp_params(24)
-    serial = run_nodes(
-        em.Ramp,
-        params,
-        TIMES,
-        ["batch_size", "batch_first", "pid"],
-        execution=ExecutionSpec(jobs=1),
-    )
-    pooled = run_nodes(
-        em.Ramp,
-        params,
-        TIMES,
-        ["batch_size", "batch_first", "pid"],
-        execution=ExecutionSpec(jobs=2),
+    serial, pooled = (
+        run_nodes(
+            em.Ramp,
+            params,
+            TIMES,
+            ["batch_size", "batch_first", "pid"],
+            execution=ExecutionSpec(jobs=jobs),
+        )
+        for jobs in (1, 2)
     )
     expected_size = np.empty(24)
     expected_first = np.empty(24)
@@ -151,12 +148,20 @@ def test_backend_inprocess_runs_here_for_debugging() -> None:
 # -- accuracy and determinism ----------------------------------------------------------------
 
 
+def _oscillator(**settings: Any) -> RunResult:
+    """The stacked oscillator at its 48 nodes, run by :func:`run_nodes` with ``settings``."""
+    params, times = em.oscillator_nodes(48)
+    return run_nodes(em.StackedOscillator, params, times, ["x", "v"], **settings)
+
+
+def _assert_bit_identical(found: RunResult, serial: RunResult) -> None:
+    for name in ("x", "v"):
+        np.testing.assert_array_equal(found.values[name], serial.values[name])
+
+
 @pytest.fixture(scope="module")
 def oscillator_serial():
-    params, times = em.oscillator_nodes(48)
-    return run_nodes(
-        em.StackedOscillator, params, times, ["x", "v"], execution=ExecutionSpec(jobs=1)
-    )
+    return _oscillator(execution=ExecutionSpec(jobs=1))
 
 
 def test_batched_nodes_match_the_closed_form(oscillator_serial) -> None:
@@ -172,37 +177,20 @@ def test_batched_nodes_match_the_closed_form(oscillator_serial) -> None:
 def test_batch_composition_changes_the_last_bits(oscillator_serial) -> None:
     # Proof that the bit-identity tests below can fail: other chunks give other bits
     # (the stacked error control sees other nodes), though equally accurate values.
-    params, times = em.oscillator_nodes(48)
-    single = run_nodes(
-        em.StackedOscillator, params, times, ["x"], chunk_size=1, execution=ExecutionSpec(jobs=1)
-    )
+    single = _oscillator(chunk_size=1, execution=ExecutionSpec(jobs=1))
     assert not np.array_equal(single.values["x"], oscillator_serial.values["x"])
     np.testing.assert_allclose(single.values["x"], oscillator_serial.values["x"], atol=2e-6)
 
 
 @pytest.mark.slow
 def test_loky_is_bit_identical_to_serial(oscillator_serial) -> None:
-    params, times = em.oscillator_nodes(48)
-    pooled = run_nodes(
-        em.StackedOscillator, params, times, ["x", "v"], execution=ExecutionSpec(jobs=2)
-    )
-    for name in ("x", "v"):
-        np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
+    _assert_bit_identical(_oscillator(execution=ExecutionSpec(jobs=2)), oscillator_serial)
 
 
 @pytest.mark.slow
 def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -> None:
-    params, times = em.oscillator_nodes(48)
-    pooled = run_nodes(
-        em.StackedOscillator,
-        params,
-        times,
-        ["x", "v"],
-        address=dask_address,
-        execution=ExecutionSpec(backend="dask"),
-    )
-    for name in ("x", "v"):
-        np.testing.assert_array_equal(pooled.values[name], oscillator_serial.values[name])
+    pooled = _oscillator(address=dask_address, execution=ExecutionSpec(backend="dask"))
+    _assert_bit_identical(pooled, oscillator_serial)
     probe = run_nodes(
         em.Ramp,
         ramp_params(24),
@@ -216,15 +204,8 @@ def test_dask_is_bit_identical_to_serial(oscillator_serial, dask_address: str) -
 
 @pytest.mark.slow
 def test_dask_local_cluster_is_started_and_bit_identical(oscillator_serial) -> None:
-    params, times = em.oscillator_nodes(48)
-    pooled = run_nodes(
-        em.StackedOscillator,
-        params,
-        times,
-        ["x", "v"],
-        execution=ExecutionSpec(backend="dask", jobs=2),
-    )
-    np.testing.assert_array_equal(pooled.values["x"], oscillator_serial.values["x"])
+    pooled = _oscillator(execution=ExecutionSpec(backend="dask", jobs=2))
+    _assert_bit_identical(pooled, oscillator_serial)
 
 
 def test_field_inputs_are_sliced_per_node() -> None:

@@ -50,7 +50,8 @@ class Faulty:
     endless loop), or "segfault-on-build" (in the constructor, whatever the nodes). Each call
     sleeps ``sleep`` s per node; the process that misbehaves writes its pid to ``marker``.
     With ``BLOCK_ABOVE`` in the run's environment, a call with a node above it waits until
-    the run is stopped.
+    the run is stopped; with ``HOLD_ABOVE``, such calls log their batch size to
+    ``marker.held``, and the first waits until its worker is killed.
     """
 
     outputs = ("y",)
@@ -68,6 +69,14 @@ class Faulty:
         block = os.environ.get("BLOCK_ABOVE")
         if block is not None and np.any(a > float(block)):
             time.sleep(3600)
+        hold = os.environ.get("HOLD_ABOVE")
+        if hold is not None and np.any(a > float(hold)):
+            held = self.marker + ".held"
+            first = not os.path.exists(held)
+            with open(held, "a") as log:
+                log.write(f"{a.size}\\n")
+            if first:
+                time.sleep(3600)
         if np.any((a > self.low) & (a < self.high)):
             with open(self.marker, "a") as marker:
                 marker.write(f"{os.getpid()}\\n")
@@ -144,20 +153,22 @@ def _study(
     return config
 
 
-def _run(config: Path) -> tuple[int, str, int]:
-    """Exit code, stderr and pid of ``python -m pcmb.cli run CONFIG --quiet``."""
+def _run(config: Path, env: dict[str, str] | None = None) -> tuple[int, str, int]:
+    """Exit code, stderr and pid of ``python -m pcmb.cli run CONFIG --quiet`` (in ``env``)."""
     process = subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env=env,
     )
     _, stderr = process.communicate(timeout=300)
     return process.returncode, stderr, process.pid
 
 
-CASES = [
-    pytest.param(index, code, jobs, id=f"{where}-exit{code}-jobs{jobs}")
+#: Where the model calls ``sys.exit(code)``, with how many workers (slow: each runs a study).
+EXITS = [
+    pytest.param(index, code, jobs, id=f"{where}-exit{code}-jobs{jobs}", marks=pytest.mark.slow)
     for index, where in ((FIRST, "first"), (MIDDLE, "middle"))
     for code in (0, 3)
     for jobs in (1, 2)
@@ -170,16 +181,20 @@ def _check_where_it_ran(folder: Path, pid: int) -> None:
     assert exited and pid not in exited
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+def _exit_run(folder: Path, index: int, code: int, jobs: int, policy: str) -> tuple[int, str]:
+    """Exit code and stderr of ``pcmb run`` of a study whose model calls ``sys.exit(code)`` at
+    node ``index``, in this process: a ``sys.exit`` run here by mistake fails the test rather
+    than ending it."""
+    done = pcmb_here("run", str(_study(folder, index, code, jobs, policy)), "--quiet")
+    return done.returncode, done.stderr
+
+
+@pytest.mark.parametrize(("index", "code", "jobs"), EXITS)
 def test_sys_exit_in_the_model_aborts_with_exit_3(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
-    config = _study(tmp_path, index, code, jobs, "abort")
-    # In this process: a model's sys.exit run here by mistake would fail the test, not end it.
-    done = pcmb_here("run", str(config), "--quiet")
-    stderr = done.stderr
-    assert done.returncode == 3, stderr
+    returncode, stderr = _exit_run(tmp_path, index, code, jobs, "abort")
+    assert returncode == 3, stderr
     assert "the model failed at 1 of 9 node(s) (on_failure: abort)" in stderr
     assert f"  node {index} (a={NODES[index]:.6g}): SystemExit: {code} at faulty.py:" in stderr
     # The model's traceback is shown, not one of pcmb's own.
@@ -189,15 +204,12 @@ def test_sys_exit_in_the_model_aborts_with_exit_3(
     _check_where_it_ran(tmp_path, os.getpid())
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize(("index", "code", "jobs"), CASES)
+@pytest.mark.parametrize(("index", "code", "jobs"), EXITS)
 def test_sys_exit_in_the_model_is_regressed_over_with_a_complete_file(
     tmp_path: Path, index: int, code: int, jobs: int
 ) -> None:
-    config = _study(tmp_path, index, code, jobs, "regress")
-    done = pcmb_here("run", str(config), "--quiet")
-    stderr = done.stderr
-    assert done.returncode == 0, stderr
+    returncode, stderr = _exit_run(tmp_path, index, code, jobs, "regress")
+    assert returncode == 0, stderr
     assert f"node {index} (a={NODES[index]:.6g}): SystemExit: {code}" in stderr
     assert "pcmb: wrote" in stderr
     # A complete file and nothing else: no journal, no temporary file.
@@ -268,14 +280,18 @@ def test_a_crash_in_the_nominal_run_is_a_warning(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_nominal_run_past_the_timeout_leaves_no_design_node_unrun(tmp_path: Path) -> None:
-    # Chunks [0-2] [3-5] [6-8] [nominal], one call each: the nominal run (2 s allowed) hangs
-    # while [6-8] (4.5 s of 7 allowed) runs beside it; the kill of both workers must not cost
-    # [6-8] its run, as a failed nominal run never stops a study.
-    config = _study(
-        tmp_path, NOMINAL, 0, 2, "abort", how="hang", sleep=1.5, timeout=2.0, chunk_size=3
-    )
-    returncode, stderr, _ = _run(config)
+    # Chunks [0-2] [3-5] [6-8] [nominal], one call each, two workers: [6-8] runs beside the
+    # nominal run and, the first time, waits until its worker is killed (HOLD_ABOVE); the
+    # nominal run hangs, and its timeout (2 s against [6-8]'s 6 s) kills both workers with
+    # [6-8] in flight: no sleep races the timeout. That kill must not cost [6-8] its run, as
+    # a failed nominal run never stops a study.
+    config = _study(tmp_path, NOMINAL, 0, 2, "abort", how="hang", timeout=2.0, chunk_size=3)
+    held = {**os.environ, "HOLD_ABOVE": str(0.5 * (NODES[5] + NODES[6]))}
+    returncode, stderr, _ = _run(config, held)
     assert returncode == 0, stderr
+    # [6-8] was held and run again whole: the nominal run's timeout killed it (had its own
+    # come first, its nodes would have run one by one, and this test proved nothing).
+    assert (tmp_path / "marker.held").read_text().split() == ["3", "3"]
     assert "the nominal run failed, so none is stored: timed out after 2 s" in stderr
     result = pcmb.load(tmp_path / "out" / "result.h5")
     assert (result.status == Status.OK).all(), result.status

@@ -4,18 +4,15 @@ past, dask's logs under --quiet, a foreign file at the output path."""
 from __future__ import annotations
 
 import csv
-import os
-import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
-from cli_process import pcmb_cli
+from cli_process import gated_pcmb, pcmb_cli
 
 import pcmb
 from pcmb.cli import main
@@ -95,36 +92,19 @@ def _stamps(folder: Path) -> dict[str, tuple[int, int]]:
 @pytest.mark.slow
 def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Path) -> None:
     _growth_sweep(tmp_path)
-    gate = tmp_path / "gate"
-    gate.touch()
-    first = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "sweep", "study.yaml", "-o", "out", "--quiet"],
-        cwd=tmp_path,
-        env={**os.environ, "GATE": str(gate)},
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 60
-        while not (tmp_path / "gate.reached").exists():  # the first holds the folder, waits
-            assert first.poll() is None, first.stderr.read()
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
+    sweep = ("sweep", "study.yaml", "-o", "out")
+    # The first holds the folder and waits.
+    reached = (tmp_path / "gate.reached").exists
+    with gated_pcmb(
+        *sweep, "--quiet", cwd=tmp_path, gate=tmp_path / "gate", ready=reached
+    ) as first:
         before = _stamps(tmp_path / "out")
-        second = pcmb_cli("sweep", "study.yaml", "-o", "out", "--resume", "--quiet", cwd=tmp_path)
+        second = pcmb_cli(*sweep, "--resume", "--quiet", cwd=tmp_path)
         assert second.returncode == 2, second.stderr
         assert _stamps(tmp_path / "out") == before  # nothing written, not even the ledger
         assert f"(PID {first.pid}) is writing the sweep folder out;" in second.stderr
         assert "pcmb.cli sweep study.yaml -o out --quiet" in second.stderr  # its command
         assert "Traceback" not in second.stderr
-        gate.unlink()
-        _, err = first.communicate(timeout=120)
-        assert first.returncode == 0, err
-    finally:
-        if first.poll() is None:
-            os.killpg(first.pid, signal.SIGKILL)
-            first.communicate()
     folder = tmp_path / "out"
     with open(folder / "sweep.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))

@@ -299,6 +299,22 @@ def test_a_non_finite_output_at_a_node_run_ends_the_rounds_naming_the_output_and
     assert "order-budget" not in {w.code for w in recovery.warnings}
 
 
+def test_a_non_finite_output_is_recorded_once():
+    """The rounds' end and the statistics each recorded ``statistic-non-finite`` for the
+    same output: two records of one problem."""
+
+    def values_at(nodes):
+        y = np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])
+        y[nodes.params[:, 0] == 3.0, 4] = np.nan
+        return {"y": y}
+
+    *_, recovery = _refined(_inputs(6.0), values_at)
+    (record,) = [w for w in recovery.warnings if w.code == "statistic-non-finite"]
+    assert record.output == "y" and record.time_range == (TIMES[4], TIMES[4])
+    assert "order refinement ended at order 2 after 9 runs" in record.message
+    assert "its Sobol' indices there are NaN" in record.message
+
+
 def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
     def values_at(nodes):
         return {"y": np.exp(np.outer(nodes.params[:, 0], TIMES) + 0.5 * nodes.params[:, 1:])}
@@ -312,6 +328,88 @@ def test_a_failed_node_ending_the_rounds_is_not_called_a_budget():
     assert "method.max_runs" not in record.message
 
 
+def _cubic(nodes) -> dict[str, np.ndarray]:
+    """a³ t + a b² - b t², of degrees 3 in a and 2 in b: exact on the grid of level 2."""
+    a, b = nodes.params[:, :1], nodes.params[:, 1:]
+    return {"y": a**3 * TIMES + a * b**2 - b * TIMES**2}
+
+
+@pytest.mark.parametrize(
+    "settings",
+    [
+        MethodSettings("collocation", orders="auto", diagnostics_tolerance=1e-6),
+        MethodSettings("adaptive", tolerance=1e-6, basis="tensor"),
+    ],
+    ids=["order-auto", "adaptive-tensor"],
+)
+def test_a_polynomial_response_stops_on_the_grid_that_resolves_it(settings):
+    """The grid of level 2 (orders 5, 7) holds the response exactly: along a, odd, its norms
+    of degrees 2, 4 and 5 are round-off, and the single norm left (degree 3) told no decay, so
+    the estimate stayed at the change from level 1 (4.5e-3) and both variants ran a level
+    more (285 and 135 runs)."""
+    inputs = {"a": pcmb.Uniform(-1.0, 1.0), "b": pcmb.Normal(0.0, 1.0)}
+    design = make_design(inputs, settings)
+    nodes = design.nodes()
+    values, ok = _cubic(nodes), np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, values, ok)) is not None:
+        nodes = join_nodes(nodes, batch)
+        values = {"y": np.vstack([values["y"], _cubic(batch)["y"]])}
+        ok = np.ones(nodes.size, dtype=bool)
+    assert nodes.size == 63 and design.record().orders == (5, 7)
+
+
+def test_a_converging_response_at_the_last_level_is_not_called_discontinuous():
+    """1/(1.05 - a): analytic, its estimate falls ~1e-4 per level to the rule's last; the
+    record told it order alone may not converge, "a steep, discontinuous or chaotic response"
+    (the kink of test_verdicts keeps that advice: its estimate stalls)."""
+    settings = MethodSettings("collocation", orders="auto", diagnostics_tolerance=1e-14)
+    design = make_design({"a": pcmb.Uniform(0.0, 1.0)}, settings)
+    nodes = design.nodes()
+
+    def pole(nodes):
+        return 1 / (1.05 - nodes.params) + 0 * TIMES
+
+    values = pole(nodes)
+    while (batch := design.more(nodes, {"y": values}, np.ones(nodes.size, bool))) is not None:
+        nodes, values = join_nodes(nodes, batch), np.vstack([values, pole(batch)])
+    recovery = design.recover(nodes, {"y": values}, np.ones(nodes.size, bool), TIMES)
+    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    indicator = recovery.report.refinement.indicator
+    assert indicator[-1] < 1e-3 * indicator[-2]
+    assert "discontinuous" not in record.message
+    assert f"fell from {indicator[-2]:.3g} to {indicator[-1]:.3g}" in record.message
+    assert "method.elements" in record.message
+
+
+def test_a_converging_response_stopped_by_max_runs_is_told_to_raise_it_only():
+    """A damped oscillator's phase drift to t = 8: its estimate falls 1.6 -> 7.8e-3 over
+    level 2; the record stopped by max_runs added "order alone may not converge for a steep,
+    discontinuous or chaotic response"."""
+    times = np.linspace(0.0, 8.0, 81)
+    inputs = {"omega": pcmb.Uniform(1.5, 2.5), "zeta": pcmb.Uniform(0.02, 0.1)}
+    settings = MethodSettings(
+        "collocation", orders="auto", diagnostics_tolerance=1e-4, max_runs=100
+    )
+    design = make_design(inputs, settings)
+
+    def swing(nodes):
+        omega, zeta = nodes.params[:, :1], nodes.params[:, 1:]
+        return np.exp(-zeta * omega * times) * np.cos(omega * np.sqrt(1 - zeta**2) * times)
+
+    nodes = design.nodes()
+    values = swing(nodes)
+    while (batch := design.more(nodes, {"y": values}, np.ones(nodes.size, bool))) is not None:
+        nodes, values = join_nodes(nodes, batch), np.vstack([values, swing(batch)])
+    recovery = design.recover(nodes, {"y": values}, np.ones(nodes.size, bool), times)
+    (record,) = [w for w in recovery.warnings if w.code == "order-budget"]
+    before, last = recovery.report.refinement.indicator
+    assert nodes.size == 49 and "49 of 100 runs (method.max_runs)" in record.message
+    assert f"raise method.max_runs: the estimate fell from {before:.3g} to {last:.3g}" in (
+        record.message
+    )
+    assert "discontinuous" not in record.message
+
+
 def test_the_error_estimate_does_not_depend_on_the_outputs_scale():
     """The estimate is relative to the std: the same response in other units gives the same
     estimate (near 1e300 the squares of the coefficients overflowed: 2.1e-3 for 2.1e-7; at
@@ -322,6 +420,20 @@ def test_the_error_estimate_does_not_depend_on_the_outputs_scale():
     np.testing.assert_allclose(
         box_errors(grid, 1e300 * values), box_errors(grid, values), rtol=1e-9
     )
+
+
+@pytest.mark.parametrize("c", [1.0, 0.5])
+def test_the_std_error_of_an_entire_hermite_response_counts_its_truncated_squares(c):
+    """e^(c b), b ~ N(0, 1), on the 9 Genz–Keister nodes (degree 7): its Hermite coefficients
+    fall like c^q / sqrt(q!), and the std's error is what the squares past degree 7 add to it,
+    not the degree-16 term the ratios read (0.086x and 0.095x of the true error before)."""
+    inputs = {"b": pcmb.Normal(0.0, 1.0)}
+    grid = SparseGrid((inputs["b"],), box_index_set((2,)), nested_rules(inputs, "auto"))
+    values = np.exp(c * grid.params)[:, None, :]
+    expansion = pcmb.ChaosExpansion(grid.project(values), grid.multi_index, grid.distributions)
+    mean, std = np.exp(c**2 / 2), np.sqrt(np.exp(2 * c**2) - np.exp(c**2))
+    error = max(abs(expansion.mean()[0, 0] - mean), abs(expansion.std()[0, 0] - std)) / std
+    assert error / 10 <= box_errors(grid, values)[0] <= 10 * error
 
 
 def _calibration():

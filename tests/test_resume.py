@@ -24,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from cli_process import pcmb_here
+from cli_process import gated_pcmb, pcmb_here
 
 from pcmb.result import StudyResult
 from pcmb.store import load
@@ -50,12 +50,8 @@ def line(params, times):
     return {"y": params["a"] * times + params["b"] ** 2}
 """
 
-PYTHON_CONFIG = """\
-name: resume
-model:
-  kind: python
-  entry: model.py:line
-  params: {a: 1.0, b: 0.0}
+#: What the python and command studies share after their model section.
+STUDY = """\
 time: {start: 0.0, stop: 2.0, points: 5}
 inputs:
   a: {dist: uniform, low: 1.0, high: 3.0}
@@ -64,6 +60,15 @@ method: {kind: collocation, order: 3}
 execution: {jobs: 1, chunk_size: 1}
 output: out.h5
 """
+
+PYTHON_CONFIG = """\
+name: resume
+model:
+  kind: python
+  entry: model.py:line
+  params: {a: 1.0, b: 0.0}
+"""
+PYTHON_CONFIG += STUDY
 
 # A command model: program ./sim.py (a path), a template rendered per node and a data file
 # linked into every work directory. With BLOCK_AFTER it counts its runs in CALLS_FILE and
@@ -106,14 +111,8 @@ model:
   templates: [input.txt]
   files: [data/scale.txt]
   run_dir: runs
-time: {start: 0.0, stop: 2.0, points: 5}
-inputs:
-  a: {dist: uniform, low: 1.0, high: 3.0}
-  b: {dist: normal, mean: 0.0, std: 1.0}
-method: {kind: collocation, order: 3}
-execution: {jobs: 1, chunk_size: 1}
-output: out.h5
 """
+COMMAND_CONFIG += STUDY
 
 
 def pcmb_run(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -315,24 +314,14 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
 ) -> None:
     folder = python_study
     journal = folder / "out.h5.journal"
-    gate = folder / "gate"
-    gate.touch()
-    first = subprocess.Popen(
-        [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", "--quiet"],
-        cwd=folder,
-        env={**os.environ, "GATE": str(gate)},
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 60
-        # The first run journals its first two nodes (the model's first two calls), then
-        # holds the lock and waits at the gate.
-        while len(records(folder)) < 2:
-            assert first.poll() is None, first.stderr.read()
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
+    run = ("run", "study.yaml", "--quiet")
+
+    def journaled() -> bool:
+        """The first run journaled its first two nodes (the model's first two calls): it
+        holds the lock and waits at the gate."""
+        return len(records(folder)) >= 2
+
+    with gated_pcmb(*run, cwd=folder, gate=folder / "gate", ready=journaled) as first:
         before = snapshot(journal)
         for args in ((), ("--resume",)):
             second = pcmb_run(folder, *args)
@@ -343,13 +332,6 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first(
             )
             assert "Traceback" not in second.stderr and "interrupted" not in second.stderr
             assert snapshot(journal) == before
-        gate.unlink()
-        _, err = first.communicate(timeout=60)
-        assert first.returncode == 0, err
-    finally:
-        if first.poll() is None:
-            os.killpg(first.pid, signal.SIGKILL)
-            first.communicate()
     assert not journal.exists()
     with h5py.File(folder / "out.h5", "r") as file:
         params, times = file["nodes/params"][()], file["time"][()]

@@ -521,3 +521,34 @@ def test_a_resumed_study_reruns_only_what_its_joined_campaign_left(tmp_path):
     assert np.array_equal(result.values["y"], result.params[:, :1] * TIMES)
     assert np.array_equal(result.held_out.values["y"], result.held_out.params[:, :1] * TIMES)
     assert np.array_equal(result.nominal["y"], 1.5 * TIMES)
+
+
+@pytest.mark.parametrize(
+    "method",
+    [{"kind": "collocation", "order": 2}, {"kind": "collocation", "order": "auto"}],
+    ids=["joined", "after-rounds"],
+)
+def test_a_failed_held_out_run_names_both_journals(tmp_path, method):
+    """A held-out run that stops a study (on_failure: abort) keeps the design's nodes in the
+    journal and the held-out runs in its ``validation`` folder: the error names both, and
+    that ``--resume`` keeps both (with or without rounds before the held-out runs)."""
+    from executor_models import SwitchedRamp
+
+    inputs = {"a": pcmb.Uniform(1.0, 3.0), "b": pcmb.Uniform(0.0, 1.0)}
+    settings = {
+        "method": method,
+        "outputs": ["y"],
+        "execution": {"backend": "inprocess", "on_failure": "abort"},
+    }
+    plain = pcmb.Study(SwitchedRamp, inputs, TIMES, params={"bad": [], "switch": ""}, **settings)
+    bad = plain.run().held_out.params[3, 0]
+    switch = tmp_path / "switch"
+    switch.touch()
+    params = {"bad": [bad], "switch": str(switch)}
+    study = pcmb.Study(SwitchedRamp, inputs, TIMES, params=params, **settings)
+    with pytest.raises(ModelRunError) as raised:
+        study.run(tmp_path / "r.h5")
+    journal = tmp_path / "r.h5.journal"
+    assert f"the design's nodes are kept in {journal} and the " in str(raised.value)
+    assert f"finished held-out run(s) in {journal / 'validation'}" in str(raised.value)
+    assert "--resume keeps both" in str(raised.value)

@@ -26,8 +26,9 @@ raises false alarms.
   where the runs vary, and surrogate samples far outside the range of the run values.
 - **Runs all equal**: where the design's runs are all equal while the held-out runs vary,
   the design saw none of the spread (nodes symmetric about a kink) and the verdict fails
-  there; without held-out runs, runs all equal at every time are reported
-  (``runs-all-equal``, or ``output-constant`` when the nominal run equals them too).
+  there, unless the held-out check says the error holds within the tolerance; without
+  held-out runs, runs all equal at every time are reported (``runs-all-equal``, or
+  ``output-constant`` when the nominal run equals them too).
 
 :func:`diagnose` does all of it for one output: its estimated error is the larger of the
 estimated errors of the mean and the std at each time (the decay where there are no held-out
@@ -43,7 +44,6 @@ the PDFs, quantiles and Sobol' indices drawn from it are less accurate than the 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
@@ -720,11 +720,9 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
-        means, stds, errors, unseen, unchecked = (
-            np.array(column) for column in zip(*found, strict=True)
-        )
+        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         return (
@@ -732,16 +730,23 @@ def placed_check(
             np.sqrt(variance),
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
-            np.sqrt(np.sum((probability * unchecked) ** 2, axis=0)),
         )
 
-    rich_mean, rich_std, error, unseen, unchecked = moments(0)
+    rich_mean, rich_std, error, unseen = moments(0)
+    # The elements without held-out runs, which nothing checks, add their next coefficients.
+    unchecked = np.sqrt(
+        sum(
+            (p * _unchecked(own / scale)) ** 2
+            for p, (_, points, _, rule, own) in zip(probability[:, 0], pieces, strict=True)
+            if points.size == rule.size
+        )
+    )
     mean_error, std_error = (
         np.abs(rich_mean - mean / scale) + unseen,
         np.abs(rich_std - std / scale),
     )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error, fewer_unseen, _ = moments(PLACED_SPARE)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
@@ -818,12 +823,10 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
     mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
-    and held-out runs without its last ``spare`` held-out runs, over the scale; and, for an
-    element without held-out runs (whose interpolant is its expansion), the estimated size of
-    its next coefficient (:func:`_unchecked`; zeros for the others)."""
+    and held-out runs without its last ``spare`` held-out runs, over the scale."""
     size = rule.size
     kept = max(size, points.size - spare)
     own = own / scale
@@ -834,7 +837,6 @@ def _placed_moments(
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
         _unseen_mean_error(family, points[:size], rule, coefficients),
-        _unchecked(coefficients) * (points.size == size),
     )
 
 
@@ -886,27 +888,41 @@ def out_of_range(
     also held to be non-negative: draws below 0 by more than ``RANGE_BELOW_ZERO`` times the
     range count too.
     """
-    return _outside_sides(expansion, node_values, draws, seed, node_germ, margin).sum(axis=0)
+    germ, samples = _surrogate_draws(expansion, draws, seed)
+    values = np.asarray(node_values, dtype=float)
+    return _outside_sides(expansion, values, margin, samples, _in_box(germ, node_germ)).sum(axis=0)
+
+
+def _surrogate_draws(
+    expansion: Expansion, draws: int, seed: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(D, n) germ drawn from the inputs' distribution and (D, T) the surrogate there."""
+    germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
+    return germ, expansion.evaluate_germ(germ)
+
+
+def _in_box(germ: NDArray[np.float64], node_germ: ArrayLike | None) -> NDArray[np.bool_]:
+    """(D,) whether each draw lies inside the box the (N, n) ``node_germ`` spans (all of them
+    without it)."""
+    if node_germ is None:
+        return np.ones(germ.shape[0], dtype=bool)
+    box = np.asarray(node_germ, dtype=float)
+    return np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)
 
 
 def _outside_sides(
     expansion: Expansion,
-    node_values: ArrayLike,
-    draws: int,
-    seed: int,
-    node_germ: ArrayLike | None,
+    values: NDArray[np.float64],
     margin: float,
+    samples: NDArray[np.float64],
+    kept: NDArray[np.bool_],
 ) -> NDArray[np.float64]:
-    """(2, T) the shares of :func:`out_of_range` below and above the runs' range."""
-    values = np.asarray(node_values, dtype=float)
-    floor, ceiling = _far_bounds(values, margin)
-    germ = draw_germs(expansion.distributions, draws, np.random.default_rng(seed))
-    if node_germ is not None:
-        box = np.asarray(node_germ, dtype=float)
-        germ = germ[np.all((germ >= box.min(axis=0)) & (germ <= box.max(axis=0)), axis=1)]
-    if germ.shape[0] == 0:
+    """(2, T) the shares of :func:`out_of_range` below and above the (N, T) runs' range,
+    among the (D, T) surrogate ``samples`` where ``kept``."""
+    if not kept.any():
         return np.zeros((2, values.shape[1]))
-    samples = expansion.evaluate_germ(germ)
+    floor, ceiling = _far_bounds(values, margin)
+    samples = samples[kept]
     sides = np.stack([(samples < floor).mean(axis=0), (samples > ceiling).mean(axis=0)])
     return np.where(expansion.varies() & (ceiling > floor), sides, 0.0)
 
@@ -962,15 +978,9 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         made = _finite_rows(np.vstack(runs))
         pdf = analysis.outputs[name].pdf
         points = nearest_indices(result.grid(name), pdf.at)
-        drawn = _outside_sides(
-            expansion, made, RANGE_DRAWS, RANGE_SEED, result.germ[ok], PDF_MARGIN
-        )
-        # The draws from the whole input space, only where a record needs its cause.
-        anywhere = functools.cache(
-            functools.partial(
-                _outside_sides, expansion, made, RANGE_DRAWS, RANGE_SEED, None, PDF_MARGIN
-            )
-        )
+        germ, samples = _surrogate_draws(expansion, RANGE_DRAWS, RANGE_SEED)
+        drawn = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, result.germ[ok]))
+        anywhere = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, None))
         floor, ceiling = _far_bounds(made, PDF_MARGIN)
         allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
@@ -983,7 +993,7 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                 continue
             if drawn[:, k].max() > allowed:
                 cause = "the surrogate overshoots (see its held-out error)"
-            elif 2 * anywhere()[:, k].sum() >= stored.sum():
+            elif 2 * anywhere[:, k].sum() >= stored.sum():
                 cause = (
                     "the surrogate's draws go there from outside the box the design's nodes "
                     "span, where it extrapolates and no run checks it"
@@ -1144,8 +1154,8 @@ class OutputDiagnostics:
         The accepted error, relative to the scale.
     failing_from:
         :func:`verdict` of the estimate: the first time it exceeds the tolerance by more than
-        its noise, or where the design's runs are all equal while the held-out runs vary; NaN
-        if never.
+        its noise, or where the design's runs are all equal while the held-out runs vary and
+        do not show the error within the tolerance; NaN if never.
     warnings:
         ``chaos-unreliable`` (when ``failing_from`` is a time), ``chaos-undecided`` (where
         the noise is too large to tell) and the range checks' records (:func:`range_checks`).
@@ -1265,6 +1275,9 @@ def diagnose(
         else np.where(np.isnan(checked.noise), np.inf, checked.noise)
     )
     failing_from = verdict(times, estimate, tolerance, noise)
+    # A blind time fails unless the held-out runs, which saw the spread there, say it holds
+    # beyond their noise (a switch the nodes have not reached yet, its spread still small).
+    blind &= estimate + noise > tolerance
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     share = out_of_range(expansion, node_values, node_germ=node_germ)
@@ -1325,37 +1338,50 @@ def diagnose(
 def more_runs(found: OutputDiagnostics) -> int:
     """How many held-out runs, beyond those made, would decide every undecided time of
     ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
-    undecided): the noise falls as 1/√K. Too few runs to measure any noise (one): the
-    first batch."""
-    undecided = found.undecided
-    if not undecided.any():
+    undecided, at least 1 otherwise): the noise falls as 1/√K. Too few runs to measure any
+    noise (one): the first batch."""
+    if not found.undecided.any():
         return 0
     count = found.holdout.count  # a time is undecided only by a held-out check's noise
-    margin = np.abs(found.estimate - found.tolerance)[undecided]
-    margin = np.maximum(margin, found.tolerance / 10)
-    needed = count * np.max(found.noise[undecided] / margin) ** 2
+    needed = _runs_needed(found)
     if not np.isfinite(needed):
         return max(FIRST_BATCH - count, 1)
     return max(int(np.ceil(needed)) - count, 1)
 
 
+def _runs_needed(found: OutputDiagnostics) -> float:
+    """Held-out runs in all whose noise would decide every undecided time of ``found``, those
+    within a tenth of the tolerance of it to that tenth (:func:`more_runs`)."""
+    undecided = found.undecided
+    margin = np.abs(found.estimate - found.tolerance)[undecided]
+    margin = np.maximum(margin, found.tolerance / 10)
+    return found.holdout.count * float(np.max(found.noise[undecided] / margin)) ** 2
+
+
 def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) -> WarningRecord:
     """The ``chaos-undecided`` record: where the held-out check cannot tell whether the
-    statistics hold, the estimate at the worst such time and the runs that would decide."""
+    statistics hold, the estimate at the worst such time and the runs that would decide, or,
+    where the runs made resolve every such time to a tenth of the tolerance, that the
+    estimate sits at the tolerance itself."""
     undecided = found.undecided
     worst = int(np.flatnonzero(undecided)[np.argmax(found.estimate[undecided])])
     holdout = found.holdout
     where = f" at {axis} = {times[worst]:.4g}" if axis else ""
     count = holdout.count
-    more = more_runs(found)
+    if _runs_needed(found) <= count:
+        decide = (
+            "its estimate lies within a tenth of the tolerance of it there, at the tolerance "
+            "itself, which more held-out runs resolve only slowly"
+        )
+    else:
+        more = more_runs(found)
+        decide = f"about {more} more held-out runs would decide (method.validation: {count + more})"
     return WarningRecord(
         "chaos-undecided",
         f"the held-out check cannot tell whether mean and std hold within the tolerance "
         f"{_percent(found.tolerance)} of the largest std at {_count(undecided)}: estimated "
         f"error {_percent(found.estimate[worst])} ± {_percent(found.noise[worst])}{where} "
-        f"({_percent(holdout.confidence)} confidence, {count} "
-        f"held-out runs); about {more} more held-out runs would decide (method.validation: "
-        f"{count + more})",
+        f"({_percent(holdout.confidence)} confidence, {count} held-out runs); {decide}",
         found.output,
         _span(times, undecided),
     )

@@ -204,12 +204,13 @@ class _Labels:
 
 
 class _Canvas:
-    """Creates figures of the report's sizes and saves them; collects notes on what could not
-    be drawn."""
+    """Creates figures of the report's sizes and saves them in ``directory`` (made if needed,
+    once matplotlib is found); collects notes on what could not be drawn."""
 
-    def __init__(self, directory: Path):
-        self.directory = directory
+    def __init__(self, directory: str | os.PathLike[str]):
+        self.directory = Path(directory)
         self.figure_class, self.canvas_class = _matplotlib()
+        self.directory.mkdir(parents=True, exist_ok=True)
         self.written: list[Path] = []
         self.notes: list[str] = []
 
@@ -980,18 +981,9 @@ def write_comparison_figures(
     *,
     labels: Sequence[str] | None = None,
 ) -> list[Path]:
-    """Write ``<output>_compare.png`` (means and stds overlaid) for every shared output.
-
-    Raises
-    ------
-    MissingDependencyError
-        If matplotlib is missing.
-    UsageError
-        If a comparison has another time grid or no shared output.
-    """
-    directory = Path(directory)
+    """Write ``<output>_compare.png`` (means and stds overlaid) for every shared output;
+    raises as :func:`write_report` does."""
     canvas = _Canvas(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     others, found = _others(reference, comparisons, labels)
     settings = reference.analysis.settings if reference.analysis else AnalysisSettings()
     for name in reference.outputs:
@@ -1039,9 +1031,7 @@ def write_report(
     UsageError
         If a comparison has another time grid or no shared output.
     """
-    directory = Path(directory)
     canvas = _Canvas(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     analysis = result.analysis or analyse(result)
     others, found = _others(result, comparisons, labels)
     text = _Labels(analysis.settings, _horizon(result))
@@ -1065,9 +1055,11 @@ def write_report(
             _draw(canvas, name, "comparison", _compare_figure, result, name, shared, matched, text)
         )
         figures[name] = [path for path in drawn if path is not None]
-    index = directory / "index.html"
+    index = canvas.directory / "index.html"
     index.write_text(
-        _index_page(result, source, others, found, figures, directory, text, spectra, canvas.notes),
+        _index_page(
+            result, source, others, found, figures, canvas.directory, text, spectra, canvas.notes
+        ),
         encoding="utf-8",
     )
     return [*canvas.written, index]

@@ -19,7 +19,15 @@ from pydantic_core import PydanticCustomError
 
 from pcmb.chaos import process as kl
 from pcmb.config.messages import SETTING_ERROR
-from pcmb.config.types import NonNegativeReal, PositiveInt, PositiveReal, Real, Section, count
+from pcmb.config.types import (
+    NonNegativeReal,
+    PositiveInt,
+    PositiveReal,
+    Real,
+    Section,
+    Stop,
+    count,
+)
 
 __all__ = ["CovarianceSpec", "GridSpec", "ProcessSpec"]
 
@@ -105,18 +113,10 @@ class GridSpec(Section):
     """The points where the model receives the field: ``numpy.linspace(start, stop, points)``."""
 
     start: Real = Field(default=0.0, description="first point")
-    stop: Real = Field(description="last point (> start)")
+    stop: Stop = Field(description="last point (> start)")
     points: count(ge=2, le=kl.MAX_GRID_POINTS) = Field(
         description="number of points m: the model receives (B, m) values"
     )
-
-    @field_validator("stop")
-    @classmethod
-    def _after_start(cls, stop: float, info: ValidationInfo) -> float:
-        start = info.data.get("start")
-        if start is not None and not stop > start:
-            raise ValueError(f"expected stop > start = {start!r}, found {stop!r}")
-        return stop
 
 
 @functools.lru_cache(maxsize=16)

@@ -52,6 +52,7 @@ from pcmb.config.types import (
     Probability,
     Real,
     Section,
+    Stop,
     count,
     tagged_by_key,
     unique,
@@ -240,19 +241,11 @@ class TimeGridSpec(Section):
     ``numpy.geomspace``)."""
 
     start: Real = Field(default=0.0, description="first output time (> 0 for spacing: log)")
-    stop: Real = Field(description="last output time (> start)")
+    stop: Stop = Field(description="last output time (> start)")
     points: Points = Field(description="number of output times")
     spacing: Literal["linear", "log"] = Field(
         default="linear", description="even steps (linear) or even ratios (log)"
     )
-
-    @field_validator("stop")
-    @classmethod
-    def _after_start(cls, stop: float, info: ValidationInfo) -> float:
-        start = info.data.get("start")
-        if start is not None and not stop > start:
-            raise ValueError(f"expected stop > start = {start!r}, found {stop!r}")
-        return stop
 
     @field_validator("spacing")
     @classmethod

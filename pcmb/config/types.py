@@ -17,6 +17,7 @@ from pydantic import (
     Discriminator,
     Field,
     Tag,
+    ValidationInfo,
 )
 from pydantic_core import PydanticCustomError
 
@@ -76,6 +77,13 @@ def unique(values: list[Any]) -> list[Any]:
     return values
 
 
+def _past_start(stop: float, info: ValidationInfo) -> float:
+    start = info.data.get("start")
+    if start is not None and not stop > start:
+        raise ValueError(f"expected stop > start = {start!r}, found {stop!r}")
+    return stop
+
+
 def count(**bounds: int) -> Any:
     """An integer type with bounds; the bounds come before the validator so that they
     stay plain JSON Schema keywords (minimum, maximum)."""
@@ -85,6 +93,8 @@ def count(**bounds: int) -> Any:
 Real = Annotated[float, BeforeValidator(reject_text_and_bool("a number"))]
 PositiveReal = Annotated[float, Field(gt=0), BeforeValidator(reject_text_and_bool("a number"))]
 NonNegativeReal = Annotated[float, Field(ge=0), BeforeValidator(reject_text_and_bool("a number"))]
+#: The end of a section's span: a number past its ``start`` (a field declared before it).
+Stop = Annotated[Real, AfterValidator(_past_start)]
 Probability = Annotated[float, Field(gt=0, lt=1), BeforeValidator(reject_text_and_bool("a number"))]
 NonNegativeInt = count(ge=0)
 PositiveInt = count(ge=1)

@@ -9,11 +9,13 @@ estimated error of the mean and std, relative to the output's largest std over t
 diagnostics' scale, ``docs/diagnostics.md``), is :func:`box_errors`' largest over the inputs:
 the change d_k the grid's last level in input k makes (the grid against the grid one level
 lower in k alone), carried to the grid's degree by the decay of the coefficients along k
-(:func:`error_ratio`). The first round (level 1) can so stop on its own.
+(:func:`error_ratio`), or, where larger, what the squared coefficients past the grid's degree
+in k add to its std (:func:`tail_share`). The first round (level 1) can so stop on its own.
 The rounds end when it is below ``diagnostics.tolerance``, or, with an ``order-budget``
 warning, when the next level's order would pass :data:`MAX_ORDER` (or its rule has no next
 level) or its grid ``method.max_runs``; a failed node ends them with a ``nodes-failed`` record,
-a value that is not finite at a node counted as run with a ``statistic-non-finite`` one.
+a value that is not finite at a node counted as run with a ``statistic-non-finite`` one (joined
+to the statistics' record of that output).
 
 All inputs are raised together (kind ``adaptive`` with ``basis: tensor`` raises the one with
 the largest estimated error, one at a time).
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import numpy as np
@@ -47,10 +49,21 @@ from pcmb.result import (
     WarningRecord,
 )
 
-__all__ = ["MAX_ORDER", "OrderRefinement", "RefinementReport", "box_errors", "error_ratio"]
+__all__ = [
+    "MAX_ORDER",
+    "OrderRefinement",
+    "RefinementReport",
+    "box_errors",
+    "error_ratio",
+    "tail_share",
+]
 
 #: Highest order ``order: auto`` tries.
 MAX_ORDER = 24
+#: The fall of the estimate over the last level that says a response converges with order.
+CONVERGING = 10.0
+#: Degrees past a grid's own over which :func:`tail_share` sums the extrapolated norms.
+TAIL_DEGREES = 80
 #: Steepest fall of the norms' ratios per log of the degree still read as an entire
 #: function's (exp's ratios fall like 1/q: 1); a steeper one is a lucky small norm at the top.
 MAX_STEEPENING = 1.5
@@ -61,7 +74,8 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
     (a box of levels L_k) from its (N, outputs, T) ``values``, relative to each output's
     largest std over time: d_k times :func:`error_ratio` along k, with d_k the largest change
     of the mean and std between the box and the box one level lower in input k (the lower
-    box's error in k).
+    box's error in k), or, where larger, the std's truncation along k: what the squared norms
+    past the box's degree in k (:func:`tail_share`) add to its std.
     """
     distributions, rules = grid.distributions, grid.rules
     coefficients = grid.project(values)
@@ -83,7 +97,14 @@ def box_errors(grid: SparseGrid, values: NDArray[np.float64]) -> NDArray[np.floa
             float(root_sum_of_squares(coefficients[degree[:, k] == p]).max())
             for p in range(int(degree[:, k].max()) + 1)
         ]
-        errors[k] = relative.max() * error_ratio(norms, rule.projection_degree(int(top) - 1))
+        ratio = error_ratio(norms, rule.projection_degree(int(top) - 1))
+        # The std's truncation: sqrt(std² + the squared norms past the top degree) - std.
+        missing = math.sqrt(tail_share(norms)) * root_sum_of_squares(
+            coefficients[degree[:, k] == len(norms) - 1]
+        )
+        truncation = (np.hypot(std, missing) - std).max(axis=-1)
+        truncated = np.divide(truncation, spread, out=np.zeros_like(truncation), where=spread > 0)
+        errors[k] = max(relative.max() * ratio, truncated.max())
     return errors
 
 
@@ -93,16 +114,66 @@ def error_ratio(norms: list[float], low: int) -> float:
 
     A grid of degree p integrates degree 2p + 1 exactly, so its error is carried by the
     coefficients from degree 2p + 2: the ratio is the product of the per-degree ratios
-    r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated from the upper half of
-    the degrees (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the
-    largest: a symmetry that zeroes every other degree does not fool it), read through their
-    upper envelope (max over degrees >= q: nor does a lucky small norm). r_q = ρ (p/q)^s:
-    ρ = exp of the least-squares slope of log n_q (at most 1); s, the steepening, in [0, 1]
-    the ratios' least fall per log of the degree where each ratio is below the one before
-    (faster than geometric, as an entire function's, whose r_q fall like 1/q), else 0 (so
-    from a single ratio, or where a fall passes :data:`MAX_STEEPENING`: a lucky small norm
-    at the top). 1 where fewer than two norms are above round-off (the decay cannot be told).
+    r_q = n_q / n_(q-1) over degrees 2 low + 3 .. 2p + 2, extrapolated by :func:`_decay`'s
+    r_q = ρ (p/q)^s. Where the norms of the top two degrees are round-off (:data:`BLIND` of the
+    largest from degree 1), the grid holds a polynomial response exactly along k: their size.
+    Else 1 where fewer than two norms are above round-off (the decay cannot be told).
     """
+    resolved = _resolved(norms)
+    if resolved is not None:
+        return resolved
+    decay = _decay(norms)
+    if decay is None:
+        return 1.0
+    slope, steepening = decay
+    top = len(norms) - 1
+    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
+    count = last - first + 1
+    factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
+    log = slope * count - steepening * factorials
+    return float(np.exp(min(0.0, log)))
+
+
+def tail_share(norms: list[float]) -> float:
+    """Σ_(q > p) n_q² / n_p²: the squared norms past the grid's degree p, which its std
+    misses, against the top one's, from the norms n_0..n_p of the coefficients of degree
+    0..p along an input. They are extrapolated as r_q = r_p (p/q)^s from the last ratio r_p of
+    the upper envelope of the upper half of the degrees (s: :func:`_decay`'s steepening) over
+    :data:`TAIL_DEGREES` degrees; 0 where the grid holds the response exactly, the decay
+    cannot be told or the top norm does not fall.
+    """
+    decay = _decay(norms)
+    if _resolved(norms) is not None or decay is None:
+        return 0.0
+    top = len(norms) - 1
+    upper = np.maximum.accumulate(np.array(norms[max(1, top // 2) :])[::-1])[::-1]
+    if not 0.0 < upper[-1] < upper[-2]:
+        return 0.0
+    degrees = np.arange(top + 1, top + 1 + TAIL_DEGREES)
+    logs = 2 * (math.log(upper[-1] / upper[-2]) - decay[1] * np.log(degrees / top))
+    return float(np.exp(np.cumsum(logs)).sum())
+
+
+def _resolved(norms: list[float]) -> float | None:
+    """The size of the norms of the top two degrees against the largest from degree 1 where
+    they are round-off (a polynomial response of lower degree along the input, held
+    exactly), else ``None``."""
+    variation, last = max(norms[1:], default=0.0), max(norms[-2:])
+    if len(norms) > 2 and variation > 0.0 and last <= BLIND * variation:
+        return last / variation
+    return None
+
+
+def _decay(norms: list[float]) -> tuple[float, float] | None:
+    """(log ρ, s) of the norms' decay r_q = ρ (p/q)^s, read from the upper half of the degrees
+    (p/2 <= q <= p, q >= 1) of the norms above round-off (:data:`BLIND` of the largest: a
+    symmetry that zeroes every other degree does not fool it), through their upper envelope
+    (max over degrees >= q: nor does a lucky small norm): ρ = exp of the least-squares slope
+    of log n_q (at most 1); s, the steepening, in [0, 1] the ratios' least fall per log of the
+    degree where each ratio is below the one before (faster than geometric, as an entire
+    function's, whose r_q fall like 1/q), else 0 (so from a single ratio, or where a fall
+    passes :data:`MAX_STEEPENING`: a lucky small norm at the top). ``None`` where fewer than
+    two norms are above round-off."""
     top = len(norms) - 1
     degrees = np.arange(max(1, top // 2), top + 1)
     found = np.array(norms)[degrees]
@@ -110,7 +181,7 @@ def error_ratio(norms: list[float], low: int) -> float:
     degrees = degrees[kept]
     found = np.maximum.accumulate(found[kept][::-1])[::-1]  # the upper envelope
     if degrees.size < 2:
-        return 1.0
+        return None
     slope = min(0.0, np.polyfit(degrees, np.log(found), 1)[0])
     logs = np.log(found[1:] / found[:-1])  # log r_q at degrees[1:]
     falls = -np.diff(logs) / np.diff(np.log(degrees[1:]))
@@ -120,12 +191,7 @@ def error_ratio(norms: list[float], low: int) -> float:
         and falls.min() > 0.0
         and falls.max() <= MAX_STEEPENING
     )
-    steepening = min(float(falls.min()), 1.0) if entire else 0.0
-    first, last = 2 * low + 3, 2 * top + 2  # the degrees whose ratios the error falls by
-    count = last - first + 1
-    factorials = math.lgamma(last + 1) - math.lgamma(first) - count * math.log(top)
-    log = slope * count - steepening * factorials
-    return float(np.exp(min(0.0, log)))
+    return slope, min(float(falls.min()), 1.0) if entire else 0.0
 
 
 def _moments(
@@ -268,26 +334,51 @@ class OrderRefinement(GrowingGrid):
                 "highest order auto tries (pcmb.designs.refine.MAX_ORDER)"
             )
             self._stopped = (
-                self._ended(
-                    "order-budget",
-                    f"{nodes.size} runs, as {limit}",
-                    "more runs would not help: order alone may not converge (a steep, "
-                    "discontinuous or chaotic response), follow the diagnostics' remedy",
-                ),
+                self._ended("order-budget", f"{nodes.size} runs, as {limit}", self._top_advice()),
             )
             return None
         if grid.size > self.max_runs:
+            fell = self._fell()
+            advice = (
+                f"raise method.max_runs: {fell}: the response converges with order"
+                if fell
+                else "raise method.max_runs, or follow the diagnostics' remedy (order alone may "
+                "not converge for a steep, discontinuous or chaotic response)"
+            )
             self._stopped = (
                 self._ended(
                     "order-budget",
                     f"{nodes.size} of {self.max_runs} runs (method.max_runs), as level {level + 1} "
                     f"would take {grid.size - nodes.size} more",
-                    "raise method.max_runs, or follow the diagnostics' remedy (order alone may not "
-                    "converge for a steep, discontinuous or chaotic response)",
+                    advice,
                 ),
             )
             return None
         return self._adopt(grid)
+
+    def _fell(self) -> str:
+        """``the estimate fell from A to B with the last level`` where the last level cut it by
+        :data:`CONVERGING` or more (the response converges with order: an analytic one), else
+        ""."""
+        if len(self._history) < 2:
+            return ""
+        before, last = self._history[-2][2], self._history[-1][2]
+        if last * CONVERGING > before:
+            return ""
+        return f"the estimate fell from {before:.3g} to {last:.3g} with the last level"
+
+    def _top_advice(self) -> str:
+        """What to do at the highest order: elements or the tolerance for a response that
+        converges with order (:meth:`_fell`), else order alone may not converge."""
+        if fell := self._fell():
+            return (
+                f"{fell}: the response converges with order, but not within the highest; split "
+                "it into elements (method.elements: auto) or loosen diagnostics.tolerance"
+            )
+        return (
+            "more runs would not help: order alone may not converge (a steep, discontinuous or "
+            "chaotic response), follow the diagnostics' remedy"
+        )
 
     def _named(self, nodes: NodeSet, rows: NDArray[np.intp], shown: int = 5) -> str:
         """``node 3 (a=0.5, b=2), ...``: the first ``shown`` of ``nodes``' ``rows``."""
@@ -332,8 +423,28 @@ class OrderRefinement(GrowingGrid):
             runs=np.array([h[1] for h in history], dtype=np.int64),
             indicator=np.array([h[2] for h in history], dtype=float),
         )
-        warnings = recovery.warnings + self._stopped
-        return Recovery(recovery.expansions, warnings, RefinementReport(refinement))
+        return Recovery(
+            recovery.expansions,
+            _folded(recovery.warnings, self._stopped),
+            RefinementReport(refinement),
+        )
+
+
+def _folded(
+    found: tuple[WarningRecord, ...], ended: tuple[WarningRecord, ...]
+) -> tuple[WarningRecord, ...]:
+    """``found`` and the records of what ended the rounds, each of these joined to the record
+    of its code and output found already (the statistics' ``statistic-non-finite`` of an
+    output that ended them): one record per problem."""
+    records = list(found)
+    for record in ended:
+        keys = [(w.code, w.output) for w in records]
+        if (record.code, record.output) in keys:
+            i = keys.index((record.code, record.output))
+            records[i] = replace(records[i], message=f"{records[i].message}; {record.message}")
+        else:
+            records.append(record)
+    return tuple(records)
 
 
 @dataclass(frozen=True)

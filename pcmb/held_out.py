@@ -1,0 +1,148 @@
+"""A study's held-out runs: how many it makes, where they go (placed to extend the design's
+nodes, or drawn), and what they found; the check itself is :mod:`pcmb.analysis.diagnostics`'s
+(``docs/diagnostics.md``)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pcmb.analysis.diagnostics import (
+    ELEMENT_POINTS,
+    FIRST_BATCH,
+    HELD_OUT_SEED,
+    HeldOut,
+    element_importance,
+    held_out_budget,
+    held_out_draws,
+    held_out_placed,
+    held_out_placed_elements,
+)
+from pcmb.chaos.inputs import Distribution
+from pcmb.chaos.nodes import NodeSet
+from pcmb.designs import NodeDesign
+from pcmb.result import Status, WarningRecord
+
+if TYPE_CHECKING:
+    from pcmb.run.executor import RunResult
+
+__all__ = ["HeldOutDraws", "HeldOutPlan"]
+
+#: The grids of one input whose held-out runs are placed (:meth:`HeldOutPlan.placed`).
+_PLACED_GRIDS = frozenset(
+    {"tensor-gauss", "tensor-nested", "smolyak", "adaptive", "adaptive tensor", "element-gauss"}
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldOutPlan:
+    """The held-out runs that check the expansions of a study's ``design`` of the germ
+    ``inputs``: ``validation`` of them (``method.validation``; ``None``: as many as the
+    verdict needs, within the budget), drawn from ``seed`` (``method.seed``)."""
+
+    design: NodeDesign
+    inputs: Mapping[str, Distribution]
+    seed: int
+    validation: int | None
+
+    def runs(self, design_runs: int) -> tuple[int, int]:
+        """(first batch, most in all) of the held-out runs that check an expansion of
+        ``design_runs`` runs: ``validation`` both when it is set, else a first batch of at
+        most ``FIRST_BATCH`` and at most :func:`~pcmb.analysis.diagnostics.held_out_budget`
+        in all, the rest drawn only where the verdict is undecided; placed runs
+        (:meth:`placed`) all at once, as half of them can call a wrong result reliable (the
+        double well at order 7 with 4)."""
+        most = self._most(design_runs)
+        if self.validation is not None or self.placed():
+            return most, most
+        return min(FIRST_BATCH, most), most
+
+    def placed(self) -> bool:
+        """Whether the held-out runs are placed to extend the design's nodes
+        (:func:`~pcmb.analysis.diagnostics.held_out_placed`) rather than drawn: a grid of one
+        input (tensor, ``order: auto``'s, sparse, adaptive or multi-element, unless its
+        elements cannot hold the check's runs: ``ELEMENT_POINTS``), where a random sample
+        wastes the few runs."""
+        grid = self.design.record().grid
+        if len(self.inputs) != 1 or grid not in _PLACED_GRIDS:
+            return False
+        if grid != "element-gauss":
+            return True
+        own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
+        return self._most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
+
+    def _most(self, design_runs: int) -> int:
+        """The most held-out runs of the check: ``validation``, else the budget."""
+        if self.validation is not None:
+            return self.validation
+        return held_out_budget(design_runs)
+
+    def draws(
+        self,
+        count: int,
+        design: NDArray[np.float64],
+        values: Mapping[str, NDArray[np.float64]] | None = None,
+        batch: int = 0,
+    ) -> HeldOutDraws:
+        """Where the ``count`` held-out runs of batch ``batch`` go (seed ``seed + 7919 +
+        batch``), placed to extend the design's nodes ``design`` (germ points) where
+        :meth:`placed` (per element of a multi-element design, where its node ``values`` say
+        it may err most), else drawn."""
+        seed = self.seed + HELD_OUT_SEED + batch
+        placed = self.placed()
+        partition = getattr(self.design, "partition", None)
+        if placed and partition is not None:
+            # Each element's own nodes (not those of the elements split on the way).
+            where = self.design.node_elements
+            own = where >= 0
+            design, values = design[own], {name: y[own] for name, y in (values or {}).items()}
+            importance = element_importance(partition, design, where[own], values)
+            draws, weights = held_out_placed_elements(
+                partition, design, where[own], importance, count
+            )
+        elif placed:
+            # Leja points extending the nodes: with them, a far richer interpolant.
+            draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)
+        else:
+            # A Latin hypercube, normal inputs widened into their tails (weighted back): each
+            # input's range is met evenly, which steadies the estimated errors of the
+            # statistics against a few runs missing where the error sits.
+            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+        return HeldOutDraws(seed, draws, weights, placed)
+
+
+@dataclasses.dataclass(frozen=True)
+class HeldOutDraws:
+    """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
+    ``placed`` or drawn (:meth:`HeldOutPlan.draws`)."""
+
+    seed: int
+    nodes: NodeSet
+    weights: NDArray[np.float64]
+    placed: bool
+
+    def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
+        """The held-out runs made (``found``), and a ``nodes-failed`` record naming those that
+        failed (``regress`` leaves them out)."""
+        ok = found.status == Status.OK
+        held_out = HeldOut(
+            self.seed,
+            self.nodes.nodes,
+            self.nodes.params,
+            found.values,
+            ok,
+            self.weights,
+            self.placed,
+        )
+        if not found.failures:
+            return held_out, ()
+        failed = WarningRecord(
+            "nodes-failed",
+            f"{len(found.failures)} of {self.nodes.size} held-out run(s) failed and were left out "
+            f"of the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
+        )
+        return held_out, (failed,)
