@@ -73,7 +73,7 @@ def _study(tmp_path: Path, entry: str, inputs: int, method: str, stop: float, *e
         time: {{start: 0.0, stop: {stop}, points: {int(stop * 20) + 1}}}
         inputs: {{{", ".join(f"{n}: {law}" for n in names)}}}
         method: {method}
-        execution: {{jobs: 1, backend: loky}}
+        execution: {{backend: inprocess}}
         output: out.h5
         """
     )
