@@ -1205,6 +1205,7 @@ class Study:
             axes=result.axes,
             nominal=result.nominal,
             budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
+            design_error=None if result.report is None else result.report.statistics_error(),
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -547,6 +547,11 @@ class AdaptiveReport(RecordReport):
 
     adaptive: AdaptiveFit
 
+    def statistics_error(self) -> float | None:
+        """The last round's estimated error (``None`` before any round)."""
+        estimate = self.adaptive.estimate
+        return estimate if math.isfinite(estimate) else None
+
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: runs and estimated error; per input: what it reached."""
         fit = self.adaptive
