@@ -93,18 +93,19 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     config = pcmb.load_config(ROOT / "configs" / "mr_damper.yaml")
     study = pcmb.Study.from_config(config)
+    paper = study.method.model_dump(exclude_unset=True)  # the config's method: keys
     studies = {
         f"Monte Carlo ({MONTE_CARLO} runs)": study.replace(
-            method="montecarlo", samples=MONTE_CARLO, seed=1
+            method={"kind": "montecarlo", "samples": MONTE_CARLO, "seed": 1}
         ),
         "chaos order 3 (the paper's)": study,
-        "order: auto": study.replace(order="auto"),
-        "elements: auto, order 3": study.replace(elements="auto"),
+        "order: auto": study.replace(method={**paper, "order": "auto"}),
+        "elements: auto, order 3": study.replace(method={**paper, "elements": "auto"}),
         "elements: auto, order 3, to 0.01": study.replace(
-            elements="auto", diagnostics_tolerance=0.01
+            method={**paper, "elements": "auto"}, diagnostics={"tolerance": 0.01}
         ),
         "elements: auto, order 5, to 0.01": study.replace(
-            order=5, elements="auto", diagnostics_tolerance=0.01
+            method={**paper, "order": 5, "elements": "auto"}, diagnostics={"tolerance": 0.01}
         ),
     }
     start = time.perf_counter()

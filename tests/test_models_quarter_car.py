@@ -227,12 +227,15 @@ def mr_damper_remedy():
     """The MR damper to t = 6 s (61 times) and its remedy's result, ``elements: auto`` at
     order 3 to 1 % of the largest std: the study of both Fig. 11 tests, run once."""
     config = pcmb.load_config(CONFIGS_DIR / "mr_damper.yaml")
-    study = pcmb.Study.from_config(config).replace(
-        times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
+    study = pcmb.Study.from_config(config, {"backend": "inprocess", "nominal_run": False})
+    study = study.replace(times=np.linspace(0.0, 6.0, 61))
+    remedy = study.replace(
+        method={**study.method.model_dump(exclude_unset=True), "elements": "auto"},
+        diagnostics={"tolerance": 0.01},
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        return study, study.replace(elements="auto", diagnostics_tolerance=0.01).run()
+        return study, remedy.run()
 
 
 @pytest.mark.slow
@@ -252,7 +255,10 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy(mr_damper_remedy):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
         # All runs in one stacked solve: its per-step overhead once, not once per 128 runs.
-        carlo = study.replace(method="montecarlo", samples=runs, seed=1, chunk_size=runs).run()
+        carlo = study.replace(
+            method={"kind": "montecarlo", "samples": runs, "seed": 1},
+            execution={**study.execution.model_dump(exclude_unset=True), "chunk_size": runs},
+        ).run()
         paper = study.run()
     sampled = carlo.values["x1"][carlo.ok][:, -1]
     std = sampled.std(ddof=1)
