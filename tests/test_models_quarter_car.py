@@ -247,8 +247,11 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy(mr_damper_remedy):
     The paper's order 3 (4 runs) is far outside them: x1(6 s) has 13 extrema in I, which a
     cubic cannot follow. The remedy the tool leads to, ``elements: auto`` at order 3, asked
     for 1 % of the largest std (below the 1.7 % by which 2000 Monte Carlo runs err), agrees
-    within 3 standard errors for the mean and the std and within the 99 % two-sample
-    Kolmogorov–Smirnov distance for the distribution.
+    within what it was asked plus 3 standard errors for the mean and the std (1 % of the
+    largest std is 2.7 and 6.8 of them at 6 s). Its partition on this grid (61 times) also
+    holds the distribution within the 99 % two-sample Kolmogorov–Smirnov distance (0.032
+    from the reference of scripts/mr_damper_fig11.py); the tolerance does not bound the PDF,
+    and on the script's 601 times the partition chosen is 0.066 from it.
     """
     study, remedy = mr_damper_remedy
     runs = 1000
@@ -277,19 +280,21 @@ def test_mr_damper_fig_11_holds_only_with_the_remedy(mr_damper_remedy):
 
     assert min(departures(paper)) > 5
     assert np.isfinite(paper.diagnostics["x1"].failing_from)  # and the tool says so
+    asked = 0.01 * carlo.values["x1"][carlo.ok].std(axis=0, ddof=1).max()
     mean_z, std_z, ks = departures(remedy)
-    assert mean_z < 3 and std_z < 3 and ks < 1  # its verdict: the test below
+    assert mean_z < asked / mean_error + 3 and std_z < asked / std_error + 3
+    assert ks < 1  # its verdict: the test below
 
 
 @pytest.mark.slow
 def test_mr_damper_remedy_is_not_flagged_by_its_held_out_check(mr_damper_remedy):
-    """The remedy of Fig. 11 (``elements: auto``, order 3, to 1 %: 10 elements, 76 runs) is
-    0.24 % off at worst over t in [0, 6] (against 64 elements of order 7, which 39 elements
-    of order 9 match to 1e-5). Its held-out check once flagged it from t = 2.3: "mean off by
-    an estimated 1.3 % (± 0.44 % from 19 held-out runs)", 98 % of it the unseen mean of the
-    two elements without placed runs (I in [0.375, 0.5] and [0.75, 1]), extrapolated from
-    their own degrees 1-3, whose two neighbour averages read flat: 560 and 960 times their
-    true errors (issue 23; the unit case in tests/test_held_out.py)."""
+    """The remedy of Fig. 11 (``elements: auto``, order 3, to 1 %: 9 elements, 68 runs) is
+    0.31 % off at worst over t in [0, 6] (against the reference of scripts/mr_damper_fig11.py,
+    100 elements of 8 Gauss–Legendre points). Its held-out check once flagged it from t = 2.3:
+    "mean off by an estimated 1.3 % (± 0.44 % from 19 held-out runs)", 98 % of it the unseen
+    mean of the two elements without placed runs (I in [0.375, 0.5] and [0.75, 1]),
+    extrapolated from their own degrees 1-3, whose two neighbour averages read flat: 560 and
+    960 times their true errors (issue 23; the unit case in tests/test_held_out.py)."""
     _, remedy = mr_damper_remedy
     assert np.isnan(remedy.diagnostics["x1"].failing_from)
 
