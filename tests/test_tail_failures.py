@@ -1,0 +1,125 @@
+"""Held-out runs that fail in the tails a drawn check widens its normal inputs into, beyond the
+design's nodes: left out of the check, never a reason to stop a study (docs/diagnostics.md)."""
+
+import functools
+
+import executor_models as em
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.cli import main
+from pcmb.config.schema import ExecutionSpec
+from pcmb.errors import ModelRunError
+from pcmb.result import Status
+from pcmb.run.executor import run_nodes
+
+TIMES = np.linspace(0.0, 2.0, 21)
+INPUTS = {"K": pcmb.Normal(1.0, 0.2), "c": pcmb.Uniform(0.5, 1.5)}
+
+#: A stiffness that must be positive: K ~ N(1, 0.2) is negative 5 σ below its mean, where
+#: the check's widened draws (N(0, 4.2²) in the germ) often go, the design's nodes never.
+STIFFNESS_MODEL = """\
+import numpy as np
+import pcmb
+
+
+@pcmb.batched(outputs=("y",))
+def stiffness(params, times):
+    K = params["K"]
+    if np.any(K <= 0):
+        raise ValueError(f"stiffness must be positive, got {K.min()}")
+    return {"y": np.sqrt(K)[:, None] * np.exp(-params["c"][:, None] * times)}
+"""
+
+
+@pcmb.batched(outputs=("y",))
+def stiffness(params, times):
+    K = params["K"]
+    if np.any(K <= 0):
+        raise ValueError(f"stiffness must be positive, got {K.min()}")
+    return {"y": np.sqrt(K)[:, None] * np.exp(-params["c"][:, None] * times)}
+
+
+def _tail_records(result):
+    return [w.message for w in result.warnings if w.code == "nodes-failed"]
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+@pytest.mark.parametrize("order", [4, "auto"], ids=["joined", "after-rounds"])
+@pytest.mark.parametrize("seed", range(5))
+def test_a_held_out_run_failing_in_a_widened_tail_does_not_abort(seed, order):
+    """Under ``on_failure: abort`` the study finishes; the failed tail runs are left out of the
+    check and named, with the input whose tail they lie in and the model's error."""
+    study = pcmb.Study(
+        stiffness,
+        INPUTS,
+        TIMES,
+        method={"kind": "collocation", "order": order, "seed": seed},
+        execution={"backend": "inprocess", "on_failure": "abort"},
+    )
+    result = study.run()
+    held_out = result.held_out
+    failed = ~held_out.ok
+    assert np.all(held_out.params[failed, 0] <= 0)
+    assert np.all(held_out.params[~failed, 0] > 0)
+    if failed.any():
+        (record,) = _tail_records(result)
+        assert f"{failed.sum()} of {failed.size} held-out run(s) failed in the tails of K" in record
+        assert "beyond the design's nodes" in record
+        assert "stiffness must be positive" in record
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_pcmb_run_finishes_a_study_whose_held_out_runs_fail_in_the_tails(tmp_path, capsys):
+    """The same study from a config file: exit 0, and the file holds the record."""
+    (tmp_path / "stiff.py").write_text(STIFFNESS_MODEL)
+    config = tmp_path / "stiff.yaml"
+    config.write_text(
+        "name: stiff\n"
+        "model: {kind: python, entry: stiff.py:stiffness, params: {K: 1.0, c: 1.0}}\n"
+        "time: {start: 0.0, stop: 2.0, points: 21}\n"
+        "inputs:\n"
+        "  K: {dist: normal, mean: 1.0, std: 0.2}\n"
+        "  c: {dist: uniform, low: 0.5, high: 1.5}\n"
+        "method: {kind: collocation, order: 4, seed: 1}\n"
+        "execution: {backend: inprocess, on_failure: abort}\n"
+        f"output: {tmp_path / 'stiff.h5'}\n"
+    )
+    assert main(["run", str(config)]) == 0
+    result = pcmb.load(tmp_path / "stiff.h5")
+    assert not result.held_out.ok.all()  # seed 1 draws K = -1.1 (germ -10.6)
+    assert any("in the tails of K" in record for record in _tail_records(result))
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_a_held_out_run_failing_within_the_design_s_range_still_aborts():
+    """A held-out run inside the design's nodes in every input is no tail draw: its failure
+    stops the study under ``on_failure: abort``, as before."""
+    inputs = {"a": pcmb.Normal(2.0, 0.2), "b": pcmb.Uniform(0.0, 1.0)}
+    settings = {
+        "method": {"kind": "collocation", "order": 4, "seed": 3},
+        "outputs": ["y"],
+        "execution": {"backend": "inprocess", "on_failure": "abort"},
+    }
+    plain = pcmb.Study(em.RaisingRamp, inputs, TIMES, params={"bad": []}, **settings).run()
+    reach = np.abs(plain.germ[:, 0]).max()
+    inside = np.flatnonzero(np.abs(plain.held_out.germ[:, 0]) < reach)
+    assert inside.size, "no held-out run inside the design's range: pick another seed"
+    bad = [plain.held_out.params[inside[0], 0]]
+    study = pcmb.Study(em.RaisingRamp, inputs, TIMES, params={"bad": bad}, **settings)
+    with pytest.raises(ModelRunError, match="held-out run"):
+        study.run()
+
+
+def test_a_tolerated_failure_does_not_stop_an_aborting_campaign():
+    """``stop_on_failure`` stops dispatching at a failure, but not at a ``tolerated`` node's."""
+    params = {"a": np.array([-1.0, 1.0, 2.0, 3.0])}
+    model = functools.partial(em.RaisingRamp, [-1.0])
+    execution = ExecutionSpec(backend="inprocess")
+    run = {"execution": execution, "chunk_size": 1, "stop_on_failure": True}
+    stopped = run_nodes(model, params, TIMES, ["y"], **run)
+    assert np.any(stopped.status == Status.PENDING)
+    tolerated = np.array([True, False, False, False])
+    went_on = run_nodes(model, params, TIMES, ["y"], tolerated=tolerated, **run)
+    assert list(went_on.status) == [Status.FAILED, Status.OK, Status.OK, Status.OK]
