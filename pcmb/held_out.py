@@ -92,11 +92,12 @@ class HeldOutPlan:
         """Where the ``count`` held-out runs of batch ``batch`` go (seed ``seed + 7919 +
         batch``), placed to extend the design's nodes ``design`` (germ points) where
         :meth:`placed` (per element of a multi-element design, where its node ``values`` say
-        it may err most), else drawn, with the runs beyond the design's nodes in a widened
+        it may err most), else drawn; with the runs beyond the design's nodes in a normal
         input marked (:attr:`HeldOutDraws.beyond`)."""
         seed = self.seed + HELD_OUT_SEED + batch
         placed = self.placed()
-        names = tuple(self.inputs)
+        normal = [isinstance(d.family, Hermite) for d in self.inputs.values()]
+        low, high = design.min(axis=0), design.max(axis=0)
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).
@@ -115,20 +116,16 @@ class HeldOutPlan:
             # input's range is met evenly, which steadies the estimated errors of the
             # statistics against a few runs missing where the error sits.
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
-            widened = [isinstance(d.family, Hermite) for d in self.inputs.values()]
-            germ = draws.nodes
-            outside = (germ < design.min(axis=0)) | (germ > design.max(axis=0))
-            return HeldOutDraws(seed, draws, weights, placed, names, outside & widened)
-        beyond = np.zeros(draws.nodes.shape, dtype=bool)
-        return HeldOutDraws(seed, draws, weights, placed, names, beyond)
+        beyond = ((draws.nodes < low) | (draws.nodes > high)) & normal
+        return HeldOutDraws(seed, draws, weights, placed, tuple(self.inputs), beyond)
 
 
 @dataclasses.dataclass(frozen=True)
 class HeldOutDraws:
     """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
     ``placed`` or drawn (:meth:`HeldOutPlan.draws`); ``beyond`` (K, n): where a run's germ
-    lies outside the design's nodes' in one of the germ ``inputs`` the draws widen into its
-    tails (a normal one), which the model need not stand (``docs/diagnostics.md``)."""
+    lies outside the design's nodes' in a normal one of the germ ``inputs``, a tail the check
+    explores (drawn widened, or placed) and the model need not stand (``docs/diagnostics.md``)."""
 
     seed: int
     nodes: NodeSet
