@@ -97,23 +97,34 @@ def test_pcmb_run_finishes_a_study_whose_held_out_runs_fail_in_the_tails(tmp_pat
 
 
 @pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
-def test_a_held_out_run_failing_within_the_design_s_range_still_aborts():
+def test_a_held_out_run_failing_within_the_design_s_range_still_aborts(tmp_path):
     """A held-out run inside the design's nodes in every input is no tail draw: its failure
-    stops the study under ``on_failure: abort``, as before."""
-    inputs = {"a": pcmb.Normal(2.0, 0.2), "b": pcmb.Uniform(0.0, 1.0)}
+    stops the study under ``on_failure: abort``, as before; ``--resume`` then finishes it from
+    the journal, which holds a failed tail draw too, and runs none of the design's nodes."""
+    inputs = {"a": STIFFNESS, "b": pcmb.Uniform(0.0, 1.0)}
     settings = {
         "method": {"kind": "collocation", "order": 4, "seed": 3},
         "outputs": ["y"],
-        "execution": {"backend": "inprocess", "on_failure": "abort"},
+        "execution": {"backend": "inprocess", "on_failure": "abort", "nominal_run": False},
     }
-    plain = pcmb.Study(em.RaisingRamp, inputs, TIMES, params={"bad": []}, **settings).run()
-    reach = np.abs(plain.germ[:, 0]).max()
-    inside = np.flatnonzero(np.abs(plain.held_out.germ[:, 0]) < reach)
-    assert inside.size, "no held-out run inside the design's range: pick another seed"
-    bad = [plain.held_out.params[inside[0], 0]]
-    study = pcmb.Study(em.RaisingRamp, inputs, TIMES, params={"bad": bad}, **settings)
-    with pytest.raises(ModelRunError, match="held-out run"):
-        study.run()
+    plain = pcmb.Study(em.PositiveRamp, inputs, TIMES, params={"bad": [], "switch": ""}, **settings)
+    held_out = plain.run().held_out
+    assert not held_out.ok.all()  # a tail draw at a < 0
+    reach = np.abs(plain.node_set().nodes[:, 0]).max()
+    inside = np.flatnonzero(np.abs(held_out.germ[:, 0]) < reach)
+    switch = tmp_path / "switch"
+    switch.touch()
+    params = {"bad": [held_out.params[inside[-1], 0]], "switch": str(switch)}
+    study = pcmb.Study(em.PositiveRamp, inputs, TIMES, params=params, **settings)
+    with pytest.raises(ModelRunError, match="the model failed at 1 of 8 held-out run"):
+        study.run(tmp_path / "r.h5")
+    switch.unlink()
+    em.SwitchedRamp.RAN.clear()
+    resumed = study.run(tmp_path / "r.h5", resume=True)
+    design = set(map(tuple, plain.node_set().params.tolist()))
+    assert not design & set(em.SwitchedRamp.RAN)  # the design's runs come from the journal
+    np.testing.assert_array_equal(resumed.held_out.ok, held_out.ok)
+    assert any("in the tails of a" in record for record in _tail_records(resumed))
 
 
 def test_a_tolerated_failure_does_not_stop_an_aborting_campaign():
