@@ -153,12 +153,13 @@ class HeldOutDraws:
             self.weights,
             self.placed,
         )
-        tails = [f for f in found.failures if self.beyond[f.index].any()]
-        others = [f for f in found.failures if not self.beyond[f.index].any()]
+        tail = self.tails
+        tails = [f for f in found.failures if tail[f.index]]
+        others = [f for f in found.failures if not tail[f.index]]
         records = []
         if tails:
-            where = np.any([self.beyond[f.index] for f in tails], axis=0)
-            names = " and ".join(np.asarray(self.inputs)[where])
+            beyond = np.any([self.beyond[f.index] for f in tails], axis=0)
+            names = " and ".join(np.asarray(self.inputs)[beyond])
             where = f" in the tails of {names} beyond the design's nodes"
             records.append(_failed(tails, self.nodes.size, where, ""))
         if others:
