@@ -182,11 +182,6 @@ def test_elements_auto_held_to_two_elements_is_not_flagged_below_the_tolerance(t
     assert np.isnan(verdict["failing_from"])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="runs-all-equal does not enter the verdict (pcmb/analysis/diagnostics.py): inspect "
-    "and the report say 'reliable at every time' beside it and --strict exits 0",
-)
 def test_a_degenerate_design_without_a_check_is_not_called_reliable(tmp_path):
     """Done when, a degenerate design is flagged: |x1| |x2| (1 + t) at tensor order 1 puts both
     Gauss points of each input at ±1/√3, all 4 runs equal; with ``validation: 0`` the
