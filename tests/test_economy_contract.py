@@ -194,12 +194,6 @@ def test_a_degenerate_design_without_a_check_is_not_called_reliable(tmp_path):
     assert "reliable" not in checked.replace("UNRELIABLE", ""), checked
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the corrected LOO error is divided by a zero variance at t = 0 "
-    "(pcmb/designs/regression.py, pcmb/chaos/sparse_regression.py): 3.3e4 in the fit line, "
-    "a regression-loo record at t = 0 and the regression-budget message",
-)
 def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_path):
     """Item 5: exp(0.3 x1 t) cos((1 + 0.2 x2) t) equals 1 at t = 0 at every run. LARS fits it
     within 1e-4 of the std; the output that does not vary at t = 0 is recorded
