@@ -182,11 +182,6 @@ def test_elements_auto_held_to_two_elements_is_not_flagged_below_the_tolerance(t
     assert np.isnan(verdict["failing_from"])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="runs-all-equal does not enter the verdict (pcmb/analysis/diagnostics.py): inspect "
-    "and the report say 'reliable at every time' beside it and --strict exits 0",
-)
 def test_a_degenerate_design_without_a_check_is_not_called_reliable(tmp_path):
     """Done when, a degenerate design is flagged: |x1| |x2| (1 + t) at tensor order 1 puts both
     Gauss points of each input at ±1/√3, all 4 runs equal; with ``validation: 0`` the
@@ -199,12 +194,6 @@ def test_a_degenerate_design_without_a_check_is_not_called_reliable(tmp_path):
     assert "reliable" not in checked.replace("UNRELIABLE", ""), checked
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the corrected LOO error is divided by a zero variance at t = 0 "
-    "(pcmb/designs/regression.py, pcmb/chaos/sparse_regression.py): 3.3e4 in the fit line, "
-    "a regression-loo record at t = 0 and the regression-budget message",
-)
 def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_path):
     """Item 5: exp(0.3 x1 t) cos((1 + 0.2 x2) t) equals 1 at t = 0 at every run. LARS fits it
     within 1e-4 of the std; the output that does not vary at t = 0 is recorded

@@ -1346,14 +1346,23 @@ def diagnose(
     blind &= estimate + noise > tolerance
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
+    # Without held-out runs, design runs all equal at every time say nothing: where the
+    # nominal run differs the design missed the spread (it fails), else none can tell.
+    missed, spread = (
+        _all_equal(output, runs, times, nominal)
+        if holdout is None and runs.shape[0] > 1 and equal.all()
+        else (None, False)
+    )
+    if spread:
+        failing_from = float(times[0])
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
     holding = ~(times >= failing_from)  # every time where the verdict never fails
-    undecided = (estimate + noise > tolerance) & holding
+    undecided = ((estimate + noise > tolerance) | (spread is None)) & holding
     if checked is not None:
         records.extend(_inaccurate(output, checked, times, tolerance, holding, undecided))
-    if holdout is None and runs.shape[0] > 1 and equal.all():
-        records.append(_all_equal(output, runs, times, nominal))
+    if missed is not None:
+        records.append(missed)
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
@@ -1371,6 +1380,11 @@ def diagnose(
                 f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
                 f"{checked.count} held-out runs vary there, which no expansion can learn "
                 f"from; {evidence}"
+            )
+        elif spread:
+            evidence = (
+                f"the design's {runs.shape[0]} runs are all equal at every time while the "
+                "nominal run differs, which no expansion can learn from"
             )
         # The remedy reads the times from where the estimate passes the tolerance, which
         # the flag, waiting for the noise, may follow late.
@@ -1476,26 +1490,28 @@ def _all_equal(
     runs: NDArray[np.float64],
     times: NDArray[np.float64],
     nominal: ArrayLike | None,
-) -> WarningRecord:
+) -> tuple[WarningRecord, bool | None]:
     """The record of an output whose (N, T) runs are all equal at every time and that no
     held-out run checks: ``output-constant`` when the nominal run equals them too, else
-    ``runs-all-equal``."""
+    ``runs-all-equal``; and whether the nominal run saw a spread the design missed (``None``:
+    nothing else was run to tell)."""
     span = _span(times, np.ones(times.size, dtype=bool))
     unchecked = "no held-out run checks it (method.validation is 0)"
     if nominal is not None and np.size(nominal) == runs.shape[1]:
         with_nominal = np.vstack([runs, np.reshape(nominal, (1, -1))])
         if np.all(np.isfinite(with_nominal)) and not _varies(with_nominal, times.size).any():
-            return WarningRecord(
+            constant = WarningRecord(
                 "output-constant",
                 f"all {runs.shape[0]} runs of the design and the nominal run are equal at "
                 f"every time: the output looks constant, and {unchecked}",
                 output,
                 span,
             )
-        seen = "the nominal run differs, so the design missed the spread"
+            return constant, False
+        seen, spread = "the nominal run differs, so the design missed the spread", True
     else:
-        seen = "nothing else was run to compare"
-    return WarningRecord(
+        seen, spread = "nothing else was run to compare", None
+    record = WarningRecord(
         "runs-all-equal",
         f"all {runs.shape[0]} runs of the design are equal at every time: its std 0 says "
         f"nothing about the spread (nodes placed symmetric about a kink see none); {seen}, "
@@ -1503,6 +1519,7 @@ def _all_equal(
         output,
         span,
     )
+    return record, spread
 
 
 def _inaccurate(
