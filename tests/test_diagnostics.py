@@ -16,6 +16,7 @@ import pytest
 
 import pcmb
 from pcmb.analysis.diagnostics import (
+    TAIL_BOUND,
     TOLERANCE,
     HeldOut,
     HeldOutCheck,
@@ -247,23 +248,29 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
 
 
 def test_moment_weights_give_every_cubic_in_the_widened_germs_its_standard_normal_mean():
-    # Two normal germs drawn from N(0, λ²) (held_out_draws' λ) beside a uniform: numpy's
-    # Gauss–Hermite rule (exact for these polynomials) gives E ω g = E_N(0,1) g for every g
-    # of degree 3 or less in each normal germ.
+    # Two normal germs drawn from N(0, λ²) bounded to ±TAIL_BOUND (held_out_draws' law)
+    # beside a uniform: a Gauss–Legendre rule of that density (exact to round-off for these
+    # smooth integrands) gives E ω g = E_N(0,1) g for every g of degree 3 or less in each
+    # normal germ, up to the standard normal's mass beyond the bound (2e-9).
     inputs = (pcmb.Normal(0.0, 1.0), Uniform(0.0, 1.0), pcmb.Normal(2.0, 3.0))
-    x, w = np.polynomial.hermite_e.hermegauss(12)
-    a, b = (g.ravel() for g in np.meshgrid(x, x, indexing="ij"))
-    rule = np.outer(w, w).ravel() / (2 * np.pi)
-    width = _tail_width(2)
-    germ = np.column_stack([width * a, np.full(a.size, 0.3), width * b])
+    x, w = np.polynomial.legendre.leggauss(80)
+
+    def bounded(width):
+        density = w * np.exp(-((TAIL_BOUND * x / width) ** 2) / 2)
+        return TAIL_BOUND * x, density / density.sum()
+
+    z, rule = bounded(_tail_width(2))
+    a, b = (g.ravel() for g in np.meshgrid(z, z, indexing="ij"))
+    rule = np.outer(rule, rule).ravel()
+    germ = np.column_stack([a, np.full(a.size, 0.3), b])
     omega = _moment_weights(inputs, germ)
     z1, z2 = germ[:, 0], germ[:, 2]
     for g, exact in ((1, 1), (z1, 0), (z1**2, 1), (z1**3, 0), (z1**2 * z2**2, 1), (z1 * z2**3, 0)):
-        assert rule @ (omega * g) == pytest.approx(exact, abs=1e-12)
-    # One normal germ: a second moment of 1.44 where the importance weights' is 3.
-    one = (pcmb.Normal(0.0, 1.0),)
-    omega = _moment_weights(one, _tail_width(1) * x[:, None])
-    assert w @ omega**2 / np.sqrt(2 * np.pi) == pytest.approx(1.44, abs=0.01)
+        assert rule @ (omega * g) == pytest.approx(exact, abs=1e-8)
+    # One normal germ: a second moment of 1.72 where the importance weights' is 2.55.
+    z, rule = bounded(_tail_width(1))
+    omega = _moment_weights((pcmb.Normal(0.0, 1.0),), z[:, None])
+    assert rule @ omega**2 == pytest.approx(1.72, abs=0.01)
 
 
 def test_a_surrogate_is_linear_in_its_normal_inputs_only_without_their_higher_degrees():
