@@ -148,12 +148,6 @@ def test_a_heavy_tailed_hermite_response_is_flagged_at_its_true_crossing(tmp_pat
         assert file["validation/params"].shape[0] <= 8
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="placed check of a jump at x0 = 0.2 (pcmb/analysis/diagnostics.py): its mean error, "
-    "now 0.97 of the truth, moves by 0.3 of itself without its last two runs, so t = 0.3-0.5 is "
-    "undecided and the flag comes at t = 0.55, 8 % of the horizon after the crossing",
-)
 def test_a_jump_in_the_initial_condition_is_never_called_reliable_past_its_crossing(tmp_path):
     """Item 4, Done when: sign(x0 − 0.2)(1 − e^{−t}) + 0.1 x0, x0 ~ U[−1, 1], order 5: every
     time whose true error passes 5 % is flagged or undecided, and the flag is within 5 % of the

@@ -750,11 +750,12 @@ def placed_check(
     interpolant's own error from the degrees beyond it (:func:`_unseen_mean_error`; where the two
     means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
     Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
-    runs (of each element) are left out (infinite with no more runs than that), plus in quadrature
-    the next coefficient of each element without held-out runs (:func:`_unchecked`: nothing checks
-    it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
-    surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
-    upper bound that plus how far it moves.
+    runs (of each element) are left out, shrunk by the rate at which they converge
+    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
+    coefficient of each element without held-out runs (:func:`_unchecked`: nothing checks it), the
+    spread that of the larger estimate (the corrected mean's adds the unseen error); the surrogate
+    error is the L2 distance of the two surrogates (their coefficients' difference), its upper bound
+    that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
@@ -805,8 +806,14 @@ def placed_check(
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
         # elements without runs, which nothing checks, add their next coefficients.
-        mean_se = np.hypot(mean_error - fewer_mean_error, unchecked)
-        std_se = np.hypot(rich_std - fewer_std, unchecked)
+        mean_moved, std_moved = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
+        if count > 2 * PLACED_SPARE:
+            least_mean, least_std, _, least_unseen = moments(2 * PLACED_SPARE)
+            least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
+            mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
+            std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
+        mean_se = np.hypot(mean_moved, unchecked)
+        std_se = np.hypot(std_moved, unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
@@ -823,6 +830,15 @@ def placed_check(
         count,
         confidence,
     )
+
+
+def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) what is left of an estimate's error after its last move ``moved`` (without the last
+    ``PLACED_SPARE`` runs), the move ``before`` it (without as many more) giving the rate ρ:
+    a geometric convergence leaves ρ / (1 − ρ) of the last move; at most all of it."""
+    rate = np.divide(moved, before, out=np.ones_like(moved), where=before > 0)
+    left = np.divide(rate, 1.0 - rate, out=np.ones_like(rate), where=rate < 0.5)
+    return moved * left
 
 
 def _placed_pieces(
