@@ -700,15 +700,12 @@ def holdout_error(
 
 
 def _unseen_mean_error(
-    family: OrthonormalFamily,
-    nodes: NDArray[np.float64],
-    rule: NDArray[np.float64],
-    coefficients: NDArray[np.float64],
+    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
-    (M, T) ``coefficients``, where the design's ``rule`` (its interpolatory weights on the (N,)
-    germ ``nodes``) integrates every degree below M exactly, so that the interpolant's mean is
-    the design's own (zeros otherwise: the interpolant then measures that error itself).
+    """(T,) estimated error of the mean of the interpolant of (M, T) ``coefficients`` through
+    the (M,) germ ``points`` from the degrees beyond it: the error of its interpolatory rule
+    on them. Where the design's own rule integrates every degree below M exactly, the two
+    rules agree on every response, and this is the design mean's error itself.
 
     The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
     (all of them with fewer than ``_SHAPE_LAYERS`` after it), are fitted by a line against p
@@ -718,10 +715,10 @@ def _unseen_mean_error(
     once read flat extrapolated its 4-point rule's errors into a false alarm)."""
     first = coefficients.shape[0]
     last = UNSEEN_DEGREES * first
-    rule_errors = rule @ family.evaluate(nodes, last)
     # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
-    if first - 2 < _SHAPE_LAYERS or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
+    if first - 2 < _SHAPE_LAYERS:
         return np.zeros(coefficients.shape[1:])
+    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
     seen = np.arange(1.0, first - 1)
@@ -773,18 +770,19 @@ def placed_check(
     (:func:`held_out_placed`; per element, :func:`held_out_placed_elements`).
 
     Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
-    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than
-    the expansion (Leja points keep the interpolation well conditioned); its mean and std
-    (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
-    corrected mean and std, and their differences from the expansion's the estimated
-    errors, the mean's plus, where the two means agree exactly (K <= N placed runs beside N
-    Gauss nodes), the design rule's error on the degrees beyond the interpolant's
-    (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
-    ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
-    than that), plus in quadrature the next coefficient of each element without held-out runs
-    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the
-    corrected mean's adds the unseen error); the surrogate error is the L2 distance of the two
-    surrogates (their coefficients' difference), its upper bound that plus how far it moves.
+    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than the
+    expansion (Leja points keep the interpolation well conditioned); its mean and std (exact: c_0
+    and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the corrected mean and
+    std, and their differences from the expansion's the estimated errors, the mean's plus the
+    interpolant's own error from the degrees beyond it (:func:`_unseen_mean_error`; where the two
+    means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
+    Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
+    runs (of each element) are left out, shrunk by the rate at which they converge
+    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
+    coefficient of each element without held-out runs (:func:`_unchecked`: nothing checks it), the
+    spread that of the larger estimate (the corrected mean's adds the unseen error); the surrogate
+    error is the L2 distance of the two surrogates (their coefficients' difference), its upper bound
+    that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
@@ -821,8 +819,8 @@ def placed_check(
     unchecked = np.sqrt(
         sum(
             (p * _unchecked(own / scale)) ** 2
-            for p, (_, points, _, rule, own) in zip(probability[:, 0], pieces, strict=True)
-            if points.size == rule.size
+            for p, (_, points, _, nodes, own) in zip(probability[:, 0], pieces, strict=True)
+            if points.size == nodes
         )
     )
     mean_error, std_error = (
@@ -835,8 +833,14 @@ def placed_check(
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
         # elements without runs, which nothing checks, add their next coefficients.
-        mean_se = np.hypot(mean_error - fewer_mean_error, unchecked)
-        std_se = np.hypot(rich_std - fewer_std, unchecked)
+        mean_moved, std_moved = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
+        if count > 2 * PLACED_SPARE:
+            least_mean, least_std, _, least_unseen = moments(2 * PLACED_SPARE)
+            least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
+            mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
+            std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
+        mean_se = np.hypot(mean_moved, unchecked)
+        std_se = np.hypot(std_moved, unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
@@ -855,17 +859,25 @@ def placed_check(
     )
 
 
+def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) what is left of an estimate's error after its last move ``moved`` (without the last
+    ``PLACED_SPARE`` runs), the move ``before`` it (without as many more) giving the rate ρ:
+    a geometric convergence leaves ρ / (1 − ρ) of the last move; at most all of it."""
+    rate = np.divide(moved, before, out=np.ones_like(moved), where=before > 0)
+    left = np.divide(rate, 1.0 - rate, out=np.ones_like(rate), where=rate < 0.5)
+    return moved * left
+
+
 def _placed_pieces(
     expansion: ChaosExpansion | PiecewiseExpansion,
     node_germ: NDArray[np.float64],
     node_values: NDArray[np.float64],
     germ: NDArray[np.float64],
     observed: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, NDArray, NDArray]]]:
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
     """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
     element its family, points (its nodes, then its held-out runs, in its own coordinate),
-    their values, its nodes' interpolatory rule (:func:`interpolatory_weights`, computed
-    once) and its own (S, T) coefficients by degree. An element's
+    their values, its number of nodes and its own (S, T) coefficients by degree. An element's
     nodes are its own Gauss nodes, their values its expansion's there (which interpolates
     them): the design's runs also hold the nodes of the elements split on the way."""
     degrees = expansion.multi_index[:, 0]
@@ -881,8 +893,7 @@ def _placed_pieces(
         points = np.concatenate([node_germ, germ])
         values = np.vstack([node_values, observed])
         coefficients = own(expansion.coefficients, points.size)
-        rule = interpolatory_weights(family, node_germ)
-        return np.ones((1, 1)), [(family, points, values, rule, coefficients)]
+        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
     partition = expansion.partition
     distribution = partition.distributions[0]
     physical = distribution.to_physical(germ)
@@ -894,8 +905,7 @@ def _placed_pieces(
         points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
         values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
         coefficients = own(expansion.coefficients[e], points.size)
-        rule = interpolatory_weights(conditional.family, nodes)
-        pieces.append((conditional.family, points, values, rule, coefficients))
+        pieces.append((conditional.family, points, values, nodes.size, coefficients))
     return partition.probability[:, None], pieces
 
 
@@ -903,24 +913,32 @@ def _placed_moments(
     family: OrthonormalFamily,
     points: NDArray[np.float64],
     values: NDArray[np.float64],
-    rule: NDArray[np.float64],
+    nodes: int,
     own: NDArray[np.float64],
     scale: float,
     spare: int,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
-    mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
-    and held-out runs without its last ``spare`` held-out runs, over the scale."""
-    size = rule.size
-    kept = max(size, points.size - spare)
+    mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
+    interpolant's degrees, at most its mean's difference from the design's) of the interpolant
+    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
+    without its last ``spare`` held-out runs, over the scale."""
+    kept = max(nodes, points.size - spare)
     own = own / scale
     coefficients = _interpolated(family, points[:kept], values[:kept] / scale)
     missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
+    unseen = _unseen_mean_error(family, points[:kept], coefficients)
+    design = points[:nodes]
+    rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
+    if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
+        # The interpolant holds degrees the design's rule does not integrate: its mean measures
+        # the design's error, and its own error is, by the check's premise, at most that.
+        unseen = np.fmin(unseen, np.abs(coefficients[0] - own[0]))
     return (
         coefficients[0],
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
-        _unseen_mean_error(family, points[:size], rule, coefficients),
+        unseen,
     )
 
 
