@@ -98,7 +98,9 @@ def test_kink_mean_keeps_its_paired_standard_error(tmp_path):
     """The residual of |a - 0.3| + b at order 4 depends on a alone and its neighbouring pairs
     along a share it evenly: their standard error of the mean stands (6 times below sd/√K at
     K = 56), so a mean error 3 times the tolerance is flagged in most draws."""
-    result = _study(_kink, {"kind": "collocation", "order": 4, "validation": 0}, 0.05, tmp_path / "kink.h5")
+    result = _study(
+        _kink, {"kind": "collocation", "order": 4, "validation": 0}, 0.05, tmp_path / "kink.h5"
+    )
     rule, weights = np.polynomial.legendre.leggauss(200)
     a = np.concatenate([0.15 * (rule + 1), 0.3 + 0.35 * (rule + 1)])
     w = np.concatenate([0.15 * weights, 0.35 * weights])

@@ -420,7 +420,8 @@ def _standard_error(
         squares = (ordered[1:even:2] - ordered[0:even:2]) ** 2
         total = squares.sum(axis=0)
         shared = total * total >= PAIRED_EFFECTIVE * np.sum(squares * squares, axis=0)
-        found = np.where(shared, np.fmin(found, np.sqrt(np.mean(squares, axis=0) / (2 * count))), found)
+        paired = np.sqrt(np.mean(squares, axis=0) / (2 * count))
+        found = np.where(shared, np.fmin(found, paired), found)
     return found
 
 
