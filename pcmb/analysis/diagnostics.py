@@ -1134,6 +1134,27 @@ def verdict(
     return float(np.asarray(times, dtype=float)[above[0]]) if above.size else float("nan")
 
 
+def _flag_margin(checked: HeldOutCheck, tolerance: float) -> NDArray[np.float64]:
+    """(T,) how far the held-out estimate must pass the tolerance to be flagged: m times its
+    standard error s, where an error at the tolerance itself, estimated as ê ~ N(tolerance,
+    s²), has a sign-free |ê| beyond tolerance + m s with probability Φ(-m) + Φ(-m - 2
+    tolerance / s) = 1 - confidence. m is the one-sided quantile (1.28 at 90 %) where s is
+    small against the tolerance, the two-sided one (1.64) where it is large: there |ê| passes
+    the tolerance by 1.28 s on either side of a truth near zero, twice as often as the
+    confidence allows. Found by bisection; infinite where s is unknown (NaN)."""
+    tail = np.frompyfunc(lambda x: 0.5 * math.erfc(x / math.sqrt(2.0)), 1, 1)
+    miss = 1.0 - checked.confidence
+    spread = np.where(np.isnan(checked.spread), np.inf, checked.spread)
+    edge = np.divide(2.0 * tolerance, spread, out=np.full(spread.shape, np.inf), where=spread > 0)
+    low = np.full(spread.shape, STANDARD_NORMAL.inv_cdf(1.0 - miss))
+    high = np.full(spread.shape, STANDARD_NORMAL.inv_cdf(1.0 - miss / 2.0))
+    for _ in range(40):
+        middle = 0.5 * (low + high)
+        beyond = (tail(middle) + tail(middle + edge)).astype(float) > miss
+        low, high = np.where(beyond, middle, low), np.where(beyond, high, middle)
+    return high * spread
+
+
 @dataclass(frozen=True)
 class OutputDiagnostics:
     """How far one output's chaos expansion can be trusted, time by time.
@@ -1283,7 +1304,9 @@ def diagnose(
         if checked is None
         else np.where(np.isnan(checked.noise), np.inf, checked.noise)
     )
-    failing_from = verdict(times, estimate, tolerance, noise)
+    failing_from = verdict(
+        times, estimate, tolerance, noise if checked is None else _flag_margin(checked, tolerance)
+    )
     # A blind time fails unless the held-out runs, which saw the spread there, say it holds
     # beyond their noise (a switch the nodes have not reached yet, its spread still small).
     blind &= estimate + noise > tolerance
