@@ -124,11 +124,12 @@ def test_kink_mean_keeps_its_paired_standard_error(tmp_path):
 
 
 def test_error_far_below_noise_flags_at_most_the_confidence(tmp_path):
-    """exp(a + b/2) at order 3 is off by 9e-7 of its std, far below a tolerance of 1e-5 that
-    is itself far below the noise of 32 runs (1e-4): |estimate| passes the tolerance by 1.28
-    standard errors on either side of the truth, twice as often as the one-sided confidence
-    allows, unless the margin is that of the sign-free estimate."""
+    """exp(a + b/2) at order 4 is off by 2.4e-9 of its std, far below a tolerance of 1e-7
+    that is itself far below the noise of 16 runs (9e-6): |estimate| passes the tolerance by
+    1.28 standard errors on either side of the truth, twice as often as the one-sided
+    confidence allows (19.5 % of 200 checks), unless the margin is that of the sign-free
+    estimate (7 %)."""
     result = _study(
-        _smooth, {"kind": "collocation", "order": 3, "validation": 0}, 0.05, tmp_path / "s.h5"
+        _smooth, {"kind": "collocation", "order": 4, "validation": 0}, 0.05, tmp_path / "s.h5"
     )
-    assert _flag_share(result, _smooth, 32, 1e-5) <= 1 - CONFIDENCE
+    assert _flag_share(result, _smooth, 16, 1e-7) <= 1 - CONFIDENCE

@@ -112,9 +112,9 @@ FIRST_BATCH = 8
 #: The fewest held-out runs whose standard error is read from neighbouring pairs
 #: (:func:`_standard_error`); fewer are taken as independent draws.
 PAIRED_FROM = 16
-#: ... and the fewest pairs that must carry an input's sum of squared differences (Kish's
-#: effective count) for its pairs to stand.
-PAIRED_EFFECTIVE = 4
+#: ... and the largest kurtosis of an input's pair differences, P Σ d⁴ / (Σ d²)² over its P
+#: pairs, at which they stand (a normal's is 3; a few pairs carrying the sum push it to P).
+PAIRED_KURTOSIS = 10.0
 #: A placed check's noise: how far its richer surrogate's statistics move without its last
 #: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
 #: the centre.
@@ -405,7 +405,7 @@ def _standard_error(
     stratifies k and the others); the smallest over the inputs is the estimate, never
     above sd/√K. Below ``PAIRED_FROM`` runs the few pairs' estimate is itself too noisy (a
     bouncing ball at K = 8: three flags on noise in ten seeds), and sd/√K stands; so it does
-    along an input whose sum fewer than ``PAIRED_EFFECTIVE`` pairs carry, (Σ d²)² / Σ d⁴: a
+    along an input whose pair differences d have a kurtosis above ``PAIRED_KURTOSIS``: a
     residual spiking at one end of the input (a pole) puts its variance in the one slice
     whose pair is small in most draws (3 times too small a standard error at K = 56).
     """
@@ -419,7 +419,8 @@ def _standard_error(
         ordered = values[np.argsort(column, kind="stable")]
         squares = (ordered[1:even:2] - ordered[0:even:2]) ** 2
         total = squares.sum(axis=0)
-        shared = total * total >= PAIRED_EFFECTIVE * np.sum(squares * squares, axis=0)
+        tails = squares.shape[0] * np.sum(squares * squares, axis=0)
+        shared = tails <= PAIRED_KURTOSIS * total * total
         paired = np.sqrt(np.mean(squares, axis=0) / (2 * count))
         found = np.where(shared, np.fmin(found, paired), found)
     return found
