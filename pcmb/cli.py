@@ -503,7 +503,8 @@ def _inspect(path: str) -> str:
             f"({found.holdout.count} {'placed' if result.held_out.placed else 'drawn'} "
             "held-out runs)"
             if found.holdout is not None
-            else "no held-out runs"
+            else "no held-out runs, estimated error up to "
+            f"{np.nanmax(found.estimate, initial=0.0):.3g}"
         )
         axis = result.axis(name)
         undecided = found.reliable and found.undecided.any()

@@ -24,8 +24,9 @@ from pcmb.analysis.diagnostics import (
 )
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.polynomials import Hermite
 from pcmb.designs import NodeDesign
-from pcmb.result import Status, WarningRecord
+from pcmb.result import NodeFailure, Status, WarningRecord
 
 if TYPE_CHECKING:
     from pcmb.run.executor import RunResult
@@ -91,9 +92,12 @@ class HeldOutPlan:
         """Where the ``count`` held-out runs of batch ``batch`` go (seed ``seed + 7919 +
         batch``), placed to extend the design's nodes ``design`` (germ points) where
         :meth:`placed` (per element of a multi-element design, where its node ``values`` say
-        it may err most), else drawn."""
+        it may err most), else drawn; with the runs beyond the design's nodes in a normal
+        input marked (:attr:`HeldOutDraws.beyond`)."""
         seed = self.seed + HELD_OUT_SEED + batch
         placed = self.placed()
+        normal = [isinstance(d.family, Hermite) for d in self.inputs.values()]
+        low, high = design.min(axis=0), design.max(axis=0)
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).
@@ -112,22 +116,33 @@ class HeldOutPlan:
             # input's range is met evenly, which steadies the estimated errors of the
             # statistics against a few runs missing where the error sits.
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
-        return HeldOutDraws(seed, draws, weights, placed)
+        beyond = ((draws.nodes < low) | (draws.nodes > high)) & normal
+        return HeldOutDraws(seed, draws, weights, placed, tuple(self.inputs), beyond)
 
 
 @dataclasses.dataclass(frozen=True)
 class HeldOutDraws:
     """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
-    ``placed`` or drawn (:meth:`HeldOutPlan.draws`)."""
+    ``placed`` or drawn (:meth:`HeldOutPlan.draws`); ``beyond`` (K, n): where a run's germ
+    lies outside the design's nodes' in a normal one of the germ ``inputs``, a tail the check
+    explores (drawn widened, or placed) and the model need not stand (``docs/diagnostics.md``)."""
 
     seed: int
     nodes: NodeSet
     weights: NDArray[np.float64]
     placed: bool
+    inputs: tuple[str, ...]
+    beyond: NDArray[np.bool_]
+
+    @property
+    def tails(self) -> NDArray[np.bool_]:
+        """(K,) the tail draws: the runs whose failure never stops a study."""
+        return self.beyond.any(axis=1)
 
     def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
-        """The held-out runs made (``found``), and a ``nodes-failed`` record naming those that
-        failed (``regress`` leaves them out)."""
+        """The held-out runs made (``found``), and ``nodes-failed`` records naming those that
+        failed (left out of the check): the tail draws' (:attr:`tails`), and the others'
+        (``on_failure: regress``)."""
         ok = found.status == Status.OK
         held_out = HeldOut(
             self.seed,
@@ -138,11 +153,25 @@ class HeldOutDraws:
             self.weights,
             self.placed,
         )
-        if not found.failures:
-            return held_out, ()
-        failed = WarningRecord(
-            "nodes-failed",
-            f"{len(found.failures)} of {self.nodes.size} held-out run(s) failed and were left out "
-            f"of the check (on_failure: regress): " + "; ".join(map(str, found.failures)),
-        )
-        return held_out, (failed,)
+        tail = self.tails
+        tails = [f for f in found.failures if tail[f.index]]
+        others = [f for f in found.failures if not tail[f.index]]
+        records = []
+        if tails:
+            beyond = np.any([self.beyond[f.index] for f in tails], axis=0)
+            names = " and ".join(np.asarray(self.inputs)[beyond])
+            where = f" in the tails of {names} beyond the design's nodes"
+            records.append(_failed(tails, self.nodes.size, where, ""))
+        if others:
+            records.append(_failed(others, self.nodes.size, "", " (on_failure: regress)"))
+        return held_out, tuple(records)
+
+
+def _failed(failures: list[NodeFailure], total: int, where: str, why: str) -> WarningRecord:
+    """The ``nodes-failed`` record of the held-out runs ``failures`` (of ``total``), failed
+    ``where`` and left out ``why``."""
+    return WarningRecord(
+        "nodes-failed",
+        f"{len(failures)} of {total} held-out run(s) failed{where} and were left out of the "
+        f"check{why}: " + "; ".join(map(str, failures)),
+    )

@@ -277,6 +277,12 @@ class DesignReport(ABC):
         another axis); a report of the whole study keeps its own."""
         return self
 
+    def statistics_error(self) -> float | None:
+        """The design's own estimate of the error of the mean and std, relative to the
+        output's largest std (the largest over outputs and times), where it makes one that
+        is calibrated (``docs/methods.md``); ``None`` otherwise."""
+        return None
+
 
 #: A field of a :class:`RecordReport`'s record stored as a dataset whose last axis is the
 #: points of the output (dropped for a scalar output).

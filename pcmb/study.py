@@ -1003,6 +1003,10 @@ class Study:
         if self.execution.nominal_run:
             sets.append((self._nominal_node(), None))
         sizes = [len(next(iter(params.values()))) for params, _ in sets]
+        # Only the held-out runs' tail draws fail without stopping the campaign.
+        tolerated = np.zeros(sum(sizes), dtype=bool)
+        if draws is not None:
+            tolerated[sizes[0] : sizes[0] + sizes[1]] = draws.tails
         joined = None
         if journal is not None:
             joined = JoinedJournal(
@@ -1010,7 +1014,7 @@ class Study:
             )
         params = {name: np.concatenate([p[name] for p, _ in sets]) for name in sets[0][0]}
         with removed_if_rejected(journal, fresh_journal):  # its held-out runs' folder too
-            runs = self._campaign(run, params, joined, counted=nodes.size)
+            runs = self._campaign(run, params, joined, counted=nodes.size, tolerated=tolerated)
         design_runs, *others = split_runs(runs, sizes)
         self._judge_failures(run, design_runs, journal)
         checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
@@ -1018,7 +1022,7 @@ class Study:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            self._judge_failures(run, found, held_journal, _HELD_OUT_RUN)
+            self._judge_failures(run, found, held_journal, _HELD_OUT_RUN, draws.tails)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
@@ -1032,14 +1036,15 @@ class Study:
         proven: bool = False,
         keep: bool = True,
         runs_of: str = "node",
+        tolerated: NDArray[np.bool_] | None = None,
     ) -> tuple[RunResult, Journal | None]:
         """Run every node (checked by the caller, :meth:`_check_finite`), journaled in the
         run's journal (its ``folder``, if given) when it has one (the journal is returned, to
         be removed once the result is written); raise by the failure policy. ``chunk_size``
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
-        only (a streamed study); ``runs_of``: what the runs are, for the error
-        (:meth:`_judge_failures`)."""
+        only (a streamed study); ``runs_of``: what the runs are, for the error, and
+        ``tolerated``: the runs whose failure the policy lets by (:meth:`_judge_failures`)."""
         journal, fresh_journal = self._journal(run, nodes, folder)
         with removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
@@ -1049,8 +1054,9 @@ class Study:
                 chunk_size,
                 proven=proven,
                 keep=keep,
+                tolerated=tolerated,
             )
-        self._judge_failures(run, runs, journal, runs_of)
+        self._judge_failures(run, runs, journal, runs_of, tolerated)
         return runs, journal
 
     def _journal(
@@ -1075,10 +1081,12 @@ class Study:
         proven: bool = False,
         keep: bool = True,
         counted: int | None = None,
+        tolerated: NDArray[np.bool_] | None = None,
     ) -> RunResult:
         """:func:`~pcmb.run.executor.run_nodes` of the model at ``params`` under the study's
-        execution settings and failure policy (see :meth:`_run_nodes`); the progress line
-        counts the first ``counted`` runs (default: all)."""
+        execution settings and failure policy (see :meth:`_run_nodes`), which the failures of
+        the ``tolerated`` runs do not stop; the progress line counts the first ``counted``
+        runs (default: all)."""
         return run_nodes(
             self.model_factory,
             params,
@@ -1096,6 +1104,7 @@ class Study:
             proven=proven,
             keep_values=keep,
             counted=counted,
+            tolerated=tolerated,
         )
 
     def _judge_failures(
@@ -1104,11 +1113,14 @@ class Study:
         runs: RunResult,
         journal: Journal | None,
         runs_of: str = "node",
+        tolerated: NDArray[np.bool_] | None = None,
     ) -> None:
-        """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on;
-        ``runs_of``: what the runs are (``"held-out run"``: numbered among those, and kept
-        beside the design's nodes, which the error names too: ``--resume`` keeps both)."""
-        if not runs.failures or self.execution.on_failure == "regress":
+        """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on, or
+        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`); ``runs_of``:
+        what the runs are (``"held-out run"``: numbered among those, and kept beside the
+        design's nodes, which the error names too: ``--resume`` keeps both)."""
+        failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
+        if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
         places = []
@@ -1132,8 +1144,8 @@ class Study:
             else ""
         )
         raise ModelRunError(
-            runs.failures,
-            f"the model failed at {len(runs.failures)} of {runs.status.size} {runs_of}(s) "
+            failures,
+            f"the model failed at {len(failures)} of {runs.status.size} {runs_of}(s) "
             f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
         )
 
@@ -1160,8 +1172,9 @@ class Study:
         by the design's ``record``), batch ``batch`` of the check, placed to extend the
         design's nodes ``design`` (germ points) or drawn
         (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
-        folder (``validation-<batch>`` after the first), under the failure policy; and a
-        ``nodes-failed`` record naming those that failed (``regress`` leaves them out)."""
+        folder (``validation-<batch>`` after the first), under the failure policy, which the
+        tail draws' failures never trigger; and ``nodes-failed`` records naming those that
+        failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
         if not count or record.basis is None:
             return None, ()
         draws = self._held_out.draws(count, design, values, batch)
@@ -1172,7 +1185,13 @@ class Study:
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
         found, journal = self._run_nodes(
-            run, draws.nodes, name, halves, proven=proven, runs_of=_HELD_OUT_RUN
+            run,
+            draws.nodes,
+            name,
+            halves,
+            proven=proven,
+            runs_of=_HELD_OUT_RUN,
+            tolerated=draws.tails,
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
@@ -1205,6 +1224,7 @@ class Study:
             axes=result.axes,
             nominal=result.nominal,
             budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
+            design_error=None if result.report is None else result.report.statistics_error(),
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

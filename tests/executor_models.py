@@ -150,6 +150,15 @@ class SwitchedRamp(Ramp):
             raise ValueError(f"a={float(hit[0])!r} is switched off")
 
 
+class PositiveRamp(SwitchedRamp):
+    """A switched ramp whose ``a`` must be positive, like a stiffness: raises for a <= 0."""
+
+    def check(self, params: Mapping[str, NDArray[np.float64]]) -> None:
+        super().check(params)
+        if np.any(params["a"] <= 0):
+            raise ValueError(f"a must be positive, got {float(params['a'].min())!r}")
+
+
 class NanRamp(Ramp):
     """Returns NaN from t >= ``t_bad`` on for nodes with ``a`` in ``bad``."""
 

@@ -19,9 +19,11 @@ from test_resume import (
 )
 
 import pcmb
+from pcmb.chaos.nodes import NodeSet, join_nodes
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
-from pcmb.designs import method_section
+from pcmb.designs import MethodSettings, make_design, method_section
+from pcmb.designs.adaptive import estimated_error
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import (
     ishigami,
@@ -283,6 +285,33 @@ def test_the_error_left_beyond_a_rules_last_level_is_not_ignored():
     assert "last level" in stopped.message
 
 
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+def test_no_run_is_spent_once_only_the_error_beyond_the_last_levels_is_left():
+    """1{a <= 0.6} e^(b + c/2): a's jump reaches Gauss–Patterson's last level with 4.8e-2 of
+    the std left, which no refinement lowers, so the estimate cannot meet 1e-4; the grid ran
+    on to 375 runs (143 at 1e-2) for the same error, 2.9e-2. It stops once the error it can
+    lower is below the error left."""
+    inputs = {name: pcmb.Uniform(0.0, 1.0) for name in ("a", "b", "c")}
+    mean = 0.6 * math.expm1(1.0) * 2 * math.expm1(0.5)
+    std = math.sqrt(0.6 * math.expm1(2.0) / 2 * math.expm1(1.0) - mean**2)
+    runs = []
+    for tolerance in (1e-2, 1e-4):
+        result = _adaptive(
+            lambda x: np.where(x[:, 0] <= 0.6, np.exp(x[:, 1] + 0.5 * x[:, 2]), 0.0),
+            inputs,
+            method="adaptive",
+            tolerance=tolerance,
+            max_runs=2000,
+            validation=0,
+        )
+        error, estimate = _statistics_error(result, mean, std), result.adaptive.estimate
+        assert error / 10 <= estimate <= 10 * error and estimate > tolerance, (estimate, error)
+        (stopped,) = [w for w in result.warnings if w.code == "adaptive-budget"]
+        assert "a reached the last level" in stopped.message
+        runs.append(result.n_nodes)
+    assert runs[1] == runs[0], runs
+
+
 def test_a_response_near_a_singularity_is_not_called_nonsmooth():
     """sqrt(a + 0.002) e^b is analytic on the box, its branch point just outside: the norms of
     its surpluses along a fall like a kink's (p^-2.3) to degree 23, but the changes of the mean
@@ -516,3 +545,78 @@ def test_the_estimate_does_not_depend_on_the_outputs_scale():
     ]
     np.testing.assert_array_equal(found[0].history[:, 0], found[1].history[:, 0])
     np.testing.assert_allclose(found[0].indicators, found[1].indicators, rtol=1e-9)
+
+
+def test_each_round_is_a_public_record_the_history_is_made_of():
+    """``design.rounds``: one record per round, whose runs and estimates are the result's
+    history, each estimate the tail of the changes so far (at least the error beyond the
+    rules' last levels); a kink's input is named where it is measured."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)}
+    design = make_design(inputs, MethodSettings("adaptive", tolerance=1e-5, max_runs=400))
+    first = design.nodes()
+    germ, params = first.nodes, first.params
+    while True:
+        values = {"y": (np.abs(params[:, 0] - 0.3) + np.exp(params[:, 1]))[:, None]}
+        nodes, ok = NodeSet(first.distributions, germ, params), np.ones(len(germ), bool)
+        more = design.more(nodes, values, ok)
+        if more is None:
+            break
+        germ, params = np.vstack([germ, more.nodes]), np.vstack([params, more.params])
+    rounds = design.rounds
+    history = design.recover(nodes, values, ok, np.zeros(1)).adaptive.history
+    np.testing.assert_array_equal(history, [(r.runs, r.estimate) for r in rounds])
+    assert [r.runs for r in rounds] == sorted({r.runs for r in rounds})
+    for k, record in enumerate(rounds):
+        changes = [r.change for r in rounds[: k + 1]]
+        tail = estimated_error(changes, geometric=not record.nonsmooth)
+        assert record.estimate == max(tail, record.left)
+    assert [name for name, _ in rounds[-1].nonsmooth] == ["a"]
+
+
+def test_a_tensor_grid_does_not_raise_a_resolved_input_past_another_at_its_last_level():
+    """log(a + 0.005) + b: a reaches Gauss–Patterson's last level (31 points) with its error
+    above 1e-6; b, linear, reads exact at level 2 (its top two degrees at round-off). Raising
+    b further cannot lower the estimate, yet the grid raised it to the last level too:
+    31 x 31 = 961 runs where 31 x 7 = 217 say as much."""
+    inputs = {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
+    design = make_design(inputs, MethodSettings("adaptive", tolerance=1e-6, basis="tensor"))
+    nodes = design.nodes()
+
+    def values(batch):
+        a, b = batch.params[:, :1], batch.params[:, 1:]
+        return np.log(a + 0.005) + b + 0 * TIMES
+
+    found, ok = {"y": values(nodes)}, np.ones(nodes.size, dtype=bool)
+    while (batch := design.more(nodes, found, ok)) is not None:
+        nodes = join_nodes(nodes, batch)
+        found = {"y": np.vstack([found["y"], values(batch)])}
+        ok = np.ones(nodes.size, dtype=bool)
+    recovery = design.recover(nodes, found, ok, TIMES)
+    assert nodes.size == 31 * 7
+    (record,) = [w for w in recovery.warnings if w.code == "adaptive-budget"]
+    assert "a is at its rule's last level" in record.message
+
+
+def _rosenbrock(x):
+    return np.sum(100 * (x[:, 1:] - x[:, :-1] ** 2) ** 2 + (1 - x[:, :-1]) ** 2, axis=1)
+
+
+def test_without_held_out_runs_a_grid_exact_to_round_off_is_not_called_unreliable():
+    """Rosenbrock in 3 inputs, a polynomial the grid resolves exactly (its estimate 1e-16):
+    with validation 0 the verdict read the spectral decay alone, 21 % of the std in the
+    sparse set's edge terms, real ones, and flagged the exact result (chaos-unreliable, with
+    multi-element chaos as the remedy)."""
+    inputs = {f"x{k}": pcmb.Uniform(-2.0, 2.0) for k in range(3)}
+    study = Study(
+        _model(_rosenbrock, inputs),
+        inputs,
+        TIMES,
+        method={"kind": "adaptive", "tolerance": 1e-4, "validation": 0},
+        execution={"backend": "inprocess"},
+    )
+    result = study.run()
+    assert result.adaptive.estimate < 1e-12
+    found = result.diagnostics["y"]
+    assert np.nanmax(found.decay) > found.tolerance  # what the decay alone reads
+    assert found.reliable and "chaos-unreliable" not in {w.code for w in result.warnings}
+    assert np.nanmax(found.estimate) < 1e-12

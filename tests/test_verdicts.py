@@ -96,8 +96,14 @@ def test_without_held_out_runs_a_record_says_the_runs_were_all_equal():
     assert "16 runs" in record.message and "nothing about the spread" in record.message
     assert "the nominal run differs" in record.message  # G(1/2, ...) = 0
     assert "method.validation" in record.message
-    with pytest.warns(pcmb.PcmbWarning, match="runs-all-equal"):
+    # The verdict agrees: the design missed the spread, so no time is called reliable.
+    assert result.diagnostics["y"].failing_from == G_TIMES[0]
+    (flag,) = [w for w in result.warnings if w.code == "chaos-unreliable"]
+    assert "16 runs are all equal at every time while the nominal run differs" in flag.message
+    with pytest.warns(pcmb.PcmbWarning) as caught:
         pcmb.Study(g_function, G_INPUTS, G_TIMES, order=1, backend="inprocess", validation=0).run()
+    shown = " ".join(str(w.message) for w in caught)
+    assert "[runs-all-equal]" in shown and "[chaos-unreliable]" in shown
 
 
 # -- budget messages name the limit hit --------------------------------------------------------

@@ -14,7 +14,8 @@ raises false alarms.
   alone can be empty while the expansion is far from converged.
 - **Held-out check** (:func:`holdout_error`): the surrogate against K extra model runs at
   random inputs (:func:`held_out_draws`: a Latin hypercube of the inputs' distribution, normal
-  inputs widened into their tails and weighted back; K sized to the design,
+  inputs widened into their tails and weighted back, by moment weights where the surrogate is
+  linear in them; K sized to the design,
   :func:`held_out_budget`): the RMS error of the surrogate and an upper confidence bound on
   it that fits K; and, with the surrogate as a control variate, the errors of the mean and
   of the standard deviation themselves (:func:`statistics_error`), which are what the error
@@ -82,6 +83,7 @@ __all__ = [
     "held_out_placed",
     "held_out_placed_elements",
     "holdout_error",
+    "linear_in_widened",
     "more_runs",
     "out_of_range",
     "pdf_outside_runs",
@@ -125,6 +127,9 @@ UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
+#: The surrogate is linear in the widened inputs where the terms of degree 2 or more along
+#: them hold at most this share of its variance (:func:`linear_in_widened`).
+LINEAR_SHARE = 1e-6
 #: Most points (nodes and placed held-out runs) in one element of a one-input multi-element
 #: design (:func:`held_out_placed_elements`): a truncated family's Leja points need four
 #: times as many recurrence terms as points.
@@ -257,6 +262,53 @@ def held_out_draws(
     z = germ[:, normal]
     log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
     return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+
+
+def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
+    """(T,) the times at which the terms of degree 2 or more along the inputs
+    :func:`held_out_draws` widens (the normal ones) hold at most ``LINEAR_SHARE`` of the
+    expansion's variance: the response is linear in them (a damped oscillator in its initial
+    displacement), not heavy-tailed; all False without normal inputs."""
+    normal = [isinstance(d.family, Hermite) for d in expansion.distributions]
+    index = np.asarray(expansion.multi_index)
+    if not any(normal) or not scale > 0 or not np.isfinite(scale):
+        return np.zeros(expansion.shape, dtype=bool)
+    energy = _energies(expansion, scale)
+    curved = np.sum(energy[np.any(index[:, normal] >= 2, axis=1)], axis=0)
+    return curved <= LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0], axis=0)
+
+
+def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
+    """(K,) weights ω = Π (a + b z²) over the normal germs z of draws from N(0, λ²)
+    (:func:`held_out_draws`), with a = (3λ² - 1) / (2λ²) and b = (1 - λ²) / (2λ⁴): E ω g(z)
+    = E_N(0, 1) g for every g of degree 3 or less in each, at E ω² = 1.44 per germ (λ = 4.2)
+    where the importance weights' is 3."""
+    normal = [isinstance(d.family, Hermite) for d in distributions]
+    width2 = _tail_width(sum(normal)) ** 2
+    z2 = np.asarray(germ, dtype=float)[:, normal] ** 2
+    return np.prod((3 * width2 - 1) / (2 * width2) + (1 - width2) / (2 * width2**2) * z2, axis=1)
+
+
+def _judging_weights(
+    expansion: Expansion, scale: float, weights: ArrayLike | None, germ: ArrayLike | None
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The weights and the Latin-hypercube germ (:func:`_standard_error`) the held-out check
+    judges drawn runs by. Where the surrogate is linear in every widened input
+    (:func:`linear_in_widened`), the residual and the control variate's terms are of degree 2
+    at most along them: (K, T) the moment weights (:func:`_moment_weights`) there, the
+    importance ``weights`` elsewhere, and no germ, as neighbours paired along an input
+    understate the spread of these weights' products (a narrow damped oscillator at 16
+    runs: two false alarms in ten seeds). ``weights`` and ``germ`` as given where no draw
+    is widened (either missing) or the surrogate is nowhere linear in them."""
+    if weights is None or germ is None:
+        return weights, germ
+    weights = np.asarray(weights, dtype=float)
+    linear = linear_in_widened(expansion, scale)
+    if not linear.any():
+        return weights, germ
+    moment = _moment_weights(expansion.distributions, germ)
+    shape = (-1,) + (1,) * linear.ndim
+    return np.where(linear, moment.reshape(shape), weights.reshape(shape)), None
 
 
 def held_out_placed(
@@ -446,9 +498,10 @@ def _control_variate(
     weights: NDArray[np.float64],
     germ: NDArray[np.float64] | None,
 ) -> _ControlVariate:
-    """The corrected mean and std over the scale (see :func:`statistics_error`)."""
+    """The corrected mean and std over the scale (see :func:`statistics_error`); ``weights``
+    (K,) or, per time, (K, T)."""
     count = predicted.shape[0]
-    weight = weights[:, None]
+    weight = weights[:, None] if weights.ndim == 1 else weights
     residual = (observed - predicted) / scale
     centred = (predicted - np.asarray(mean, dtype=float)) / scale
     sigma = np.asarray(std, dtype=float) / scale
@@ -578,8 +631,9 @@ def holdout_error(
     confidence:
         Level of the upper bound, in (0, 1).
     weights:
-        (K,) importance weights of the runs (:func:`held_out_draws`; default: 1); the RMS
-        error is that of the draws as they fell.
+        (K,) importance weights of the runs (:func:`held_out_draws`; default: 1), or (K, T)
+        per time (:func:`diagnose`'s moment weights), which weight the RMS error too: that of
+        the inputs' distribution, not of the widened draws.
     germ:
         (K, n) germ of the runs when they are a Latin hypercube (:func:`_standard_error`;
         default: independent draws).
@@ -593,13 +647,16 @@ def holdout_error(
     if predicted.shape != observed.shape:
         raise ValueError(f"predicted {predicted.shape} and observed {observed.shape} differ")
     kept = np.isfinite(observed).all(axis=tuple(range(1, observed.ndim)))
-    differences = predicted[kept] - observed[kept]
     count = int(kept.sum())
     mean, std = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
         return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
     weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
+    # Weighted back to the inputs' distribution: a widened draw far in a tail counts as
+    # little as the distribution makes it (a moment weight below zero, as nothing).
+    share = np.clip(weights[kept], 0.0, None)
+    differences = (predicted[kept] - observed[kept]) * np.sqrt(share.reshape(count, -1))
     quantile = chi_square_quantile(count, 1.0 - confidence)
     if not scale > 0 or not np.isfinite(scale):  # nothing varies: nothing to correct
         zeros = np.zeros(observed.shape[1:])
@@ -1230,6 +1287,7 @@ def diagnose(
     holdout_germ: ArrayLike | None = None,
     weights: ArrayLike | None = None,
     placed: bool = False,
+    design_error: float | None = None,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -1272,6 +1330,10 @@ def diagnose(
     placed:
         Whether the held-out runs extend the nodes of a one-input expansion
         (:func:`held_out_placed`): judged by :func:`placed_check` instead.
+    design_error:
+        The design's own calibrated estimate of the statistics' error
+        (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out
+        runs, where it meets the tolerance it bounds the decay's reading.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -1293,13 +1355,17 @@ def diagnose(
     if holdout is not None and placed:
         checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
     elif holdout is not None:
-        checked = holdout_error(
-            *holdout, expansion.mean(), std, scale, weights=weights, germ=holdout_germ
-        )
+        judged, paired = _judging_weights(expansion, scale, weights, holdout_germ)
+        checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.statistics
+    # Without them, a design that measured its own convergence (an adaptive grid, order:
+    # auto) outweighs the decay, which reads an exact polynomial's top terms (or a sparse
+    # set's edge) as a tail.
+    if checked is None and design_error is not None and design_error <= tolerance:
+        estimate = np.minimum(decay, design_error)
     noise = (
         np.zeros(times.size)
         if checked is None
@@ -1313,14 +1379,23 @@ def diagnose(
     blind &= estimate + noise > tolerance
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
+    # Without held-out runs, design runs all equal at every time say nothing: where the
+    # nominal run differs the design missed the spread (it fails), else none can tell.
+    missed, spread = (
+        _all_equal(output, runs, times, nominal)
+        if holdout is None and runs.shape[0] > 1 and equal.all()
+        else (None, False)
+    )
+    if spread:
+        failing_from = float(times[0])
     share = out_of_range(expansion, node_values, node_germ=node_germ)
     records = range_checks(output, expansion, node_values, times, share)
     holding = ~(times >= failing_from)  # every time where the verdict never fails
-    undecided = (estimate + noise > tolerance) & holding
+    undecided = ((estimate + noise > tolerance) | (spread is None)) & holding
     if checked is not None:
         records.extend(_inaccurate(output, checked, times, tolerance, holding, undecided))
-    if holdout is None and runs.shape[0] > 1 and equal.all():
-        records.append(_all_equal(output, runs, times, nominal))
+    if missed is not None:
+        records.append(missed)
     if not np.isnan(failing_from):
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
@@ -1338,6 +1413,11 @@ def diagnose(
                 f"the design's {runs.shape[0]} runs are all equal at {_count(blind)} while the "
                 f"{checked.count} held-out runs vary there, which no expansion can learn "
                 f"from; {evidence}"
+            )
+        elif spread:
+            evidence = (
+                f"the design's {runs.shape[0]} runs are all equal at every time while the "
+                "nominal run differs, which no expansion can learn from"
             )
         # The remedy reads the times from where the estimate passes the tolerance, which
         # the flag, waiting for the noise, may follow late.
@@ -1443,26 +1523,28 @@ def _all_equal(
     runs: NDArray[np.float64],
     times: NDArray[np.float64],
     nominal: ArrayLike | None,
-) -> WarningRecord:
+) -> tuple[WarningRecord, bool | None]:
     """The record of an output whose (N, T) runs are all equal at every time and that no
     held-out run checks: ``output-constant`` when the nominal run equals them too, else
-    ``runs-all-equal``."""
+    ``runs-all-equal``; and whether the nominal run saw a spread the design missed (``None``:
+    nothing else was run to tell)."""
     span = _span(times, np.ones(times.size, dtype=bool))
     unchecked = "no held-out run checks it (method.validation is 0)"
     if nominal is not None and np.size(nominal) == runs.shape[1]:
         with_nominal = np.vstack([runs, np.reshape(nominal, (1, -1))])
         if np.all(np.isfinite(with_nominal)) and not _varies(with_nominal, times.size).any():
-            return WarningRecord(
+            constant = WarningRecord(
                 "output-constant",
                 f"all {runs.shape[0]} runs of the design and the nominal run are equal at "
                 f"every time: the output looks constant, and {unchecked}",
                 output,
                 span,
             )
-        seen = "the nominal run differs, so the design missed the spread"
+            return constant, False
+        seen, spread = "the nominal run differs, so the design missed the spread", True
     else:
-        seen = "nothing else was run to compare"
-    return WarningRecord(
+        seen, spread = "nothing else was run to compare", None
+    record = WarningRecord(
         "runs-all-equal",
         f"all {runs.shape[0]} runs of the design are equal at every time: its std 0 says "
         f"nothing about the spread (nodes placed symmetric about a kink see none); {seen}, "
@@ -1470,6 +1552,7 @@ def _all_equal(
         output,
         span,
     )
+    return record, spread
 
 
 def _inaccurate(
@@ -1817,6 +1900,7 @@ def diagnose_all(
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
     budgets: Collection[str] = (),
+    design_error: float | None = None,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -1825,7 +1909,8 @@ def diagnose_all(
     ``germ`` and ``values`` are the (N, n) and (N, T) runs of the design and ``ok`` the (N,)
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
     holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
-    ``budgets`` the codes of the design's budget records (:func:`diagnose`).
+    ``budgets`` the codes of the design's budget records and ``design_error`` its own
+    estimate of the statistics' error (:func:`diagnose`).
     """
     found = {}
     for name, expansion in expansions.items():
@@ -1853,5 +1938,6 @@ def diagnose_all(
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
             held_out is not None and held_out.placed,
+            design_error,
         )
     return found

@@ -771,7 +771,12 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
     error = float(np.nanmax(found.estimate, initial=0.0))
     numbers = [f"error up to {error:.2g} of the largest std ({tolerance})"]
     if found.holdout is None:
-        numbers.append("no held-out runs: estimated from the spectral decay")
+        source = (
+            "the design's own estimate"
+            if np.any(found.estimate < found.decay)
+            else "the spectral decay"
+        )
+        numbers.append(f"no held-out runs: estimated from {source}")
     else:
         surrogate = float(np.nanmax(found.holdout.error, initial=0.0))
         numbers.append(

@@ -40,6 +40,8 @@ __all__ = [
 MAX_CONDITION = 1e8
 #: Nodes per term that :func:`fit_largest_stable` requires (oversampling for a stable fit).
 OVERSAMPLING = 1.5
+#: A response whose std is below this share of its RMS does not vary (round-off).
+_ROUND_OFF = 1e-12
 
 
 def _rows(values: ArrayLike, n_nodes: int) -> NDArray:
@@ -243,7 +245,9 @@ def fit_least_squares(
     with np.errstate(divide="ignore", invalid="ignore"):
         loo = np.sum(share * (residual / (1.0 - leverage)[:, None]) ** 2, axis=0)
         spread = np.sum(share * (rhs - np.sum(share * rhs, axis=0)) ** 2, axis=0)
-        loo_error = np.where(spread > 0, loo / spread, np.nan)
+        # A std below 1e-12 of the RMS is round-off (runs equal but for the last bit).
+        varies = spread > _ROUND_OFF**2 * np.sum(share * rhs**2, axis=0)
+        loo_error = np.where(varies, loo / spread, np.nan)
     return LeastSquaresFit(
         coefficients=coefficients.reshape(n_terms, *trailing),
         condition=condition,

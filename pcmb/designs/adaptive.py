@@ -28,9 +28,10 @@ assumes a smooth response: where an input's axis surpluses fall like a power of 
 faster than a kink's, and so do the changes of the mean they make (a jump or a kink; on an
 analytic response near a singularity these fall geometrically first), an ``adaptive-nonsmooth``
 warning names it, and the estimate is the largest of the last three changes alone. The estimate
-is at least the error no refinement can lower, beyond a rule's last level
-(:meth:`AdaptiveCollocation._left_at_last_levels`); where that alone exceeds the tolerance, an
-``adaptive-budget`` warning names the input.
+is at least the error no refinement can lower, beyond a rule's last level; the rounds end once
+the error refining can lower is below it, and where it exceeds the tolerance, an
+``adaptive-budget`` warning names the input. Each round's figures are kept as an
+:class:`AdaptiveRound` (:attr:`AdaptiveCollocation.rounds`).
 """
 
 from __future__ import annotations
@@ -55,7 +56,13 @@ from pcmb.designs.base import MethodSection, MethodSettings, Recovery
 from pcmb.designs.smolyak import GrowingGrid, nested_rules
 from pcmb.result import AdaptiveFit, Design, Placement, RecordReport, StudyResult, WarningRecord
 
-__all__ = ["AdaptiveCollocation", "AdaptiveReport", "AdaptiveSettings", "estimated_error"]
+__all__ = [
+    "AdaptiveCollocation",
+    "AdaptiveReport",
+    "AdaptiveRound",
+    "AdaptiveSettings",
+    "estimated_error",
+]
 
 #: Share of the refinable indicators' sum a round refines (bulk marking).
 BULK = 0.5
@@ -108,6 +115,33 @@ class AdaptiveSettings(MethodSection):
         return "tolerance"
 
 
+@dataclass(frozen=True)
+class AdaptiveRound:
+    """What one round of :class:`AdaptiveCollocation` measured (see the module); errors are
+    relative to the output's largest std.
+
+    Attributes
+    ----------
+    runs:
+        The grid's runs after the round.
+    change:
+        d_k, the largest change of the mean and std the active indices make.
+    left:
+        The error beyond the rules' last levels, which no refinement can lower.
+    nonsmooth:
+        The inputs whose axis surpluses fall algebraically, each with its exponent a (an
+        ``adaptive-nonsmooth`` warning each).
+    estimate:
+        The estimated error of the mean and std.
+    """
+
+    runs: int
+    change: float
+    left: float
+    nonsmooth: tuple[tuple[str, float], ...]
+    estimate: float
+
+
 class AdaptiveCollocation(GrowingGrid):
     """``method: {kind: adaptive, tolerance, max_runs, rule}``: a dimension-adaptive sparse grid
     on the nested ``rule`` (``auto``: Gauss–Patterson for uniform inputs, Genz–Keister for
@@ -155,9 +189,15 @@ class AdaptiveCollocation(GrowingGrid):
         self._norms: dict[tuple[int, ...], NDArray[np.float64]] = {}
         self._indicators = np.full(len(self._index), np.nan)
         self._mean_changes = np.full(len(self._index), np.nan)
-        self._history: list[tuple[int, float]] = []
         self._changes: list[float] = []
+        self._rounds: list[AdaptiveRound] = []
         self._stopped: str | None = None
+
+    @property
+    def rounds(self) -> tuple[AdaptiveRound, ...]:
+        """The rounds measured so far, in order (each call of :meth:`more` whose nodes all ran
+        adds one)."""
+        return tuple(self._rounds)
 
     @property
     def runs(self) -> int:
@@ -202,11 +242,13 @@ class AdaptiveCollocation(GrowingGrid):
         while True:
             active = np.flatnonzero(self._active())
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
-            converged = self._reducible() <= self.tolerance
+            # Refining lowers only the reducible error: below the error left beyond the rules'
+            # last levels, more runs cannot lower the estimate.
+            left, names = self._left_at_last_levels()
+            converged = self._reducible() <= max(self.tolerance, left)
             if converged:
                 refinable = self._blind()
                 if not refinable:
-                    left, names = self._left_at_last_levels()
                     if left > self.tolerance:
                         self._stopped = (
                             f"{' and '.join(names)} reached the last level of its rule with an "
@@ -245,7 +287,15 @@ class AdaptiveCollocation(GrowingGrid):
             self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
             return False
         self._measure(np.stack(list(values.values()), axis=1)[order])
-        self._history.append((self._grid.size, self._estimate()))
+        self._rounds.append(
+            AdaptiveRound(
+                runs=self._grid.size,
+                change=self._changes[-1],
+                left=self._left_at_last_levels()[0],
+                nonsmooth=tuple(self._nonsmooth()),
+                estimate=self._estimate(),
+            )
+        )
         return True
 
     def _measure(self, values: NDArray[np.float64]) -> None:
@@ -414,7 +464,7 @@ class AdaptiveCollocation(GrowingGrid):
             index_set=np.array(self._index, dtype=np.int64),
             indicators=self._indicators.copy(),
             active=self._active(),
-            history=np.array(self._history, dtype=float).reshape(-1, 2),
+            history=np.array([(r.runs, r.estimate) for r in self._rounds]).reshape(-1, 2),
             orders=self._grid.multi_index.max(axis=0),
         )
         warnings = recovery.warnings + tuple(
@@ -425,10 +475,10 @@ class AdaptiveCollocation(GrowingGrid):
                 "resolved yet, and the estimated error, which assumes a smooth, resolved "
                 "response, may be far too small",
             )
-            for name, exponent in self._nonsmooth()
+            for name, exponent in (self._rounds[-1].nonsmooth if self._rounds else ())
         )
         if self._stopped is not None:
-            reached = f"{self._history[-1][1]:.3g}" if self._history else "unknown"
+            reached = f"{self._rounds[-1].estimate:.3g}" if self._rounds else "unknown"
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
@@ -496,6 +546,11 @@ class AdaptiveReport(RecordReport):
     }
 
     adaptive: AdaptiveFit
+
+    def statistics_error(self) -> float | None:
+        """The last round's estimated error (``None`` before any round)."""
+        estimate = self.adaptive.estimate
+        return estimate if math.isfinite(estimate) else None
 
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: runs and estimated error; per input: what it reached."""

@@ -76,7 +76,12 @@ class AnisotropicTensor(AdaptiveCollocation):
         tolerance and the budget allows, else ``None``."""
         if not self._measure_round(nodes, values, ok) or self._estimate() <= self.tolerance:
             return None
-        for k in np.argsort(-self._errors, kind="stable"):
+        # Only an input whose own error passes the tolerance is raised: raising another cannot
+        # lower the largest.
+        above = [
+            k for k in np.argsort(-self._errors, kind="stable") if self._errors[k] > self.tolerance
+        ]
+        for k in above:
             rule = self.rules[k]
             if rule.max_level is not None and self._levels[k] >= rule.max_level:
                 continue
@@ -93,5 +98,10 @@ class AnisotropicTensor(AdaptiveCollocation):
             self._levels = levels
             self._refined.update(added)
             return self._grow(added)
-        self._stopped = "every input is at its rule's last level: use rule leja"
+        names = " and ".join(self.names[k] for k in above)
+        verb = "is" if len(above) == 1 else "are"
+        self._stopped = (
+            f"{names} {verb} at its rule's last level with its error above the tolerance, "
+            "which raising the other inputs cannot lower: use rule leja, or a larger tolerance"
+        )
         return None

@@ -463,6 +463,11 @@ class RefinementReport(RecordReport):
 
     refinement: Refinement
 
+    def statistics_error(self) -> float | None:
+        """The last round's estimated error (``None`` before any round)."""
+        last = self.refinement.indicator[-1:]
+        return float(last[0]) if last.size and np.isfinite(last[0]) else None
+
     def summary(self, result: StudyResult) -> list[tuple[str, str]]:
         """Per round: the order and its indicator."""
         rounds = ", ".join(

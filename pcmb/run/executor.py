@@ -336,6 +336,7 @@ class _Campaign:
         proven: bool = False,
         keep_values: bool = True,
         counted: int | None = None,
+        tolerated: NDArray[np.bool_] | None = None,
     ) -> None:
         layout = Layout.of(outputs, times, axes or {})
         self.factory = factory
@@ -355,6 +356,14 @@ class _Campaign:
         self.resumed = 0
         self.progress: Progress | None = None
         self.counted = n_nodes if counted is None else counted  # those the progress counts
+        # The nodes whose failure does not stop the campaign (run_nodes' ``tolerated``).
+        self.tolerated = np.zeros(n_nodes, dtype=bool) if tolerated is None else tolerated
+
+    @property
+    def stopped(self) -> bool:
+        """Whether a node has failed that ``stop_on_failure`` stops the campaign at: one not
+        ``tolerated``."""
+        return any(not self.tolerated[i] for i in self.messages)
 
     def resume(self, journal: Journal | JoinedJournal) -> None:
         """Take the successful nodes from the journal; failed ones will be run again."""
@@ -525,7 +534,8 @@ def _run_pooled(
 
     A task past its deadline has its workers killed (the pool is rebuilt); the other tasks
     in flight then are run again, and the late task is isolated like one whose worker died.
-    With ``stop_on_failure``, no task is started once a node has failed; the tasks in flight
+    With ``stop_on_failure``, no task is started once a node not tolerated has failed
+    (:attr:`_Campaign.stopped`); the tasks in flight
     finish (and are journaled; those a kill of the workers cut short run again), the others
     stay pending. While the model has broken the
     protocol at every node it tried, no task is started either: if the tasks in flight do
@@ -546,7 +556,7 @@ def _run_pooled(
         if campaign.broken_everywhere and not in_flight:
             break
         # After a death, feed nothing more: let the chunks in flight finish or fail first.
-        if stop_on_failure and campaign.messages:
+        if stop_on_failure and campaign.stopped:
             queue.clear()
         while (
             (restarted or queue)
@@ -700,6 +710,7 @@ def run_nodes(
     proven: bool = False,
     keep_values: bool = True,
     counted: int | None = None,
+    tolerated: ArrayLike | None = None,
 ) -> RunResult:
     """Run the model at every node, in chunks, in parallel; capture and name failed nodes.
 
@@ -736,7 +747,8 @@ def run_nodes(
     stop_on_failure:
         Start no more chunks once a node has failed (the policy ``abort``): the chunks in
         flight finish and every failure found in them is reported; the nodes never run stay
-        pending (status 0), in the journal too, so a resumed run runs them.
+        pending (status 0), in the journal too, so a resumed run runs them; a failure at a
+        ``tolerated`` node does not stop it.
     pool:
         Workers to run on (see :func:`pcmb.run.backends.open_pool`), shared by several
         campaigns; default: a pool of ``backend`` opened and closed by this call.
@@ -752,6 +764,10 @@ def run_nodes(
     counted:
         The progress line counts the first ``counted`` nodes only (default: all): the others
         are runs of other sets joined to them (a study's held-out and nominal runs).
+    tolerated:
+        (N,) bool: the nodes whose failure does not stop the campaign under
+        ``stop_on_failure`` (a study's held-out runs in the tails of its inputs, see
+        ``docs/diagnostics.md``); default: none.
 
     Returns
     -------
@@ -796,6 +812,7 @@ def run_nodes(
                 proven=proven,
                 keep_values=keep_values,
                 counted=counted,
+                tolerated=tolerated,
             )
     if keep_values is False and journal is None:
         raise UsageError("values not kept in memory must go to a journal", source="run_nodes")
@@ -824,6 +841,7 @@ def run_nodes(
         proven=proven,
         keep_values=keep_values,
         counted=counted,
+        tolerated=None if tolerated is None else np.asarray(tolerated, dtype=bool),
     )
     if journal is not None:
         campaign.resume(journal)

@@ -1,0 +1,140 @@
+"""Held-out runs that fail in the tails a drawn check widens its normal inputs into, beyond the
+design's nodes: left out of the check, never a reason to stop a study (docs/diagnostics.md)."""
+
+import functools
+
+import executor_models as em
+import numpy as np
+import pytest
+
+import pcmb
+from pcmb.cli import main
+from pcmb.config.schema import ExecutionSpec
+from pcmb.errors import ModelRunError
+from pcmb.result import Status
+from pcmb.run.executor import run_nodes
+
+TIMES = np.linspace(0.0, 2.0, 21)
+STIFFNESS = pcmb.Normal(1.0, 0.2)
+
+#: A stiffness that must be positive: K ~ N(1, 0.2) is negative 5 σ below its mean, where
+#: the check's widened draws (N(0, 4.2²) in the germ) often go, the design's nodes never.
+STIFFNESS_MODEL = """\
+import numpy as np
+import pcmb
+
+
+@pcmb.batched(outputs=("y",))
+def stiffness(params, times):
+    K = params["K"]
+    if np.any(K <= 0):
+        raise ValueError(f"stiffness must be positive, got {K.min()}")
+    c = params.get("c", np.ones_like(K))
+    return {"y": np.sqrt(K)[:, None] * np.exp(-c[:, None] * times)}
+"""
+stiffness = {}
+exec(STIFFNESS_MODEL, stiffness)
+stiffness = stiffness["stiffness"]
+
+
+def _tail_records(result):
+    return [w.message for w in result.warnings if w.code == "nodes-failed"]
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+@pytest.mark.parametrize("order", [4, "auto"], ids=["joined", "after-rounds"])
+@pytest.mark.parametrize(
+    ("seed", "inputs"),
+    [
+        *((seed, {"K": STIFFNESS, "c": pcmb.Uniform(0.5, 1.5)}) for seed in range(5)),
+        (0, {"K": STIFFNESS}),
+    ],
+    ids=[*(f"drawn-{seed}" for seed in range(5)), "placed"],
+)
+def test_a_held_out_run_failing_in_a_normal_tail_does_not_abort(seed, inputs, order):
+    """Under ``on_failure: abort`` the study finishes, its check drawn widened or placed; the
+    failed tail runs are left out of the check and named, with the input whose tail they lie
+    in and the model's error."""
+    study = pcmb.Study(
+        stiffness,
+        inputs,
+        TIMES,
+        method={"kind": "collocation", "order": order, "seed": seed},
+        execution={"backend": "inprocess", "on_failure": "abort"},
+    )
+    result = study.run()
+    held_out = result.held_out
+    failed = ~held_out.ok
+    assert np.all(held_out.params[failed, 0] <= 0)
+    assert np.all(held_out.params[~failed, 0] > 0)
+    assert failed.any()  # the lowest of the 8 slices of the Latin hypercube: K < 0
+    (record,) = _tail_records(result)
+    assert f"{failed.sum()} of {failed.size} held-out run(s) failed in the tails of K" in record
+    assert "beyond the design's nodes" in record
+    assert "stiffness must be positive" in record
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_pcmb_run_finishes_a_study_whose_held_out_runs_fail_in_the_tails(tmp_path, capsys):
+    """The same study from a config file: exit 0, and the file holds the record."""
+    (tmp_path / "stiff.py").write_text(STIFFNESS_MODEL)
+    config = tmp_path / "stiff.yaml"
+    config.write_text(
+        "name: stiff\n"
+        "model: {kind: python, entry: stiff.py:stiffness, params: {K: 1.0, c: 1.0}}\n"
+        "time: {start: 0.0, stop: 2.0, points: 21}\n"
+        "inputs:\n"
+        "  K: {dist: normal, mean: 1.0, std: 0.2}\n"
+        "  c: {dist: uniform, low: 0.5, high: 1.5}\n"
+        "method: {kind: collocation, order: 4, seed: 1}\n"
+        "execution: {backend: inprocess, on_failure: abort}\n"
+        f"output: {tmp_path / 'stiff.h5'}\n"
+    )
+    assert main(["run", str(config)]) == 0
+    result = pcmb.load(tmp_path / "stiff.h5")
+    assert not result.held_out.ok.all()  # seed 1 draws K = -1.1 (germ -10.6)
+    assert any("in the tails of K" in record for record in _tail_records(result))
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_a_held_out_run_failing_within_the_design_s_range_still_aborts(tmp_path):
+    """A held-out run inside the design's nodes in every input is no tail draw: its failure
+    stops the study under ``on_failure: abort``, as before; ``--resume`` then finishes it from
+    the journal, which holds a failed tail draw too, and runs none of the design's nodes."""
+    inputs = {"a": STIFFNESS, "b": pcmb.Uniform(0.0, 1.0)}
+    settings = {
+        "method": {"kind": "collocation", "order": 4, "seed": 3},
+        "outputs": ["y"],
+        "execution": {"backend": "inprocess", "on_failure": "abort", "nominal_run": False},
+    }
+    plain = pcmb.Study(em.PositiveRamp, inputs, TIMES, params={"bad": [], "switch": ""}, **settings)
+    held_out = plain.run().held_out
+    assert not held_out.ok.all()  # a tail draw at a < 0
+    reach = np.abs(plain.node_set().nodes[:, 0]).max()
+    inside = np.flatnonzero(np.abs(held_out.germ[:, 0]) < reach)
+    switch = tmp_path / "switch"
+    switch.touch()
+    params = {"bad": [held_out.params[inside[-1], 0]], "switch": str(switch)}
+    study = pcmb.Study(em.PositiveRamp, inputs, TIMES, params=params, **settings)
+    with pytest.raises(ModelRunError, match="the model failed at 1 of 8 held-out run"):
+        study.run(tmp_path / "r.h5")
+    switch.unlink()
+    em.SwitchedRamp.RAN.clear()
+    resumed = study.run(tmp_path / "r.h5", resume=True)
+    design = set(map(tuple, plain.node_set().params.tolist()))
+    assert not design & set(em.SwitchedRamp.RAN)  # the design's runs come from the journal
+    np.testing.assert_array_equal(resumed.held_out.ok, held_out.ok)
+    assert any("in the tails of a" in record for record in _tail_records(resumed))
+
+
+def test_a_tolerated_failure_does_not_stop_an_aborting_campaign():
+    """``stop_on_failure`` stops dispatching at a failure, but not at a ``tolerated`` node's."""
+    params = {"a": np.array([-1.0, 1.0, 2.0, 3.0])}
+    model = functools.partial(em.RaisingRamp, [-1.0])
+    execution = ExecutionSpec(backend="inprocess")
+    run = {"execution": execution, "chunk_size": 1, "stop_on_failure": True}
+    stopped = run_nodes(model, params, TIMES, ["y"], **run)
+    assert np.any(stopped.status == Status.PENDING)
+    tolerated = np.array([True, False, False, False])
+    went_on = run_nodes(model, params, TIMES, ["y"], tolerated=tolerated, **run)
+    assert list(went_on.status) == [Status.FAILED, Status.OK, Status.OK, Status.OK]
