@@ -13,13 +13,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.stats import norm
 
 import pcmb
 from pcmb.analysis.diagnostics import (
+    TAIL_BOUND,
     TOLERANCE,
     HeldOut,
     HeldOutCheck,
     _moment_weights,
+    _plain_share,
     _tail_width,
     chi_square_quantile,
     diagnose,
@@ -247,23 +250,33 @@ def test_the_double_well_is_flagged_where_its_exact_error_crosses_the_tolerance(
 
 
 def test_moment_weights_give_every_cubic_in_the_widened_germs_its_standard_normal_mean():
-    # Two normal germs drawn from N(0, λ²) (held_out_draws' λ) beside a uniform: numpy's
-    # Gauss–Hermite rule (exact for these polynomials) gives E ω g = E_N(0,1) g for every g
-    # of degree 3 or less in each normal germ.
+    # Two normal germs drawn as held_out_draws draws them (N(0, λ²) within ±TAIL_BOUND, the
+    # rest N(0, 1)) beside a uniform: Gauss–Legendre rules of that density on each side of
+    # the bound (exact to round-off for these smooth pieces) give E ω g = E_N(0,1) g for
+    # every g of degree 3 or less in each normal germ.
     inputs = (pcmb.Normal(0.0, 1.0), Uniform(0.0, 1.0), pcmb.Normal(2.0, 3.0))
-    x, w = np.polynomial.hermite_e.hermegauss(12)
-    a, b = (g.ravel() for g in np.meshgrid(x, x, indexing="ij"))
-    rule = np.outer(w, w).ravel() / (2 * np.pi)
-    width = _tail_width(2)
-    germ = np.column_stack([width * a, np.full(a.size, 0.3), width * b])
+    x, w = np.polynomial.legendre.leggauss(100)
+
+    def drawn(width):
+        pieces = [(-14.0, -TAIL_BOUND), (-TAIL_BOUND, TAIL_BOUND), (TAIL_BOUND, 14.0)]
+        z = np.concatenate([a + (x + 1) * (b - a) / 2 for a, b in pieces])
+        inside = np.repeat([False, True, False], x.size)
+        plain = _plain_share(width)
+        density = plain * norm.pdf(z) + inside * norm.pdf(z / width) / width
+        return z, np.concatenate([w * (b - a) / 2 for a, b in pieces]) * density
+
+    z, rule = drawn(_tail_width(2))
+    a, b = (g.ravel() for g in np.meshgrid(z, z, indexing="ij"))
+    rule = np.outer(rule, rule).ravel()
+    germ = np.column_stack([a, np.full(a.size, 0.3), b])
     omega = _moment_weights(inputs, germ)
     z1, z2 = germ[:, 0], germ[:, 2]
     for g, exact in ((1, 1), (z1, 0), (z1**2, 1), (z1**3, 0), (z1**2 * z2**2, 1), (z1 * z2**3, 0)):
-        assert rule @ (omega * g) == pytest.approx(exact, abs=1e-12)
-    # One normal germ: a second moment of 1.44 where the importance weights' is 3.
-    one = (pcmb.Normal(0.0, 1.0),)
-    omega = _moment_weights(one, _tail_width(1) * x[:, None])
-    assert w @ omega**2 / np.sqrt(2 * np.pi) == pytest.approx(1.44, abs=0.01)
+        assert rule @ (omega * g) == pytest.approx(exact, abs=1e-10)
+    # One normal germ: a second moment of 1.55 where the importance weights' is 1.99.
+    z, rule = drawn(_tail_width(1))
+    omega = _moment_weights((pcmb.Normal(0.0, 1.0),), z[:, None])
+    assert rule @ omega**2 == pytest.approx(1.55, abs=0.01)
 
 
 def test_a_surrogate_is_linear_in_its_normal_inputs_only_without_their_higher_degrees():

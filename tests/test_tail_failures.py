@@ -15,10 +15,11 @@ from pcmb.result import Status
 from pcmb.run.executor import run_nodes
 
 TIMES = np.linspace(0.0, 2.0, 21)
-STIFFNESS = pcmb.Normal(1.0, 0.2)
+STIFFNESS = pcmb.Normal(1.0, 0.25)
 
-#: A stiffness that must be positive: K ~ N(1, 0.2) is negative 5 σ below its mean, where
-#: the check's widened draws (N(0, 4.2²) in the germ) often go, the design's nodes never.
+#: A stiffness that must be positive: K ~ N(1, 0.25) is negative 4 σ below its mean, where
+#: the check's widened draws (N(0, 4.2²) within ±6 in the germ) often go, the design's nodes
+#: (order 4: ±2.9 σ) never.
 STIFFNESS_MODEL = """\
 import numpy as np
 import pcmb
@@ -46,10 +47,11 @@ def _tail_records(result):
 @pytest.mark.parametrize(
     ("seed", "inputs"),
     [
-        *((seed, {"K": STIFFNESS, "c": pcmb.Uniform(0.5, 1.5)}) for seed in range(5)),
+        # The seeds of 0-5 whose lowest draw lies below -4 σ (seeds 1 and 2: -3.5 and -2.9).
+        *((seed, {"K": STIFFNESS, "c": pcmb.Uniform(0.5, 1.5)}) for seed in (0, 3, 4, 5)),
         (0, {"K": STIFFNESS}),
     ],
-    ids=[*(f"drawn-{seed}" for seed in range(5)), "placed"],
+    ids=[*(f"drawn-{seed}" for seed in (0, 3, 4, 5)), "placed"],
 )
 def test_a_held_out_run_failing_in_a_normal_tail_does_not_abort(seed, inputs, order):
     """Under ``on_failure: abort`` the study finishes, its check drawn widened or placed; the
@@ -67,7 +69,7 @@ def test_a_held_out_run_failing_in_a_normal_tail_does_not_abort(seed, inputs, or
     failed = ~held_out.ok
     assert np.all(held_out.params[failed, 0] <= 0)
     assert np.all(held_out.params[~failed, 0] > 0)
-    assert failed.any()  # the lowest of the 8 slices of the Latin hypercube: K < 0
+    assert failed.any()  # the lowest draw: K < 0
     (record,) = _tail_records(result)
     assert f"{failed.sum()} of {failed.size} held-out run(s) failed in the tails of K" in record
     assert "beyond the design's nodes" in record
@@ -84,15 +86,15 @@ def test_pcmb_run_finishes_a_study_whose_held_out_runs_fail_in_the_tails(tmp_pat
         "model: {kind: python, entry: stiff.py:stiffness, params: {K: 1.0, c: 1.0}}\n"
         "time: {start: 0.0, stop: 2.0, points: 21}\n"
         "inputs:\n"
-        "  K: {dist: normal, mean: 1.0, std: 0.2}\n"
+        "  K: {dist: normal, mean: 1.0, std: 0.25}\n"
         "  c: {dist: uniform, low: 0.5, high: 1.5}\n"
-        "method: {kind: collocation, order: 4, seed: 1}\n"
+        "method: {kind: collocation, order: 4, seed: 3}\n"
         "execution: {backend: inprocess, on_failure: abort}\n"
         f"output: {tmp_path / 'stiff.h5'}\n"
     )
     assert main(["run", str(config)]) == 0
     result = pcmb.load(tmp_path / "stiff.h5")
-    assert not result.held_out.ok.all()  # seed 1 draws K = -1.1 (germ -10.6)
+    assert not result.held_out.ok.all()  # seed 3 draws K = -0.4 (germ -5.6)
     assert any("in the tails of K" in record for record in _tail_records(result))
 
 

@@ -127,6 +127,9 @@ UNSEEN_DEGREES = 3
 #: Largest second moment of the importance weights of the held-out draws (:func:`held_out_draws`):
 #: the weighted runs count at least as 1/this many plain ones.
 WEIGHT_MOMENT = 3.0
+#: Widened held-out draws of a normal germ stay within ±this (:func:`held_out_draws`): the
+#: standard normal's mass beyond is 2·10⁻⁹, and a widened draw there would weigh at most 2·10⁻⁷.
+TAIL_BOUND = 6.0
 #: The surrogate is linear in the widened inputs where the terms of degree 2 or more along
 #: them hold at most this share of its variance (:func:`linear_in_widened`).
 LINEAR_SHARE = 1e-6
@@ -234,9 +237,15 @@ def held_out_budget(design_runs: int) -> int:
 def _tail_width(normal_inputs: int) -> float:
     """λ of the N(0, λ²) draws of each of m normal germs: the widest that keeps the weights'
     second moment E[w²] = (λ² / √(2λ² - 1))^m at ``WEIGHT_MOMENT`` (λ = 4.2 for one normal
-    input, 2.3 for two, 1.7 for four)."""
+    input, 2.3 for two, 1.7 for four), less with the plain draws beyond ±``TAIL_BOUND``."""
     b = WEIGHT_MOMENT ** (1.0 / normal_inputs)
     return math.sqrt(b * b + b * math.sqrt(b * b - 1.0))
+
+
+def _plain_share(width: float) -> float:
+    """P, the share of plain N(0, 1) draws of a widened normal germ (:func:`held_out_draws`):
+    the mass of N(0, λ²), λ = ``width``, beyond ±``TAIL_BOUND``."""
+    return 2.0 * STANDARD_NORMAL.cdf(-TAIL_BOUND / width)
 
 
 def held_out_draws(
@@ -246,22 +255,32 @@ def held_out_draws(
 
     A Latin hypercube of the inputs' distribution (one run in each of K equal-probability
     slices of every input), except that each normal germ is drawn from N(0, λ²)
-    (:func:`_tail_width`) and every run weighted by the ratio of the densities,
-    w = Π λ exp(-z² (1 - 1/λ²) / 2): the errors of a surrogate of a normal input sit in its
-    tails (a lognormal response), which K plain draws rarely reach. Without normal inputs the
-    weights are 1.
+    (:func:`_tail_width`): the errors of a surrogate of a normal input sit in its tails (a
+    lognormal response), which K plain draws rarely reach. The slices beyond ±``TAIL_BOUND``
+    (a share P, :func:`_plain_share`) are drawn from N(0, 1) instead, their probabilities
+    stretched onto (0, 1) in order: a parameter there is often meaningless and its weight
+    nil. The density is q = φ_λ 1(|z| <= bound) + P φ, each run weighted by the ratio
+    w = Π φ / q (at most 1/P). Without normal inputs the weights are 1.
     """
     batch = random_nodes(distributions, count, "lhs", seed)
     normal = np.array([isinstance(d.family, Hermite) for d in distributions], dtype=bool)
     if not normal.any():
         return batch, np.ones(count)
     width = _tail_width(int(normal.sum()))
+    plain = _plain_share(width)
     germ = batch.nodes.copy()
-    germ[:, normal] *= width
+    z = width * germ[:, normal]
+    beyond = np.abs(z) > TAIL_BOUND
+    # An outer slice's tail probability over P: a standard normal draw on its side.
+    outer = germ[:, normal][beyond]
+    tail = np.vectorize(STANDARD_NORMAL.cdf, otypes=[float])(-np.abs(outer)) / plain
+    z[beyond] = -np.sign(outer) * np.vectorize(STANDARD_NORMAL.inv_cdf, otypes=[float])(tail)
+    germ[:, normal] = z
     params = np.column_stack([d.to_physical(germ[:, k]) for k, d in enumerate(distributions)])
-    z = germ[:, normal]
-    log_weights = np.sum(np.log(width) - z**2 * (1.0 - 1.0 / width**2) / 2.0, axis=1)
-    return NodeSet(batch.distributions, germ, params), np.exp(log_weights)
+    widened = np.where(
+        np.abs(z) <= TAIL_BOUND, np.exp(z**2 * (1.0 - 1.0 / width**2) / 2.0) / width, 0.0
+    )
+    return NodeSet(batch.distributions, germ, params), 1.0 / np.prod(plain + widened, axis=1)
 
 
 def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
@@ -279,14 +298,22 @@ def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
-    """(K,) weights ω = Π (a + b z²) over the normal germs z of draws from N(0, λ²)
-    (:func:`held_out_draws`), with a = (3λ² - 1) / (2λ²) and b = (1 - λ²) / (2λ⁴): E ω g(z)
-    = E_N(0, 1) g for every g of degree 3 or less in each, at E ω² = 1.44 per germ (λ = 4.2)
-    where the importance weights' is 3."""
+    """(K,) weights ω = Π (a + b z²) over the normal germs z of the widened draws
+    (:func:`held_out_draws`), of second and fourth moments m₂ and m₄, with
+    b = (1 - m₂) / (m₄ - m₂²) and a = 1 - b m₂: E ω g(z) = E_N(0, 1) g for every g of degree
+    3 or less in each, at E ω² = 1.55 per germ (λ = 4.2) where the importance weights' is
+    1.99 (all widened: a = (3λ² - 1) / (2λ²), b = (1 - λ²) / (2λ⁴), 1.44 and 3)."""
     normal = [isinstance(d.family, Hermite) for d in distributions]
-    width2 = _tail_width(sum(normal)) ** 2
+    width = _tail_width(sum(normal))
+    plain = _plain_share(width)
+    # The widened part's moments within ±TAIL_BOUND, by parts, and the plain draws'.
+    beta = TAIL_BOUND / width
+    edge = 2.0 * beta * STANDARD_NORMAL.pdf(beta)
+    second = width**2 * (1.0 - plain - edge) + plain
+    fourth = width**4 * (3.0 * (1.0 - plain) - (beta**2 + 3.0) * edge) + 3.0 * plain
+    b = (1.0 - second) / (fourth - second**2)
     z2 = np.asarray(germ, dtype=float)[:, normal] ** 2
-    return np.prod((3 * width2 - 1) / (2 * width2) + (1 - width2) / (2 * width2**2) * z2, axis=1)
+    return np.prod(1.0 - b * second + b * z2, axis=1)
 
 
 def _judging_weights(
@@ -683,15 +710,12 @@ def holdout_error(
 
 
 def _unseen_mean_error(
-    family: OrthonormalFamily,
-    nodes: NDArray[np.float64],
-    rule: NDArray[np.float64],
-    coefficients: NDArray[np.float64],
+    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """(T,) estimated error of the design's mean from the degrees beyond an interpolant's
-    (M, T) ``coefficients``, where the design's ``rule`` (its interpolatory weights on the (N,)
-    germ ``nodes``) integrates every degree below M exactly, so that the interpolant's mean is
-    the design's own (zeros otherwise: the interpolant then measures that error itself).
+    """(T,) estimated error of the mean of the interpolant of (M, T) ``coefficients`` through
+    the (M,) germ ``points`` from the degrees beyond it: the error of its interpolatory rule
+    on them. Where the design's own rule integrates every degree below M exactly, the two
+    rules agree on every response, and this is the design mean's error itself.
 
     The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
     (all of them with fewer than ``_SHAPE_LAYERS`` after it), are fitted by a line against p
@@ -701,10 +725,10 @@ def _unseen_mean_error(
     once read flat extrapolated its 4-point rule's errors into a false alarm)."""
     first = coefficients.shape[0]
     last = UNSEEN_DEGREES * first
-    rule_errors = rule @ family.evaluate(nodes, last)
     # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
-    if first - 2 < _SHAPE_LAYERS or not np.allclose(rule_errors[1:first], 0.0, atol=_EXACT):
+    if first - 2 < _SHAPE_LAYERS:
         return np.zeros(coefficients.shape[1:])
+    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
     seen = np.arange(1.0, first - 1)
@@ -756,18 +780,19 @@ def placed_check(
     (:func:`held_out_placed`; per element, :func:`held_out_placed_elements`).
 
     Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
-    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than
-    the expansion (Leja points keep the interpolation well conditioned); its mean and std
-    (exact: c_0 and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the
-    corrected mean and std, and their differences from the expansion's the estimated
-    errors, the mean's plus, where the two means agree exactly (K <= N placed runs beside N
-    Gauss nodes), the design rule's error on the degrees beyond the interpolant's
-    (:func:`_unseen_mean_error`). Their standard errors are how far the estimates move when the last
-    ``PLACED_SPARE`` held-out runs (of each element) are left out (infinite with no more runs
-    than that), plus in quadrature the next coefficient of each element without held-out runs
-    (:func:`_unchecked`: nothing checks it), the spread that of the larger estimate (the
-    corrected mean's adds the unseen error); the surrogate error is the L2 distance of the two
-    surrogates (their coefficients' difference), its upper bound that plus how far it moves.
+    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than the
+    expansion (Leja points keep the interpolation well conditioned); its mean and std (exact: c_0
+    and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the corrected mean and
+    std, and their differences from the expansion's the estimated errors, the mean's plus the
+    interpolant's own error from the degrees beyond it (:func:`_unseen_mean_error`; where the two
+    means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
+    Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
+    runs (of each element) are left out, shrunk by the rate at which they converge
+    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
+    coefficient of each element without held-out runs (:func:`_unchecked`: nothing checks it), the
+    spread that of the larger estimate (the corrected mean's adds the unseen error); the surrogate
+    error is the L2 distance of the two surrogates (their coefficients' difference), its upper bound
+    that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
@@ -804,8 +829,8 @@ def placed_check(
     unchecked = np.sqrt(
         sum(
             (p * _unchecked(own / scale)) ** 2
-            for p, (_, points, _, rule, own) in zip(probability[:, 0], pieces, strict=True)
-            if points.size == rule.size
+            for p, (_, points, _, nodes, own) in zip(probability[:, 0], pieces, strict=True)
+            if points.size == nodes
         )
     )
     mean_error, std_error = (
@@ -818,8 +843,14 @@ def placed_check(
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
         # elements without runs, which nothing checks, add their next coefficients.
-        mean_se = np.hypot(mean_error - fewer_mean_error, unchecked)
-        std_se = np.hypot(rich_std - fewer_std, unchecked)
+        mean_moved, std_moved = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
+        if count > 2 * PLACED_SPARE:
+            least_mean, least_std, _, least_unseen = moments(2 * PLACED_SPARE)
+            least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
+            mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
+            std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
+        mean_se = np.hypot(mean_moved, unchecked)
+        std_se = np.hypot(std_moved, unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
@@ -838,17 +869,25 @@ def placed_check(
     )
 
 
+def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) what is left of an estimate's error after its last move ``moved`` (without the last
+    ``PLACED_SPARE`` runs), the move ``before`` it (without as many more) giving the rate ρ:
+    a geometric convergence leaves ρ / (1 − ρ) of the last move; at most all of it."""
+    rate = np.divide(moved, before, out=np.ones_like(moved), where=before > 0)
+    left = np.divide(rate, 1.0 - rate, out=np.ones_like(rate), where=rate < 0.5)
+    return moved * left
+
+
 def _placed_pieces(
     expansion: ChaosExpansion | PiecewiseExpansion,
     node_germ: NDArray[np.float64],
     node_values: NDArray[np.float64],
     germ: NDArray[np.float64],
     observed: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, NDArray, NDArray]]]:
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
     """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
     element its family, points (its nodes, then its held-out runs, in its own coordinate),
-    their values, its nodes' interpolatory rule (:func:`interpolatory_weights`, computed
-    once) and its own (S, T) coefficients by degree. An element's
+    their values, its number of nodes and its own (S, T) coefficients by degree. An element's
     nodes are its own Gauss nodes, their values its expansion's there (which interpolates
     them): the design's runs also hold the nodes of the elements split on the way."""
     degrees = expansion.multi_index[:, 0]
@@ -864,8 +903,7 @@ def _placed_pieces(
         points = np.concatenate([node_germ, germ])
         values = np.vstack([node_values, observed])
         coefficients = own(expansion.coefficients, points.size)
-        rule = interpolatory_weights(family, node_germ)
-        return np.ones((1, 1)), [(family, points, values, rule, coefficients)]
+        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
     partition = expansion.partition
     distribution = partition.distributions[0]
     physical = distribution.to_physical(germ)
@@ -877,8 +915,7 @@ def _placed_pieces(
         points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
         values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
         coefficients = own(expansion.coefficients[e], points.size)
-        rule = interpolatory_weights(conditional.family, nodes)
-        pieces.append((conditional.family, points, values, rule, coefficients))
+        pieces.append((conditional.family, points, values, nodes.size, coefficients))
     return partition.probability[:, None], pieces
 
 
@@ -886,24 +923,32 @@ def _placed_moments(
     family: OrthonormalFamily,
     points: NDArray[np.float64],
     values: NDArray[np.float64],
-    rule: NDArray[np.float64],
+    nodes: int,
     own: NDArray[np.float64],
     scale: float,
     spare: int,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
-    mean error (:func:`_unseen_mean_error`) of the interpolant through an element's nodes
-    and held-out runs without its last ``spare`` held-out runs, over the scale."""
-    size = rule.size
-    kept = max(size, points.size - spare)
+    mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
+    interpolant's degrees, at most its mean's difference from the design's) of the interpolant
+    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
+    without its last ``spare`` held-out runs, over the scale."""
+    kept = max(nodes, points.size - spare)
     own = own / scale
     coefficients = _interpolated(family, points[:kept], values[:kept] / scale)
     missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
+    unseen = _unseen_mean_error(family, points[:kept], coefficients)
+    design = points[:nodes]
+    rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
+    if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
+        # The interpolant holds degrees the design's rule does not integrate: its mean measures
+        # the design's error, and its own error is, by the check's premise, at most that.
+        unseen = np.fmin(unseen, np.abs(coefficients[0] - own[0]))
     return (
         coefficients[0],
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
-        _unseen_mean_error(family, points[:size], rule, coefficients),
+        unseen,
     )
 
 
