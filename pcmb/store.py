@@ -491,6 +491,7 @@ def _write_diagnostics(
     group = file.create_group("validation")
     group.attrs["seed"] = held_out.seed
     group.attrs["placed"] = held_out.placed
+    group.attrs["batches"] = held_out.batches
     run = _scale(file, "validation_run", np.arange(held_out.germ.shape[0]))
     _attach(group.create_dataset("germ", data=held_out.germ), run, input_)
     _attach(group.create_dataset("params", data=held_out.params), run, input_)
@@ -553,6 +554,7 @@ def _read_diagnostics(
         ok=group["status"][()] == Status.OK,
         weights=group["weights"][()] if "weights" in group else np.ones(len(group["status"])),
         placed=bool(group.attrs.get("placed", False)),  # older files drew theirs
+        batches=int(group.attrs.get("batches", 1)),  # and in one batch
     )
     return found, held_out
 

@@ -35,14 +35,20 @@ Case = tuple[dict, np.ndarray, Callable[[np.ndarray, np.ndarray], np.ndarray], t
 KINK, STEP = 0.3, 0.3
 
 
-def well() -> Case:
+def _double_well(low: float, high: float) -> Case:
+    """The double well with x0 ~ U[low, high], t in [0, 4]
+    (:func:`pcmb.references.double_well_moments`)."""
     times = np.linspace(0.0, 4.0, 41)
     return (
-        {"x0": pcmb.Uniform(-0.625, 0.375)},
+        {"x0": pcmb.Uniform(low, high)},
         times,
         lambda x, t: double_well(t, x[:, 0]),
-        double_well_moments(times, -0.625, 0.375),
+        double_well_moments(times, low, high),
     )
+
+
+def well() -> Case:
+    return _double_well(-0.625, 0.375)
 
 
 def kink() -> Case:
@@ -219,14 +225,8 @@ def restitution_ball() -> Case:
 
 def shifted_well() -> Case:
     """The double well with x0 ~ U[-0.2, 0.6], t in [0, 4]: its jump at x0 = 0 a quarter of the
-    way in (:func:`pcmb.references.double_well_moments`)."""
-    times = np.linspace(0.0, 4.0, 41)
-    return (
-        {"x0": pcmb.Uniform(-0.2, 0.6)},
-        times,
-        lambda x, t: double_well(t, x[:, 0]),
-        double_well_moments(times, -0.2, 0.6),
-    )
+    way in."""
+    return _double_well(-0.2, 0.6)
 
 
 def step_times_exp() -> Case:

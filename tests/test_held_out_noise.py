@@ -133,3 +133,52 @@ def test_error_far_below_noise_flags_at_most_the_confidence(tmp_path):
         _smooth, {"kind": "collocation", "order": 4, "validation": 0}, 0.05, tmp_path / "s.h5"
     )
     assert _flag_share(result, _smooth, 16, 1e-7) <= 1 - CONFIDENCE
+
+
+def test_two_batches_of_draws_are_not_paired_as_one_latin_hypercube(tmp_path):
+    """A second batch of held-out draws joins the first: each is a Latin hypercube, their union
+    is not, and pairing neighbours across it understated the noise (|x1| |x2| (1 + t), order 7,
+    tolerance 0.02: 3 flags of 10 seeds 5-35 % of the horizon early, none with one batch of 16;
+    tests/test_economy_contract.py). The joined runs say how many batches they hold, the file
+    keeps it, and their noise is that of independent draws."""
+    from pcmb.analysis.diagnostics import HeldOut, holdout_error
+    from pcmb.chaos.expansion import ChaosExpansion
+    from pcmb.chaos.nodes import TensorGrid
+    from pcmb.chaos.recovery import project_tensor
+
+    inputs = (pcmb.Uniform(-1.0, 1.0), pcmb.Uniform(-1.0, 1.0))
+    grid = TensorGrid(inputs, (4, 4))
+    times = np.linspace(0.0, 1.0, 3)
+
+    def response(germ):
+        return np.abs(germ[:, :1]) * np.abs(germ[:, 1:]) * (1 + times)
+
+    expansion = ChaosExpansion(
+        project_tensor(grid, response(grid.nodes), grid.multi_index), grid.multi_index, inputs
+    )
+    batches = []
+    for seed in (1, 2):
+        draws, weights = held_out_draws(inputs, 8, seed)
+        values = {"y": response(draws.nodes)}
+        batches.append(HeldOut(seed, draws.nodes, draws.params, values, np.ones(8, bool), weights))
+    joined = batches[0].joined(batches[1])
+    assert joined.batches == 2
+    found = diagnose(
+        "y",
+        expansion,
+        response(grid.nodes),
+        times,
+        (expansion.evaluate_germ(joined.germ), joined.values["y"]),
+        holdout_germ=joined.germ,
+        weights=joined.weights,
+        stratified=joined.batches == 1,
+    )
+    plain = holdout_error(
+        expansion.evaluate_germ(joined.germ),
+        joined.values["y"],
+        expansion.mean(),
+        expansion.std(),
+        found.scale,
+        weights=joined.weights,
+    )
+    np.testing.assert_allclose(found.noise, plain.noise)

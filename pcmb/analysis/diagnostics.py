@@ -1333,6 +1333,7 @@ def diagnose(
     weights: ArrayLike | None = None,
     placed: bool = False,
     design_error: float | None = None,
+    stratified: bool = True,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -1375,6 +1376,10 @@ def diagnose(
     placed:
         Whether the held-out runs extend the nodes of a one-input expansion
         (:func:`held_out_placed`): judged by :func:`placed_check` instead.
+    stratified:
+        Whether the drawn held-out runs are one Latin hypercube, whose standard errors
+        :func:`_standard_error` reads from neighbouring pairs; several batches joined are
+        not (their neighbours, from different hypercubes, understate the spread).
     design_error:
         The design's own calibrated estimate of the statistics' error
         (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out
@@ -1401,6 +1406,7 @@ def diagnose(
         checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
     elif holdout is not None:
         judged, paired = _judging_weights(expansion, scale, weights, holdout_germ)
+        paired = paired if stratified else None
         checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
@@ -1910,6 +1916,10 @@ class HeldOut:
         Whether the runs extend a one-input design's nodes (:func:`held_out_placed`, per
         element :func:`held_out_placed_elements`) rather than being drawn: the check is then
         :func:`placed_check` (``/validation`` attribute ``placed``).
+    batches:
+        How many batches of draws the runs hold (``/validation`` attribute ``batches``): each
+        is a Latin hypercube, their union is not one, so with more than one the check's
+        standard errors are those of independent draws (:func:`_standard_error`).
     """
 
     seed: int
@@ -1919,6 +1929,7 @@ class HeldOut:
     ok: NDArray[np.bool_]
     weights: NDArray[np.float64]
     placed: bool = False
+    batches: int = 1
 
     def joined(self, more: HeldOut) -> HeldOut:
         """These runs followed by ``more`` (a later batch of the same check; the seed is the
@@ -1931,6 +1942,7 @@ class HeldOut:
             np.concatenate([self.ok, more.ok]),
             np.concatenate([self.weights, more.weights]),
             self.placed,
+            self.batches + more.batches,
         )
 
 
@@ -1984,5 +1996,6 @@ def diagnose_all(
             None if holdout is None else held_out.weights[held_out.ok],
             held_out is not None and held_out.placed,
             design_error,
+            held_out is None or held_out.batches == 1,
         )
     return found
