@@ -97,7 +97,8 @@ class HeldOutPlan:
         seed = self.seed + HELD_OUT_SEED + batch
         placed = self.placed()
         normal = [isinstance(d.family, Hermite) for d in self.inputs.values()]
-        low, high = design.min(axis=0), design.max(axis=0)
+        # Without design runs (an intrusive solve) no range is known: no run is a tail draw.
+        low, high = (design.min(axis=0), design.max(axis=0)) if design.size else (-np.inf, np.inf)
         partition = getattr(self.design, "partition", None)
         if placed and partition is not None:
             # Each element's own nodes (not those of the elements split on the way).

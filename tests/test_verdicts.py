@@ -304,8 +304,8 @@ def test_an_analytic_response_is_told_to_raise_the_order():
 def test_a_response_oscillating_across_its_range_is_told_to_use_elements():
     # configs/mr_damper.yaml at the paper's order 3: x1 has up to 13 extrema in I
     # (docs/paper_cases.md), the order-3 spectrum rises to its top degree and the held-out
-    # error spreads over the range; order: auto then stops at order 12 unconverged (85
-    # runs) where elements: auto holds the mean and std.
+    # error spreads over the range. Either remedy holds the mean and std (docs/paper_cases.md:
+    # order: auto in 31 runs, elements: auto in 44); the shape of the error names elements.
     config = pcmb.load_config(ROOT / "configs" / "mr_damper.yaml")
     study = pcmb.Study.from_config(config).replace(
         times=np.linspace(0.0, 6.0, 61), backend="inprocess", nominal_run=False
