@@ -31,7 +31,10 @@ from pcmb.result import NodeFailure, Status, WarningRecord
 if TYPE_CHECKING:
     from pcmb.run.executor import RunResult
 
-__all__ = ["HeldOutDraws", "HeldOutPlan"]
+__all__ = ["HELD_OUT_RUN", "HeldOutDraws", "HeldOutPlan"]
+
+#: What messages call a held-out run (numbered among those runs, not the design's nodes).
+HELD_OUT_RUN = "held-out run"
 
 #: The grids of one input whose held-out runs are placed (:meth:`HeldOutPlan.placed`).
 _PLACED_GRIDS = frozenset(
@@ -173,6 +176,7 @@ def _failed(failures: list[NodeFailure], total: int, where: str, why: str) -> Wa
     ``where`` and left out ``why``."""
     return WarningRecord(
         "nodes-failed",
-        f"{len(failures)} of {total} held-out run(s) failed{where} and were left out of the "
-        f"check{why}: " + "; ".join(map(str, failures)),
+        f"{len(failures)} of {total} {HELD_OUT_RUN}(s) failed{where} and were left out of the "
+        f"check{why}: "
+        + "; ".join(str(dataclasses.replace(f, run=HELD_OUT_RUN)) for f in failures),
     )

@@ -52,7 +52,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.held_out import HeldOutPlan
+from pcmb.held_out import HELD_OUT_RUN, HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -117,8 +117,6 @@ def _check_inputs(
 
 #: The method of a study given none: tensor collocation of order 3.
 DEFAULT_METHOD: Mapping[str, Any] = {"kind": "collocation", "order": 3}
-#: What the errors call a held-out run (numbered among those runs, not the design's nodes).
-_HELD_OUT_RUN = "held-out run"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1022,7 +1020,7 @@ class Study:
             found = others.pop(0)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
-            self._judge_failures(run, found, held_journal, _HELD_OUT_RUN, draws.tails)
+            self._judge_failures(run, found, held_journal, HELD_OUT_RUN, draws.tails)
             checked = draws.checked(found)
         return design_runs, journal, checked, others[0] if others else None
 
@@ -1119,12 +1117,16 @@ class Study:
         all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`); ``runs_of``:
         what the runs are (``"held-out run"``: numbered among those, and kept beside the
         design's nodes, which the error names too: ``--resume`` keeps both)."""
-        failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
+        failures = [
+            dataclasses.replace(f, run=runs_of)
+            for f in runs.failures
+            if tolerated is None or not tolerated[f.index]
+        ]
         if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
         places = []
-        if runs_of == _HELD_OUT_RUN and run.journaling is not None:
+        if runs_of == HELD_OUT_RUN and run.journaling is not None:
             places.append(("the design's nodes", run.journaling.directory))
         beside = bool(places)
         if journal is not None and finished:
@@ -1190,7 +1192,7 @@ class Study:
             name,
             halves,
             proven=proven,
-            runs_of=_HELD_OUT_RUN,
+            runs_of=HELD_OUT_RUN,
             tolerated=draws.tails,
         )
         if journal is not None:

@@ -552,3 +552,5 @@ def test_a_failed_held_out_run_names_both_journals(tmp_path, method):
     assert f"the design's nodes are kept in {journal} and the " in str(raised.value)
     assert f"finished held-out run(s) in {journal / 'validation'}" in str(raised.value)
     assert "--resume keeps both" in str(raised.value)
+    # The failed run is numbered among the held-out runs, and called one (not "node 3").
+    assert "held-out run 3 (a=" in str(raised.value) and "node 3" not in str(raised.value)

@@ -74,6 +74,7 @@ def test_a_held_out_run_failing_in_a_normal_tail_does_not_abort(seed, inputs, or
     assert f"{failed.sum()} of {failed.size} held-out run(s) failed in the tails of K" in record
     assert "beyond the design's nodes" in record
     assert "stiffness must be positive" in record
+    assert "held-out run " in record and "node " not in record.replace("design's nodes", "")
 
 
 @pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")

@@ -81,18 +81,22 @@ class NodeFailure:
     traceback:
         Where the model's code raised, when it did (``None`` for the other failures, and in
         files written before pcmb kept tracebacks).
+    run:
+        What the run was, as messages name it: ``"node"`` (of the design), or ``"held-out
+        run"`` (numbered among the held-out runs).
     """
 
     index: int
     params: dict[str, float | tuple[float, ...]]
     message: str
     traceback: ModelTraceback | None = None
+    run: str = "node"
 
     @property
     def node(self) -> str:
-        """``node 3 (a=0.5, b=2)``."""
+        """``node 3 (a=0.5, b=2)``, or ``held-out run 3 (…)``."""
         values = ", ".join(f"{name}={_format_value(v)}" for name, v in self.params.items())
-        return f"node {self.index} ({values})"
+        return f"{self.run} {self.index} ({values})"
 
     @property
     def cause(self) -> tuple[str, ...]:
@@ -123,8 +127,8 @@ def failure_report(failures: Sequence[NodeFailure], label: str = "") -> list[str
             lines += [indent + line if line else "" for line in text.splitlines()]
         if others:
             lines.append(
-                f"{label}and {plural(len(others), 'more node', 'more nodes')} with the same error: "
-                + ", ".join(other.node for other in others)
+                f"{label}and {plural(len(others), f'more {first.run}', f'more {first.run}s')} "
+                "with the same error: " + ", ".join(other.node for other in others)
             )
     return lines
 
