@@ -21,10 +21,10 @@ from pcmb.analysis.diagnostics import (
     held_out_draws,
     held_out_placed,
     held_out_placed_elements,
+    widened_inputs,
 )
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
-from pcmb.chaos.polynomials import Hermite
 from pcmb.designs import NodeDesign
 from pcmb.result import NodeFailure, Status, WarningRecord
 
@@ -99,7 +99,7 @@ class HeldOutPlan:
         input marked (:attr:`HeldOutDraws.beyond`)."""
         seed = self.seed + HELD_OUT_SEED + batch
         placed = self.placed()
-        normal = [isinstance(d.family, Hermite) for d in self.inputs.values()]
+        normal = widened_inputs(tuple(self.inputs.values()))
         # Without design runs (an intrusive solve) no range is known: no run is a tail draw.
         low, high = (design.min(axis=0), design.max(axis=0)) if design.size else (-np.inf, np.inf)
         partition = getattr(self.design, "partition", None)

@@ -92,6 +92,7 @@ __all__ = [
     "spectral_decay",
     "statistics_error",
     "verdict",
+    "widened_inputs",
 ]
 
 #: Codes of the warning records the diagnostics make.
@@ -248,6 +249,11 @@ def _plain_share(width: float) -> float:
     return 2.0 * STANDARD_NORMAL.cdf(-TAIL_BOUND / width)
 
 
+def widened_inputs(distributions: Sequence[Distribution]) -> NDArray[np.bool_]:
+    """(n,) which inputs :func:`held_out_draws` widens into their tails: the normal ones."""
+    return np.array([isinstance(d.family, Hermite) for d in distributions], dtype=bool)
+
+
 def held_out_draws(
     distributions: Sequence[Distribution], count: int, seed: int
 ) -> tuple[NodeSet, NDArray[np.float64]]:
@@ -263,7 +269,7 @@ def held_out_draws(
     w = Π φ / q (at most 1/P). Without normal inputs the weights are 1.
     """
     batch = random_nodes(distributions, count, "lhs", seed)
-    normal = np.array([isinstance(d.family, Hermite) for d in distributions], dtype=bool)
+    normal = widened_inputs(distributions)
     if not normal.any():
         return batch, np.ones(count)
     width = _tail_width(int(normal.sum()))
@@ -288,9 +294,9 @@ def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
     :func:`held_out_draws` widens (the normal ones) hold at most ``LINEAR_SHARE`` of the
     expansion's variance: the response is linear in them (a damped oscillator in its initial
     displacement), not heavy-tailed; all False without normal inputs."""
-    normal = [isinstance(d.family, Hermite) for d in expansion.distributions]
+    normal = widened_inputs(expansion.distributions)
     index = np.asarray(expansion.multi_index)
-    if not any(normal) or not scale > 0 or not np.isfinite(scale):
+    if not normal.any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape, dtype=bool)
     energy = _energies(expansion, scale)
     curved = np.sum(energy[np.any(index[:, normal] >= 2, axis=1)], axis=0)
@@ -303,8 +309,8 @@ def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> N
     b = (1 - m₂) / (m₄ - m₂²) and a = 1 - b m₂: E ω g(z) = E_N(0, 1) g for every g of degree
     3 or less in each, at E ω² = 1.55 per germ (λ = 4.2) where the importance weights' is
     1.99 (all widened: a = (3λ² - 1) / (2λ²), b = (1 - λ²) / (2λ⁴), 1.44 and 3)."""
-    normal = [isinstance(d.family, Hermite) for d in distributions]
-    width = _tail_width(sum(normal))
+    normal = widened_inputs(distributions)
+    width = _tail_width(int(normal.sum()))
     plain = _plain_share(width)
     # The widened part's moments within ±TAIL_BOUND, by parts, and the plain draws'.
     beta = TAIL_BOUND / width
