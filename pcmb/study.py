@@ -1017,7 +1017,7 @@ class Study:
         self._judge_failures(run, design_runs, journal)
         checked: tuple[HeldOut | None, tuple[WarningRecord, ...]] = (None, ())
         if draws is not None:
-            found = others.pop(0)
+            found = others.pop(0).of(HELD_OUT_RUN)
             if held_journal is not None:
                 held_journal.close()  # the folder goes with the whole journal at the end
             self._judge_failures(run, found, held_journal, HELD_OUT_RUN, draws.tails)
@@ -1053,7 +1053,7 @@ class Study:
                 proven=proven,
                 keep=keep,
                 tolerated=tolerated,
-            )
+            ).of(runs_of)
         self._judge_failures(run, runs, journal, runs_of, tolerated)
         return runs, journal
 
@@ -1117,11 +1117,7 @@ class Study:
         all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`); ``runs_of``:
         what the runs are (``"held-out run"``: numbered among those, and kept beside the
         design's nodes, which the error names too: ``--resume`` keeps both)."""
-        failures = [
-            dataclasses.replace(f, run=runs_of)
-            for f in runs.failures
-            if tolerated is None or not tolerated[f.index]
-        ]
+        failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
         if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))

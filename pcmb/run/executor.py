@@ -94,6 +94,13 @@ class RunResult:
     seconds: float
     resumed: int
 
+    def of(self, run: str) -> RunResult:
+        """These runs with their failures called ``run`` (``"held-out run"``) in messages."""
+        if run == "node":
+            return self
+        failures = tuple(dataclasses.replace(f, run=run) for f in self.failures)
+        return dataclasses.replace(self, failures=failures)
+
 
 def join_runs(first: RunResult, second: RunResult) -> RunResult:
     """The runs of ``first`` followed by those of ``second`` (its node indices shifted)."""
