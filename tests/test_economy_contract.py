@@ -162,13 +162,13 @@ def test_a_jump_in_the_initial_condition_is_never_called_reliable_past_its_cross
 
 def test_elements_auto_held_to_two_elements_is_not_flagged_below_the_tolerance(tmp_path):
     """Done when, no false alarm: the same jump, ``elements: auto`` at order 3 held to 2
-    elements (12 runs): its true error stays below 2.6 % of the largest std, so nothing is
-    flagged."""
+    elements (12 runs): its true error stays below the tolerance (5 % of the largest std), so a
+    flag would be a false alarm."""
     method = "{kind: collocation, order: 3, elements: auto, max_elements: 2}"
     path = _study(tmp_path, "jump", 1, method, 3.0)
     response = lambda x, t: np.where(x > 0.2, 1.0, -1.0) * (1 - np.exp(-t)) + 0.1 * x  # noqa: E731
     _, error, verdict = _true_error(path, response, cut=0.2)
-    assert error.max() < 0.03
+    assert error.max() < 0.05  # the premise: the truth is below the tolerance everywhere
     assert np.isnan(verdict["failing_from"])
 
 
