@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import RELATIVE_NOISE, ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid, draw_germs
 from pcmb.chaos.recovery import project_tensor
@@ -41,10 +41,6 @@ from pcmb.chaos.spectral import ChaosSpectrum, chaos_spectrum
 from pcmb.chaos.truncated import Conditional
 
 __all__ = ["Partition", "PiecewiseExpansion", "piecewise_spectrum"]
-
-#: A variance below this fraction squared of the mean square is round-off (as in
-#: :class:`ChaosExpansion`): the output does not vary there.
-_RELATIVE_NOISE = 1e-12
 
 
 class Partition:
@@ -295,7 +291,7 @@ class PiecewiseExpansion:
         mean, scale, _ = self._spread
         scaled = self._scaled_variance
         with np.errstate(over="ignore", invalid="ignore"):
-            return scaled > _RELATIVE_NOISE**2 * (scaled + (mean / scale) ** 2)
+            return scaled > RELATIVE_NOISE**2 * (scaled + (mean / scale) ** 2)
 
     def mean(self) -> NDArray[np.float64]:
         """E[y] = Σ_e P_e μ_e, shape (...)."""

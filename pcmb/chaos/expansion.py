@@ -48,7 +48,7 @@ __all__ = [
 
 #: A standard deviation below this fraction of the output's RMS is round-off: the output does
 #: not vary there (std 0, Sobol' NaN).
-_RELATIVE_NOISE = 1e-12
+RELATIVE_NOISE = 1e-12
 #: Magnitudes beyond which squares may overflow (1e150² = 1e300, with room for 1e8 terms),
 #: and below which they underflow into subnormals: such columns are scaled before squaring.
 _HUGE, _TINY = 1e150, 1e-150
@@ -167,7 +167,7 @@ class ChaosExpansion:
         if self._scale is not None:
             mean = mean / self._scale
         with np.errstate(over="ignore", invalid="ignore"):
-            threshold = _RELATIVE_NOISE**2 * (variance + mean**2)
+            threshold = RELATIVE_NOISE**2 * (variance + mean**2)
         return variance > threshold, np.isfinite(variance) & (variance <= threshold)
 
     def varies(self) -> NDArray[np.bool_]:

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.chaos.basis import PolynomialBasis, total_index_set
+from pcmb.chaos.expansion import RELATIVE_NOISE
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import TensorGrid
 from pcmb.errors import IllPosedError
@@ -40,8 +41,6 @@ __all__ = [
 MAX_CONDITION = 1e8
 #: Nodes per term that :func:`fit_largest_stable` requires (oversampling for a stable fit).
 OVERSAMPLING = 1.5
-#: A response whose std is below this share of its RMS does not vary (round-off).
-_ROUND_OFF = 1e-12
 
 
 def _rows(values: ArrayLike, n_nodes: int) -> NDArray:
@@ -246,7 +245,7 @@ def fit_least_squares(
         loo = np.sum(share * (residual / (1.0 - leverage)[:, None]) ** 2, axis=0)
         spread = np.sum(share * (rhs - np.sum(share * rhs, axis=0)) ** 2, axis=0)
         # A std below 1e-12 of the RMS is round-off (runs equal but for the last bit).
-        varies = spread > _ROUND_OFF**2 * np.sum(share * rhs**2, axis=0)
+        varies = spread > RELATIVE_NOISE**2 * np.sum(share * rhs**2, axis=0)
         loo_error = np.where(varies, loo / spread, np.nan)
     return LeastSquaresFit(
         coefficients=coefficients.reshape(n_terms, *trailing),
