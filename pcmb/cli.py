@@ -458,7 +458,8 @@ def _runs_made(result) -> str:
     )
     nominal = "1 nominal" if result.nominal else "no nominal run"
     total = result.n_nodes + (0 if held_out is None else len(held_out.ok)) + bool(result.nominal)
-    return f"{total} in all: {result.n_nodes} of the design, {checked}, {nominal}"
+    made = f"{total} in all: {result.n_nodes} of the design, {checked}, {nominal}"
+    return "; ".join(filter(None, (made, result.fitted_runs)))
 
 
 def _inspect(path: str) -> str:

@@ -86,6 +86,9 @@ class Design:
     label:
         A short label the design gives itself: ``chaos order 5``, ``chaos orders 3x5``,
         ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule gauss-patterson``, ...
+    held_out_fitted:
+        Held-out runs the expansions were fitted to besides the design's runs (a regression's
+        final fit, ``docs/methods.md``); 0: the design's runs alone.
 
     Records written before a field existed load with its default (the label: the kind).
     """
@@ -105,6 +108,7 @@ class Design:
     max_samples: int | None = None
     max_runs: int | None = None
     label: str = ""
+    held_out_fitted: int = 0
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -583,6 +587,16 @@ class StudyResult(ReportedByDesign):
     @property
     def n_nodes(self) -> int:
         return self.germ.shape[0]
+
+    @property
+    def fitted_runs(self) -> str:
+        """The runs the expansions were fitted to, in words, where held-out runs were among
+        them (:attr:`Design.held_out_fitted`): ``the fit used 32 design + 10 held-out runs``;
+        empty otherwise."""
+        if not self.design.held_out_fitted:
+            return ""
+        design = int(np.sum(self.status == Status.OK))
+        return f"the fit used {design} design + {self.design.held_out_fitted} held-out runs"
 
     @property
     def node_params(self) -> dict[str, NDArray[np.float64]]:

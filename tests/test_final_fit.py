@@ -75,7 +75,7 @@ def test_lars_reselects_its_terms_over_every_run():
     result = _run(_study(method))
     germ, values, weights = _all_runs(result, "y")
     design = result.expansions["y"]
-    candidates = SparseRegression(MIXED, _settings(orders=(5, 5), samples=24)).candidates
+    candidates = SparseRegression(MIXED, _settings(orders=(5, 5), q=1.0)).candidates
     every = fit_sparse(candidates, germ, values, "lars", weights)
     own = fit_sparse(candidates, result.germ, result.values["y"], "lars")
     assert not np.array_equal(every.multi_index, own.multi_index)  # the runs change the terms
@@ -139,7 +139,9 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     params = {"bad": [], "switch": str(switch)}
     whole = _run(pcmb.Study(_SwitchedLognormal, MIXED, TIMES, params=params, **settings))
     # A run in the middle of a's range (a failed tail draw would not stop the study).
-    params["bad"] = [float(whole.held_out.params[np.argmin(np.abs(whole.held_out.params[:, 0])), 0])]
+    params["bad"] = [
+        float(whole.held_out.params[np.argmin(np.abs(whole.held_out.params[:, 0])), 0])
+    ]
     switch.touch()
     study = pcmb.Study(_SwitchedLognormal, MIXED, TIMES, params=params, **settings)
     with pytest.raises(ModelRunError, match="held-out run"):
@@ -152,7 +154,9 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     )
     np.testing.assert_array_equal(resumed.regression["y"].loo, whole.regression["y"].loo)
     back = pcmb.load(tmp_path / "r.h5")
-    np.testing.assert_array_equal(back.expansions["y"].coefficients, whole.expansions["y"].coefficients)
+    np.testing.assert_array_equal(
+        back.expansions["y"].coefficients, whole.expansions["y"].coefficients
+    )
     assert back.design.held_out_fitted == 12
 
 

@@ -725,7 +725,7 @@ def _runs_text(result: StudyResult) -> str:
     if result.nominal_params:
         nominal = ", ".join(f"{k} = {v:.6g}" for k, v in result.nominal_params.items())
         parts.append(f"nominal run at {nominal}{'' if result.nominal else ' (failed)'}")
-    return "; ".join(parts)
+    return "; ".join(filter(None, (*parts, result.fitted_runs)))
 
 
 def _inputs_table(result: StudyResult) -> list[str]:

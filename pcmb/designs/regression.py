@@ -101,7 +101,7 @@ def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
 
 
-def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
+def estimated_error(fits: Mapping[str, SparseFit], runs: float) -> float:
     """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
     worst = 0.0
     for fit in fits.values():
@@ -110,7 +110,7 @@ def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
     return worst
 
 
-def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: int) -> float:
+def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: float) -> float:
     """The estimated error of the mean and std of a least-squares fit, relative to the largest
     std, the largest over times, from its corrected LOO error ε and std σ per time.
 
@@ -265,11 +265,16 @@ class SparseRegression:
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
-        self, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: NDArray[np.float64] | None = None,
     ) -> dict[str, SparseFit]:
         germ = nodes.nodes[ok]
+        rows = None if weights is None else weights[ok]
         return {
-            name: fit_sparse(self.candidates, germ, y[ok], self.selection)
+            name: fit_sparse(self.candidates, germ, y[ok], self.selection, rows)
             for name, y in values.items()
         }
 
@@ -280,8 +285,34 @@ class SparseRegression:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        fits = self._fits(nodes, values, ok)
         self._made = nodes.size
+        return self._recovery(nodes, values, ok, None, times)
+
+    def refit(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: NDArray[np.float64],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        """The final fit (:class:`~pcmb.designs.base.RefittingDesign`): the expansions fitted
+        again, with the same candidates and selection (LARS and OMP select again), over
+        ``nodes``, the design's runs followed by the held-out runs, by least squares weighted
+        by ``weights`` (N,), 1 for the design's runs and the importance weights of the
+        held-out draws; the records describe that fit. The design's record is unchanged."""
+        return self._recovery(nodes, values, ok, weights, times)
+
+    def _recovery(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: NDArray[np.float64] | None,
+        times: NDArray[np.float64] | None,
+    ) -> Recovery:
+        """The expansions of :meth:`recover` (``weights`` ``None``) or :meth:`refit`."""
+        fits = self._fits(nodes, values, ok, weights)
         expansions = {}
         if fits:
             union, where = np.unique(
@@ -303,14 +334,15 @@ class SparseRegression:
             for name, fit in fits.items()
             if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        estimate = estimated_error(fits, runs)
+        estimate = estimated_error(fits, _effective_runs(ok, weights))
         if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
-                    f"the rounds ended after {nodes.size} of {self.max_samples} runs "
+                    f"the rounds ended after {self._made} of {self.max_samples} runs "
                     f"(method.max_samples) before the tolerance was met: estimated error of the "
-                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
+                    f"mean and std{'' if weights is None else ' of the final fit'} "
+                    f"{estimate:.3g} > {self.tolerance:g} (from the worst corrected "
                     f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
                     "lower the order",
                 ),
@@ -343,6 +375,14 @@ class SparseRegression:
             name,
             span,
         )
+
+
+def _effective_runs(ok: NDArray[np.bool_], weights: NDArray[np.float64] | None) -> float:
+    """The runs ``ok`` count as, weighted: (Σ w)² / Σ w² (their number without ``weights``)."""
+    if weights is None:
+        return float(np.sum(ok))
+    kept = weights[ok]
+    return float(np.sum(kept) ** 2 / np.sum(kept**2))
 
 
 @dataclass(frozen=True)
