@@ -86,9 +86,6 @@ class Design:
     label:
         A short label the design gives itself: ``chaos order 5``, ``chaos orders 3x5``,
         ``lhs + chaos fit, total order 3``, ``Smolyak level 3, rule gauss-patterson``, ...
-    held_out_fitted:
-        Held-out runs the expansions were fitted to besides the design's runs (a regression's
-        final fit, ``docs/methods.md``); 0: the design's runs alone.
 
     Records written before a field existed load with its default (the label: the kind).
     """
@@ -108,7 +105,6 @@ class Design:
     max_samples: int | None = None
     max_runs: int | None = None
     label: str = ""
-    held_out_fitted: int = 0
 
     def describe(self) -> str:
         """JSON text of the record (stored in ``/design``)."""
@@ -137,11 +133,15 @@ class RegressionFit:
         vary).
     condition:
         Condition number of the information matrix of the selected terms.
+    held_out_fitted:
+        Held-out runs the fit used besides the design's (the final fit, ``docs/methods.md``);
+        0: the design's runs alone (files without it: 0).
     """
 
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
+    held_out_fitted: int = 0
 
 
 @dataclass(frozen=True)
@@ -337,6 +337,8 @@ class RecordReport(DesignReport):
     def _read_field(cls, file: ReportFile, group: str, name: str, output: str) -> Any:
         place = cls.LAYOUT[name]
         if place == ATTRIBUTE:
+            if name not in file.attrs(group):  # a field added later: the record's default
+                return next(f.default for f in fields(cls.RECORD) if f.name == name)
             value = file.attrs(group)[name]
             return value.item() if isinstance(value, np.generic) else value
         if place == POINTS:
@@ -591,12 +593,14 @@ class StudyResult(ReportedByDesign):
     @property
     def fitted_runs(self) -> str:
         """The runs the expansions were fitted to, in words, where held-out runs were among
-        them (:attr:`Design.held_out_fitted`): ``the fit used 32 design + 10 held-out runs``;
-        empty otherwise."""
-        if not self.design.held_out_fitted:
+        them (a regression's final fit, :attr:`RegressionFit.held_out_fitted`): ``the fit of
+        y used 32 design + 10 held-out runs``; empty otherwise."""
+        refitted = {n: f.held_out_fitted for n, f in self.regression.items() if f.held_out_fitted}
+        if not refitted:
             return ""
         design = int(np.sum(self.status == Status.OK))
-        return f"the fit used {design} design + {self.design.held_out_fitted} held-out runs"
+        runs = " / ".join(map(str, sorted(set(refitted.values()))))
+        return f"the fit of {', '.join(refitted)} used {design} design + {runs} held-out runs"
 
     @property
     def node_params(self) -> dict[str, NDArray[np.float64]]:

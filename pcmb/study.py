@@ -879,11 +879,12 @@ class Study:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         axes: Mapping[str, OutputAxis | None],
-        weights: NDArray[np.float64] | None = None,
+        weights: Mapping[str, NDArray[np.float64]] | None = None,
     ) -> Recovery:
         """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
         order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`); with row
-        ``weights``, its final fit (:meth:`~pcmb.designs.base.RefittingDesign.refit`)."""
+        ``weights`` per output, its final fit
+        (:meth:`~pcmb.designs.base.RefittingDesign.refit`)."""
         parts = []
         for _, on_time, group in _by_axis(values, axes):
             # Warning records locate times only (time_range): off time they name indices.
@@ -1253,25 +1254,34 @@ class Study:
         stream: TextIO | None,
     ) -> StudyResult:
         """The ``judged`` result (``found``, the design's own fit, diagnosed) with the final
-        fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`) over the
-        ``runs`` at its ``nodes`` and the held-out runs that succeeded (drawn runs weighted
-        back by their importance weights): its expansions, report and records in place of
+        fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`): every
+        output the check does not vouch for fitted over the ``runs`` at its ``nodes`` and the
+        held-out runs that succeeded, weighted back by their importance weights; the others
+        keep the fit the check vouched for. Its expansions, report and records replace
         ``found``'s; the diagnostics, verdict and corrected mean and std stay those of the
-        checked fit (``docs/methods.md``). ``judged`` itself for any other design, or
-        without a held-out run that succeeded."""
+        checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself for any other
+        design, without a held-out run that succeeded, or where the check vouches for all."""
         held_out = judged.held_out
         if not hasattr(self.design, "refit") or held_out is None or not held_out.ok.any():
+            return judged
+        vouched = {name for name, checked in judged.diagnostics.items() if checked.vouched}
+        if vouched >= set(found.expansions):
             return judged
         every = join_nodes(nodes, NodeSet(nodes.distributions, held_out.germ, held_out.params))
         values = {
             name: np.concatenate([y, held_out.values[name]]) for name, y in runs.values.items()
         }
         ok = np.concatenate([runs.status == Status.OK, held_out.ok])
-        weights = np.concatenate([np.ones(nodes.size), held_out.weights])
-        fitting = f"final fit over {plural(int(held_out.ok.sum()), 'held-out run')} too"
+        left_out = np.zeros_like(held_out.weights)
+        weights = {
+            name: np.concatenate(
+                [np.ones(nodes.size), left_out if name in vouched else held_out.weights]
+            )
+            for name in values
+        }
+        fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
         with phase(fitting, stream):
             recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
-        design = dataclasses.replace(judged.design, held_out_fitted=int(held_out.ok.sum()))
         fitted = dataclasses.replace(
             found,
             expansions=recovery.expansions,
@@ -1282,7 +1292,6 @@ class Study:
         checked = tuple(record for record in judged.warnings if record not in found.warnings)
         return dataclasses.replace(
             judged,
-            design=design,
             expansions=fitted.expansions,
             report=fitted.report,
             warnings=(*fitted.warnings, *checked),

@@ -26,15 +26,18 @@ MIXED = {"a": pcmb.Normal(0.0, 1.0), "b": pcmb.Uniform(-1.0, 1.0)}
 
 
 def _lognormal(params, times):
-    """y = exp(a/2 + 0.3 b) (1 + t)."""
-    return {"y": np.exp(0.5 * params["a"] + 0.3 * params["b"])[:, None] * (1.0 + times)}
+    """y = exp(a/2 + 0.3 b) (1 + t), and p = (a + b²) (1 + t), a polynomial of the bases'."""
+    a, b = params["a"][:, None], params["b"][:, None]
+    return {"y": np.exp(0.5 * a + 0.3 * b) * (1.0 + times), "p": (a + b * b) * (1.0 + times)}
 
 
-lognormal_ramp = pcmb.batched(outputs=("y",))(_lognormal)
+lognormal_ramp = pcmb.batched(outputs=("y", "p"))(_lognormal)
+#: A tolerance no fit of y meets: the check vouches for p alone.
+STRICT = {"tolerance": 1e-6}
 
 
 def _study(method: dict, **changes) -> pcmb.Study:
-    settings = {"backend": "inprocess", "method": method, **changes}
+    settings = {"backend": "inprocess", "method": method, "diagnostics": STRICT, **changes}
     return pcmb.Study(lognormal_ramp, MIXED, TIMES, **settings)
 
 
@@ -65,7 +68,7 @@ def test_least_squares_is_refitted_over_the_held_out_runs_weighted_back():
     root = np.sqrt(weights)[:, None]
     expected, *_ = np.linalg.lstsq(matrix.evaluate(germ) * root, values * root, rcond=None)
     np.testing.assert_allclose(expansion.coefficients, expected, rtol=0, atol=1e-10)
-    assert result.design.held_out_fitted == 16 and result.design.samples == 40
+    assert result.regression["y"].held_out_fitted == 16 and result.design.samples == 40
 
 
 def test_lars_reselects_its_terms_over_every_run():
@@ -107,7 +110,7 @@ def test_the_final_fit_is_closer_to_the_closed_form_than_the_design_s_alone():
         values = {"y": ishigami(every.params)}
         own = design.recover(nodes, {"y": values["y"][: nodes.size]}, ok[: nodes.size])
         rows = np.concatenate([np.ones(nodes.size), weights])
-        final = design.refit(every, values, ok, rows)
+        final = design.refit(every, values, ok, {"y": rows})
         for name, found in (("design", own), ("final", final)):
             expansion = found.expansions["y"]
             error = abs(expansion.mean() - exact.mean), abs(expansion.std() - sigma)
@@ -135,6 +138,7 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     final fit over the design's and the held-out runs equals an uninterrupted study's."""
     method = {"kind": "regression", "samples": 32, "order": 4, "validation": 12}
     settings = {"backend": "inprocess", "method": method, "on_failure": "abort"}
+    settings["diagnostics"] = STRICT
     switch = tmp_path / "switch"
     params = {"bad": [], "switch": str(switch)}
     whole = _run(pcmb.Study(_SwitchedLognormal, MIXED, TIMES, params=params, **settings))
@@ -148,7 +152,7 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
         _run(study, tmp_path / "r.h5")
     switch.unlink()
     resumed = _run(study, tmp_path / "r.h5", resume=True)
-    assert resumed.design.held_out_fitted == whole.design.held_out_fitted == 12
+    assert resumed.regression["y"].held_out_fitted == whole.regression["y"].held_out_fitted == 12
     np.testing.assert_array_equal(
         resumed.expansions["y"].coefficients, whole.expansions["y"].coefficients
     )
@@ -157,15 +161,38 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     np.testing.assert_array_equal(
         back.expansions["y"].coefficients, whole.expansions["y"].coefficients
     )
-    assert back.design.held_out_fitted == 12
+    assert back.regression["y"].held_out_fitted == 12
 
 
-def test_inspect_and_the_report_say_which_runs_the_fit_used():
+def test_an_output_the_check_vouches_for_keeps_the_fit_it_checked():
+    """p is a polynomial of the candidates: the check vouches for its design-only fit, which
+    stays (bit for bit the design's ``recover``); y is refitted."""
     method = {"kind": "regression", "samples": 32, "order": 3, "validation": 10}
     result = _run(_study(method))
-    assert "the fit used 32 design + 10 held-out runs" in _runs_made(result)
+    assert result.diagnostics["p"].vouched and not result.diagnostics["y"].vouched
+    assert result.regression["p"].held_out_fitted == 0
+    assert result.regression["y"].held_out_fitted == 10
+    design = SparseRegression(MIXED, _settings(orders=(3, 3), q=1.0))
+    nodes = design.nodes()
+    own = design.recover(nodes, result.values, np.ones(nodes.size, dtype=bool))
+    p = own.expansions["p"]
+    kept = result.expansions["p"]
+    np.testing.assert_array_equal(own.regression["p"].selected, result.regression["p"].selected)
+    assert p.coefficients[np.any(p.coefficients != 0, axis=1)].tobytes() == (
+        kept.coefficients[np.any(kept.coefficients != 0, axis=1)].tobytes()
+    )
+
+
+def test_inspect_and_the_report_say_which_runs_the_fit_used(tmp_path):
+    method = {"kind": "regression", "samples": 32, "order": 3, "validation": 10}
+    _run(_study(method), tmp_path / "r.h5")
+    result = pcmb.load(tmp_path / "r.h5")
+    assert result.regression["y"].held_out_fitted == 10
+    assert "the fit of y used 32 design + 10 held-out runs" in _runs_made(result)
     from pcmb.analysis.report import _runs_text
 
-    assert "the fit used 32 design + 10 held-out runs" in _runs_text(result)
-    collocation = _run(_study({"kind": "collocation", "order": 2, "validation": 4}))
-    assert "the fit used" not in _runs_made(collocation)
+    assert "the fit of y used 32 design + 10 held-out runs" in _runs_text(result)
+    (line,) = [text for label, text in result.report.summary(result) if text.startswith("y:")]
+    assert "(final fit, with 10 held-out runs)" in line
+    vouched = _run(_study(method, diagnostics={}))
+    assert not vouched.fitted_runs and "the fit" not in _runs_made(vouched)

@@ -269,14 +269,18 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: NDArray[np.float64] | None = None,
-    ) -> dict[str, SparseFit]:
-        germ = nodes.nodes[ok]
-        rows = None if weights is None else weights[ok]
-        return {
-            name: fit_sparse(self.candidates, germ, y[ok], self.selection, rows)
-            for name, y in values.items()
-        }
+        weights: Mapping[str, NDArray[np.float64]] | None = None,
+    ) -> dict[str, tuple[SparseFit, NDArray[np.float64] | None]]:
+        """Each output's fit over its rows (``ok``, and a weight above 0) and their weights
+        (``None``: the design's runs alone, unweighted, as :meth:`recover` fits them)."""
+        fits = {}
+        for name, y in values.items():
+            rows = ok if weights is None else ok & (weights[name] > 0)
+            held_out = weights is not None and rows[self._made :].any()
+            kept = weights[name][rows] if held_out else None
+            fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
+            fits[name] = fit, kept if held_out else np.ones(int(rows.sum()))
+        return fits
 
     def recover(
         self,
@@ -293,14 +297,16 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: NDArray[np.float64],
+        weights: Mapping[str, NDArray[np.float64]],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        """The final fit (:class:`~pcmb.designs.base.RefittingDesign`): the expansions fitted
+        """The final fit (:class:`~pcmb.designs.base.RefittingDesign`): each output fitted
         again, with the same candidates and selection (LARS and OMP select again), over
         ``nodes``, the design's runs followed by the held-out runs, by least squares weighted
-        by ``weights`` (N,), 1 for the design's runs and the importance weights of the
-        held-out draws; the records describe that fit. The design's record is unchanged."""
+        by its ``weights`` (N,): 1 for the design's runs, the held-out draws' importance
+        weights, 0 for a row left out. An output none of whose held-out runs is kept gets
+        the fit :meth:`recover` made. The records describe these fits; the design's record
+        is unchanged."""
         return self._recovery(nodes, values, ok, weights, times)
 
     def _recovery(
@@ -308,11 +314,12 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: NDArray[np.float64] | None,
+        weights: Mapping[str, NDArray[np.float64]] | None,
         times: NDArray[np.float64] | None,
     ) -> Recovery:
         """The expansions of :meth:`recover` (``weights`` ``None``) or :meth:`refit`."""
-        fits = self._fits(nodes, values, ok, weights)
+        weighted = self._fits(nodes, values, ok, weights)
+        fits = {name: fit for name, (fit, _) in weighted.items()}
         expansions = {}
         if fits:
             union, where = np.unique(
@@ -328,28 +335,37 @@ class SparseRegression:
                 expansions[name] = ChaosExpansion(
                     coefficients, union, self.distributions, self.names
                 )
-        runs = int(np.sum(ok))
         records = tuple(
             record
-            for name, fit in fits.items()
-            if (record := self._loo_warning(name, fit, runs, times)) is not None
+            for name, (fit, rows) in weighted.items()
+            if (record := self._loo_warning(name, fit, rows.size, times)) is not None
         )
-        estimate = estimated_error(fits, _effective_runs(ok, weights))
+        estimate = max(
+            (
+                estimated_error({name: fit}, _effective(rows))
+                for name, (fit, rows) in weighted.items()
+            ),
+            default=0.0,
+        )
         if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
                     f"the rounds ended after {self._made} of {self.max_samples} runs "
                     f"(method.max_samples) before the tolerance was met: estimated error of the "
-                    f"mean and std{'' if weights is None else ' of the final fit'} "
-                    f"{estimate:.3g} > {self.tolerance:g} (from the worst corrected "
+                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
                     f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
                     "lower the order",
                 ),
             )
         regression = {
-            name: RegressionFit(fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition)
-            for name, fit in fits.items()
+            name: RegressionFit(
+                fit.multi_index,
+                np.atleast_1d(fit.loo_error),
+                fit.condition,
+                rows.size - int(np.sum(ok[: self._made])) if weights is not None else 0,
+            )
+            for name, (fit, rows) in weighted.items()
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
@@ -377,19 +393,21 @@ class SparseRegression:
         )
 
 
-def _effective_runs(ok: NDArray[np.bool_], weights: NDArray[np.float64] | None) -> float:
-    """The runs ``ok`` count as, weighted: (Σ w)² / Σ w² (their number without ``weights``)."""
-    if weights is None:
-        return float(np.sum(ok))
-    kept = weights[ok]
-    return float(np.sum(kept) ** 2 / np.sum(kept**2))
+def _final(fit: RegressionFit) -> str:
+    """`` (final fit, with 10 held-out runs)`` where the fit used held-out runs, else empty."""
+    return f" (final fit, with {fit.held_out_fitted} held-out runs)" if fit.held_out_fitted else ""
+
+
+def _effective(weights: NDArray[np.float64]) -> float:
+    """The runs that rows of ``weights`` count as: (Σ w)² / Σ w²."""
+    return float(np.sum(weights) ** 2 / np.sum(weights**2))
 
 
 @dataclass(frozen=True)
 class RegressionReport(RecordReport):
     """Each output's sparse regression fit (:class:`~pcmb.result.RegressionFit`), stored
-    beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attribute
-    ``condition``."""
+    beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attributes
+    ``condition`` and ``held_out_fitted``."""
 
     key: ClassVar[str] = "regression"
     GROUP: ClassVar[str] = "outputs/{output}"
@@ -398,6 +416,7 @@ class RegressionReport(RecordReport):
         "loo": POINTS,
         "selected": (None, "input"),
         "condition": ATTRIBUTE,
+        "held_out_fitted": ATTRIBUTE,
     }
 
     regression: dict[str, RegressionFit]
@@ -406,8 +425,9 @@ class RegressionReport(RecordReport):
         return [
             (
                 "fit",
-                f"{name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
-                f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}",
+                f"{name}: {fit.selected.shape[0]} terms selected{_final(fit)}, leave-one-out "
+                f"error up to {np.nanmax(fit.loo, initial=0.0):.3g}, condition number "
+                f"{fit.condition:.3g}",
             )
             for name, fit in self.regression.items()
         ]
