@@ -260,7 +260,7 @@ class SparseRegression:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        fits = self._fits(nodes, values, ok)
+        fits = {name: fit for name, (fit, _) in self._fits(nodes, values, ok).items()}
         self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
