@@ -207,3 +207,15 @@ def test_the_bands_and_pdfs_are_drawn_from_the_final_fit():
     for name in ("y", "p"):
         drawn, expected = result.analysis.outputs[name], again.outputs[name]
         np.testing.assert_array_equal(drawn.quantiles, expected.quantiles)
+
+
+def test_a_file_written_before_the_final_fit_reads_as_fitted_to_the_design_alone(tmp_path):
+    import h5py
+
+    method = {"kind": "regression", "samples": 32, "order": 3, "validation": 10}
+    _run(_study(method), tmp_path / "r.h5")
+    with h5py.File(tmp_path / "r.h5", "r+") as file:
+        for name in ("y", "p"):
+            del file[f"outputs/{name}"].attrs["held_out_fitted"]
+    back = pcmb.load(tmp_path / "r.h5")
+    assert back.regression["y"].held_out_fitted == 0 and not back.fitted_runs
