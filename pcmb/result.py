@@ -599,8 +599,8 @@ class StudyResult(ReportedByDesign):
         if not refitted:
             return ""
         design = int(np.sum(self.status == Status.OK))
-        runs = " / ".join(map(str, sorted(set(refitted.values()))))
-        return f"the fit of {', '.join(refitted)} used {design} design + {runs} held-out runs"
+        held_out = max(refitted.values())  # the same runs for every output refitted
+        return f"the fit of {', '.join(refitted)} used {design} design + {held_out} held-out runs"
 
     @property
     def node_params(self) -> dict[str, NDArray[np.float64]]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -260,7 +260,7 @@ class SparseRegression:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        fits = {name: fit for name, (fit, _) in self._fits(nodes, values, ok).items()}
+        fits = {name: found.fit for name, found in self._fits(nodes, values, ok).items()}
         self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
@@ -270,16 +270,16 @@ class SparseRegression:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         weights: Mapping[str, NDArray[np.float64]] | None = None,
-    ) -> dict[str, tuple[SparseFit, NDArray[np.float64] | None]]:
-        """Each output's fit over its rows (``ok``, and a weight above 0) and their weights
-        (``None``: the design's runs alone, unweighted, as :meth:`recover` fits them)."""
+    ) -> dict[str, _Fit]:
+        """Each output's fit over its rows (``ok``, and a weight above 0); one that keeps no
+        held-out row is fitted unweighted, as :meth:`recover` fits the design's runs."""
         fits = {}
         for name, y in values.items():
             rows = ok if weights is None else ok & (weights[name] > 0)
-            held_out = weights is not None and rows[self._made :].any()
+            held_out = 0 if weights is None else int(rows[self._made :].sum())
             kept = weights[name][rows] if held_out else None
             fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
-            fits[name] = fit, kept if held_out else np.ones(int(rows.sum()))
+            fits[name] = _Fit(fit, np.ones(int(rows.sum())) if kept is None else kept, held_out)
         return fits
 
     def recover(
@@ -319,7 +319,7 @@ class SparseRegression:
     ) -> Recovery:
         """The expansions of :meth:`recover` (``weights`` ``None``) or :meth:`refit`."""
         weighted = self._fits(nodes, values, ok, weights)
-        fits = {name: fit for name, (fit, _) in weighted.items()}
+        fits = {name: found.fit for name, found in weighted.items()}
         expansions = {}
         if fits:
             union, where = np.unique(
@@ -337,13 +337,13 @@ class SparseRegression:
                 )
         records = tuple(
             record
-            for name, (fit, rows) in weighted.items()
+            for name, (fit, rows, _) in weighted.items()
             if (record := self._loo_warning(name, fit, rows.size, times)) is not None
         )
         estimate = max(
             (
                 estimated_error({name: fit}, _effective(rows))
-                for name, (fit, rows) in weighted.items()
+                for name, (fit, rows, _) in weighted.items()
             ),
             default=0.0,
         )
@@ -360,12 +360,9 @@ class SparseRegression:
             )
         regression = {
             name: RegressionFit(
-                fit.multi_index,
-                np.atleast_1d(fit.loo_error),
-                fit.condition,
-                rows.size - int(np.sum(ok[: self._made])) if weights is not None else 0,
+                fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out
             )
-            for name, (fit, rows) in weighted.items()
+            for name, (fit, _, held_out) in weighted.items()
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
@@ -391,6 +388,15 @@ class SparseRegression:
             name,
             span,
         )
+
+
+class _Fit(NamedTuple):
+    """An output's fit, the weights of the rows it was fitted to and how many of those rows
+    are held-out runs."""
+
+    fit: SparseFit
+    weights: NDArray[np.float64]
+    held_out: int
 
 
 def _final(fit: RegressionFit) -> str:
