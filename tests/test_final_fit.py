@@ -15,7 +15,7 @@ from pcmb.analysis.diagnostics import held_out_draws
 from pcmb.chaos.basis import PolynomialBasis
 from pcmb.chaos.nodes import join_nodes
 from pcmb.chaos.sparse_regression import fit_sparse
-from pcmb.cli import _runs_made
+from pcmb.cli import _inspect, _runs_made
 from pcmb.designs.regression import SparseRegression
 from pcmb.errors import ModelRunError
 
@@ -194,6 +194,11 @@ def test_inspect_and_the_report_say_which_runs_the_fit_used(tmp_path):
     assert "the fit of y used 32 design + 10 held-out runs" in _runs_text(result)
     (line,) = [text for label, text in result.report.summary(result) if text.startswith("y:")]
     assert "(final fit, with 10 held-out runs)" in line
+    shown = _inspect(str(tmp_path / "r.h5")).splitlines()
+    (checked,) = [line for line in shown if line.startswith("checked  y:")]
+    assert checked.endswith("; of the fit before the final fit)")
+    (checked,) = [line for line in shown if line.startswith("checked  p:")]
+    assert "final fit" not in checked
     vouched = _run(_study(method, diagnostics={}))
     assert not vouched.fitted_runs and "the fit" not in _runs_made(vouched)
 
