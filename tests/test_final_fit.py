@@ -199,6 +199,11 @@ def test_inspect_and_the_report_say_which_runs_the_fit_used(tmp_path):
     assert checked.endswith("; of the fit before the final fit)")
     (checked,) = [line for line in shown if line.startswith("checked  p:")]
     assert "final fit" not in checked
+    from pcmb.analysis.report import _Labels, _verdict
+
+    labels = _Labels(pcmb.AnalysisSettings(), float(TIMES[-1]))
+    assert "; of the fit before the final fit)" in _verdict(result, "y", labels)[1]
+    assert "final fit" not in _verdict(result, "p", labels)[1]
     vouched = _run(_study(method, diagnostics={}))
     assert not vouched.fitted_runs and "the fit" not in _runs_made(vouched)
 
