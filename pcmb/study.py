@@ -283,6 +283,8 @@ class Study:
         settings = self.method.settings(self.orders, self.diagnostics.tolerance)
         try:
             return make_design(self.inputs, settings)
+        except ConfigError as error:  # the design names every problem of its keys
+            raise UsageError(error.problems, source="Study") from None
         except ValueError as error:
             key, _, message = str(error).partition(": ")
             raise usage_error(key, message) from None

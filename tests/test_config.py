@@ -463,6 +463,27 @@ def test_every_problem_is_reported_at_once():
     assert [p.line for p in exc.value.problems] == [9, 16, 20]
 
 
+@pytest.mark.parametrize(
+    ("method", "paths"),
+    [
+        ("kind: regression\n  tolerance: 0.01", ["method.samples", "method.order"]),
+        ("kind: lhs\n  fit: regression", ["method.samples", "method.order"]),
+        (
+            "kind: regression\n  max_samples: 90",
+            ["method.samples", "method.order", "method.max_samples"],
+        ),
+    ],
+    ids=["regression", "lhs-fit", "regression-budget"],
+)
+def test_every_missing_key_of_a_method_is_reported_at_once(method, paths):
+    """A design's own checks name every problem of its keys together, each located."""
+    text = BASE.replace("kind: collocation\n  order: 3\n  basis: tensor", method)
+    with pytest.raises(ConfigError) as exc:
+        load(text)
+    assert sorted(p.path for p in exc.value.problems) == sorted(paths)
+    assert all(p.line is not None for p in exc.value.problems)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("text", "message"),

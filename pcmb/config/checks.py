@@ -42,6 +42,10 @@ def cross_check(config: StudyConfig) -> Iterator[tuple[str, str]]:
             return
     try:
         design = config_design(config)
+    except ConfigError as error:  # the design names every problem of its keys
+        for problem in error.problems:
+            yield problem.path, problem.message
+        return
     except ValueError as error:  # the design names the key: "method.<key>: what is wrong"
         key, _, message = str(error).partition(": ")
         yield key, message

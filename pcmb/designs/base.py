@@ -15,6 +15,7 @@ from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import fit_largest_stable
 from pcmb.config.types import NonNegativeInt, Section
+from pcmb.errors import ConfigError, ConfigProblem
 from pcmb.result import (
     RECORDED_ONLY,
     Design,
@@ -35,7 +36,9 @@ __all__ = [
     "Recovery",
     "RefittingDesign",
     "least_squares_recovery",
+    "missing_keys",
     "order_words",
+    "refuse",
     "statistics_warnings",
 ]
 
@@ -165,8 +168,8 @@ class NodeDesign(Protocol):
 
     A design is built as ``Design(distributions, settings)`` (``settings`` a
     :class:`MethodSettings`); it raises ``ValueError`` with the offending key for settings it
-    cannot use. Register it in :data:`pcmb.designs.DESIGNS` under every ``method.kind`` it
-    serves.
+    cannot use, or a ConfigError naming every problem at once (:func:`refuse`). Register it in
+    :data:`pcmb.designs.DESIGNS` under every ``method.kind`` it serves.
     """
 
     def nodes(self) -> TensorGrid | NodeSet:
@@ -276,6 +279,25 @@ class IntrusiveDesign(Protocol):
             The integration failed.
         """
         ...
+
+
+def missing_keys(needed_by: str, **values: object) -> list[tuple[str, str]]:
+    """``(key, message)`` of each ``method.<key>`` among ``values`` that is not given (``None``),
+    which ``needed_by`` (e.g. ``kind regression``) requires."""
+    message = f"required key is missing (needed by {needed_by})"
+    return [(f"method.{key}", message) for key, value in values.items() if value is None]
+
+
+def refuse(problems: Sequence[tuple[str, str]]) -> None:
+    """Raise every ``(key, message)`` problem of a design's settings as one ConfigError.
+
+    Raises
+    ------
+    ConfigError
+        When there is any problem.
+    """
+    if problems:
+        raise ConfigError([ConfigProblem(key, message) for key, message in problems])
 
 
 def order_words(orders: Sequence[int], basis: str | None) -> str:

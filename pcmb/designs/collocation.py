@@ -23,7 +23,9 @@ from pcmb.designs.base import (
     Recovery,
     fit_of,
     least_squares_recovery,
+    missing_keys,
     order_words,
+    refuse,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
@@ -85,8 +87,7 @@ class TensorCollocation:
     Settings = CollocationSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        if settings.orders is None:
-            raise ValueError("method.order: required key is missing (needed by kind collocation)")
+        refuse(missing_keys("kind collocation", order=settings.orders))
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.basis = settings.basis or "tensor"

@@ -22,7 +22,14 @@ from pcmb.chaos.sparse_regression import (
     next_batch,
 )
 from pcmb.config.types import OrderSpec, PositiveInt, PositiveReal
-from pcmb.designs.base import MethodSection, MethodSettings, Recovery, statistics_warnings
+from pcmb.designs.base import (
+    MethodSection,
+    MethodSettings,
+    Recovery,
+    missing_keys,
+    refuse,
+    statistics_warnings,
+)
 from pcmb.result import (
     ATTRIBUTE,
     POINTS,
@@ -147,15 +154,16 @@ class SparseRegression:
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         selection, sampling, q = settings.selection, settings.sampling, settings.q
         tolerance, max_samples = settings.tolerance, settings.max_samples
-        if settings.samples is None:
-            raise ValueError("method.samples: required key is missing (needed by kind regression)")
-        if settings.orders is None:
-            raise ValueError("method.order: required key is missing (needed by kind regression)")
+        problems = missing_keys("kind regression", samples=settings.samples, order=settings.orders)
         if max_samples is not None and tolerance is None:
-            raise ValueError(
-                "method.max_samples: only used with method.tolerance (the budget of the rounds "
-                "that add samples until the estimated error meets it)"
+            problems.append(
+                (
+                    "method.max_samples",
+                    "only used with method.tolerance (the budget of the rounds that add samples "
+                    "until the estimated error meets it)",
+                )
             )
+        refuse(problems)
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.orders = tuple(settings.orders)
         self.samples, self.seed = settings.samples, settings.seed

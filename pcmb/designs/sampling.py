@@ -17,7 +17,9 @@ from pcmb.designs.base import (
     MethodSettings,
     Recovery,
     least_squares_recovery,
+    missing_keys,
     order_words,
+    refuse,
     statistics_warnings,
 )
 from pcmb.result import Design, WarningRecord
@@ -64,16 +66,14 @@ class Sampling:
     Settings = SamplingSettings
 
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
-        if settings.samples is None:
-            raise ValueError(
-                f"method.samples: required key is missing (needed by kind {settings.kind})"
-            )
+        problems = missing_keys(f"kind {settings.kind}", samples=settings.samples)
+        if settings.fit == "regression":
+            problems += missing_keys("fit regression", order=settings.orders)
+        refuse(problems)
         if settings.samples < 2:
             raise ValueError(
                 f"method.samples: {settings.kind} needs at least 2 samples, got {settings.samples}"
             )
-        if settings.fit == "regression" and settings.orders is None:
-            raise ValueError("method.order: required key is missing (needed by fit regression)")
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         self.kind, self.samples, self.seed = settings.kind, settings.samples, settings.seed
         self.fit = settings.fit

@@ -19,6 +19,8 @@ from pcmb.designs.base import (
     Recovery,
     fit_of,
     least_squares_recovery,
+    missing_keys,
+    refuse,
     statistics_warnings,
 )
 from pcmb.designs.collocation import CollocationSettings
@@ -49,10 +51,10 @@ class SparseCollocation:
     def __init__(self, inputs: Mapping[str, Distribution], settings: MethodSettings):
         level, rule = settings.level, settings.rule
         kind = settings.kind
-        if level is None:
-            raise ValueError(f"method.level: required key is missing (needed by kind {kind})")
+        problems = missing_keys(f"kind {kind}", level=level)
         if settings.orders is not None:
-            raise ValueError(f"method.order: kind {kind} takes method.level, not an order")
+            problems.append(("method.order", f"kind {kind} takes method.level, not an order"))
+        refuse(problems)
         self.kind, self.level, self.rule = kind, int(level), rule
         self.names, self.distributions = tuple(inputs), tuple(inputs.values())
         n = len(self.distributions)
