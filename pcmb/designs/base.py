@@ -361,6 +361,8 @@ def statistics_warnings(
 
     - ``sobol-undefined`` (one per output with an expansion that does not vary somewhere):
       there its variance is 0 up to round-off, its std exactly 0 and its Sobol' indices NaN.
+      It speaks of the expansion, not of the output: held-out runs may vary where the
+      design's did not (the verdict's ``chaos-unreliable`` says so).
     - ``statistic-non-finite`` (one per output with a NaN or infinite mean or std): values
       that are not finite among the runs kept, or magnitudes whose statistics exceed the
       floating-point range even when computed with scaling.
@@ -424,8 +426,9 @@ def statistics_warnings(
             records.append(
                 WarningRecord(
                     "sobol-undefined",
-                    f"the output does not vary (variance 0 up to round-off) at {where}: its "
-                    "std is 0 and its Sobol' indices are undefined there (stored as NaN)",
+                    f"the expansion does not vary (variance 0 up to round-off) at {where}, "
+                    "as fitted to the design's runs: its std is 0 and its Sobol' indices are "
+                    "undefined there (stored as NaN)",
                     name,
                     span,
                 )
