@@ -1,5 +1,6 @@
 """Fixes of the second contract audit's findings (issue 23): one message where a degenerate
-design's runs are all equal while the held-out runs vary."""
+design's runs are all equal while the held-out runs vary; a PDF with mass below every run of
+a positive output, noted though one tail run widens the runs' range."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import warnings
 import numpy as np
 
 import pcmb
+from pcmb.analysis.statistics import AnalysisSettings
 
 SQUARE = {name: pcmb.Uniform(-1.0, 1.0) for name in ("x1", "x2")}
 TIMES = np.linspace(0.0, 3.0, 31)
@@ -30,3 +32,31 @@ def test_a_degenerate_design_does_not_say_the_output_does_not_vary_where_it_does
     messages = [w.message for w in result.warnings if w.output == "y"]
     assert any("runs are all equal" in message for message in messages), messages
     assert not [message for message in messages if "the output does not vary" in message]
+
+
+@pcmb.batched(outputs=("x",))
+def growth(params, times):
+    """exp(0.5 z t) > 0: heavy-tailed in z ~ N(0, 1) as t grows."""
+    return {"x": np.exp(0.5 * np.asarray(params["z"])[:, None] * times)}
+
+
+def test_a_pdf_below_every_run_of_a_positive_output_is_noted():
+    # Order 3 (4 runs) and the placed check's 8 tail runs: at t = 3 the runs span
+    # [0.0002, 5432] (z = 4.3 gives 5432), and the PDF puts over a fifth of its mass below 0,
+    # where no run and no value of exp(...) can go; 5 % of that range (-271) hid it.
+    study = pcmb.Study(
+        growth,
+        {"z": pcmb.Normal(0.0, 1.0)},
+        np.linspace(0.0, 5.0, 101),
+        order=3,
+        backend="inprocess",
+        analysis=AnalysisSettings(psd=(), pdf_times=(3.0,)),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        result = study.run()
+    pdf = result.analysis.outputs["x"].pdf
+    mass = pdf.density[0] * np.gradient(pdf.value[0])
+    assert mass[pdf.value[0] < 0].sum() > 0.2  # the premise
+    (record,) = [w for w in result.warnings if w.code == "pdf-outside-runs"]
+    assert "the PDF at t = 3 " in record.message and record.time_range == (3.0, 3.0)

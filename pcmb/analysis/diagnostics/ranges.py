@@ -24,8 +24,10 @@ RANGE_SHARE = 0.01
 #: Draws of an output that no run ever made negative are also far outside below 0 by more
 #: than this fraction of the range.
 RANGE_BELOW_ZERO = 0.01
-#: A PDF's mass counts as beyond the runs past this fraction of their range
-#: (:func:`pdf_outside_runs`): between the nodes a smooth surrogate may pass them a little.
+#: A PDF's mass counts as beyond the runs past this fraction of their spread on that side,
+#: twice the distance from their median to their smallest or largest value
+#: (:func:`pdf_outside_runs`): between the nodes a smooth surrogate may pass them a little,
+#: and one tail run on the other side does not widen it.
 PDF_MARGIN = 0.05
 #: Run values whose std is below this fraction of their RMS do not vary (round-off).
 _ROUND_OFF = 1e-12
@@ -53,8 +55,8 @@ def out_of_range(
     range count too.
     """
     germ, samples = _surrogate_draws(expansion, draws, seed)
-    values = np.asarray(node_values, dtype=float)
-    return _outside_sides(expansion, values, margin, samples, _in_box(germ, node_germ)).sum(axis=0)
+    bounds = _far_bounds(np.asarray(node_values, dtype=float), margin)
+    return _outside_sides(expansion, bounds, samples, _in_box(germ, node_germ)).sum(axis=0)
 
 
 def _surrogate_draws(
@@ -76,16 +78,15 @@ def _in_box(germ: NDArray[np.float64], node_germ: ArrayLike | None) -> NDArray[n
 
 def _outside_sides(
     expansion: Expansion,
-    values: NDArray[np.float64],
-    margin: float,
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
     samples: NDArray[np.float64],
     kept: NDArray[np.bool_],
 ) -> NDArray[np.float64]:
-    """(2, T) the shares of :func:`out_of_range` below and above the (N, T) runs' range,
-    among the (D, T) surrogate ``samples`` where ``kept``."""
+    """(2, T) the shares of the (D, T) surrogate ``samples`` where ``kept`` below and above
+    the (T,) ``bounds`` (floor, ceiling)."""
+    floor, ceiling = bounds
     if not kept.any():
-        return np.zeros((2, values.shape[1]))
-    floor, ceiling = _far_bounds(values, margin)
+        return np.zeros((2, floor.size))
     samples = samples[kept]
     sides = np.stack([(samples < floor).mean(axis=0), (samples > ceiling).mean(axis=0)])
     return np.where(expansion.varies() & (ceiling > floor), sides, 0.0)
@@ -95,11 +96,25 @@ def _far_bounds(values: NDArray[np.float64], margin: float) -> tuple[NDArray, ND
     """(T,) bounds below and above which a value is far outside the (N, T) runs ``values``
     (:func:`out_of_range`)."""
     low, high = np.nanmin(values, axis=0), np.nanmax(values, axis=0)
-    reach = margin * (high - low)
-    floor = low - reach
+    return _bounds(values, low - margin * (high - low), high + margin * (high - low), high - low)
+
+
+def _pdf_bounds(values: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """(T,) bounds below and above which a PDF's mass is beyond the (N, T) runs ``values`` by
+    more than ``PDF_MARGIN`` of their spread on that side (:func:`pdf_outside_runs`)."""
+    low, middle, high = np.nanquantile(values, [0.0, 0.5, 1.0], axis=0)
+    below, above = 2 * (middle - low), 2 * (high - middle)
+    return _bounds(values, low - PDF_MARGIN * below, high + PDF_MARGIN * above, below)
+
+
+def _bounds(
+    values: NDArray[np.float64], floor: NDArray, ceiling: NDArray, spread: NDArray
+) -> tuple[NDArray, NDArray]:
+    """(``floor``, ``ceiling``), the floor raised to ``RANGE_BELOW_ZERO`` times the (T,)
+    ``spread`` below 0 where no run of the (N, T) ``values`` is ever negative."""
     if np.nanmin(values) >= 0:
-        floor = np.maximum(floor, -RANGE_BELOW_ZERO * (high - low))
-    return floor, high + reach
+        floor = np.maximum(floor, -RANGE_BELOW_ZERO * spread)
+    return floor, ceiling
 
 
 def _table_mass_beyond(
@@ -122,7 +137,8 @@ def _table_mass_beyond(
 def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
     """``pdf-outside-runs`` records (notes): a PDF stored at one of ``analysis.pdf_times`` with
     more of its mass than :func:`_pdf_allowance` on one side beyond the range of every run
-    made (design, held-out and nominal) by more than ``PDF_MARGIN`` of that range. The mass
+    made (design, held-out and nominal) by more than ``PDF_MARGIN`` of their spread on that side
+    (:func:`_pdf_bounds`). The mass
     is the stored density's (its kernel may smear the draws past a hard bound) or, where
     larger, the share of the surrogate's draws inside the box the design's nodes span
     (:func:`out_of_range`); the record names the cause: the surrogate inside that box, its
@@ -143,9 +159,9 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
         pdf = analysis.outputs[name].pdf
         points = nearest_indices(result.grid(name), pdf.at)
         germ, samples = _surrogate_draws(expansion, RANGE_DRAWS, RANGE_SEED)
-        drawn = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, result.germ[ok]))
-        anywhere = _outside_sides(expansion, made, PDF_MARGIN, samples, _in_box(germ, None))
-        floor, ceiling = _far_bounds(made, PDF_MARGIN)
+        floor, ceiling = _pdf_bounds(made)
+        drawn = _outside_sides(expansion, (floor, ceiling), samples, _in_box(germ, result.germ[ok]))
+        anywhere = _outside_sides(expansion, (floor, ceiling), samples, _in_box(germ, None))
         allowed = _pdf_allowance(made.shape[0])
         axis = result.axis(name)
         where = "" if axis is None else f"{axis.name} = "
@@ -172,7 +188,8 @@ def pdf_outside_runs(result: StudyResult) -> tuple[WarningRecord, ...]:
                     f"({as_percent(drawn[:, k].sum())} of the surrogate's draws) beyond "
                     f"[{np.min(made[:, k]):.4g}, {np.max(made[:, k]):.4g}], the range of all "
                     f"{made.shape[0]} runs made (design, held-out and nominal), by more than "
-                    f"{as_percent(PDF_MARGIN)} of that range: no run went there, {cause}",
+                    f"{as_percent(PDF_MARGIN)} of their spread on that side: no run went there, "
+                    f"{cause}",
                     name,
                     (float(t), float(t)) if result.on_time(name) else None,
                 )
