@@ -139,6 +139,15 @@ def _decay_read(name: str, kind: str, rate: float, first: int, last: int) -> str
     )
 
 
+def _rises_to_top(energy: NDArray[np.float64], index: NDArray[np.int64], k: int) -> bool:
+    """Whether the ``energy`` of the terms (of ``index``) along input k peaks at its top degree,
+    by degree and by pairs of neighbouring degrees (as :func:`decay_shape` reads them: a
+    response even or odd about the centre has every other coefficient zero)."""
+    by_degree = np.bincount(index[:, k], weights=energy)[1:]
+    pairs = by_degree[:-1] + by_degree[1:]
+    return pairs.size > 0 and by_degree.argmax() == by_degree.size - 1 == pairs.argmax() + 1
+
+
 def _cause_remedy(
     expansion: Expansion,
     estimate: NDArray[np.float64],
@@ -162,12 +171,15 @@ def _cause_remedy(
     - too few degrees to tell: a higher order when the held-out error sits at the ends of
       the input's range (``ends``, :func:`error_at_ends`, at least ``_AT_ENDS``), as that
       of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
-      around a jump or kink; else, with the error over the range, steep, oscillating or
-      discontinuous when the spectrum does not decay (the outer two layers hold at least
-      half the energy of the layers before them, the linear ones at order 3, the response's
-      structure still rising at the top degree when they hold more) or, below order 3, the
-      surrogate overshoots the runs — multi-element chaos; otherwise a higher order. The
-      message says that the order was too low to tell.
+      around a jump or kink; else, with the error over the range, a higher order when the
+      energy along the input rises to its top degree (:func:`_rises_to_top`): a smooth
+      response's spectrum rises to its peak (an oscillation faster than the order
+      resolves, as a phase drifting over a long horizon) and falls geometrically past it,
+      a jump's or kink's peaks at the first degrees; steep, oscillating or discontinuous
+      when the spectrum does not decay but peaks below the top (the outer two layers hold
+      at least half the energy of the layers before them, the linear ones at order 3) or,
+      below order 3, the surrogate overshoots the runs — multi-element chaos; otherwise a
+      higher order. The message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
@@ -234,6 +246,15 @@ def _cause_remedy(
             name,
             f"the surrogate's error at the held-out runs sits inside {place}, around a "
             f"jump, kink or steep front there{unknown}",
+        )
+    if _rises_to_top(energy, index, top):
+        return (
+            "order",
+            name,
+            f"the energy of the chaos coefficients along {name} rises to its top degree "
+            f"({order}): an oscillation that order does not yet resolve, as a smooth response's "
+            "spectrum rises to its peak before it falls geometrically (a jump's or kink's "
+            "peaks at the first degrees and falls algebraically)",
         )
     if previous > 0:
         ratio = energy[tail].sum() / previous
