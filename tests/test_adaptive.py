@@ -566,6 +566,8 @@ def test_each_round_is_a_public_record_the_history_is_made_of():
     history = design.recover(nodes, values, ok, np.zeros(1)).adaptive.history
     np.testing.assert_array_equal(history, [(r.runs, r.estimate) for r in rounds])
     assert [r.runs for r in rounds] == sorted({r.runs for r in rounds})
+    # The first change is the whole std: the grid of index 0 alone is one node, with none.
+    assert rounds[0].change == pytest.approx(1.0, rel=1e-12)
     for k, record in enumerate(rounds):
         changes = [r.change for r in rounds[: k + 1]]
         tail = estimated_error(changes, geometric=not record.nonsmooth)
