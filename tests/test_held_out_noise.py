@@ -17,7 +17,7 @@ import pytest
 
 import pcmb
 from pcmb.analysis.diagnostics import CONFIDENCE, HELD_OUT_SEED, diagnose, held_out_draws
-from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.held_out import HeldOutPlan
 
 #: The held-out runs the pole case's sequential check ends with at tolerance 1e-3.
@@ -217,6 +217,16 @@ def test_a_second_batch_of_uniform_draws_completes_one_latin_hypercube(seed):
     slices = np.floor((union + 1.0) / 2.0 * 16).astype(int)
     for column in slices.T:
         assert sorted(column) == list(range(16))
+
+
+def test_the_first_batch_is_the_latin_hypercube_it_was():
+    """The held-out draws' own hypercube (``held_out_unit``, which a second batch can complete)
+    gives the first batch the runs ``random_nodes``' hypercube gave it: every calibrated
+    first batch is the same."""
+    inputs = (pcmb.Uniform(-1.0, 1.0), pcmb.Uniform(0.0, 2.0), pcmb.Uniform(0.0, 1.0))
+    for seed in range(5):
+        draws, _ = held_out_draws(inputs, 8, seed)
+        np.testing.assert_array_equal(draws.nodes, random_nodes(inputs, 8, "lhs", seed).nodes)
 
 
 def test_a_second_batch_with_a_widened_input_is_drawn_apart():
