@@ -291,7 +291,8 @@ class HeldOut:
         :func:`placed_check` (``/validation`` attribute ``placed``).
     batches:
         How many batches of draws the runs hold (``/validation`` attribute ``batches``): each
-        is a Latin hypercube, their union is not one, so with more than one the check's
+        is a Latin hypercube, and the second completes the first's (:func:`held_out_unit`)
+        only without normal inputs and not always exactly, so with more than one the check's
         standard errors are those of independent draws (:func:`_standard_error`).
     """
 
