@@ -18,7 +18,9 @@ against the grid of the refined indices, whose nodes it holds), relative to the 
 the error of the coarser grid. The estimate is the changes to come, a geometric tail: with ρ
 the reduction per round of the largest of the last :data:`GUARDED` changes, measured over
 :data:`GUARDED` rounds, g_k the largest of the last three changes each carried to round k by ρ
-per round of its age (a lucky small change is not believed, a steady fall is), and the whole
+per round of its age (a lucky small change is not believed, a steady fall is; on fewer
+inputs than :data:`GUARDED`, one round per input, as a round refines every direction there
+is), and the whole
 grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is g_k ρ² / (1 - ρ)
 (:func:`estimated_error`). Chosen once on the stopping rounds of OTL circuit, Piston, Wing
 weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adaptive.py``,
@@ -88,6 +90,8 @@ GUARDED = 3
 SLOWEST = 0.9
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
+#: What to do where an input's rule has no further level (the sparse and tensor grids').
+LAST_LEVEL_REMEDY = "use rule clenshaw-curtis or leja, or a larger tolerance"
 
 
 class AdaptiveSettings(MethodSection):
@@ -128,17 +132,23 @@ class AdaptiveRound:
         d_k, the largest change of the mean and std the active indices make.
     left:
         The error beyond the rules' last levels, which no refinement can lower.
+    left_in:
+        The inputs at their rule's last level that ``left`` is in.
     nonsmooth:
         The inputs whose axis surpluses fall algebraically, each with its exponent a (an
         ``adaptive-nonsmooth`` warning each).
+    reducible:
+        The estimated error that refining can lower (:func:`estimated_error`).
     estimate:
-        The estimated error of the mean and std.
+        The estimated error of the mean and std: the larger of ``reducible`` and ``left``.
     """
 
     runs: int
     change: float
     left: float
+    left_in: tuple[str, ...]
     nonsmooth: tuple[tuple[str, float], ...]
+    reducible: float
     estimate: float
 
 
@@ -244,29 +254,29 @@ class AdaptiveCollocation(GrowingGrid):
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
             # Refining lowers only the reducible error: below the error left beyond the rules'
             # last levels, more runs cannot lower the estimate.
-            left, names = self._left_at_last_levels()
-            converged = self._reducible() <= max(self.tolerance, left)
+            last = self._rounds[-1]
+            converged = last.reducible <= max(self.tolerance, last.left)
             if converged:
                 refinable = self._blind()
                 if not refinable:
-                    if left > self.tolerance:
+                    if last.left > self.tolerance:
                         self._stopped = (
-                            f"{' and '.join(names)} reached the last level of its rule with an "
-                            f"error of {left:.3g} left, which no refinement can lower: use rule "
-                            "clenshaw-curtis or leja, or a larger tolerance"
+                            f"{' and '.join(last.left_in)} reached the last level of its rule "
+                            f"with an error of {last.left:.3g} left, which no refinement can "
+                            f"lower: {LAST_LEVEL_REMEDY}"
                         )
                     return None
             elif not refinable:
                 self._stopped = (
-                    "the nested rules have no further levels to refine with: use rule "
-                    "clenshaw-curtis or leja, or a larger tolerance"
+                    f"the nested rules have no further levels to refine with: {LAST_LEVEL_REMEDY}"
                 )
                 return None
             added = self._refine(refinable, bulk=not converged)
             if added is None:
                 step = "probing blind axes" if converged else "the next refinement"
                 self._stopped = (
-                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
+                    f"{step} would pass method.max_runs ({self.max_runs} runs): raise "
+                    "method.max_runs, or the tolerance"
                 )
                 return None
             if added:
@@ -287,16 +297,25 @@ class AdaptiveCollocation(GrowingGrid):
             self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
             return False
         self._measure(np.stack(list(values.values()), axis=1)[order])
-        self._rounds.append(
-            AdaptiveRound(
-                runs=self._grid.size,
-                change=self._changes[-1],
-                left=self._left_at_last_levels()[0],
-                nonsmooth=tuple(self._nonsmooth()),
-                estimate=self._estimate(),
-            )
-        )
+        self._rounds.append(self._round())
         return True
+
+    def _round(self) -> AdaptiveRound:
+        """The record of the round just measured (see the module)."""
+        left, names = self._left_at_last_levels()
+        nonsmooth = tuple(self._nonsmooth())
+        reducible = estimated_error(
+            self._changes, geometric=not nonsmooth, guarded=min(GUARDED, len(self.distributions))
+        )
+        return AdaptiveRound(
+            runs=self._grid.size,
+            change=self._changes[-1],
+            left=left,
+            left_in=tuple(names),
+            nonsmooth=nonsmooth,
+            reducible=reducible,
+            estimate=max(reducible, left),
+        )
 
     def _measure(self, values: NDArray[np.float64]) -> None:
         """Surplus norms and mean changes of the indices new since the last round, both
@@ -361,15 +380,6 @@ class AdaptiveCollocation(GrowingGrid):
 
     def _active(self) -> NDArray[np.bool_]:
         return np.array([level not in self._refined for level in self._index])
-
-    def _estimate(self) -> float:
-        """The estimated error of the mean and std after the last round (see the module), at
-        least the error left beyond the rules' last levels."""
-        return max(self._reducible(), self._left_at_last_levels()[0])
-
-    def _reducible(self) -> float:
-        """The estimated error that refining can lower: the changes' tail (see the module)."""
-        return estimated_error(self._changes, geometric=not self._nonsmooth())
 
     def _left_at_last_levels(self) -> tuple[float, list[str]]:
         """The error no refinement can lower, and the inputs it is in: the largest change of
@@ -482,15 +492,14 @@ class AdaptiveCollocation(GrowingGrid):
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {self._grid.size} of {self.max_runs} "
-                    f"runs (method.max_runs; estimated error {reached}, tolerance "
-                    f"{self.tolerance:g}): {self._stopped}",
+                    f"the refinement ended early, after {self._grid.size} runs (estimated "
+                    f"error {reached}, tolerance {self.tolerance:g}): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
-def estimated_error(changes: list[float], geometric: bool) -> float:
+def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDED) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
     predecessor's), where the decay is ``geometric``: the changes to come, a geometric tail
@@ -499,12 +508,13 @@ def estimated_error(changes: list[float], geometric: bool) -> float:
     and g_k the largest of the last :data:`GUARDED` changes, each carried to round k by ρ per
     round of its age (so one lucky small change is not believed, and a steady fall is). An
     algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone (as before
-    GUARDED + 1 rounds, when ρ cannot be measured yet)."""
-    guarded = [max(changes[max(0, k - GUARDED + 1) : k + 1]) for k in range(len(changes))]
-    if not geometric or len(guarded) <= GUARDED or guarded[-1 - GUARDED] <= 0:
-        return guarded[-1]
-    rate = min(SLOWEST, (guarded[-1] / guarded[-1 - GUARDED]) ** (1 / GUARDED))
-    aged = max(change * rate**age for age, change in enumerate(reversed(changes[-GUARDED:])))
+    GUARDED + 1 rounds, when ρ cannot be measured yet). ``guarded`` rounds in place of
+    :data:`GUARDED` where fewer directions can take turns (one per input)."""
+    window = [max(changes[max(0, k - guarded + 1) : k + 1]) for k in range(len(changes))]
+    if not geometric or len(window) <= guarded or window[-1 - guarded] <= 0:
+        return window[-1]
+    rate = min(SLOWEST, (window[-1] / window[-1 - guarded]) ** (1 / guarded))
+    aged = max(change * rate**age for age, change in enumerate(reversed(changes[-guarded:])))
     return aged * rate**ROUNDS_AHEAD / (1 - rate)
 
 
