@@ -9,6 +9,7 @@ import pytest
 
 import pcmb
 from pcmb.analysis.diagnostics import HELD_OUT_SEED, diagnose, held_out_draws
+from pcmb.analysis.diagnostics.draws import coverage_error
 
 pytestmark = pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
 
@@ -56,3 +57,28 @@ def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
         if np.any((error > 0.05) & ~judged):
             silent.append(seed)
     assert len(silent) <= 1, silent
+
+
+def test_the_coverage_error_is_the_missed_share_of_the_variance_times_the_outer_energy():
+    # s = ψ1 + ψ4 of one normal input at order 4: σ² = 2, its outer layers (degrees 3 and 4)
+    # hold E = 1. Draws where s = μ recover none of σ²: (1 - 0) E / σ = 1/√2; draws that
+    # recover it all (or more), nothing.
+    expansion = pcmb.ChaosExpansion(
+        [[0.0], [1.0], [0.0], [0.0], [1.0]], [[p] for p in range(5)], (NORMAL,)
+    )
+    blind = coverage_error(expansion, np.zeros((4, 1)), np.ones(4), 1.0)
+    assert blind == pytest.approx([2**-0.5])
+    seeing = coverage_error(expansion, np.full((4, 1), 2.0), np.ones(4), 1.0)
+    assert seeing == pytest.approx([0.0])
+
+
+def test_no_coverage_error_where_the_surrogate_is_linear_in_the_normal_inputs_or_has_none():
+    # Linear along the normal input (a damped oscillator in its initial displacement), or no
+    # normal input: the widened draws have no tail to miss.
+    uniform = pcmb.Uniform(-1.0, 1.0)
+    index = [[0, 0], [1, 0], [0, 1], [2, 0], [0, 2], [3, 0], [0, 3]]
+    coefficients = np.array([[1.0], [0.5], [1.0], [0.3], [0.0], [0.1], [0.0]])
+    linear = pcmb.ChaosExpansion(coefficients, index, (uniform, NORMAL))
+    plain = pcmb.ChaosExpansion(coefficients, index, (uniform, uniform))
+    for expansion in (linear, plain):
+        assert coverage_error(expansion, np.ones((4, 1)), np.ones(4), 1.0) == pytest.approx([0.0])

@@ -24,7 +24,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import HeldOutCheck, holdout_error
 from pcmb.analysis.diagnostics.decay import Expansion, spectral_decay
-from pcmb.analysis.diagnostics.draws import FIRST_BATCH, HeldOut, judging_weights
+from pcmb.analysis.diagnostics.draws import (
+    FIRST_BATCH,
+    HeldOut,
+    coverage_error,
+    judging_weights,
+)
 from pcmb.analysis.diagnostics.phrases import as_percent, time_count, time_span
 from pcmb.analysis.diagnostics.placed import placed_check
 from pcmb.analysis.diagnostics.ranges import finite_rows, out_of_range, range_checks, runs_vary
@@ -199,6 +204,11 @@ def diagnose(
         judged, paired = judging_weights(expansion, scale, weights, holdout_germ)
         paired = paired if stratified else None
         checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
+        # Draws that missed the tails carrying the variance saw none of the error there.
+        kept = np.isfinite(np.atleast_2d(holdout[1])).all(axis=1)
+        drawn = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
+        missed = coverage_error(expansion, np.asarray(holdout[0])[kept], drawn[kept], scale)
+        checked = checked.widened(missed, scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.

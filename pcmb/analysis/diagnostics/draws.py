@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies, top_layer
 from pcmb.analysis.diagnostics.placed import interpolated
+from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
@@ -114,13 +115,49 @@ def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
     :func:`held_out_draws` widens (the normal ones) hold at most ``LINEAR_SHARE`` of the
     expansion's variance: the response is linear in them (a damped oscillator in its initial
     displacement), not heavy-tailed; all False without normal inputs."""
-    normal = widened_inputs(expansion.distributions)
     index = np.asarray(expansion.multi_index)
-    if not normal.any() or not scale > 0 or not np.isfinite(scale):
+    if not widened_inputs(expansion.distributions).any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape, dtype=bool)
     energy = coefficient_energies(expansion, scale)
-    curved = np.sum(energy[np.any(index[:, normal] >= 2, axis=1)], axis=0)
+    curved = np.sum(energy[_curved_in_widened(expansion)], axis=0)
     return curved <= LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0], axis=0)
+
+
+def _curved_in_widened(expansion: Expansion) -> NDArray[np.bool_]:
+    """(S,) the terms of degree 2 or more along some input :func:`held_out_draws` widens."""
+    normal = widened_inputs(expansion.distributions)
+    return np.any(np.asarray(expansion.multi_index)[:, normal] >= 2, axis=1)
+
+
+def coverage_error(
+    expansion: Expansion, predicted: ArrayLike, weights: ArrayLike, scale: float
+) -> NDArray[np.float64]:
+    """(T,) how far the drawn check's estimates may be off, over the scale, where its draws
+    missed the tails of the normal inputs that carry the variance (heavy tails along a
+    direction of several normal inputs: ``docs/diagnostics.md``).
+
+    The draws' weighted estimate of the surrogate's own variance, ρ σ² = mean w (s - μ)² over
+    the (K, T) surrogate values ``predicted`` at them (importance ``weights``), falls short
+    by (1 - ρ) σ² where they missed where it lives; the variance the surrogate itself misses
+    lives there or beyond, bounded by the energy E of its outer layers
+    (:func:`~pcmb.chaos.basis.tail_terms`) curved along the widened inputs, so the check may
+    miss as much of it: (1 - ρ) (within [0, 1]) times E / σ, as Δσ <= ΔV / σ. Zero where
+    the draws recover the surrogate's variance, where it is linear in the widened inputs
+    (none: zero) or where it does not vary."""
+    outer = tail_terms(expansion.multi_index) & _curved_in_widened(expansion)
+    if not outer.any() or not scale > 0 or not np.isfinite(scale):
+        return np.zeros(expansion.shape)
+    sigma = expansion.std() / scale
+    energy = np.sum(coefficient_energies(expansion, scale)[outer], axis=0)
+    predicted = np.asarray(predicted, dtype=float)
+    weights = np.asarray(weights, dtype=float).reshape((-1,) + (1,) * (predicted.ndim - 1))
+    seen = np.mean(weights * ((predicted - expansion.mean()) / scale) ** 2, axis=0)
+    varies = sigma > 0
+    missed = np.zeros(sigma.shape)
+    np.divide(sigma**2 - seen, sigma**2, out=missed, where=varies)
+    error = np.zeros(sigma.shape)
+    np.divide(np.clip(missed, 0.0, 1.0) * energy, sigma, out=error, where=varies)
+    return error
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
