@@ -26,7 +26,8 @@ The cases of issue 23 (``lognormal``, ``jump``, ``ball``, ``drift``, ``smooth4``
 ``sliver``, a kink ``elements: auto`` misreads) and the held-out dynamical cases measured
 after them (``pendulum``: phase drift with the release angle; ``sinh``: heavy tails;
 ``switch``: a lag switched on at an uncertain time; ``oscillator`` and ``oscillator_wide``:
-three smooth inputs), closed forms or numpy Gauss rules the tests do not tune on, run
+three smooth inputs; ``lognormal2`` and ``cosh2``: heavy tails along a direction of two
+normal inputs), closed forms or numpy Gauss rules the tests do not tune on, run
 each study with the default held-out check and seeds 0..S-1 (``method.seed``: it moves the
 held-out draws; a collocation design is the same) and print, per study: its runs, the
 check's runs (fewest–most over the seeds), the true crossing, the flags, the worst distance
