@@ -37,7 +37,7 @@ from pcmb.analysis.diagnostics.remedies import element_errors, error_at_ends, re
 from pcmb.analysis.diagnostics.verdict import TOLERANCE, flag_margin, verdict
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import RELATIVE_NOISE, ChaosExpansion
 from pcmb.result import WarningRecord
 
 #: Codes of the warning records the diagnostics make.
@@ -204,11 +204,12 @@ def diagnose(
         judged, paired = judging_weights(expansion, scale, weights, holdout_germ)
         paired = paired if stratified else None
         checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
-        # Draws that missed the tails carrying the variance saw none of the error there.
+        # Draws that missed the tails carrying the variance saw none of the error there, unless
+        # they find the surrogate exact (to round-off): then its outer terms are the response's.
         kept = np.isfinite(np.atleast_2d(holdout[1])).all(axis=1)
         drawn = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
         missed = coverage_error(expansion, np.asarray(holdout[0])[kept], drawn[kept], scale)
-        checked = checked.widened(missed, scale)
+        checked = checked.widened(np.where(checked.error > RELATIVE_NOISE, missed, 0.0), scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
