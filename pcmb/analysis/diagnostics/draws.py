@@ -139,11 +139,12 @@ def coverage_error(
     The draws' weighted estimate of the surrogate's own variance, ρ σ² = mean w (s - μ)² over
     the (K, T) surrogate values ``predicted`` at them (importance ``weights``), falls short
     by (1 - ρ) σ² where they missed where it lives; the variance the surrogate itself misses
-    lives there or beyond, bounded by the energy E of its outer layers
+    lives there or beyond, taken as the energy E of its outer layers
     (:func:`~pcmb.chaos.basis.tail_terms`) curved along the widened inputs, so the check may
     miss as much of it: (1 - ρ) (within [0, 1]) times E / σ, as Δσ <= ΔV / σ. Zero where
     the draws recover the surrogate's variance, where it is linear in the widened inputs
-    (none: zero) or where it does not vary."""
+    (none: zero) or where it does not vary; an exact polynomial's outer terms are its own,
+    which :func:`~pcmb.analysis.diagnostics.diagnose` tells by its residuals."""
     outer = tail_terms(expansion.multi_index) & _curved_in_widened(expansion)
     if not outer.any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape)
