@@ -129,6 +129,25 @@ def _curved_in_widened(expansion: Expansion) -> NDArray[np.bool_]:
     return np.any(np.asarray(expansion.multi_index)[:, normal] >= 2, axis=1)
 
 
+def _slowness(expansion: Expansion, energies: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) r / (1 - r), at most 1 (1 where r >= 1), r the slowest rate at which the (S, T)
+    coefficient ``energies`` fall per degree along a widened input, read from its top three
+    degrees in pairs (E_P + E_P-1) / (E_P-1 + E_P-2) (a response even in an input has every
+    other one zero): the energy beyond the top degree over the outer ones' is about r², so
+    a fast fall leaves little unseen; 1 along an input of fewer than three degrees."""
+    index = np.asarray(expansion.multi_index)
+    rate = np.zeros(energies.shape[1:])
+    for k in np.flatnonzero(widened_inputs(expansion.distributions)):
+        top = int(index[:, k].max())
+        if top < 3:
+            return np.ones(rate.shape)
+        layers = [np.sum(energies[index[:, k] == top - j], axis=0) for j in range(3)]
+        outer, before = layers[0] + layers[1], layers[1] + layers[2]
+        rate = np.fmax(rate, np.divide(outer, before, out=np.ones(rate.shape), where=before > 0))
+    falls = rate < 0.5
+    return np.where(falls, rate / np.where(falls, 1.0 - rate, 1.0), 1.0)
+
+
 def coverage_error(
     expansion: Expansion, predicted: ArrayLike, weights: ArrayLike, scale: float
 ) -> NDArray[np.float64]:
@@ -149,7 +168,8 @@ def coverage_error(
     if not outer.any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape)
     sigma = expansion.std() / scale
-    energy = np.sum(coefficient_energies(expansion, scale)[outer], axis=0)
+    energies = coefficient_energies(expansion, scale)
+    energy = np.sum(energies[outer], axis=0) * _slowness(expansion, energies)
     predicted = np.asarray(predicted, dtype=float)
     weights = np.asarray(weights, dtype=float).reshape((-1,) + (1,) * (predicted.ndim - 1))
     seen = np.mean(weights * ((predicted - expansion.mean()) / scale) ** 2, axis=0)
