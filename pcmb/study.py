@@ -1121,19 +1121,19 @@ class Study:
         if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
-        places = []
+        finished_in = journal.directory if journal is not None and finished else None
+        kept = ""
         if runs_of == HELD_OUT_RUN and run.journaling is not None:
-            places.append(("the design's nodes", run.journaling.directory))
-        beside = bool(places)
-        if journal is not None and finished:
-            places.append((f"the {finished} finished {runs_of}(s)", journal.directory))
-        kept = " and ".join(
-            f"{what} {'are kept in' if i == 0 else 'in'} {where}"
-            for i, (what, where) in enumerate(places)
-        )
-        if beside:
-            kept += f" (--resume keeps {'both' if len(places) == 2 else 'them'})"
-        kept = f"; {kept}" if kept else ""
+            design = f"; the design's nodes are kept in {run.journaling.directory}"
+            if finished_in is None:
+                kept = f"{design} (--resume keeps them)"
+            else:
+                kept = (
+                    f"{design} and the {finished} finished {runs_of}(s) in {finished_in}"
+                    " (--resume keeps both)"
+                )
+        elif finished_in is not None:
+            kept = f"; the {finished} finished {runs_of}(s) are kept in {finished_in}"
         pending = int(np.sum(runs.status == Status.PENDING))
         stopped = (
             f"; stopped at the first failure, {pending} {runs_of}(s) not run"
