@@ -52,7 +52,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.held_out import HELD_OUT_RUN, HeldOutPlan
+from pcmb.held_out import HELD_OUT_RUN, TAIL_FAILURE_SHARE, HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -1114,10 +1114,15 @@ class Study:
         tolerated: NDArray[np.bool_] | None = None,
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on, or
-        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`); ``runs_of``:
-        what the runs are (``"held-out run"``: numbered among those, and kept beside the
-        design's nodes, which the error names too: ``--resume`` keeps both)."""
+        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and at most
+        ``TAIL_FAILURE_SHARE`` of the runs; ``runs_of``: what the runs are (``"held-out
+        run"``: numbered among those, and kept beside the design's nodes, which the error
+        names too: ``--resume`` keeps both)."""
         failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
+        in_tails = len(runs.failures) - len(failures)
+        too_many = in_tails > TAIL_FAILURE_SHARE * runs.status.size
+        if too_many:
+            failures = list(runs.failures)
         if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
@@ -1141,10 +1146,16 @@ class Study:
             if pending
             else ""
         )
+        tails = (
+            f", {in_tails} of them in the tails, more than {TAIL_FAILURE_SHARE:.0%} of the "
+            "check's runs: too many for it to stand on the rest"
+            if too_many
+            else ""
+        )
         raise ModelRunError(
             failures,
             f"the model failed at {len(failures)} of {runs.status.size} {runs_of}(s) "
-            f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
+            f"(on_failure: {self.execution.on_failure}){tails}{kept}{stopped}:",
         )
 
     def held_out_runs(self, design_runs: int) -> tuple[int, int]:
