@@ -99,6 +99,8 @@ class LokyPool:
     ) -> None:
         self.slots = workers
         self._executor: Any = None
+        # The named semaphores of the executors made (rebuilt ones too), which close waits for.
+        self._semaphores: set[str] = set()
         remove_orphaned_semaphores()
         self.rebuild()
 
@@ -122,8 +124,7 @@ class LokyPool:
                 initializer=die_with_parent,
                 initargs=(os.getpid(),),
             )
-            # Its queues' and lock's named semaphores, which close waits for.
-            self._semaphores = _semaphores_of_this_process() - before
+            self._semaphores |= _semaphores_of_this_process() - before
         # Start the workers now, while the caller prepares the work.
         self._submitted = [self._executor.submit(_warm_up) for _ in range(self.slots)]
 
@@ -197,7 +198,8 @@ def _semaphores_of_this_process() -> set[str]:
 
 
 def _until_unlinked(semaphores: set[str], seconds: float) -> None:
-    """Wait, at most ``seconds``, until none of the files ``semaphores`` exists.
+    """Wait, at most ``seconds``, until none of the files ``semaphores`` exists (a pool's
+    whose executor was rebuilt and shut down without waiting are among them).
 
     loky's ``shutdown(wait=True)`` returns once its manager thread has ended, but its call
     queue's feeder thread may still be running: the queue's ``join_thread`` waits only for
@@ -205,10 +207,11 @@ def _until_unlinked(semaphores: set[str], seconds: float) -> None:
     two locks and bounded semaphore until it ends, under load after ``shutdown`` returned.
     They are unlinked when the queue is collected, right after.
     """
-    deadline = time.monotonic() + seconds
+    deadline, pause = time.monotonic() + seconds, 0.002
     while any(map(os.path.exists, semaphores)) and time.monotonic() < deadline:
-        time.sleep(0.002)
+        time.sleep(pause)
         gc.collect()
+        pause = min(2 * pause, 0.1)
 
 
 def remove_orphaned_semaphores(folder: str | os.PathLike[str] = _SEMAPHORE_FOLDER) -> int:
