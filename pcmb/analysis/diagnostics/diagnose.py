@@ -73,6 +73,10 @@ class OutputDiagnostics:
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
         mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
+    estimated_by:
+        Where ``estimate`` comes from: ``"held-out"`` (runs drawn at random), ``"placed"``
+        (runs placed to extend the design's nodes), ``"design"`` (no held-out runs: the
+        design's own estimate, where it bounds the decay) or ``"decay"``.
     noise:
         (T,) how far the estimate may be off at the held-out check's confidence
         (:attr:`HeldOutCheck.noise`; 0 for the decay).
@@ -96,6 +100,7 @@ class OutputDiagnostics:
     holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
+    estimated_by: str
     noise: NDArray[np.float64]
     undecided: NDArray[np.bool_]
     tolerance: float
@@ -216,11 +221,14 @@ def diagnose(
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.statistics
+    estimated_by = "decay" if checked is None else "placed" if placed else "held-out"
     # Without them, a design that measured its own convergence (an adaptive grid, order:
     # auto) outweighs the decay, which reads an exact polynomial's top terms (or a sparse
     # set's edge) as a tail.
     if checked is None and design_error is not None and design_error <= tolerance:
         estimate = np.minimum(decay, design_error)
+        if np.any(design_error < decay):
+            estimated_by = "design"
     noise = (
         np.zeros(times.size)
         if checked is None
@@ -290,6 +298,7 @@ def diagnose(
         checked,
         share,
         estimate,
+        estimated_by,
         noise,
         undecided,
         tolerance,
