@@ -1,0 +1,180 @@
+"""Issue 23's second contract audit: dynamical models the repository does not have (a bouncing
+ball, a damped oscillator with a drifting phase, a logistic growth run as an external
+program, a MuJoCo slider with uncertain dry friction), written as a user would and driven by
+``pcmb run``, ``pcmb inspect`` and ``pcmb report`` only, judged on the result file against
+closed forms. ``tests/test_economy_contract.py`` holds the first audit's checks; none is
+repeated here.
+
+The true error is the larger error of the mean and std over the file's scale
+(``/diagnostics/<output>`` attribute ``scale``), as ``docs/diagnostics.md`` defines it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from cli_process import pcmb_here
+
+pytestmark = pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+
+MODELS = """
+import numpy as np
+import pcmb
+
+
+def height(h, times):
+    h = np.asarray(h, dtype=float)[:, None]
+    t = np.broadcast_to(times, (h.shape[0], times.size))
+    y, v, start = h - 4.905 * t * t, np.sqrt(19.62 * h) * 0.8, np.sqrt(h / 4.905)
+    for _ in range(40):
+        tau = t - start
+        inside = (tau >= 0) & (tau < v / 4.905)
+        y = np.where(inside, v * tau - 4.905 * tau * tau, y)
+        start, v = start + v / 4.905, v * 0.8
+    return np.where(t >= start, 0.0, y)
+
+
+@pcmb.batched(outputs=("y",))
+def ball(params, times):
+    return {"y": height(params["h"], times)}
+
+
+def oscillation(w, x0, times):
+    w, x0 = np.asarray(w)[:, None], np.asarray(x0)[:, None]
+    wd = w * np.sqrt(1 - 0.05 * 0.05)
+    decay = x0 * np.exp(-0.05 * w * times)
+    x = decay * (np.cos(wd * times) + 0.05 * w / wd * np.sin(wd * times))
+    return {"x": x, "v": -decay * (w * w / wd) * np.sin(wd * times)}
+
+
+@pcmb.batched(outputs=("x", "v"))
+def oscillator(params, times):
+    x0 = params["x0"] if "x0" in params else np.ones_like(params["w"])
+    return oscillation(params["w"], x0, times)
+"""
+
+LOGISTIC = """\
+import json
+import math
+
+setup = json.load(open("params.json"))
+r, y0 = setup["params"]["r"], setup["params"]["y0"]
+with open("output.csv", "w") as out:
+    out.write("time,y\\n")
+    for t in setup["times"]:
+        out.write(f"{t!r},{1.0 / (1.0 + (1.0 / y0 - 1.0) * math.exp(-r * t))!r}\\n")
+"""
+
+SLIDER = """\
+<mujoco model="slider">
+  <option timestep="0.001" integrator="RK4" gravity="0 0 0"/>
+  <worldbody>
+    <body name="box">
+      <joint name="s" type="slide" axis="1 0 0" frictionloss="1.0"/>
+      <geom type="box" size="0.1 0.1 0.1" mass="1.0" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+BALL = "model: {kind: python, entry: fresh.py:ball, params: {h: 1.0}, outputs: [y]}"
+DRIFT = "model: {kind: python, entry: fresh.py:oscillator, params: {w: 2.0}, outputs: [x]}"
+
+
+def _run(folder: Path, model: str, inputs: str, method: str, time: str, *extra: str) -> Path:
+    """Write the files a user would, ``pcmb run`` the config; the result file's path."""
+    (folder / "fresh.py").write_text(MODELS)
+    config = f"name: audit\n{model}\ntime: {time}\ninputs: {inputs}\nmethod: {method}\n"
+    config += "execution: {backend: inprocess}\noutput: out.h5\n" + "".join(f"{x}\n" for x in extra)
+    (folder / "study.yaml").write_text(config)
+    done = pcmb_here("run", "study.yaml", "--quiet", cwd=folder)
+    assert done.returncode == 0, done.stderr
+    return folder / "out.h5"
+
+
+def _true_error(path: Path, output: str, response, weights: np.ndarray):
+    """(times, true error over the scale, the diagnostics group's arrays and attributes):
+    the truth's mean and std are the ``weights`` quadrature of ``response(times)`` (runs x
+    times)."""
+    with h5py.File(path) as file:
+        times = file["time"][:]
+        found = file[f"diagnostics/{output}"]
+        verdict = {key: found[key][:] for key in found}
+        verdict.update(found.attrs)
+        values = response(times)
+        mean = weights @ values
+        std = np.sqrt(np.maximum(weights @ values**2 - mean**2, 0.0))
+        verdict["true_mean"], verdict["true_std"] = mean, std
+        error = np.fmax(
+            abs(file[f"outputs/{output}/mean"][:] - mean),
+            abs(file[f"outputs/{output}/std"][:] - std),
+        )
+    return times, error / verdict["scale"], verdict
+
+
+def _midpoints(low: float, high: float, count: int = 40000) -> tuple[np.ndarray, np.ndarray]:
+    """The midpoint rule on [low, high] for a uniform input (a response with kinks in it)."""
+    return low + (high - low) * (np.arange(count) + 0.5) / count, np.full(count, 1 / count)
+
+
+def _legendre(low: float, high: float, count: int = 300) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss–Legendre for a uniform input on [low, high] (a smooth response)."""
+    points, weights = np.polynomial.legendre.leggauss(count)
+    return low + (points + 1) * (high - low) / 2, weights / 2
+
+
+def _fresh(folder: Path):
+    """The audit's model module, imported from the file the runs used."""
+    namespace: dict = {}
+    exec(compile(MODELS, str(folder / "fresh.py"), "exec"), namespace)
+    return namespace
+
+
+def _inspect(path: Path) -> str:
+    shown = pcmb_here("inspect", str(path))
+    assert shown.returncode == 0, shown.stderr
+    return shown.stdout
+
+
+def _lines(shown: str, start: str) -> list[str]:
+    return [line for line in shown.splitlines() if line.startswith(start)]
+
+
+def _runs_line_agrees_with_the_file(path: Path) -> None:
+    """``pcmb inspect``'s runs line is what the file holds: design, held-out, nominal."""
+    with h5py.File(path) as file:
+        nodes, held = file["nodes/params"].shape[0], file["validation/params"].shape[0]
+        nominal = sum("nominal" in file[f"outputs/{name}"] for name in file["outputs"])
+    total = nodes + held + bool(nominal)
+    expected = f"{total} in all: {nodes} of the design, {held} held-out ({held} ok), 1 nominal"
+    assert _lines(_inspect(path), "runs") == [f"runs     {expected}"]
+
+
+def _ball(folder: Path, method: str) -> Path:
+    """The bouncing ball to t = 4, h ~ U[0.5, 1.5], run with ``method``."""
+    inputs = "{h: {dist: uniform, low: 0.5, high: 1.5}}"
+    return _run(folder, BALL, inputs, method, "{start: 0.0, stop: 4.0, points: 201}")
+
+
+def test_a_bouncing_ball_is_flagged_at_its_first_true_crossing_and_sent_to_elements(tmp_path):
+    """Items 4 and 5: a ball dropped from h ~ U[0.5, 1.5] onto a floor (restitution 0.8),
+    order 5 (6 runs), the default placed check (8 runs): the contact puts a kink in h, the
+    truth's error passes 5 % at t = 1.1; the flag is within 5 % of the horizon of it, no time
+    past it is called reliable, and the remedy is elements, with the coefficients' algebraic
+    decay as its evidence."""
+    path = _ball(tmp_path, "{kind: collocation, order: 5}")
+    h, weights = _midpoints(0.5, 1.5)
+    height = _fresh(tmp_path)["height"]
+    times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
+    crossing = times[np.argmax(error > 0.05)]
+    assert 1.0 <= crossing <= 1.2  # the closed form's, not the code's
+    assert abs(verdict["failing_from"] - crossing) <= 0.05 * times[-1]
+    judged = verdict["undecided"] | (times >= verdict["failing_from"])
+    assert not np.any((error > 0.05) & ~judged)
+    assert verdict["holdout_count"] <= 8
+    (flag,) = [line for line in _lines(_inspect(path), "warning") if "[chaos-unreliable]" in line]
+    assert "multi-element chaos along h" in flag and "fall algebraically" in flag, flag
+    _runs_line_agrees_with_the_file(path)
