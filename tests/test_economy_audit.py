@@ -178,3 +178,56 @@ def test_a_bouncing_ball_is_flagged_at_its_first_true_crossing_and_sent_to_eleme
     (flag,) = [line for line in _lines(_inspect(path), "warning") if "[chaos-unreliable]" in line]
     assert "multi-element chaos along h" in flag and "fall algebraically" in flag, flag
     _runs_line_agrees_with_the_file(path)
+
+
+def test_order_auto_on_an_oscillator_keeps_every_run_and_its_estimate_is_calibrated(tmp_path):
+    """Items 1, 2 and 3: x'' + 0.1 w x' + w² x = 0, w ~ U[1.8, 2.2], x(0) = x0 ~ N(1, 0.1²), to
+    t = 20 (the phase drifts), ``order: auto``: every run of its first round is a node of its
+    last (nested rules: the design is the last round's runs), the check stays within
+    max(8, ¼ of the design), inspect's runs line is the file's, and the last round's indicator
+    lies within 10× of the true error on either side, which is below the tolerance."""
+    entry = "{kind: python, entry: fresh.py:oscillator, params: {w: 2.0, x0: 1.0}"
+    model = f"model: {entry}, outputs: [x, v]}}"
+    inputs = "{w: {dist: uniform, low: 1.8, high: 2.2}, x0: {dist: normal, mean: 1.0, std: 0.1}}"
+    time = "{start: 0.0, stop: 20.0, points: 201}"
+    path = _run(tmp_path, model, inputs, "{kind: collocation, order: auto}", time)
+    with h5py.File(path) as file:
+        runs, indicator = file["refinement/runs"][:], file["refinement/indicator"][:]
+        nodes, held = file["nodes/params"].shape[0], file["validation/params"].shape[0]
+    assert len(runs) >= 2 and nodes == runs[-1]  # no round's runs discarded
+    assert 0 < held <= max(8, nodes // 4)
+    _runs_line_agrees_with_the_file(path)
+    w, w_weights = _legendre(1.8, 2.2, 200)
+    z, z_weights = np.polynomial.hermite_e.hermegauss(40)
+    w, x0 = (grid.ravel() for grid in np.meshgrid(w, 1 + 0.1 * z, indexing="ij"))
+    weights = np.outer(w_weights, z_weights / z_weights.sum()).ravel()
+    oscillation = _fresh(tmp_path)["oscillation"]
+    worst = max(
+        _true_error(path, name, lambda t, name=name: oscillation(w, x0, t)[name], weights)[1].max()
+        for name in ("x", "v")
+    )
+    assert worst < 0.05
+    assert worst / 10 <= indicator[-1] <= 10 * worst, (indicator[-1], worst)
+
+
+def test_elements_auto_out_of_elements_names_its_limit_and_never_contradicts_the_verdict(
+    tmp_path,
+):
+    """Item 5: the bouncing ball with ``elements: auto`` held to 2 elements: the budget record
+    names the limit it hit (2 of 2 elements, method.max_elements); the verdict is not
+    "reliable" while the elements' indicator says the error is above the tolerance, and that
+    indicator is worded as one; no time past the true crossing is called reliable."""
+    path = _ball(tmp_path, "{kind: collocation, order: 3, elements: auto, max_elements: 2}")
+    shown = _inspect(path)
+    (budget,) = [line for line in shown.splitlines() if line.endswith("[element-budget]")]
+    assert "stopped at 2 of 2 elements (method.max_elements)" in budget, budget
+    (checked,) = _lines(shown, "checked")
+    (decay,) = [line for line in shown.splitlines() if line.endswith("[element-decay]")]
+    assert "reliable at every time" not in checked
+    assert decay.startswith("warning") and "an indicator, not a verdict" in decay
+    h, weights = _midpoints(0.5, 1.5)
+    height = _fresh(tmp_path)["height"]
+    times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
+    judged = verdict["undecided"] | (times >= verdict["failing_from"])
+    assert not np.any((error > 0.05) & ~judged)
+    _runs_line_agrees_with_the_file(path)
