@@ -11,6 +11,8 @@ The true error is the larger error of the mean and std over the file's scale
 
 from __future__ import annotations
 
+import html
+import re
 from pathlib import Path
 
 import h5py
@@ -231,3 +233,44 @@ def test_elements_auto_out_of_elements_names_its_limit_and_never_contradicts_the
     judged = verdict["undecided"] | (times >= verdict["failing_from"])
     assert not np.any((error > 0.05) & ~judged)
     _runs_line_agrees_with_the_file(path)
+
+
+def _report_text(path: Path) -> str:
+    """``pcmb report``'s index page as text (tags, styles and images dropped)."""
+    done = pcmb_here("report", str(path), "-o", str(path.parent / "report"))
+    assert done.returncode == 0, done.stderr
+    page = (path.parent / "report" / "index.html").read_text()
+    page = re.sub(r"<(style|script)\b.*?</\1>", " ", page, flags=re.S)
+    return html.unescape(re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", page)))
+
+
+@pytest.mark.slow
+def test_a_command_program_over_time_is_judged_honestly_and_reported_as_the_file_says(tmp_path):
+    """Items 3 and 4 through ``kind: command``: logistic growth y = 1 / (1 + (1/y0 − 1) e^{−rt}),
+    r ~ U[0.5, 1.5], y0 ~ U[0.05, 0.15], written by an external program as output.csv, tensor
+    order 2 (9 runs): its held-out runs go through the same program (8, the budget), no time
+    whose true error passes the tolerance is called reliable, and ``pcmb report`` states the
+    runs made and the largest std the file holds."""
+    (tmp_path / "logistic.py").write_text(LOGISTIC)
+    model = (
+        "model: {kind: command, command: [python3, logistic.py], files: [logistic.py], "
+        "params: {r: 1.0, y0: 0.1}, outputs: [y], output: {file: output.csv}}"
+    )
+    inputs = "{r: {dist: uniform, low: 0.5, high: 1.5}, y0: {dist: uniform, low: 0.05, high: 0.15}}"
+    time = "{start: 0.0, stop: 10.0, points: 101}"
+    path = _run(tmp_path, model, inputs, "{kind: collocation, order: 2}", time)
+    r, r_weights = _legendre(0.5, 1.5, 150)
+    y0, y0_weights = _legendre(0.05, 0.15, 150)
+    r, y0 = (grid.ravel()[:, None] for grid in np.meshgrid(r, y0, indexing="ij"))
+    weights = np.outer(r_weights, y0_weights).ravel()
+    response = lambda t: 1 / (1 + (1 / y0 - 1) * np.exp(-r * t))  # noqa: E731
+    times, error, verdict = _true_error(path, "y", response, weights)
+    judged = verdict["undecided"] | (times >= verdict["failing_from"])
+    assert not np.any((error > 0.05) & ~judged)
+    assert verdict["holdout_count"] == 8
+    _runs_line_agrees_with_the_file(path)
+    text = _report_text(path)
+    assert "9 design nodes (9 ok, 0 failed, 0 pending); 8 held-out (8 ok); nominal run" in text
+    with h5py.File(path) as file:
+        largest = file["outputs/y/std"][:].max()
+    assert re.search(rf"\by +[-0-9.e]+ \.\. [-0-9.e]+ +{largest:.4g}\b", text), text
