@@ -274,3 +274,28 @@ def test_a_command_program_over_time_is_judged_honestly_and_reported_as_the_file
     with h5py.File(path) as file:
         largest = file["outputs/y/std"][:].max()
     assert re.search(rf"\by +[-0-9.e]+ \.\. [-0-9.e]+ +{largest:.4g}\b", text), text
+
+
+@pytest.mark.slow
+def test_a_mujoco_slider_with_uncertain_dry_friction_is_reliable_where_it_is(tmp_path):
+    """A MuJoCo scene: a box launched at 2 m/s on a slide joint whose dry friction f ~
+    U[0.6, 1.4] N stops it at t = 2/f, x = 2t − f t²/2 until then (a kink in f at each time
+    the box stops); order 5, the default check (8 placed runs). The truth's error stays far
+    below the tolerance, the verdict says reliable, and its estimate is within 10× of the
+    truth where the truth is above round-off."""
+    (tmp_path / "slider.xml").write_text(SLIDER)
+    model = (
+        "model: {kind: mujoco, xml: slider.xml, bind: {f: [{field: dof_frictionloss, name: s}]}, "
+        "init: {qvel: {s: 2.0}}, outputs: {x: {qpos: s}}}"
+    )
+    inputs = "{f: {dist: uniform, low: 0.6, high: 1.4}}"
+    time = "{start: 0.0, stop: 4.0, points: 201}"
+    path = _run(tmp_path, model, inputs, "{kind: collocation, order: 5}", time)
+    f, weights = _midpoints(0.6, 1.4)
+    f = f[:, None]
+    response = lambda t: np.where(t < 2 / f, 2 * t - 0.5 * f * t * t, 2 / f)  # noqa: E731
+    _, error, verdict = _true_error(path, "x", response, weights)
+    assert error.max() < 0.005  # MuJoCo's soft friction is within 1e-4 m of the closed form
+    assert np.isnan(verdict["failing_from"]) and not verdict["undecided"].any()
+    assert error.max() / 10 <= verdict["estimate"].max() <= 10 * error.max()
+    _runs_line_agrees_with_the_file(path)
