@@ -299,3 +299,57 @@ def test_a_mujoco_slider_with_uncertain_dry_friction_is_reliable_where_it_is(tmp
     assert np.isnan(verdict["failing_from"]) and not verdict["undecided"].any()
     assert error.max() / 10 <= verdict["estimate"].max() <= 10 * error.max()
     _runs_line_agrees_with_the_file(path)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the placed check's standard errors (pcmb/analysis/diagnostics.py, placed_check: "
+    "how far the estimates move without the last 2 runs, shrunk by _converging) collapse at "
+    "times where two leave-out moves coincide; on the ball's kink the corrected std is off "
+    "by up to 1.8 % (order 5) and 4.5 % (elements: auto) of the scale at 21 and 39 of 201 "
+    "times beyond 3 standard errors (its noise 1e-6 to 1e-3)",
+)
+@pytest.mark.parametrize(
+    "method",
+    ["{kind: collocation, order: 5}", "{kind: collocation, order: 3, elements: auto}"],
+    ids=["order-5", "elements-auto"],
+)
+def test_the_placed_checks_standard_errors_cover_a_kinked_response(tmp_path, method):
+    """Items 3 and 4: the bouncing ball (one input, a kink from the contact), the default
+    placed check: the stored corrected std and the verdict's estimate are within 3 of their
+    standard errors (or 0.5 % of the scale) of the truth at all but 5 % of the times."""
+    path = _ball(tmp_path, method)
+    h, weights = _midpoints(0.5, 1.5)
+    height = _fresh(tmp_path)["height"]
+    times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
+    scale, confidence_se = verdict["scale"], verdict["noise"] / 1.28  # noise: 1.28 se at 90 %
+    std_off = np.abs(verdict["corrected_std"] - verdict["true_std"]) / scale
+    std_se = verdict["corrected_std_se"] / scale
+    estimate_off = np.abs(verdict["estimate"] - error)
+    allowed = 0.05 * times.size
+    assert np.sum(std_off > np.fmax(3 * std_se, 0.005)) <= allowed
+    assert np.sum(estimate_off > np.fmax(3 * confidence_se, 0.005)) <= allowed
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the remedy (pcmb/analysis/diagnostics.py, the shape read from the spectrum along "
+    "one input) reads an analytic phase drift at order 4 as 'steep, oscillating or "
+    "discontinuous' and asks for elements (elements: auto: 15 runs to hold it) where a higher "
+    "order does it cheaper (order: auto, 7 runs; order 6, 7 runs: true error 1.75 %)",
+)
+def test_a_phase_drift_is_told_to_raise_the_order(tmp_path):
+    """Item 5: x(t) of x'' + 0.1 w x' + w² x = 0, w ~ U[1.8, 2.2], to t = 40, order 4 (5 runs):
+    cos(w t) is entire in w, flagged at t = 29.1 where the truth crosses; the remedy is a
+    higher order (order 6 holds it within 1.75 % of the largest std), not elements."""
+    time = "{start: 0.0, stop: 40.0, points: 401}"
+    path = _run(
+        tmp_path,
+        DRIFT,
+        "{w: {dist: uniform, low: 1.8, high: 2.2}}",
+        "{kind: collocation, order: 4}",
+        time,
+    )
+    (flag,) = [line for line in _lines(_inspect(path), "warning") if "[chaos-unreliable]" in line]
+    assert "unreliable from t = 29.1" in flag
+    assert "raising the order of w (method.order)" in flag, flag
