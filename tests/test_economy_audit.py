@@ -27,6 +27,12 @@ import numpy as np
 import pcmb
 
 
+@pcmb.batched(outputs=("y",))
+def vee(params, times):
+    both = np.abs(np.asarray(params["x1"])) + np.abs(np.asarray(params["x2"]))
+    return {"y": both[:, None] * np.sin(times)}
+
+
 def height(h, times):
     h = np.asarray(h, dtype=float)[:, None]
     t = np.broadcast_to(times, (h.shape[0], times.size))
@@ -382,3 +388,68 @@ def test_an_adaptive_grid_on_a_phase_drift_stops_where_its_tolerance_is_met(tmp_
     if "reliable at every time" in _lines(shown, "checked")[0]:
         assert not [line for line in budget if line.startswith("warning")], budget
     assert 1e-4 <= _drift_error(tmp_path, path) <= 0.1
+
+
+VEE = "model: {kind: python, entry: fresh.py:vee, params: {x1: 0.0, x2: 0.0}, outputs: [y]}"
+SQUARE = "{x1: {dist: uniform, low: -1.0, high: 1.0}, x2: {dist: uniform, low: -1.0, high: 1.0}}"
+
+
+def _vee_at_order_1(folder: Path, *flags: str):
+    """(|x1| + |x2|) sin t on U[-1, 1]², tensor order 1: both Gauss points of each input at
+    ±1/√3, so all 4 runs are equal at every time while the response varies; ``pcmb run``
+    with ``flags``, its completed process."""
+    (folder / "fresh.py").write_text(MODELS)
+    (folder / "study.yaml").write_text(
+        f"name: vee\n{VEE}\ntime: {{start: 0.0, stop: 3.0, points: 31}}\ninputs: {SQUARE}\n"
+        "method: {kind: collocation, order: 1}\nexecution: {backend: inprocess}\noutput: out.h5\n"
+    )
+    return pcmb_here("run", "study.yaml", "--quiet", *flags, cwd=folder)
+
+
+def test_a_degenerate_design_over_time_exits_4_under_strict_with_the_file_written(tmp_path):
+    """Done when, a degenerate design is flagged; README, exit codes: with ``--strict`` an
+    expansion the diagnostics call unreliable exits 4 after writing the file. The flag is at
+    the first time the response varies (t = 0.1), where the held-out runs differ."""
+    done = _vee_at_order_1(tmp_path, "--strict")
+    assert done.returncode == 4, done.stderr
+    assert "--strict: the expansion of y is unreliable" in done.stderr
+    with h5py.File(tmp_path / "out.h5") as file:
+        assert np.all(file["outputs/y/std"][:] == 0)
+        assert file["diagnostics/y"].attrs["failing_from"] == pytest.approx(0.1)
+    (checked,) = _lines(_inspect(tmp_path / "out.h5"), "checked")
+    assert "UNRELIABLE from t = 0.1" in checked
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="pcmb/designs/base.py (the sobol-undefined record, written before the held-out "
+    "check) says 'the output does not vary ... at all 31 times' where the design's runs are "
+    "all equal but the held-out runs vary from t = 0.1, beside the verdict that says so",
+)
+def test_a_degenerate_design_does_not_say_the_output_does_not_vary_where_it_does(tmp_path):
+    """Item 5, one signal: where the design's runs are all equal and the held-out runs vary, no
+    record may say that the output does not vary there (it is the expansion that does not)."""
+    assert _vee_at_order_1(tmp_path).returncode == 0
+    shown = _inspect(tmp_path / "out.h5")
+    assert "runs are all equal" in shown
+    assert "the output does not vary (variance 0 up to round-off) at all 31 times" not in shown
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the design's own checks (pcmb/designs/regression.py, RegressionDesign: "
+    "method.samples, then method.order; likewise sampling.py) raise at the first missing key, "
+    "so a user fixes them one run at a time",
+)
+def test_every_missing_key_of_a_method_is_named_at_once(tmp_path):
+    """docs/architecture.md, ConfigError: "an invalid config, with file, line and key path of
+    every problem", before any run (exit 2): ``{kind: regression, tolerance: 0.01}`` lacks
+    ``method.samples`` and ``method.order``; ``pcmb validate`` names both."""
+    (tmp_path / "fresh.py").write_text(MODELS)
+    (tmp_path / "study.yaml").write_text(
+        f"name: vee\n{VEE}\ntime: {{start: 0.0, stop: 3.0, points: 31}}\ninputs: {SQUARE}\n"
+        "method: {kind: regression, tolerance: 0.01}\noutput: out.h5\n"
+    )
+    done = pcmb_here("validate", "study.yaml", cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "method.samples" in done.stderr and "method.order" in done.stderr, done.stderr
