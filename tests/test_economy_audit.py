@@ -33,6 +33,11 @@ def vee(params, times):
     return {"y": both[:, None] * np.sin(times)}
 
 
+@pcmb.batched(outputs=("x",))
+def growth(params, times):
+    return {"x": np.exp(0.5 * np.asarray(params["z"])[:, None] * times)}
+
+
 def height(h, times):
     h = np.asarray(h, dtype=float)[:, None]
     t = np.broadcast_to(times, (h.shape[0], times.size))
@@ -453,3 +458,30 @@ def test_every_missing_key_of_a_method_is_named_at_once(tmp_path):
     done = pcmb_here("validate", "study.yaml", cwd=tmp_path)
     assert done.returncode == 2, done.stderr
     assert "method.samples" in done.stderr and "method.order" in done.stderr, done.stderr
+
+
+@pytest.mark.slow
+def test_elements_auto_on_a_heavy_tailed_hermite_response_is_flagged_where_it_fails(tmp_path):
+    """Item 4 and the issue's case: x = exp(0.5 z t), z ~ N(0, 1), ``elements: auto`` at order
+    4 (it ended 12 % wrong from t = 3.77, unflagged, before). Mean exp(t²/8) and std
+    √(e^{t²/2} − e^{t²/4}) in closed form: no time whose true error passes 5 % is called
+    reliable, a flag is within 5 % of the horizon of the true crossing, and the check stays
+    within max(8, ¼ of the design)."""
+    model = "model: {kind: python, entry: fresh.py:growth, params: {z: 0.0}, outputs: [x]}"
+    inputs = "{z: {dist: normal, mean: 0.0, std: 1.0}}"
+    method = "{kind: collocation, order: 4, elements: auto}"
+    path = _run(tmp_path, model, inputs, method, "{start: 0.0, stop: 5.0, points: 101}")
+
+    def moments(t):  # two equally likely values with the closed form's mean and std
+        mean, std = np.exp(t * t / 8), np.sqrt(np.exp(t * t / 2) - np.exp(t * t / 4))
+        return np.vstack([mean - std, mean + std])
+
+    times, error, verdict = _true_error(path, "x", moments, np.array([0.5, 0.5]))
+    judged = verdict["undecided"] | (times >= verdict["failing_from"])
+    assert not np.any((error > 0.05) & ~judged), times[(error > 0.05) & ~judged]
+    if np.any(error > 0.05):
+        crossing = times[np.argmax(error > 0.05)]
+        assert abs(verdict["failing_from"] - crossing) <= 0.05 * times[-1]
+    with h5py.File(path) as file:
+        nodes, held = file["nodes/params"].shape[0], file["validation/params"].shape[0]
+    assert held <= max(8, nodes // 4)
