@@ -485,3 +485,33 @@ def test_elements_auto_on_a_heavy_tailed_hermite_response_is_flagged_where_it_fa
     with h5py.File(path) as file:
         nodes, held = file["nodes/params"].shape[0], file["validation/params"].shape[0]
     assert held <= max(8, nodes // 4)
+
+
+@pytest.mark.parametrize(
+    ("method", "first_round", "budget", "held_out"),
+    [
+        ("{kind: collocation, order: auto, max_runs: 200}", 3, 200, "8 to 50"),
+        ("{kind: collocation, order: 4, elements: auto}", 5, 155, "8 to 38"),
+    ],
+)
+def test_validate_counts_the_held_out_runs_a_refining_design_may_make(
+    tmp_path, method, first_round, budget, held_out
+):
+    """Item 2 through ``pcmb validate``: a design that refines (``order: auto``,
+    ``elements: auto``) may end with up to its budget of runs, whose check is up to max(8, ¼
+    of them), not the first round's 8: ``elements: auto`` on exp(0.5 z t) makes 105 runs and
+    26 held-out runs where validate said "+ 8"."""
+    (tmp_path / "fresh.py").write_text(MODELS)
+    (tmp_path / "study.yaml").write_text(
+        "name: growth\nmodel: {kind: python, entry: fresh.py:growth, params: {z: 0.0}, "
+        "outputs: [x]}\ntime: {start: 0.0, stop: 5.0, points: 101}\n"
+        f"inputs: {{z: {{dist: normal, mean: 0.0, std: 1.0}}}}\nmethod: {method}\n"
+    )
+    done = pcmb_here("validate", "study.yaml", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    (runs,) = _lines(done.stdout, "runs")
+    expected = (
+        f"runs     {first_round} model runs in the first round, at most {budget} in all + "
+        f"{held_out} held-out runs that check the expansion (abort on failure)"
+    )
+    assert runs == expected
