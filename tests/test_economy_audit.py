@@ -515,3 +515,32 @@ def test_validate_counts_the_held_out_runs_a_refining_design_may_make(
         f"{held_out} held-out runs that check the expansion (abort on failure)"
     )
     assert runs == expected
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="pdf_outside_runs (pcmb/analysis/diagnostics.py, PDF_MARGIN: 5 % of the runs' "
+    "range) lets one placed tail run widen the allowance: at t = 3 the runs span [0.0002, "
+    "5432] (z = 4.3 at 5432), so 31 % of the PDF's mass below 0, where no run and no value "
+    "of exp(...) can go, lies within the margin (-271)",
+)
+def test_a_pdf_below_every_run_of_a_positive_output_is_flagged(tmp_path):
+    """Item 6: x = exp(0.5 z t) > 0, z ~ N(0, 1), order 3 (4 runs, 8 placed held-out runs),
+    PDF at t = 3 (before the flag at 3.2, the closed form's crossing): the stored PDF puts
+    more than a fifth of its mass below the smallest run made; a ``pdf-outside-runs`` record
+    must say so."""
+    model = "model: {kind: python, entry: fresh.py:growth, params: {z: 0.0}, outputs: [x]}"
+    inputs = "{z: {dist: normal, mean: 0.0, std: 1.0}}"
+    time = "{start: 0.0, stop: 5.0, points: 101}"
+    method = "{kind: collocation, order: 3}"
+    path = _run(tmp_path, model, inputs, method, time, "analysis: {pdf_times: [3.0]}")
+    with h5py.File(path) as file:
+        k = int(np.argmin(np.abs(file["time"][:] - 3.0)))
+        runs = [file["outputs/x/values"][:, k], file["validation/x/values"][:, k]]
+        smallest = min(np.min(values) for values in runs)
+        value, density = file["outputs/x/pdf/value"][0], file["outputs/x/pdf/density"][0]
+        assert file["diagnostics/x"].attrs["failing_from"] == pytest.approx(3.2)
+    below = np.sum((density * np.gradient(value))[value < min(0.0, smallest)])
+    assert below > 0.2  # the premise: a fifth of the mass where x cannot be
+    outside = [line for line in _inspect(path).splitlines() if "[pdf-outside-runs]" in line]
+    assert [line for line in outside if "the PDF at 3 " in line], outside
