@@ -21,9 +21,6 @@ from pcmb.analysis.diagnostics import (
     TOLERANCE,
     HeldOut,
     HeldOutCheck,
-    _moment_weights,
-    _plain_share,
-    _tail_width,
     chi_square_quantile,
     diagnose,
     held_out_draws,
@@ -35,6 +32,7 @@ from pcmb.analysis.diagnostics import (
     statistics_error,
     verdict,
 )
+from pcmb.analysis.diagnostics.draws import _moment_weights, _plain_share, _tail_width
 from pcmb.chaos.basis import tail_terms, tensor_index_set, total_index_set
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Uniform

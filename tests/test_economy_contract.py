@@ -199,9 +199,9 @@ def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_p
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="the sequential drawn check (pcmb/analysis/diagnostics.py): 2 silent misses over 10 "
-    "seeds, the estimate short of the kinks' truth by more than its noise (the 3 early flags, "
-    "from two Latin hypercubes of 8 paired as one of 16, are gone: HeldOut.batches)",
+    reason="the sequential drawn check (pcmb/analysis/diagnostics/diagnose.py): 2 silent misses "
+    "over 10 seeds, the estimate short of the kinks' truth by more than its noise (the 3 early "
+    "flags, from two Latin hypercubes of 8 paired as one of 16, are gone: HeldOut.batches)",
 )
 def test_the_sequential_check_of_two_kinks_is_right_at_its_stated_confidence(tmp_path):
     """Item 4: |x1| |x2| (1 + t) on U[-1, 1]², tensor order 7 (64 runs), tolerance 0.02: its
@@ -262,8 +262,8 @@ def test_a_model_that_cannot_be_built_exits_as_documented(tmp_path, code, exit_c
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="the drawn check's tail draws (pcmb/analysis/diagnostics.py, N(0, 2.3^2) per input "
-    "for two normal inputs) miss the tails that carry the std: 3 seeds of 10 call t = 3.5 "
+    reason="the drawn check's tail draws (pcmb/analysis/diagnostics/draws.py, N(0, 2.3^2) per "
+    "input for two normal inputs) miss the tails that carry the std: 3 seeds of 10 call t = 3.5 "
     "reliable where the std is 5.3 % off (validation: 32: 5 of 10); no draw design measured "
     "(docs/diagnostics.md, 'Heavy tails along a direction') gets to 1",
 )

@@ -1,0 +1,272 @@
+"""The placed check: a grid of one input against held-out runs that extend its nodes.
+
+:func:`placed_check` compares the design's mean and std with those of the interpolant through
+nodes and held-out runs (placed by :func:`~pcmb.analysis.diagnostics.draws.held_out_placed`),
+plus the mean's part beyond its degree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
+from pcmb.analysis.diagnostics.decay import SHAPE_LAYERS, next_coefficient
+from pcmb.chaos.elements import PiecewiseExpansion
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.nested import interpolatory_weights
+from pcmb.chaos.nodes import TensorGrid
+from pcmb.chaos.polynomials import OrthonormalFamily
+
+#: A placed check's noise: how far its richer surrogate's statistics move without its last
+#: this many held-out runs (:func:`placed_check`); two, as Leja points come in pairs about
+#: the centre.
+PLACED_SPARE = 2
+#: A placed check extrapolates its interpolant's spectrum up to this many times its degree
+#: to estimate the mean's error beyond it (:func:`_unseen_mean_error`).
+UNSEEN_DEGREES = 3
+#: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
+_EXACT = 1e-8
+
+
+def _unseen_mean_error(
+    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(T,) estimated error of the mean of the interpolant of (M, T) ``coefficients`` through
+    the (M,) germ ``points`` from the degrees beyond it: the error of its interpolatory rule
+    on them. Where the design's own rule integrates every degree below M exactly, the two
+    rules agree on every response, and this is the design mean's error itself.
+
+    The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
+    (all of them with fewer than ``SHAPE_LAYERS`` after it), are fitted by a line against p
+    and against log p, each extrapolated up to degree ``UNSEEN_DEGREES`` × M, the larger
+    kept, and weighted by the squared error of the rule on each degree; zeros with fewer than
+    ``SHAPE_LAYERS`` averages (M < 5: an element without placed runs, whose own three degrees
+    once read flat extrapolated its 4-point rule's errors into a false alarm)."""
+    first = coefficients.shape[0]
+    last = UNSEEN_DEGREES * first
+    # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
+    if first - 2 < SHAPE_LAYERS:
+        return np.zeros(coefficients.shape[1:])
+    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
+    energy = coefficients[1:] ** 2
+    paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
+    seen = np.arange(1.0, first - 1)
+    fitted = np.arange(seen.size)[:, None] >= np.argmax(paired, axis=0)
+    fitted[:, fitted.sum(axis=0) < SHAPE_LAYERS] = True
+    unseen = np.arange(first, last + 1.0)[:, None]
+    tails = [
+        _extrapolated(transform(seen), paired, fitted, transform(unseen))
+        for transform in (np.asarray, np.log)
+    ]
+    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors[first:, None] ** 2, axis=0))
+
+
+def _extrapolated(
+    x: NDArray[np.float64], y: NDArray[np.float64], fitted: NDArray[np.bool_], at: NDArray
+) -> NDArray[np.float64]:
+    """(U, T) exp of the least-squares line through the (P, T) ``y`` against the (P,) ``x``
+    where ``fitted``, column by column, at the (U, 1) ``at``; a rising line is held flat."""
+    count = fitted.sum(axis=0)
+    x_mean = (fitted * x[:, None]).sum(axis=0) / count
+    y_mean = np.where(fitted, y, 0.0).sum(axis=0) / count
+    dx = np.where(fitted, x[:, None] - x_mean, 0.0)
+    slope = (dx * np.where(fitted, y - y_mean, 0.0)).sum(axis=0) / (dx**2).sum(axis=0)
+    slope = np.minimum(slope, 0.0)
+    return np.exp(y_mean + slope * (at - x_mean))
+
+
+def interpolated(
+    family: OrthonormalFamily, germ: NDArray[np.float64], values: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(M, T) coefficients of the polynomial of degree M - 1 through M runs of one input,
+    in its orthonormal basis: its mean is the first, its variance the sum of the others'
+    squares. Each row is scaled by √(germ density), as the weighted Leja points are chosen:
+    the same solution, but well conditioned (at 67 Hermite points: 10, not 10³⁰)."""
+    root = np.sqrt(family.germ.pdf(germ))[:, None]
+    return np.linalg.solve(root * family.evaluate(germ, germ.size - 1), root * values)
+
+
+def placed_check(
+    expansion: ChaosExpansion | PiecewiseExpansion,
+    node_germ: ArrayLike,
+    node_values: ArrayLike,
+    germ: ArrayLike,
+    observed: ArrayLike,
+    scale: float,
+    confidence: float = CONFIDENCE,
+) -> HeldOutCheck:
+    """The held-out check of a one-input expansion by K runs placed to extend its N nodes
+    (:func:`held_out_placed`; per element, :func:`held_out_placed_elements`).
+
+    Nodes and held-out runs are interpolated by one polynomial of degree N + K - 1 in the
+    orthonormal basis (of each element, in its own coordinate), a far richer surrogate than the
+    expansion (Leja points keep the interpolation well conditioned); its mean and std (exact: c_0
+    and √Σ_{i>=1} c_i²; the elements' combined by their probabilities) are the corrected mean and
+    std, and their differences from the expansion's the estimated errors, the mean's plus the
+    interpolant's own error from the degrees beyond it (:func:`_unseen_mean_error`; where the two
+    means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
+    Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
+    runs (of each element) are left out, shrunk by the rate at which they converge
+    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
+    coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
+    it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
+    surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
+    upper bound that plus how far it moves.
+    Runs that are not finite are left out; zeros if the scale is zero.
+    """
+    observed = np.atleast_2d(np.asarray(observed, dtype=float))
+    kept = np.isfinite(observed).all(axis=1)
+    count = int(kept.sum())
+    mean, std = expansion.mean(), expansion.std()
+    if not scale > 0 or not np.isfinite(scale):
+        zeros = np.zeros(observed.shape[1:])
+        return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
+    node_values = np.asarray(node_values, dtype=float)
+    runs = np.isfinite(node_values).all(axis=1)
+    probability, pieces = _placed_pieces(
+        expansion,
+        np.ravel(node_germ)[runs],
+        node_values[runs],
+        np.ravel(germ)[kept],
+        observed[kept],
+    )
+
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        found = [_placed_moments(*piece, scale, spare) for piece in pieces]
+        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
+        rich_mean = np.sum(probability * means, axis=0)
+        variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
+        return (
+            rich_mean,
+            np.sqrt(variance),
+            np.sqrt(np.sum(probability * errors**2, axis=0)),
+            np.sum(probability * unseen, axis=0),
+        )
+
+    rich_mean, rich_std, error, unseen = moments(0)
+    # The elements without held-out runs, which nothing checks, add their next coefficients.
+    unchecked = np.sqrt(
+        sum(
+            (p * next_coefficient(own / scale)) ** 2
+            for p, (_, points, _, nodes, own) in zip(probability[:, 0], pieces, strict=True)
+            if points.size == nodes
+        )
+    )
+    mean_error, std_error = (
+        np.abs(rich_mean - mean / scale) + unseen,
+        np.abs(rich_std - std / scale),
+    )
+    if count > PLACED_SPARE:
+        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
+        fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
+        # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
+        # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
+        # elements without runs, which nothing checks, add their next coefficients.
+        mean_moved, std_moved = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
+        if count > 2 * PLACED_SPARE:
+            least_mean, least_std, _, least_unseen = moments(2 * PLACED_SPARE)
+            least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
+            mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
+            std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
+        mean_se = np.hypot(mean_moved, unchecked)
+        std_se = np.hypot(std_moved, unchecked)
+        moved = np.abs(error - fewer_error)
+    else:
+        mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
+    return HeldOutCheck(
+        error,
+        error + moved,
+        mean_error,
+        std_error,
+        np.where(mean_error >= std_error, mean_se, std_se),
+        rich_mean * scale,
+        rich_std * scale,
+        (mean_se + unseen) * scale,
+        std_se * scale,
+        count,
+        confidence,
+    )
+
+
+def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) what is left of an estimate's error after its last move ``moved`` (without the last
+    ``PLACED_SPARE`` runs), the move ``before`` it (without as many more) giving the rate ρ:
+    a geometric convergence leaves ρ / (1 − ρ) of the last move; at most all of it."""
+    rate = np.divide(moved, before, out=np.ones_like(moved), where=before > 0)
+    left = np.divide(rate, 1.0 - rate, out=np.ones_like(rate), where=rate < 0.5)
+    return moved * left
+
+
+def _placed_pieces(
+    expansion: ChaosExpansion | PiecewiseExpansion,
+    node_germ: NDArray[np.float64],
+    node_values: NDArray[np.float64],
+    germ: NDArray[np.float64],
+    observed: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], list[tuple[OrthonormalFamily, NDArray, NDArray, int, NDArray]]]:
+    """(E, 1) the element probabilities (one element for a :class:`ChaosExpansion`) and per
+    element its family, points (its nodes, then its held-out runs, in its own coordinate),
+    their values, its number of nodes and its own (S, T) coefficients by degree. An element's
+    nodes are its own Gauss nodes, their values its expansion's there (which interpolates
+    them): the design's runs also hold the nodes of the elements split on the way."""
+    degrees = expansion.multi_index[:, 0]
+    order = int(degrees.max())
+
+    def own(coefficients: NDArray[np.float64], size: int) -> NDArray[np.float64]:
+        padded = np.zeros((max(size, order + 1), *coefficients.shape[1:]))
+        padded[degrees] = coefficients
+        return padded
+
+    if isinstance(expansion, ChaosExpansion):
+        family = expansion.distributions[0].family
+        points = np.concatenate([node_germ, germ])
+        values = np.vstack([node_values, observed])
+        coefficients = own(expansion.coefficients, points.size)
+        return np.ones((1, 1)), [(family, points, values, node_germ.size, coefficients)]
+    partition = expansion.partition
+    distribution = partition.distributions[0]
+    physical = distribution.to_physical(germ)
+    where = partition.locate(physical[:, None])
+    pieces = []
+    for e, (conditional,) in enumerate(partition.inputs):
+        nodes = TensorGrid((conditional,), (order,)).nodes[:, 0]
+        basis = conditional.family.evaluate(nodes, order)[:, degrees]
+        points = np.concatenate([nodes, conditional.to_germ(physical[where == e])])
+        values = np.vstack([basis @ expansion.coefficients[e], observed[where == e]])
+        coefficients = own(expansion.coefficients[e], points.size)
+        pieces.append((conditional.family, points, values, nodes.size, coefficients))
+    return partition.probability[:, None], pieces
+
+
+def _placed_moments(
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    values: NDArray[np.float64],
+    nodes: int,
+    own: NDArray[np.float64],
+    scale: float,
+    spare: int,
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
+    mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
+    interpolant's degrees, at most its mean's difference from the design's) of the interpolant
+    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
+    without its last ``spare`` held-out runs, over the scale."""
+    kept = max(nodes, points.size - spare)
+    own = own / scale
+    coefficients = interpolated(family, points[:kept], values[:kept] / scale)
+    missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
+    unseen = _unseen_mean_error(family, points[:kept], coefficients)
+    design = points[:nodes]
+    rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
+    if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
+        # The interpolant holds degrees the design's rule does not integrate: its mean measures
+        # the design's error, and its own error is, by the check's premise, at most that.
+        unseen = np.fmin(unseen, np.abs(coefficients[0] - own[0]))
+    return (
+        coefficients[0],
+        np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
+        np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
+        unseen,
+    )
