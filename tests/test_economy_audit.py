@@ -314,7 +314,7 @@ def test_a_mujoco_slider_with_uncertain_dry_friction_is_reliable_where_it_is(tmp
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the placed check's standard errors (pcmb/analysis/diagnostics.py, placed_check: "
+    reason="the placed check's standard errors (pcmb/analysis/diagnostics/placed.py, placed_check: "
     "how far the estimates move without the last 2 runs, shrunk by _converging) collapse at "
     "times where two leave-out moves coincide; on the ball's kink the corrected std is off "
     "by up to 1.8 % (order 5) and 4.5 % (elements: auto) of the scale at 21 and 39 of 201 "
@@ -344,7 +344,7 @@ def test_the_placed_checks_standard_errors_cover_a_kinked_response(tmp_path, met
 
 @pytest.mark.xfail(
     strict=True,
-    reason="the remedy (pcmb/analysis/diagnostics.py, the shape read from the spectrum along "
+    reason="the remedy (pcmb/analysis/diagnostics/remedies.py, _cause_remedy, the spectrum along "
     "one input) reads an analytic phase drift at order 4 as 'steep, oscillating or "
     "discontinuous' and asks for elements (elements: auto: 15 runs to hold it) where a higher "
     "order does it cheaper (order: auto, 7 runs; order 6, 7 runs: true error 1.75 %)",
@@ -519,7 +519,7 @@ def test_validate_counts_the_held_out_runs_a_refining_design_may_make(
 
 @pytest.mark.xfail(
     strict=True,
-    reason="pdf_outside_runs (pcmb/analysis/diagnostics.py, PDF_MARGIN: 5 % of the runs' "
+    reason="pdf_outside_runs (pcmb/analysis/diagnostics/ranges.py, PDF_MARGIN: 5 % of the runs' "
     "range) lets one placed tail run widen the allowance: at t = 3 the runs span [0.0002, "
     "5432] (z = 4.3 at 5432), so 31 % of the PDF's mass below 0, where no run and no value "
     "of exp(...) can go, lies within the margin (-271)",
