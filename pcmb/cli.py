@@ -463,7 +463,8 @@ def _runs_made(result) -> str:
     )
     nominal = "1 nominal" if result.nominal else "no nominal run"
     total = result.n_nodes + (0 if held_out is None else len(held_out.ok)) + bool(result.nominal)
-    return f"{total} in all: {result.n_nodes} of the design, {checked}, {nominal}"
+    made = f"{total} in all: {result.n_nodes} of the design, {checked}, {nominal}"
+    return "; ".join(filter(None, (made, result.fitted_runs)))
 
 
 def _inspect(path: str) -> str:
@@ -525,9 +526,11 @@ def _inspect(path: str) -> str:
             if undecided:
                 first = axis.values[np.argmax(found.undecided)]
                 verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
+        fit = result.regression.get(name)
+        before = "; of the fit before the final fit" if fit and fit.held_out_fitted else ""
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
-            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g})"
+            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g}{before})"
         )
     if result.report is not None:  # what the design concluded, in its own words
         lines += [f"{label:<9}{text}" for label, text in result.report.summary(result)]

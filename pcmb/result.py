@@ -133,11 +133,15 @@ class RegressionFit:
         vary).
     condition:
         Condition number of the information matrix of the selected terms.
+    held_out_fitted:
+        Held-out runs the fit used besides the design's (the final fit, ``docs/methods.md``);
+        0: the design's runs alone (files without it: 0).
     """
 
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
+    held_out_fitted: int = 0
 
 
 @dataclass(frozen=True)
@@ -333,6 +337,8 @@ class RecordReport(DesignReport):
     def _read_field(cls, file: ReportFile, group: str, name: str, output: str) -> Any:
         place = cls.LAYOUT[name]
         if place == ATTRIBUTE:
+            if name not in file.attrs(group):  # a field added later: the record's default
+                return next(f.default for f in fields(cls.RECORD) if f.name == name)
             value = file.attrs(group)[name]
             return value.item() if isinstance(value, np.generic) else value
         if place == POINTS:
@@ -583,6 +589,18 @@ class StudyResult(ReportedByDesign):
     @property
     def n_nodes(self) -> int:
         return self.germ.shape[0]
+
+    @property
+    def fitted_runs(self) -> str:
+        """The runs the expansions were fitted to, in words, where held-out runs were among
+        them (a regression's final fit, :attr:`RegressionFit.held_out_fitted`): ``the fit of
+        y used 32 design + 10 held-out runs``; empty otherwise."""
+        refitted = {n: f.held_out_fitted for n, f in self.regression.items() if f.held_out_fitted}
+        if not refitted:
+            return ""
+        design = int(np.sum(self.status == Status.OK))
+        held_out = max(refitted.values())  # the same runs for every output refitted
+        return f"the fit of {', '.join(refitted)} used {design} design + {held_out} held-out runs"
 
     @property
     def node_params(self) -> dict[str, NDArray[np.float64]]:

@@ -17,7 +17,7 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Literal, TextIO, TypeVar
 
 import cloudpickle
 import numpy as np
@@ -749,7 +749,8 @@ class Study:
                     found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
             found = self._with_nominal(found, nominal)
             analysis = None
-            if self.analysis is not None:
+            # A design that refits after the check (_final_fit) has its statistics drawn then.
+            if self.analysis is not None and not (first and hasattr(self.design, "refit")):
                 with phase("statistics (quantile bands, PDFs, spectra)", stream):
                     analysis = analyse(found, self.analysis)
         except BaseException:
@@ -775,6 +776,11 @@ class Study:
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
                 result = self._diagnosed(found, held_out, held_out_failed)
+        if not intrusive:
+            result = self._final_fit(nodes, runs, nominal, found, result, stream)
+        if self.analysis is not None and analysis is None:
+            with phase("statistics (quantile bands, PDFs, spectra)", stream):
+                analysis = analyse(result, self.analysis)
         if analysis is not None:
             result = dataclasses.replace(result, analysis=analysis)
             result = dataclasses.replace(
@@ -873,14 +879,20 @@ class Study:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         axes: Mapping[str, OutputAxis | None],
+        weights: Mapping[str, NDArray[np.float64]] | None = None,
     ) -> Recovery:
         """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
-        order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`)."""
+        order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`); with row
+        ``weights`` per output, its final fit
+        (:meth:`~pcmb.designs.base.RefittingDesign.refit`)."""
         parts = []
         for _, on_time, group in _by_axis(values, axes):
             # Warning records locate times only (time_range): off time they name indices.
             grid = self.times if on_time else None
-            parts.append(self.design.recover(nodes, group, ok, times=grid))
+            if weights is None:
+                parts.append(self.design.recover(nodes, group, ok, times=grid))
+            else:
+                parts.append(self.design.refit(nodes, group, ok, weights, times=grid))
         first = parts[0]
         if len(parts) == 1:
             return first
@@ -1230,6 +1242,59 @@ class Study:
             diagnostics=found,
             held_out=held_out,
             warnings=(*warnings, *records),
+        )
+
+    def _final_fit(
+        self,
+        nodes: TensorGrid | NodeSet,
+        runs: RunResult,
+        nominal: RunResult | None,
+        found: StudyResult,
+        judged: StudyResult,
+        stream: TextIO | None,
+    ) -> StudyResult:
+        """The ``judged`` result (``found``, the design's own fit, diagnosed) with the final
+        fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`): every
+        output the check does not vouch for fitted over the ``runs`` at its ``nodes`` and the
+        held-out runs that succeeded, weighted back by their importance weights; the others
+        keep the fit the check vouched for. Its expansions, report and records replace
+        ``found``'s; the diagnostics, verdict and corrected mean and std stay those of the
+        checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself for any other
+        design, without a held-out run that succeeded, or where the check vouches for all."""
+        held_out = judged.held_out
+        if not hasattr(self.design, "refit") or held_out is None or not held_out.ok.any():
+            return judged
+        vouched = {name for name, checked in judged.diagnostics.items() if checked.vouched}
+        if vouched >= set(found.expansions):
+            return judged
+        every = join_nodes(nodes, NodeSet(nodes.distributions, held_out.germ, held_out.params))
+        values = {
+            name: np.concatenate([y, held_out.values[name]]) for name, y in runs.values.items()
+        }
+        ok = np.concatenate([runs.status == Status.OK, held_out.ok])
+        left_out = np.zeros_like(held_out.weights)
+        weights = {
+            name: np.concatenate(
+                [np.ones(nodes.size), left_out if name in vouched else held_out.weights]
+            )
+            for name in values
+        }
+        fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
+        with phase(fitting, stream):
+            recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
+        fitted = dataclasses.replace(
+            found,
+            expansions=recovery.expansions,
+            report=recovery.report,
+            warnings=(*_nodes_failed(runs.failures, nodes.size), *recovery.warnings),
+        )
+        fitted = self._with_nominal(fitted, nominal)
+        checked = tuple(record for record in judged.warnings if record not in found.warnings)
+        return dataclasses.replace(
+            judged,
+            expansions=fitted.expansions,
+            report=fitted.report,
+            warnings=(*fitted.warnings, *checked),
         )
 
     def _start_nominal(self, run: _RunContext) -> PendingRun | None:

@@ -261,3 +261,24 @@ def test_rounds_stop_on_the_error_of_the_mean_and_std_not_on_the_loo_error():
     estimate = relative * (1 / np.sqrt(nodes.size) + relative / 2)
     assert estimate <= tolerance and error <= 10 * tolerance
     assert error / 10 <= estimate <= 10 * error
+
+
+@pytest.mark.parametrize("selection", ["lars", "omp"])
+def test_a_weighted_path_is_the_path_of_rows_repeated_as_often_as_their_weight(selection):
+    """Row weights of 1, 2, 3 select the terms that the rows repeated 1, 2, 3 times select
+    (the correlations and residuals are the same sums), and the fit over the selected terms
+    is numpy's least squares of the rows scaled by √w."""
+    nodes = random_nodes(OSCILLATOR, 60, "lhs", seed=2)
+    values = damped_oscillator(np.linspace(0.0, 4.0, 9), *nodes.params.T)
+    weights = np.random.default_rng(3).integers(1, 4, nodes.size).astype(float)
+    repeated = np.repeat(np.arange(nodes.size), weights.astype(int))
+    candidates = _candidates(OSCILLATOR, 6)
+    matrix = candidates.evaluate(nodes.nodes)
+    path = selection_path(matrix, values, selection, weights)
+    alone = selection_path(matrix[repeated], values[repeated], selection)
+    assert np.array_equal(path.order, alone.order)
+    fit = fit_sparse(candidates, nodes.nodes, values, selection, weights)
+    selected = PolynomialBasis(candidates.families, fit.multi_index).evaluate(nodes.nodes)
+    root = np.sqrt(weights)[:, None]
+    expected, *_ = np.linalg.lstsq(selected * root, values * root, rcond=None)
+    np.testing.assert_allclose(fit.coefficients, expected, rtol=0, atol=1e-10)

@@ -725,7 +725,7 @@ def _runs_text(result: StudyResult) -> str:
     if result.nominal_params:
         nominal = ", ".join(f"{k} = {v:.6g}" for k, v in result.nominal_params.items())
         parts.append(f"nominal run at {nominal}{'' if result.nominal else ' (failed)'}")
-    return "; ".join(parts)
+    return "; ".join(filter(None, (*parts, result.fitted_runs)))
 
 
 def _inputs_table(result: StudyResult) -> list[str]:
@@ -759,6 +759,9 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
     if found is None:
         return "info", "not checked (no chaos expansion)"
     tolerance = f"tolerance {found.tolerance:g} of the largest std"
+    fit = result.regression.get(name)
+    if fit is not None and fit.held_out_fitted:  # the final fit is not the one checked
+        tolerance += "; of the fit before the final fit"
     if not found.reliable:
         axis = result.axis(name)
         where = "" if axis is None else f" from {labels.where(result, name, found.failing_from)}"

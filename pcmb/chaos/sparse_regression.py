@@ -92,14 +92,16 @@ class SelectionPath:
     correction: NDArray[np.float64]  # (K + 1,) the LOO correction factors
 
 
-def _targets(values: NDArray[np.float64]) -> NDArray[np.float64]:
+def _targets(values: NDArray[np.float64], weights: NDArray[np.float64]) -> NDArray[np.float64]:
     """Z with ZZᵀ = ỸỸᵀ for the time-normalised response Ỹ (times that do not vary dropped),
-    its principal components U·S down to singular values of round-off size."""
-    centred = values - values.mean(axis=0)
-    spread = np.sqrt(np.mean(centred**2, axis=0))
-    scale = np.sqrt(np.mean(values**2, axis=0))
+    its principal components U·S down to singular values of round-off size; with row
+    ``weights`` w (mean 1), Ỹ is centred and normalised by weighted means and its rows scaled
+    by √w."""
+    centred = values - weights @ values / values.shape[0]
+    spread = np.sqrt(weights @ centred**2 / values.shape[0])
+    scale = np.sqrt(weights @ values**2 / values.shape[0])
     varies = spread > _NOISE * scale
-    normalised = centred[:, varies] / spread[varies]
+    normalised = centred[:, varies] / spread[varies] * np.sqrt(weights)[:, None]
     if normalised.shape[1] <= 1:
         return normalised
     left, singular, _ = np.linalg.svd(normalised, full_matrices=False)
@@ -108,7 +110,10 @@ def _targets(values: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def selection_path(
-    matrix: NDArray[np.float64], values: ArrayLike, selection: Selection = "lars"
+    matrix: NDArray[np.float64],
+    values: ArrayLike,
+    selection: Selection = "lars",
+    weights: ArrayLike | None = None,
 ) -> SelectionPath:
     """The LARS or OMP path over the columns of a basis matrix, scored by the corrected LOO.
 
@@ -120,6 +125,9 @@ def selection_path(
         (N, ...) responses; the path is shared by all trailing entries.
     selection:
         ``"lars"`` or ``"omp"``.
+    weights:
+        (N,) positive row weights of a weighted least squares (default: 1): the path of the
+        rows scaled by √w after weighted centring, its LOO errors weighted the same way.
 
     Returns
     -------
@@ -128,9 +136,10 @@ def selection_path(
         k: the constant and the first k entered columns).
     """
     n_nodes = matrix.shape[0]
-    target = _targets(np.asarray(values, dtype=float).reshape(n_nodes, -1))
-    mean = matrix.mean(axis=0)
-    centred = matrix - mean
+    weights = _mean_one(weights, n_nodes)
+    target = _targets(np.asarray(values, dtype=float).reshape(n_nodes, -1), weights)
+    mean = weights @ matrix / n_nodes
+    centred = (matrix - mean) * np.sqrt(weights)[:, None]
     norm = np.sqrt(np.sum(centred**2, axis=0))
     usable = norm > _DEPENDENT * np.sqrt(n_nodes) * np.maximum(1.0, np.abs(mean))
     usable[0] = False
@@ -145,7 +154,7 @@ def selection_path(
     correlation = columns.T @ target  # (P, r): x_jᵀR for the LARS/OMP residual R
     direction = np.zeros_like(correlation)  # LARS: x_jᵀ P_A R
     residual = target.copy()  # least-squares residual (I - H) Z, Z centred
-    leverage = np.full(n_nodes, 1.0 / n_nodes)
+    leverage = weights / n_nodes
     total = float(np.sum(target**2))
     order: list[int] = []
     score = [_score(residual, leverage, trace, n_nodes, 1)]
@@ -194,6 +203,14 @@ def selection_path(
     return SelectionPath(
         np.asarray(order, dtype=np.intp), np.asarray(score), np.asarray(correction)
     )
+
+
+def _mean_one(weights: ArrayLike | None, n_nodes: int) -> NDArray[np.float64]:
+    """(N,) row weights scaled to mean 1 (all 1 without ``weights``)."""
+    if weights is None:
+        return np.ones(n_nodes)
+    weights = np.asarray(weights, dtype=float)
+    return weights * (n_nodes / np.sum(weights))
 
 
 def _lars_step(
@@ -246,8 +263,9 @@ def fit_sparse(
     nodes: ArrayLike,
     values: ArrayLike,
     selection: Selection = "lars",
+    weights: ArrayLike | None = None,
 ) -> SparseFit:
-    """Select terms of a candidate basis and fit them by least squares.
+    """Select terms of a candidate basis and fit them by (weighted) least squares.
 
     Parameters
     ----------
@@ -261,6 +279,11 @@ def fit_sparse(
         ``"lars"`` or ``"omp"`` (hybrid: least squares on every active set along the path,
         the one with the smallest corrected LOO error summed over the trailing entries kept),
         or ``"none"``: least squares on the whole candidate set.
+    weights:
+        (N,) positive row weights (default: 1), e.g. the importance weights of runs drawn
+        from another density than the inputs' (:func:`selection_path`,
+        :func:`~pcmb.chaos.recovery.fit_least_squares`); the LOO correction takes them
+        scaled to mean 1.
 
     Returns
     -------
@@ -290,15 +313,16 @@ def fit_sparse(
     matrix = basis.evaluate(nodes)
     if selection == "none":
         keep = np.arange(basis.size)
-        trace = float(np.sum(np.linalg.pinv(matrix) ** 2))
+        root = np.sqrt(_mean_one(weights, n_nodes))[:, None]
+        trace = float(np.sum(np.linalg.pinv(matrix * root) ** 2))
         factor = _correction(trace, n_nodes, basis.size)
     else:
-        path = selection_path(matrix, values, selection)
+        path = selection_path(matrix, values, selection, weights)
         best = int(np.argmin(path.score))
         keep = np.sort(np.concatenate(([0], path.order[:best])))
         factor = float(path.correction[best])
     selected = PolynomialBasis(basis.families, basis.multi_index[keep])
-    fit = fit_least_squares(selected, nodes, values)
+    fit = fit_least_squares(selected, nodes, values, weights)
     return SparseFit(
         selected.multi_index, fit.coefficients, fit.loo_error * factor, fit.condition**2
     )

@@ -33,6 +33,7 @@ __all__ = [
     "MomentReport",
     "NodeDesign",
     "Recovery",
+    "RefittingDesign",
     "least_squares_recovery",
     "order_words",
     "statistics_warnings",
@@ -218,6 +219,27 @@ class AdaptiveDesign(NodeDesign, Protocol):
         ok: NDArray[np.bool_],
     ) -> NodeSet | None:
         """The next round's nodes, given every node run so far, or ``None`` when done."""
+        ...
+
+
+class RefittingDesign(NodeDesign, Protocol):
+    """A design whose expansions are fitted again, after the held-out check's verdict, over
+    its runs and the held-out runs that succeeded (a regression's final fit,
+    ``docs/methods.md``). ``Study.run`` calls :meth:`refit` where a design has it; the others
+    keep the expansions the check judged."""
+
+    def refit(
+        self,
+        nodes: TensorGrid | NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: Mapping[str, NDArray[np.float64]],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        """Expansions of every output from the (N, T) values of the design's runs followed by
+        the held-out runs, as :meth:`~NodeDesign.recover` makes them, each output's rows
+        weighted by its ``weights`` (N,): 1 for the design's runs, the held-out draws'
+        importance weights, 0 for a row left out."""
         ...
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -101,7 +101,7 @@ def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
 
 
-def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
+def estimated_error(fits: Mapping[str, SparseFit], runs: float) -> float:
     """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
     worst = 0.0
     for fit in fits.values():
@@ -110,7 +110,7 @@ def estimated_error(fits: Mapping[str, SparseFit], runs: int) -> float:
     return worst
 
 
-def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: int) -> float:
+def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: float) -> float:
     """The estimated error of the mean and std of a least-squares fit, relative to the largest
     std, the largest over times, from its corrected LOO error ε and std σ per time.
 
@@ -260,18 +260,27 @@ class SparseRegression:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        fits = self._fits(nodes, values, ok)
+        fits = {name: found.fit for name, found in self._fits(nodes, values, ok).items()}
         self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
-        self, nodes: NodeSet, values: Mapping[str, NDArray[np.float64]], ok: NDArray[np.bool_]
-    ) -> dict[str, SparseFit]:
-        germ = nodes.nodes[ok]
-        return {
-            name: fit_sparse(self.candidates, germ, y[ok], self.selection)
-            for name, y in values.items()
-        }
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: Mapping[str, NDArray[np.float64]] | None = None,
+    ) -> dict[str, _Fit]:
+        """Each output's fit over its rows (``ok``, and a weight above 0); one that keeps no
+        held-out row is fitted unweighted, as :meth:`recover` fits the design's runs."""
+        fits = {}
+        for name, y in values.items():
+            rows = ok if weights is None else ok & (weights[name] > 0)
+            held_out = 0 if weights is None else int(rows[self._made :].sum())
+            kept = weights[name][rows] if held_out else None
+            fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
+            fits[name] = _Fit(fit, np.ones(int(rows.sum())) if kept is None else kept, held_out)
+        return fits
 
     def recover(
         self,
@@ -280,8 +289,37 @@ class SparseRegression:
         ok: NDArray[np.bool_],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
-        fits = self._fits(nodes, values, ok)
         self._made = nodes.size
+        return self._recovery(nodes, values, ok, None, times)
+
+    def refit(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: Mapping[str, NDArray[np.float64]],
+        times: NDArray[np.float64] | None = None,
+    ) -> Recovery:
+        """The final fit (:class:`~pcmb.designs.base.RefittingDesign`): each output fitted
+        again, with the same candidates and selection (LARS and OMP select again), over
+        ``nodes``, the design's runs followed by the held-out runs, by least squares weighted
+        by its ``weights`` (N,): 1 for the design's runs, the held-out draws' importance
+        weights, 0 for a row left out. An output none of whose held-out runs is kept gets
+        the fit :meth:`recover` made. The records describe these fits; the design's record
+        is unchanged."""
+        return self._recovery(nodes, values, ok, weights, times)
+
+    def _recovery(
+        self,
+        nodes: NodeSet,
+        values: Mapping[str, NDArray[np.float64]],
+        ok: NDArray[np.bool_],
+        weights: Mapping[str, NDArray[np.float64]] | None,
+        times: NDArray[np.float64] | None,
+    ) -> Recovery:
+        """The expansions of :meth:`recover` (``weights`` ``None``) or :meth:`refit`."""
+        weighted = self._fits(nodes, values, ok, weights)
+        fits = {name: found.fit for name, found in weighted.items()}
         expansions = {}
         if fits:
             union, where = np.unique(
@@ -297,18 +335,23 @@ class SparseRegression:
                 expansions[name] = ChaosExpansion(
                     coefficients, union, self.distributions, self.names
                 )
-        runs = int(np.sum(ok))
         records = tuple(
             record
-            for name, fit in fits.items()
-            if (record := self._loo_warning(name, fit, runs, times)) is not None
+            for name, (fit, rows, _) in weighted.items()
+            if (record := self._loo_warning(name, fit, rows.size, times)) is not None
         )
-        estimate = estimated_error(fits, runs)
+        estimate = max(
+            (
+                estimated_error({name: fit}, _effective(rows))
+                for name, (fit, rows, _) in weighted.items()
+            ),
+            default=0.0,
+        )
         if self.tolerance is not None and estimate > self.tolerance:
             records += (
                 WarningRecord(
                     "regression-budget",
-                    f"the rounds ended after {nodes.size} of {self.max_samples} runs "
+                    f"the rounds ended after {self._made} of {self.max_samples} runs "
                     f"(method.max_samples) before the tolerance was met: estimated error of the "
                     f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
                     f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
@@ -316,8 +359,10 @@ class SparseRegression:
                 ),
             )
         regression = {
-            name: RegressionFit(fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition)
-            for name, fit in fits.items()
+            name: RegressionFit(
+                fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out
+            )
+            for name, (fit, _, held_out) in weighted.items()
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
@@ -345,11 +390,30 @@ class SparseRegression:
         )
 
 
+class _Fit(NamedTuple):
+    """An output's fit, the weights of the rows it was fitted to and how many of those rows
+    are held-out runs."""
+
+    fit: SparseFit
+    weights: NDArray[np.float64]
+    held_out: int
+
+
+def _final(fit: RegressionFit) -> str:
+    """`` (final fit, with 10 held-out runs)`` where the fit used held-out runs, else empty."""
+    return f" (final fit, with {fit.held_out_fitted} held-out runs)" if fit.held_out_fitted else ""
+
+
+def _effective(weights: NDArray[np.float64]) -> float:
+    """The runs that rows of ``weights`` count as: (Σ w)² / Σ w²."""
+    return float(np.sum(weights) ** 2 / np.sum(weights**2))
+
+
 @dataclass(frozen=True)
 class RegressionReport(RecordReport):
     """Each output's sparse regression fit (:class:`~pcmb.result.RegressionFit`), stored
-    beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attribute
-    ``condition``."""
+    beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attributes
+    ``condition`` and ``held_out_fitted``."""
 
     key: ClassVar[str] = "regression"
     GROUP: ClassVar[str] = "outputs/{output}"
@@ -358,6 +422,7 @@ class RegressionReport(RecordReport):
         "loo": POINTS,
         "selected": (None, "input"),
         "condition": ATTRIBUTE,
+        "held_out_fitted": ATTRIBUTE,
     }
 
     regression: dict[str, RegressionFit]
@@ -366,8 +431,9 @@ class RegressionReport(RecordReport):
         return [
             (
                 "fit",
-                f"{name}: {fit.selected.shape[0]} terms selected, leave-one-out error up to "
-                f"{np.nanmax(fit.loo, initial=0.0):.3g}, condition number {fit.condition:.3g}",
+                f"{name}: {fit.selected.shape[0]} terms selected{_final(fit)}, leave-one-out "
+                f"error up to {np.nanmax(fit.loo, initial=0.0):.3g}, condition number "
+                f"{fit.condition:.3g}",
             )
             for name, fit in self.regression.items()
         ]
