@@ -139,6 +139,15 @@ def _legendre(low: float, high: float, count: int = 300) -> tuple[np.ndarray, np
     return low + (points + 1) * (high - low) / 2, weights / 2
 
 
+def _oscillator_rule() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(w, x0, weights): Gauss–Legendre in w ~ U[1.8, 2.2] times Gauss–Hermite in x0 ~
+    N(1, 0.1²), the oscillator's two inputs (its response is linear in x0)."""
+    w, w_weights = _legendre(1.8, 2.2, 150)
+    z, z_weights = np.polynomial.hermite_e.hermegauss(40)
+    w, x0 = (grid.ravel() for grid in np.meshgrid(w, 1 + 0.1 * z, indexing="ij"))
+    return w, x0, np.outer(w_weights, z_weights / z_weights.sum()).ravel()
+
+
 def _fresh(folder: Path | None = None):
     """The audit's model module, imported from the file the runs used."""
     namespace: dict = {}
@@ -210,10 +219,7 @@ def test_order_auto_on_an_oscillator_keeps_every_run_and_its_estimate_is_calibra
     assert len(runs) >= 2 and nodes == runs[-1]  # no round's runs discarded
     assert 0 < held <= max(8, nodes // 4)
     _runs_line_agrees_with_the_file(path)
-    w, w_weights = _legendre(1.8, 2.2, 200)
-    z, z_weights = np.polynomial.hermite_e.hermegauss(40)
-    w, x0 = (grid.ravel() for grid in np.meshgrid(w, 1 + 0.1 * z, indexing="ij"))
-    weights = np.outer(w_weights, z_weights / z_weights.sum()).ravel()
+    w, x0, weights = _oscillator_rule()
     oscillation = _fresh(tmp_path)["oscillation"]
     worst = max(
         _true_error(path, name, lambda t, name=name: oscillation(w, x0, t)[name], weights)[1].max()
@@ -577,10 +583,7 @@ def test_the_drawn_check_of_a_drifting_oscillator_is_right_at_its_confidence_ove
     entry = "{kind: python, entry: fresh.py:oscillator, params: {w: 2.0, x0: 1.0}"
     model = f"model: {entry}, outputs: [x, v]}}"
     inputs = "{w: {dist: uniform, low: 1.8, high: 2.2}, x0: {dist: normal, mean: 1.0, std: 0.1}}"
-    w, w_weights = _legendre(1.8, 2.2, 150)
-    z, z_weights = np.polynomial.hermite_e.hermegauss(40)
-    w, x0 = (grid.ravel() for grid in np.meshgrid(w, 1 + 0.1 * z, indexing="ij"))
-    weights = np.outer(w_weights, z_weights / z_weights.sum()).ravel()
+    w, x0, weights = _oscillator_rule()
     oscillation = _fresh()["oscillation"]
     misses, early = set(), set()  # the seeds
     for seed in range(10):
@@ -601,3 +604,27 @@ def test_the_drawn_check_of_a_drifting_oscillator_is_right_at_its_confidence_ove
             off = np.abs(verdict["corrected_mean"] - verdict["true_mean"])
             assert np.mean(off[1:] > 2 * verdict["corrected_mean_se"][1:]) <= 0.05
     assert len(misses) <= 1 and len(early) <= 1, (misses, early)
+
+
+@pytest.mark.parametrize(("stop", "batches", "held"), [(20.0, 1, 8), (40.0, 2, 12)])
+def test_the_drawn_check_draws_its_second_batch_only_where_undecided(tmp_path, stop, batches, held):
+    """Items 2 and 4: the drifting oscillator (w ~ U[1.8, 2.2], x0 ~ N(1, 0.1²)), tensor
+    orders 5 × 7 (48 runs; budget max(8, 12) = 12). To t = 20 the first batch of 8 decides
+    (reliable everywhere: one batch); to t = 40 it leaves times undecided and the second
+    batch spends the rest of the budget, no more. The truth's error stays below 3 % of the
+    largest std: no time is flagged; the runs line and the file agree."""
+    entry = "{kind: python, entry: fresh.py:oscillator, params: {w: 2.0, x0: 1.0}"
+    model = f"model: {entry}, outputs: [x, v]}}"
+    inputs = "{w: {dist: uniform, low: 1.8, high: 2.2}, x0: {dist: normal, mean: 1.0, std: 0.1}}"
+    time = f"{{start: 0.0, stop: {stop}, points: {int(stop * 10) + 1}}}"
+    path = _run(tmp_path, model, inputs, "{kind: collocation, order: {w: 5, x0: 7}}", time)
+    with h5py.File(path) as file:
+        assert file["validation"].attrs["batches"] == batches
+        assert file["validation/params"].shape[0] == held
+        assert [np.isnan(file[f"diagnostics/{y}"].attrs["failing_from"]) for y in "xv"] == [1, 1]
+    _runs_line_agrees_with_the_file(path)
+    w, x0, weights = _oscillator_rule()
+    oscillation = _fresh()["oscillation"]
+    for name in ("x", "v"):
+        response = lambda t, name=name: oscillation(w, x0, t)[name]  # noqa: E731
+        assert _true_error(path, name, response, weights)[1].max() < 0.03
