@@ -11,6 +11,7 @@ The true error is the larger error of the mean and std over the file's scale
 
 from __future__ import annotations
 
+import functools
 import html
 import re
 from pathlib import Path
@@ -148,20 +149,23 @@ def _oscillator_rule() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return w, x0, np.outer(w_weights, z_weights / z_weights.sum()).ravel()
 
 
-def _fresh(folder: Path | None = None):
-    """The audit's model module, imported from the file the runs used."""
+@functools.cache
+def _fresh() -> dict:
+    """The namespace of the audit's model file, whose closed forms give the truth."""
     namespace: dict = {}
-    exec(compile(MODELS, str((folder or Path()) / "fresh.py"), "exec"), namespace)
+    exec(compile(MODELS, "fresh.py", "exec"), namespace)
     return namespace
 
 
 def _inspect(path: Path) -> str:
+    """What ``pcmb inspect`` prints of the result file at ``path``."""
     shown = pcmb_here("inspect", str(path))
     assert shown.returncode == 0, shown.stderr
     return shown.stdout
 
 
 def _lines(shown: str, start: str) -> list[str]:
+    """The lines of ``shown`` that begin with ``start``."""
     return [line for line in shown.splitlines() if line.startswith(start)]
 
 
@@ -189,7 +193,7 @@ def test_a_bouncing_ball_is_flagged_at_its_first_true_crossing_and_sent_to_eleme
     decay as its evidence."""
     path = _ball(tmp_path, "{kind: collocation, order: 5}")
     h, weights = _midpoints(0.5, 1.5)
-    height = _fresh(tmp_path)["height"]
+    height = _fresh()["height"]
     times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
     crossing = times[np.argmax(error > 0.05)]
     assert 1.0 <= crossing <= 1.2  # the closed form's, not the code's
@@ -220,7 +224,7 @@ def test_order_auto_on_an_oscillator_keeps_every_run_and_its_estimate_is_calibra
     assert 0 < held <= max(8, nodes // 4)
     _runs_line_agrees_with_the_file(path)
     w, x0, weights = _oscillator_rule()
-    oscillation = _fresh(tmp_path)["oscillation"]
+    oscillation = _fresh()["oscillation"]
     worst = max(
         _true_error(path, name, lambda t, name=name: oscillation(w, x0, t)[name], weights)[1].max()
         for name in ("x", "v")
@@ -245,7 +249,7 @@ def test_elements_auto_out_of_elements_names_its_limit_and_never_contradicts_the
     assert "reliable at every time" not in checked
     assert decay.startswith("warning") and "an indicator, not a verdict" in decay
     h, weights = _midpoints(0.5, 1.5)
-    height = _fresh(tmp_path)["height"]
+    height = _fresh()["height"]
     times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
     judged = verdict["undecided"] | (times >= verdict["failing_from"])
     assert not np.any((error > 0.05) & ~judged)
@@ -337,7 +341,7 @@ def test_the_placed_checks_standard_errors_cover_a_kinked_response(tmp_path, met
     standard errors (or 0.5 % of the scale) of the truth at all but 5 % of the times."""
     path = _ball(tmp_path, method)
     h, weights = _midpoints(0.5, 1.5)
-    height = _fresh(tmp_path)["height"]
+    height = _fresh()["height"]
     times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
     scale, confidence_se = verdict["scale"], verdict["noise"] / 1.28  # noise: 1.28 se at 90 %
     std_off = np.abs(verdict["corrected_std"] - verdict["true_std"]) / scale
@@ -375,7 +379,7 @@ def _drift(folder: Path, method: str) -> Path:
 def _drift_error(folder: Path, path: Path) -> float:
     """The largest true error of the phase drift's mean and std over the file's scale."""
     w, weights = _legendre(1.8, 2.2, 400)
-    oscillation = _fresh(folder)["oscillation"]
+    oscillation = _fresh()["oscillation"]
     response = lambda t: oscillation(w, np.ones_like(w), t)["x"]  # noqa: E731
     return _true_error(path, "x", response, weights)[1].max()
 
@@ -565,7 +569,7 @@ def test_order_auto_on_a_bouncing_ball_is_not_flagged_early(tmp_path):
     the truth's first crossing of 5 %."""
     path = _ball(tmp_path, "{kind: collocation, order: auto}")
     h, weights = _midpoints(0.5, 1.5)
-    height = _fresh(tmp_path)["height"]
+    height = _fresh()["height"]
     times, error, verdict = _true_error(path, "y", lambda t: height(h, t), weights)
     crossing = times[np.argmax(error > 0.05)]
     assert 1.6 <= crossing <= 1.7  # the closed form's
