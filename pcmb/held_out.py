@@ -21,6 +21,7 @@ from pcmb.analysis.diagnostics import (
     held_out_draws,
     held_out_placed,
     held_out_placed_elements,
+    held_out_unit,
     widened_inputs,
 )
 from pcmb.chaos.inputs import Distribution
@@ -79,6 +80,12 @@ class HeldOutPlan:
         own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
         return self._most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
 
+    def _first_batch(self, design_runs: int) -> NDArray[np.float64]:
+        """The unit-cube points of the first batch of draws, whose empty slices the second
+        fills (:func:`~pcmb.analysis.diagnostics.held_out_unit`)."""
+        first, _ = self.runs(design_runs)
+        return held_out_unit(first, len(self.inputs), self.seed + HELD_OUT_SEED)
+
     def _most(self, design_runs: int) -> int:
         """The most held-out runs of the check: ``validation``, else the budget."""
         if self.validation is not None:
@@ -119,7 +126,12 @@ class HeldOutPlan:
             # A Latin hypercube, normal inputs widened into their tails (weighted back): each
             # input's range is met evenly, which steadies the estimated errors of the
             # statistics against a few runs missing where the error sits.
-            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed)
+            # A later batch completes the first's hypercube: its runs and the first's
+            # stratify every input as one, their mean steadier (two apart left slices empty
+            # and doubled others). Not with a widened input: the weights' products do not
+            # stratify, and there it cost timely flags without saving a miss.
+            before = None if batch == 0 or normal.any() else self._first_batch(design.shape[0])
+            draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed, before)
         beyond = ((draws.nodes < low) | (draws.nodes > high)) & normal
         return HeldOutDraws(seed, draws, weights, placed, tuple(self.inputs), beyond)
 

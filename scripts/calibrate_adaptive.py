@@ -16,7 +16,8 @@ The estimate's form (see :mod:`pcmb.designs.adaptive`) was chosen on the rounds 
 genz_oscillatory, otl_circuit, piston, wing_weight and lognormal6; ishigami3 and genz_gaussian
 validate it (g_function is not smooth: the estimate cannot see its kink, the warnings must).
 ``--held-out`` runs functions no rule was chosen on (Genz product peak and corner peak,
-Borehole, cos of 5 normal inputs) instead, to check that the rules generalise.
+Borehole, cos of 5 normal inputs, ..., Friedman, Welch et al.'s 20 inputs) instead, to check
+that the rules generalise.
 
 ``--replay`` runs every function once to ``--max-runs`` (the near-singular sqrt(a + 0.002) e^b
 and log(a + 0.005) + b too) and replays each stopping rule of :data:`REPLAYED` (today's, and
@@ -41,7 +42,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import erf
+from scipy.special import erf, sici
 
 import pcmb
 from pcmb.chaos.expansion import ChaosExpansion
@@ -308,6 +309,70 @@ def dette8() -> Case:
     )
 
 
+def friedman() -> Case:
+    """Friedman's 10 sin(π x0 x1) + 20 (x2 - 1/2)² + 10 x3 + 5 x4, 5 uniform inputs (held
+    out): E sin(π x0 x1) = Cin(π) / π and E sin²(π x0 x1) = 1/2 - Si(2π) / (4π), with Cin(z)
+    = γ + log z - Ci(z); 20 (x2 - 1/2)² has mean 20/12 and second moment 400/80."""
+    sine = (np.euler_gamma + math.log(np.pi) - sici(np.pi)[1]) / np.pi
+    sine_square = 0.5 - sici(2 * np.pi)[0] / (4 * np.pi)
+    mean = 10 * sine + 20 / 12 + 10 / 2 + 5 / 2
+    variance = 100 * (sine_square - sine**2) + 400 / 80 - (20 / 12) ** 2 + (100 + 25) / 12
+
+    def function(x: np.ndarray) -> np.ndarray:
+        x0, x1, x2, x3, x4 = x.T
+        return 10 * np.sin(np.pi * x0 * x1) + 20 * (x2 - 0.5) ** 2 + 10 * x3 + 5 * x4
+
+    return _unit(5), function, mean, math.sqrt(variance)
+
+
+#: Welch et al.'s linear coefficients by input, 0-based (their x_(k+1)).
+WELCH_LINEAR = {
+    1: 0.05,
+    2: 0.08,
+    4: 1.0,
+    5: -0.03,
+    6: 0.03,
+    8: -0.09,
+    9: -0.01,
+    10: -0.07,
+    13: -0.04,
+    14: 0.06,
+    16: -0.01,
+    17: -0.03,
+}
+
+
+def welch20() -> Case:
+    """Welch et al.'s screening function of 20 inputs on [-1/2, 1/2] (held out): 5 x11 / (1 +
+    x0) + 5 (x3 - x19)² + 40 x18³ - 5 x18 + 0.25 x12² + linear terms (0-based; x7 and x15 do
+    not enter). Its terms share no input, so its variance is theirs summed, in closed form:
+    25/9 (E x11² = 1/12, E (1 + x0)^-2 = 4/3), 25 (1/15 - 1/36) (x3 - x19 is triangular on
+    [-1, 1]), 1600/448 - 400/80 + 25/12, (1/80 - 1/144) / 16 and Σ c² / 12."""
+    inputs = {f"x{k}": pcmb.Uniform(-0.5, 0.5) for k in range(20)}
+    linear = np.zeros(20)
+    linear[list(WELCH_LINEAR)] = list(WELCH_LINEAR.values())
+
+    def function(x: np.ndarray) -> np.ndarray:
+        return (
+            5 * x[:, 11] / (1 + x[:, 0])
+            + 5 * (x[:, 3] - x[:, 19]) ** 2
+            + 40 * x[:, 18] ** 3
+            - 5 * x[:, 18]
+            + 0.25 * x[:, 12] ** 2
+            + x @ linear
+        )
+
+    mean = 5 / 6 + 0.25 / 12
+    variance = (
+        25 / 9
+        + 25 * (1 / 15 - 1 / 36)
+        + (1600 / 448 - 400 / 80 + 25 / 12)
+        + (1 / 80 - 1 / 144) / 16
+        + float(linear @ linear) / 12
+    )
+    return inputs, function, mean, math.sqrt(variance)
+
+
 def sqrt_exp() -> Case:
     """sqrt(a + 0.002) e^b, 2 uniform inputs (``--replay``): analytic on the box, its branch
     point 0.2 % of the width beyond it."""
@@ -392,6 +457,8 @@ HELD_OUT = {
         exp_normal3,
         genz_continuous,
         dette8,
+        friedman,
+        welch20,
     )
 }
 #: Analytic responses near a singularity, outside both tables, only replayed (``--replay``).

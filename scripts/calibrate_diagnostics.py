@@ -26,19 +26,19 @@ The cases of issue 23 (``lognormal``, ``jump``, ``ball``, ``drift``, ``smooth4``
 ``sliver``, a kink ``elements: auto`` misreads) and the held-out dynamical cases measured
 after them (``pendulum``: phase drift with the release angle; ``sinh``: heavy tails;
 ``switch``: a lag switched on at an uncertain time; ``oscillator`` and ``oscillator_wide``:
-three smooth inputs), closed forms or numpy Gauss rules the tests do not tune on, run
-each study with the default held-out check and seeds 0..S-1 (``method.seed``: it moves the
-held-out draws; a collocation design is the same) and print, per study: its runs, the
-check's runs (fewest–most over the seeds), the true crossing, the flags, the worst distance
-of a flag from the truth in percent of the horizon, false alarms (a flag where the truth
-never crosses, or more than 5 % of the horizon before it), misses (no flag, or one more than
-5 % after it), of those the silent ones (where, from 5 % of the horizon after the crossing
-on, the true error exceeds the tolerance at a time that neither a flag nor a
-``chaos-undecided`` record covers), and the seeds whose check is undecided at some time.
-``--validation K`` fixes the check's runs instead; ``--mean-error`` prints instead, per
-study, the mean's true and estimated errors (``mean_error``) where the truth crosses and the
-largest of each.
-"""
+three smooth inputs; ``diagonal`` and ``largest``: kinks across two and three uniform
+inputs, whose drawn check runs a second batch), closed forms or numpy Gauss rules the tests
+do not tune on, run each study with the default held-out check and seeds 0..S-1
+(``method.seed``: it moves the held-out draws; a collocation design is the same) and print,
+per study: its runs, the check's runs (fewest–most over the seeds), the true crossing, the
+flags, the worst distance of a flag from the truth in percent of the horizon, false alarms
+(a flag where the truth never crosses, or more than 5 % of the horizon before it), misses
+(no flag, or one more than 5 % after it), of those the silent ones (where, from 5 % of the
+horizon after the crossing on, the true error exceeds the tolerance at a time that neither a
+flag nor a ``chaos-undecided`` record covers), and the seeds whose check is undecided at
+some time. ``--validation K`` fixes the check's runs instead; ``--mean-error`` prints
+instead, per study, the mean's true and estimated errors (``mean_error``) where the truth
+crosses and the largest of each."""
 
 from __future__ import annotations
 
@@ -309,6 +309,28 @@ def oscillator_moments(times, stiffness, points=120):
     return mean, np.sqrt(np.maximum(square - mean**2, 0.0))
 
 
+@pcmb.batched(outputs=("y",))
+def diagonal(params, times):
+    """|a - b| (1 + t), a, b ~ U[0, 1]: a kink across both inputs."""
+    return {"y": np.outer(np.abs(np.subtract(params["a"], params["b"])), 1 + times)}
+
+
+def diagonal_moments(times):
+    """E |a - b| = 1/3 and E (a - b)² = 1/6, by hand."""
+    return (1 + times) / 3, np.sqrt(1 / 6 - 1 / 9) * (1 + times)
+
+
+@pcmb.batched(outputs=("y",))
+def largest(params, times):
+    """max(a, b, c) (1 + t), a, b, c ~ U[0, 1]: kinks where two inputs tie."""
+    return {"y": np.outer(np.maximum.reduce([params[k] for k in "abc"]), 1 + times)}
+
+
+def largest_moments(times):
+    """The largest of three U[0, 1] has density 3 m²: E m = 3/4, E m² = 3/5."""
+    return 0.75 * (1 + times), np.sqrt(0.6 - 0.5625) * (1 + times)
+
+
 #: Case -> (model, inputs, times, exact (mean, std) of times, studies' settings by label; the
 #: truth is judged at the tolerance of the study's own verdict).
 CASES = {
@@ -412,6 +434,21 @@ CASES = {
         np.linspace(0.0, 30.0, 151),
         functools.partial(oscillator_moments, stiffness=WIDE_STIFFNESS),
         {f"order {order}": {"order": order} for order in (3, 4, 6)},
+    ),
+    # Tolerances 0.6 of each design's true error at t = 2, so that the truth crosses at 0.8.
+    "diagonal": (
+        diagonal,
+        {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)},
+        np.linspace(0.0, 2.0, 41),
+        diagonal_moments,
+        {"order 7, 0.013": {"order": 7, "diagnostics": {"tolerance": 0.013}}},
+    ),
+    "largest": (
+        largest,
+        {k: pcmb.Uniform(0.0, 1.0) for k in "abc"},
+        np.linspace(0.0, 2.0, 41),
+        largest_moments,
+        {"order 3, 0.03": {"order": 3, "diagnostics": {"tolerance": 0.03}}},
     ),
 }
 

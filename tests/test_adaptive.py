@@ -23,7 +23,7 @@ from pcmb.chaos.nodes import NodeSet, join_nodes
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design, method_section
-from pcmb.designs.adaptive import estimated_error
+from pcmb.designs.adaptive import LAST_LEVEL_REMEDY, estimated_error
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import (
     ishigami,
@@ -308,6 +308,7 @@ def test_no_run_is_spent_once_only_the_error_beyond_the_last_levels_is_left():
         assert error / 10 <= estimate <= 10 * error and estimate > tolerance, (estimate, error)
         (stopped,) = [w for w in result.warnings if w.code == "adaptive-budget"]
         assert "a reached the last level" in stopped.message
+        assert LAST_LEVEL_REMEDY in stopped.message
         runs.append(result.n_nodes)
     assert runs[1] == runs[0], runs
 
@@ -566,6 +567,8 @@ def test_each_round_is_a_public_record_the_history_is_made_of():
     history = design.recover(nodes, values, ok, np.zeros(1)).adaptive.history
     np.testing.assert_array_equal(history, [(r.runs, r.estimate) for r in rounds])
     assert [r.runs for r in rounds] == sorted({r.runs for r in rounds})
+    # The first change is the whole std: the grid of index 0 alone is one node, with none.
+    assert rounds[0].change == pytest.approx(1.0, rel=1e-12)
     for k, record in enumerate(rounds):
         changes = [r.change for r in rounds[: k + 1]]
         tail = estimated_error(changes, geometric=not record.nonsmooth)
@@ -595,6 +598,7 @@ def test_a_tensor_grid_does_not_raise_a_resolved_input_past_another_at_its_last_
     assert nodes.size == 31 * 7
     (record,) = [w for w in recovery.warnings if w.code == "adaptive-budget"]
     assert "a is at its rule's last level" in record.message
+    assert LAST_LEVEL_REMEDY in record.message  # the sparse grid's words ('use rule leja')
 
 
 def _rosenbrock(x):

@@ -199,9 +199,10 @@ def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_p
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="the sequential drawn check (pcmb/analysis/diagnostics/diagnose.py): 2 silent misses "
-    "over 10 seeds, the estimate short of the kinks' truth by more than its noise (the 3 early "
-    "flags, from two Latin hypercubes of 8 paired as one of 16, are gone: HeldOut.batches)",
+    reason="the sequential drawn check is at its stated confidence, not beyond it: seeds 0 and 7 "
+    "of 0-9 call a time past the crossing reliable (seed 7 only t = 0.9, where the truth is "
+    "2.001 %), 3 of 0-29 and 10 of 0-99, the 10 % that 90 % one-sided confidence allows "
+    "(tests/test_held_out_noise.py); at 10 % two of ten seeds happen one time in four",
 )
 def test_the_sequential_check_of_two_kinks_is_right_at_its_stated_confidence(tmp_path):
     """Item 4: |x1| |x2| (1 + t) on U[-1, 1]², tensor order 7 (64 runs), tolerance 0.02: its

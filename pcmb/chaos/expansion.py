@@ -40,6 +40,7 @@ from pcmb.chaos.nodes import draw_germs
 
 __all__ = [
     "ChaosExpansion",
+    "power_of_two",
     "root_sum_of_squares",
     "sample_mean",
     "sample_std",
@@ -307,7 +308,7 @@ class ChaosExpansion:
 # -- overflow-safe squares ---------------------------------------------------------------------
 
 
-def _power_of_two(top: NDArray[np.float64]) -> NDArray[np.float64]:
+def power_of_two(top: NDArray[np.float64]) -> NDArray[np.float64]:
     """The power of two 2^(e-1) with top = m 2^e, 0.5 <= m < 1: top / 2^(e-1) is in [1, 2),
     and 2^(e-1) is a float for every finite top > 0 (2^e is not for top near 1.8e308)."""
     return np.ldexp(1.0, np.frexp(top)[1] - 1)
@@ -327,7 +328,7 @@ def _power_of_two_scale(columns: NDArray[np.float64]) -> NDArray[np.float64] | N
     risky = (top > _HUGE) | ((top < _TINY) & (top > 0))
     if not risky.any():
         return None
-    return np.where(risky, _power_of_two(np.where(risky, top, 1.0)), 1.0)
+    return np.where(risky, power_of_two(np.where(risky, top, 1.0)), 1.0)
 
 
 def unsafe_to_square(values: ArrayLike) -> bool:
@@ -359,7 +360,7 @@ def sample_mean(values: ArrayLike) -> NDArray[np.float64]:
     flat, columns = mean.reshape(-1), values.reshape(values.shape[0], -1)
     overflowed = np.isinf(flat) & np.isfinite(columns).all(axis=0)
     if overflowed.any():
-        scale = _power_of_two(np.max(np.abs(columns[:, overflowed]), axis=0))
+        scale = power_of_two(np.max(np.abs(columns[:, overflowed]), axis=0))
         flat[overflowed] = (columns[:, overflowed] / scale).mean(axis=0) * scale
     return flat.reshape(mean.shape)
 

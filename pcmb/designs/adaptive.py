@@ -88,6 +88,8 @@ GUARDED = 3
 SLOWEST = 0.9
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
+#: What to do where an input's rule has no further level (the sparse and tensor grids').
+LAST_LEVEL_REMEDY = "use rule clenshaw-curtis or leja, or a larger tolerance"
 
 
 class AdaptiveSettings(MethodSection):
@@ -128,17 +130,23 @@ class AdaptiveRound:
         d_k, the largest change of the mean and std the active indices make.
     left:
         The error beyond the rules' last levels, which no refinement can lower.
+    left_in:
+        The inputs at their rule's last level that ``left`` is in.
     nonsmooth:
         The inputs whose axis surpluses fall algebraically, each with its exponent a (an
         ``adaptive-nonsmooth`` warning each).
+    reducible:
+        The estimated error that refining can lower (:func:`estimated_error`).
     estimate:
-        The estimated error of the mean and std.
+        The estimated error of the mean and std: the larger of ``reducible`` and ``left``.
     """
 
     runs: int
     change: float
     left: float
+    left_in: tuple[str, ...]
     nonsmooth: tuple[tuple[str, float], ...]
+    reducible: float
     estimate: float
 
 
@@ -244,22 +252,21 @@ class AdaptiveCollocation(GrowingGrid):
             refinable = [k for k in active if self._forward(self._index[k], room=True)]
             # Refining lowers only the reducible error: below the error left beyond the rules'
             # last levels, more runs cannot lower the estimate.
-            left, names = self._left_at_last_levels()
-            converged = self._reducible() <= max(self.tolerance, left)
+            last = self._rounds[-1]
+            converged = last.reducible <= max(self.tolerance, last.left)
             if converged:
                 refinable = self._blind()
                 if not refinable:
-                    if left > self.tolerance:
+                    if last.left > self.tolerance:
                         self._stopped = (
-                            f"{' and '.join(names)} reached the last level of its rule with an "
-                            f"error of {left:.3g} left, which no refinement can lower: use rule "
-                            "clenshaw-curtis or leja, or a larger tolerance"
+                            f"{' and '.join(last.left_in)} reached the last level of its rule "
+                            f"with an error of {last.left:.3g} left, which no refinement can "
+                            f"lower: {LAST_LEVEL_REMEDY}"
                         )
                     return None
             elif not refinable:
                 self._stopped = (
-                    "the nested rules have no further levels to refine with: use rule "
-                    "clenshaw-curtis or leja, or a larger tolerance"
+                    f"the nested rules have no further levels to refine with: {LAST_LEVEL_REMEDY}"
                 )
                 return None
             added = self._refine(refinable, bulk=not converged)
@@ -287,16 +294,23 @@ class AdaptiveCollocation(GrowingGrid):
             self._stopped = f"{int(np.sum(~ok))} node(s) failed, and the surpluses need all"
             return False
         self._measure(np.stack(list(values.values()), axis=1)[order])
-        self._rounds.append(
-            AdaptiveRound(
-                runs=self._grid.size,
-                change=self._changes[-1],
-                left=self._left_at_last_levels()[0],
-                nonsmooth=tuple(self._nonsmooth()),
-                estimate=self._estimate(),
-            )
-        )
+        self._rounds.append(self._round())
         return True
+
+    def _round(self) -> AdaptiveRound:
+        """The record of the round just measured (see the module)."""
+        left, names = self._left_at_last_levels()
+        nonsmooth = tuple(self._nonsmooth())
+        reducible = estimated_error(self._changes, geometric=not nonsmooth)
+        return AdaptiveRound(
+            runs=self._grid.size,
+            change=self._changes[-1],
+            left=left,
+            left_in=tuple(names),
+            nonsmooth=nonsmooth,
+            reducible=reducible,
+            estimate=max(reducible, left),
+        )
 
     def _measure(self, values: NDArray[np.float64]) -> None:
         """Surplus norms and mean changes of the indices new since the last round, both
@@ -361,15 +375,6 @@ class AdaptiveCollocation(GrowingGrid):
 
     def _active(self) -> NDArray[np.bool_]:
         return np.array([level not in self._refined for level in self._index])
-
-    def _estimate(self) -> float:
-        """The estimated error of the mean and std after the last round (see the module), at
-        least the error left beyond the rules' last levels."""
-        return max(self._reducible(), self._left_at_last_levels()[0])
-
-    def _reducible(self) -> float:
-        """The estimated error that refining can lower: the changes' tail (see the module)."""
-        return estimated_error(self._changes, geometric=not self._nonsmooth())
 
     def _left_at_last_levels(self) -> tuple[float, list[str]]:
         """The error no refinement can lower, and the inputs it is in: the largest change of

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet
 from pcmb.chaos.sparse import SparseGrid, box_index_set
-from pcmb.designs.adaptive import AdaptiveCollocation
+from pcmb.designs.adaptive import LAST_LEVEL_REMEDY, AdaptiveCollocation, AdaptiveRound
 from pcmb.designs.base import MethodSettings
 from pcmb.designs.refine import box_errors
 from pcmb.result import Design
@@ -63,8 +63,9 @@ class AnisotropicTensor(AdaptiveCollocation):
         super()._measure(values)
         self._errors = box_errors(self._grid, values)
 
-    def _estimate(self) -> float:
-        return float(self._errors.max())
+    def _round(self) -> AdaptiveRound:
+        """The driver's record, with the estimate the largest error left in an input."""
+        return dataclasses.replace(super()._round(), estimate=float(self._errors.max()))
 
     def more(
         self,
@@ -74,7 +75,10 @@ class AnisotropicTensor(AdaptiveCollocation):
     ) -> NodeSet | None:
         """The nodes of the next input's level while the estimated error exceeds the
         tolerance and the budget allows, else ``None``."""
-        if not self._measure_round(nodes, values, ok) or self._estimate() <= self.tolerance:
+        if (
+            not self._measure_round(nodes, values, ok)
+            or self._rounds[-1].estimate <= self.tolerance
+        ):
             return None
         # Only an input whose own error passes the tolerance is raised: raising another cannot
         # lower the largest.
@@ -102,6 +106,6 @@ class AnisotropicTensor(AdaptiveCollocation):
         verb = "is" if len(above) == 1 else "are"
         self._stopped = (
             f"{names} {verb} at its rule's last level with its error above the tolerance, "
-            "which raising the other inputs cannot lower: use rule leja, or a larger tolerance"
+            f"which raising the other inputs cannot lower: {LAST_LEVEL_REMEDY}"
         )
         return None

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
-from pcmb.chaos.expansion import root_sum_of_squares
+from pcmb.chaos.expansion import power_of_two, root_sum_of_squares
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nodes import NodeSet, TensorGrid
 from pcmb.chaos.recovery import project_tensor
@@ -482,7 +482,7 @@ def _unit(coefficients: NDArray[np.float64]) -> float:
     """A power of two near the largest finite coefficient (1 if none): its unit."""
     finite = np.abs(coefficients[np.isfinite(coefficients)])
     largest = float(np.max(finite, initial=0.0))
-    return float(2.0 ** np.floor(np.log2(largest))) if largest > 0 else 1.0
+    return float(power_of_two(largest)) if largest > 0 else 1.0
 
 
 def _tails(multi_index: NDArray[np.int64]) -> NDArray[np.bool_]:

@@ -38,6 +38,7 @@ from pcmb.analysis.diagnostics.draws import (
     held_out_draws,
     held_out_placed,
     held_out_placed_elements,
+    held_out_unit,
     linear_in_widened,
     widened_inputs,
 )
@@ -70,6 +71,7 @@ __all__ = [
     "held_out_draws",
     "held_out_placed",
     "held_out_placed_elements",
+    "held_out_unit",
     "holdout_error",
     "linear_in_widened",
     "more_runs",

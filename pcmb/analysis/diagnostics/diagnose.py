@@ -170,7 +170,9 @@ def diagnose(
     stratified:
         Whether the drawn held-out runs are one Latin hypercube, whose standard errors
         :func:`_standard_error` reads from neighbouring pairs; several batches joined are
-        not (their neighbours, from different hypercubes, understate the spread).
+        taken as independent draws (paired across two hypercubes drawn apart, neighbours
+        understated the spread; a second batch that completes the first's hypercube,
+        :func:`~pcmb.analysis.diagnostics.draws.held_out_unit`, is not always exact).
     design_error:
         The design's own calibrated estimate of the statistics' error
         (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out

@@ -22,7 +22,7 @@ from pcmb.analysis.diagnostics.placed import interpolated
 from pcmb.chaos.elements import Partition
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, random_nodes
+from pcmb.chaos.nodes import NodeSet, unit_nodes
 from pcmb.chaos.polynomials import Hermite
 from pcmb.chaos.truncated import MAX_TERMS
 
@@ -74,8 +74,31 @@ def widened_inputs(distributions: Sequence[Distribution]) -> NDArray[np.bool_]:
     return np.array([isinstance(d.family, Hermite) for d in distributions], dtype=bool)
 
 
+def held_out_unit(
+    count: int, inputs: int, seed: int, before: NDArray[np.float64] | None = None
+) -> NDArray[np.float64]:
+    """(count, inputs) points in the unit cube of a batch of held-out draws: a Latin
+    hypercube, one point in each of ``count`` equal slices of every input (those of
+    :func:`~pcmb.chaos.nodes.random_nodes`'s ``"lhs"`` with the same ``seed``); after an
+    earlier batch of K points ``before``, one point in each of ``count`` slices of K +
+    ``count`` that those leave empty, so that the union stratifies every input as one Latin
+    hypercube of K + ``count`` does (exactly where that is a multiple of K)."""
+    rng = np.random.default_rng(seed)
+    if before is None:
+        slices = np.column_stack([rng.permutation(count) for _ in range(inputs)])
+        return (slices + rng.random((count, inputs))) / count
+    total = before.shape[0] + count
+    taken = np.floor(before * total).astype(int)
+    empty = [np.setdiff1d(np.arange(total), taken[:, k]) for k in range(inputs)]
+    slices = np.column_stack([rng.permutation(free)[:count] for free in empty])
+    return (slices + rng.random((count, inputs))) / total
+
+
 def held_out_draws(
-    distributions: Sequence[Distribution], count: int, seed: int
+    distributions: Sequence[Distribution],
+    count: int,
+    seed: int,
+    before: NDArray[np.float64] | None = None,
 ) -> tuple[NodeSet, NDArray[np.float64]]:
     """K held-out inputs and their importance weights.
 
@@ -86,9 +109,11 @@ def held_out_draws(
     (a share P, :func:`_plain_share`) are drawn from N(0, 1) instead, their probabilities
     stretched onto (0, 1) in order: a parameter there is often meaningless and its weight
     nil. The density is q = φ_λ 1(|z| <= bound) + P φ, each run weighted by the ratio
-    w = Π φ / q (at most 1/P). Without normal inputs the weights are 1.
+    w = Π φ / q (at most 1/P). Without normal inputs the weights are 1. A later batch fills
+    the slices that the earlier one's unit-cube points ``before`` leave empty
+    (:func:`held_out_unit`).
     """
-    batch = random_nodes(distributions, count, "lhs", seed)
+    batch = unit_nodes(distributions, held_out_unit(count, len(distributions), seed, before))
     normal = widened_inputs(distributions)
     if not normal.any():
         return batch, np.ones(count)
@@ -266,7 +291,8 @@ class HeldOut:
         :func:`placed_check` (``/validation`` attribute ``placed``).
     batches:
         How many batches of draws the runs hold (``/validation`` attribute ``batches``): each
-        is a Latin hypercube, their union is not one, so with more than one the check's
+        is a Latin hypercube, and the second completes the first's (:func:`held_out_unit`)
+        only without normal inputs and not always exactly, so with more than one the check's
         standard errors are those of independent draws (:func:`_standard_error`).
     """
 
