@@ -48,7 +48,7 @@ import pcmb
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
-from pcmb.designs.adaptive import GUARDED, AdaptiveCollocation, estimated_error
+from pcmb.designs.adaptive import GUARDED, AdaptiveCollocation
 from pcmb.designs.refine import error_ratio
 from pcmb.designs.regression import loo_statistics_error
 from pcmb.references import borehole as borehole_flow
@@ -561,8 +561,9 @@ NOT_REPLAYED = ("ishigami3", "g_function")
 class Round:
     """One round of a run to ``max_runs``: its runs, the true error of its grid, the changes
     so far (:func:`~pcmb.designs.adaptive.estimated_error`), whether the ``adaptive-nonsmooth``
-    test fired, the error left beyond the rules' last levels, and two readings of the decay
-    from the surpluses themselves: the largest over the inputs of the fall of the axis
+    test fired, the error left beyond the rules' last levels, the estimate refining can
+    lower, and two readings of the decay from the surpluses themselves: the largest over the
+    inputs of the fall of the axis
     surpluses' norms from the last level but one to the last (their upper envelope), and of
     ``order: auto``'s :func:`~pcmb.designs.refine.error_ratio` on the coefficients' norms per
     degree of that input, from its last level but one."""
@@ -572,6 +573,7 @@ class Round:
     changes: tuple[float, ...]
     nonsmooth: bool
     left: float
+    reducible: float
     axis_fall: float
     coefficient_fall: float
 
@@ -608,6 +610,7 @@ def replayed_rounds(case: str, max_runs: int) -> list[Round]:
             changes=tuple(r.change for r in rounds[: k + 1]),
             nonsmooth=bool(record.nonsmooth),
             left=record.left,
+            reducible=record.reducible,
             axis_fall=_axis_fall(fits[k + 1]),
             coefficient_fall=fall,
         )
@@ -650,8 +653,9 @@ def _coefficient_fall(
 
 
 def _history(rounds: list[Round]) -> float:
-    """Today's estimate that refining can lower (:func:`~pcmb.designs.adaptive.estimated_error`)."""
-    return estimated_error(list(rounds[-1].changes), geometric=not rounds[-1].nonsmooth)
+    """Today's estimate that refining can lower (the design's own
+    :attr:`~pcmb.designs.adaptive.AdaptiveRound.reducible`)."""
+    return rounds[-1].reducible
 
 
 def _bounded(fall: Callable[[Round], float], factor: float) -> Callable[[list[Round]], float]:

@@ -18,7 +18,9 @@ against the grid of the refined indices, whose nodes it holds), relative to the 
 the error of the coarser grid. The estimate is the changes to come, a geometric tail: with ρ
 the reduction per round of the largest of the last :data:`GUARDED` changes, measured over
 :data:`GUARDED` rounds, g_k the largest of the last three changes each carried to round k by ρ
-per round of its age (a lucky small change is not believed, a steady fall is), and the whole
+per round of its age (a lucky small change is not believed, a steady fall is; on fewer
+inputs than :data:`GUARDED`, one round per input, as a round refines every direction there
+is), and the whole
 grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is g_k ρ² / (1 - ρ)
 (:func:`estimated_error`). Chosen once on the stopping rounds of OTL circuit, Piston, Wing
 weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adaptive.py``,
@@ -273,7 +275,8 @@ class AdaptiveCollocation(GrowingGrid):
             if added is None:
                 step = "probing blind axes" if converged else "the next refinement"
                 self._stopped = (
-                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
+                    f"{step} would pass method.max_runs ({self.max_runs} runs): raise "
+                    "method.max_runs, or the tolerance"
                 )
                 return None
             if added:
@@ -301,7 +304,9 @@ class AdaptiveCollocation(GrowingGrid):
         """The record of the round just measured (see the module)."""
         left, names = self._left_at_last_levels()
         nonsmooth = tuple(self._nonsmooth())
-        reducible = estimated_error(self._changes, geometric=not nonsmooth)
+        reducible = estimated_error(
+            self._changes, geometric=not nonsmooth, guarded=min(GUARDED, len(self.distributions))
+        )
         return AdaptiveRound(
             runs=self._grid.size,
             change=self._changes[-1],
@@ -487,15 +492,14 @@ class AdaptiveCollocation(GrowingGrid):
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {self._grid.size} of {self.max_runs} "
-                    f"runs (method.max_runs; estimated error {reached}, tolerance "
-                    f"{self.tolerance:g}): {self._stopped}",
+                    f"the refinement ended early, after {self._grid.size} runs (estimated "
+                    f"error {reached}, tolerance {self.tolerance:g}): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))
 
 
-def estimated_error(changes: list[float], geometric: bool) -> float:
+def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDED) -> float:
     """The estimated error of the finer grid from the changes of the mean and std each round
     made (relative to the largest std; the last is the finest grid's against its
     predecessor's), where the decay is ``geometric``: the changes to come, a geometric tail
@@ -504,12 +508,13 @@ def estimated_error(changes: list[float], geometric: bool) -> float:
     and g_k the largest of the last :data:`GUARDED` changes, each carried to round k by ρ per
     round of its age (so one lucky small change is not believed, and a steady fall is). An
     algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone (as before
-    GUARDED + 1 rounds, when ρ cannot be measured yet)."""
-    guarded = [max(changes[max(0, k - GUARDED + 1) : k + 1]) for k in range(len(changes))]
-    if not geometric or len(guarded) <= GUARDED or guarded[-1 - GUARDED] <= 0:
-        return guarded[-1]
-    rate = min(SLOWEST, (guarded[-1] / guarded[-1 - GUARDED]) ** (1 / GUARDED))
-    aged = max(change * rate**age for age, change in enumerate(reversed(changes[-GUARDED:])))
+    GUARDED + 1 rounds, when ρ cannot be measured yet). ``guarded`` rounds in place of
+    :data:`GUARDED` where fewer directions can take turns (one per input)."""
+    window = [max(changes[max(0, k - guarded + 1) : k + 1]) for k in range(len(changes))]
+    if not geometric or len(window) <= guarded or window[-1 - guarded] <= 0:
+        return window[-1]
+    rate = min(SLOWEST, (window[-1] / window[-1 - guarded]) ** (1 / guarded))
+    aged = max(change * rate**age for age, change in enumerate(reversed(changes[-guarded:])))
     return aged * rate**ROUNDS_AHEAD / (1 - rate)
 
 

@@ -93,8 +93,8 @@ class AnisotropicTensor(AdaptiveCollocation):
             box = box_index_set(levels)
             if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
                 self._stopped = (
-                    f"raising {self.names[k]} would pass method.max_runs: raise "
-                    "method.max_runs, or the tolerance"
+                    f"raising {self.names[k]} would pass method.max_runs ({self.max_runs} "
+                    "runs): raise method.max_runs, or the tolerance"
                 )
                 return None
             present = set(self._index)
