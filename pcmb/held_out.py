@@ -32,10 +32,19 @@ from pcmb.result import NodeFailure, Status, WarningRecord
 if TYPE_CHECKING:
     from pcmb.run.executor import RunResult
 
-__all__ = ["HELD_OUT_RUN", "HeldOutDraws", "HeldOutPlan"]
+__all__ = ["HELD_OUT_RUN", "TAIL_FAILURE_SHARE", "TAIL_SIGMAS", "HeldOutDraws", "HeldOutPlan"]
 
 #: What messages call a held-out run (numbered among those runs, not the design's nodes).
 HELD_OUT_RUN = "held-out run"
+
+#: How far out (in standard deviations) a normal input's tail starts, where a model may rightly
+#: refuse its input (0.27 % of its mass lies beyond): a held-out run is a tail draw only beyond
+#: both this and the design's nodes (:attr:`HeldOutDraws.beyond`).
+TAIL_SIGMAS = 3.0
+
+#: The largest share of a check's runs that may fail in the tails without stopping a study: with
+#: more, the check cannot stand on the rest.
+TAIL_FAILURE_SHARE = 0.5
 
 #: The grids of one input whose held-out runs are placed (:meth:`HeldOutPlan.placed`).
 _PLACED_GRIDS = frozenset(
@@ -102,8 +111,8 @@ class HeldOutPlan:
         """Where the ``count`` held-out runs of batch ``batch`` go (seed ``seed + 7919 +
         batch``), placed to extend the design's nodes ``design`` (germ points) where
         :meth:`placed` (per element of a multi-element design, where its node ``values`` say
-        it may err most), else drawn; with the runs beyond the design's nodes in a normal
-        input marked (:attr:`HeldOutDraws.beyond`)."""
+        it may err most), else drawn; with the runs beyond the design's nodes and
+        ``TAIL_SIGMAS`` in a normal input marked (:attr:`HeldOutDraws.beyond`)."""
         seed = self.seed + HELD_OUT_SEED + batch
         placed = self.placed()
         normal = widened_inputs(tuple(self.inputs.values()))
@@ -132,6 +141,7 @@ class HeldOutPlan:
             # stratify, and there it cost timely flags without saving a miss.
             before = None if batch == 0 or normal.any() else self._first_batch(design.shape[0])
             draws, weights = held_out_draws(tuple(self.inputs.values()), count, seed, before)
+        low, high = np.minimum(low, -TAIL_SIGMAS), np.maximum(high, TAIL_SIGMAS)
         beyond = ((draws.nodes < low) | (draws.nodes > high)) & normal
         return HeldOutDraws(seed, draws, weights, placed, tuple(self.inputs), beyond)
 
@@ -140,8 +150,9 @@ class HeldOutPlan:
 class HeldOutDraws:
     """Where a batch of held-out runs goes: its ``seed``, its ``nodes`` and their ``weights``,
     ``placed`` or drawn (:meth:`HeldOutPlan.draws`); ``beyond`` (K, n): where a run's germ
-    lies outside the design's nodes' in a normal one of the germ ``inputs``, a tail the check
-    explores (drawn widened, or placed) and the model need not stand (``docs/diagnostics.md``)."""
+    lies outside the design's nodes and ±``TAIL_SIGMAS`` in a normal one of the germ
+    ``inputs``, a tail the check explores (drawn widened, or placed) and the model need not
+    stand (``docs/diagnostics.md``)."""
 
     seed: int
     nodes: NodeSet
@@ -152,7 +163,8 @@ class HeldOutDraws:
 
     @property
     def tails(self) -> NDArray[np.bool_]:
-        """(K,) the tail draws: the runs whose failure never stops a study."""
+        """(K,) the tail draws: the runs whose failure does not stop a study, unless more
+        than ``TAIL_FAILURE_SHARE`` of the check's runs fail there."""
         return self.beyond.any(axis=1)
 
     def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:
@@ -176,7 +188,7 @@ class HeldOutDraws:
         if tails:
             beyond = np.any([self.beyond[f.index] for f in tails], axis=0)
             names = " and ".join(np.asarray(self.inputs)[beyond])
-            where = f" in the tails of {names} beyond the design's nodes"
+            where = f" in the tails of {names} beyond the design's nodes and ±{TAIL_SIGMAS:g} σ"
             records.append(_failed(tails, self.nodes.size, where, ""))
         if others:
             records.append(_failed(others, self.nodes.size, "", " (on_failure: regress)"))

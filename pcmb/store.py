@@ -483,6 +483,7 @@ def _write_diagnostics(
             group.attrs["holdout_count"] = found.holdout.count
             group.attrs["confidence"] = found.holdout.confidence
         group.attrs["failing_from"] = found.failing_from
+        group.attrs["estimated_by"] = found.estimated_by
         group.attrs["tolerance"] = found.tolerance
         group.attrs["scale"] = found.scale
     held_out = result.held_out
@@ -500,6 +501,17 @@ def _write_diagnostics(
     _attach(group.create_dataset("weights", data=held_out.weights), run)
     for name, values in held_out.values.items():
         _points(group, f"{name}/values", values, (run,), trails[name])
+
+
+def _estimated_by(
+    file: h5py.File, arrays: Mapping[str, np.ndarray], holdout: HeldOutCheck | None
+) -> str:
+    """Where the estimate of a file written before ``estimated_by`` was stored comes from, as
+    its contents tell: the held-out runs (placed or drawn, by /validation), else the design's
+    own estimate where it lies below the decay, else the decay."""
+    if holdout is not None:
+        return "placed" if file["validation"].attrs.get("placed", False) else "held-out"
+    return "design" if np.any(arrays["estimate"] < arrays["decay"]) else "decay"
 
 
 def _read_diagnostics(
@@ -534,6 +546,7 @@ def _read_diagnostics(
             output=name,
             scale=float(attrs["scale"]),
             holdout=holdout,
+            estimated_by=str(attrs.get("estimated_by", "")) or _estimated_by(file, arrays, holdout),
             tolerance=float(attrs["tolerance"]),
             failing_from=float(attrs["failing_from"]),
             warnings=tuple(w for w in warnings if w.output == name and w.code in CODES),

@@ -52,7 +52,7 @@ from pcmb.errors import (
     PcmbWarning,
     UsageError,
 )
-from pcmb.held_out import HELD_OUT_RUN, HeldOutPlan
+from pcmb.held_out import HELD_OUT_RUN, TAIL_FAILURE_SHARE, HeldOutPlan
 from pcmb.result import Design, DesignReport, NodeFailure, Status, StudyResult, WarningRecord
 from pcmb.run.backends import InProcessPool, Pool, checking_pool, open_pool
 from pcmb.run.executor import (
@@ -1128,26 +1128,31 @@ class Study:
         tolerated: NDArray[np.bool_] | None = None,
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on, or
-        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`); ``runs_of``:
-        what the runs are (``"held-out run"``: numbered among those, and kept beside the
-        design's nodes, which the error names too: ``--resume`` keeps both)."""
+        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and at most
+        ``TAIL_FAILURE_SHARE`` of the runs; ``runs_of``: what the runs are (``"held-out
+        run"``: numbered among those, and kept beside the design's nodes, which the error
+        names too: ``--resume`` keeps both)."""
         failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
+        in_tails = len(runs.failures) - len(failures)
+        too_many = in_tails > TAIL_FAILURE_SHARE * runs.status.size
+        if too_many:
+            failures = list(runs.failures)
         if not failures or self.execution.on_failure == "regress":
             return
         finished = int(np.sum(runs.status == Status.OK))
-        places = []
+        finished_in = journal.directory if journal is not None and finished else None
+        kept = ""
         if runs_of == HELD_OUT_RUN and run.journaling is not None:
-            places.append(("the design's nodes", run.journaling.directory))
-        beside = bool(places)
-        if journal is not None and finished:
-            places.append((f"the {finished} finished {runs_of}(s)", journal.directory))
-        kept = " and ".join(
-            f"{what} {'are kept in' if i == 0 else 'in'} {where}"
-            for i, (what, where) in enumerate(places)
-        )
-        if beside:
-            kept += f" (--resume keeps {'both' if len(places) == 2 else 'them'})"
-        kept = f"; {kept}" if kept else ""
+            design = f"; the design's nodes are kept in {run.journaling.directory}"
+            if finished_in is None:
+                kept = f"{design} (--resume keeps them)"
+            else:
+                kept = (
+                    f"{design} and the {finished} finished {runs_of}(s) in {finished_in}"
+                    " (--resume keeps both)"
+                )
+        elif finished_in is not None:
+            kept = f"; the {finished} finished {runs_of}(s) are kept in {finished_in}"
         pending = int(np.sum(runs.status == Status.PENDING))
         stopped = (
             f"; stopped at the first failure, {pending} {runs_of}(s) not run"
@@ -1155,10 +1160,16 @@ class Study:
             if pending
             else ""
         )
+        tails = (
+            f", {in_tails} of them in the tails, more than {TAIL_FAILURE_SHARE:.0%} of the "
+            "check's runs: too many for it to stand on the rest"
+            if too_many
+            else ""
+        )
         raise ModelRunError(
             failures,
             f"the model failed at {len(failures)} of {runs.status.size} {runs_of}(s) "
-            f"(on_failure: {self.execution.on_failure}){kept}{stopped}:",
+            f"(on_failure: {self.execution.on_failure}){tails}{kept}{stopped}:",
         )
 
     def held_out_runs(self, design_runs: int) -> tuple[int, int]:

@@ -27,7 +27,8 @@ The cases of issue 23 (``lognormal``, ``jump``, ``ball``, ``drift``, ``smooth4``
 after them (``pendulum``: phase drift with the release angle; ``sinh``: heavy tails;
 ``switch``: a lag switched on at an uncertain time; ``oscillator`` and ``oscillator_wide``:
 three smooth inputs; ``diagonal`` and ``largest``: kinks across two and three uniform
-inputs, whose drawn check runs a second batch), closed forms or numpy Gauss rules the tests
+inputs, whose drawn check runs a second batch; ``lognormal2`` and ``cosh2``: heavy tails
+along a direction of two normal inputs), closed forms or numpy Gauss rules the tests
 do not tune on, run each study with the default held-out check and seeds 0..S-1
 (``method.seed``: it moves the held-out draws; a collocation design is the same) and print,
 per study: its runs, the check's runs (fewest–most over the seeds), the true crossing, the
@@ -278,6 +279,31 @@ def switch_moments(times, low=1.0, high=3.0):
     return mean, np.sqrt(np.maximum(second / (high - low) - mean**2, 0.0))
 
 
+#: Rates of the two normal inputs of ``lognormal2``: its tails lie along (0.3, 0.5).
+DIRECTION = np.array([0.3, 0.5])
+
+
+@pcmb.batched(outputs=("x",))
+def lognormal2(params, times):
+    """exp((0.3 z1 + 0.5 z2) t), two normal inputs: heavy tails along a direction."""
+    rate = DIRECTION[0] * np.asarray(params["z1"]) + DIRECTION[1] * np.asarray(params["z2"])
+    return {"x": np.exp(np.outer(rate, times))}
+
+
+@pcmb.batched(outputs=("x",))
+def cosh2(params, times):
+    """cosh((z1 - z2) t / 2), two normal inputs: heavy tails at both ends of a direction."""
+    return {"x": np.cosh(0.5 * np.outer(np.asarray(params["z1"]) - params["z2"], times))}
+
+
+def cosh2_moments(times):
+    """(z1 - z2) / 2 is N(0, ½), so cosh is that of a w, w ~ N(0, 1), a = t / √2: mean e^{a²/2},
+    E cosh² = (1 + e^{2a²}) / 2."""
+    a2 = times**2 / 2
+    mean = np.exp(a2 / 2)
+    return mean, np.sqrt(np.maximum((1 + np.exp(2 * a2)) / 2 - mean**2, 0.0))
+
+
 #: The damped oscillator's inputs: stiffness (narrow, wide), damping, initial displacement.
 STIFFNESS, WIDE_STIFFNESS, DAMPING, START = (0.8, 1.2), (0.5, 1.5), (0.05, 0.25), (1.0, 0.1)
 
@@ -420,6 +446,21 @@ CASES = {
             "order 4": {"order": 4},
             "order 4, elements auto": {"order": 4, "elements": "auto"},
         },
+    ),
+    "lognormal2": (
+        lognormal2,
+        {"z1": pcmb.Normal(0.0, 1.0), "z2": pcmb.Normal(0.0, 1.0)},
+        np.linspace(0.0, 5.0, 101),
+        # z1 and z2 independent: 0.3 z1 + 0.5 z2 is |(0.3, 0.5)| w, w ~ N(0, 1).
+        lambda t: lognormal_moments(np.hypot(*DIRECTION) * t),
+        {f"order {order}": {"order": order} for order in (4, 6)},
+    ),
+    "cosh2": (
+        cosh2,
+        {"z1": pcmb.Normal(0.0, 1.0), "z2": pcmb.Normal(0.0, 1.0)},
+        np.linspace(0.0, 4.0, 81),
+        cosh2_moments,
+        {f"order {order}": {"order": order} for order in (4, 6)},
     ),
     "oscillator": (
         oscillator,

@@ -261,13 +261,6 @@ def test_a_model_that_cannot_be_built_exits_as_documented(tmp_path, code, exit_c
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="the drawn check's tail draws (pcmb/analysis/diagnostics/draws.py, N(0, 2.3^2) per "
-    "input for two normal inputs) miss the tails that carry the std: 3 seeds of 10 call t = 3.5 "
-    "reliable where the std is 5.3 % off (validation: 32: 5 of 10); no draw design measured "
-    "(docs/diagnostics.md, 'Heavy tails along a direction') gets to 1",
-)
 def test_a_heavy_tailed_response_of_two_normal_inputs_does_not_fool_the_drawn_check(tmp_path):
     """Item 4: exp(0.4 (z1 + z2) t), z1, z2 ~ N(0, 1), tensor order 4 (25 runs, a drawn check
     of 8): mean exp(0.16 t²) and std √(e^{0.64 t²} − e^{0.32 t²}) in closed form; the std's

@@ -364,3 +364,80 @@ def test_sweep_log_axes_have_readable_ticks_at_every_span(decades):
             assert len(boxes) >= 2, (name, decades, [text for text, _ in boxes])
             for (text, box), (other, next_box) in itertools.combinations(boxes, 2):
                 assert not box.overlaps(next_box), (name, decades, text, other)
+
+
+@pcmb.batched(outputs=("y",))
+def smooth(params, times):
+    """A smooth response of ``a`` (and ``b``, if an input), which every design resolves."""
+    a = params["a"][:, None]
+    b = params.get("b", np.zeros_like(params["a"]))[:, None]
+    return {"y": np.exp(0.3 * a) * np.cos(times) + b * times}
+
+
+def _verdict_line(result, folder):
+    """The index page's text of a result's report."""
+    write_report(result, folder)
+    return html.unescape((folder / "index.html").read_text())
+
+
+@pytest.mark.parametrize(
+    ("inputs", "method", "source", "shown"),
+    [
+        (
+            {"a": pcmb.Normal(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)},
+            {"order": 4},
+            "held-out",
+            "8 held-out runs drawn at random, surrogate error up to",
+        ),
+        (
+            {"a": pcmb.Normal(0.0, 1.0)},
+            {"order": 6},
+            "placed",
+            "8 held-out runs placed to extend the design's nodes, surrogate error up to",
+        ),
+        (
+            {"a": pcmb.Uniform(-1.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)},
+            {"order": 4, "validation": 0},
+            "decay",
+            "no held-out runs: estimated from the spectral decay",
+        ),
+        (
+            {"a": pcmb.Uniform(-1.0, 1.0)},
+            {"order": "auto", "validation": 0},
+            "design",
+            "no held-out runs: estimated from the design's own estimate",
+        ),
+    ],
+    ids=["drawn", "placed", "decay", "design"],
+)
+def test_the_verdict_names_where_the_estimate_comes_from(tmp_path, inputs, method, source, shown):
+    """``diagnose`` records where each output's estimate comes from (``estimated_by``), and
+    the report's verdict says it."""
+    study = pcmb.Study(
+        smooth,
+        inputs,
+        np.linspace(0.0, 2.0, 11),
+        method={"kind": "collocation", **method},
+        execution={"backend": "inprocess"},
+    )
+    result = study.run()
+    assert result.diagnostics["y"].estimated_by == source
+    assert shown in _verdict_line(result, tmp_path)
+
+
+def test_the_report_takes_the_estimate_s_source_from_the_diagnostics(tmp_path):
+    """Not inferred from the numbers: an estimate equal to the decay said to come from the
+    design is reported as the design's (the report read ``estimate < decay``)."""
+    study = pcmb.Study(
+        smooth,
+        {"a": pcmb.Uniform(-1.0, 1.0)},
+        np.linspace(0.0, 2.0, 11),
+        method={"kind": "collocation", "order": 4, "validation": 0},
+        execution={"backend": "inprocess"},
+    )
+    result = study.run()
+    found = result.diagnostics["y"]
+    assert np.array_equal(found.estimate, found.decay)
+    designed = dataclasses.replace(found, estimated_by="design")
+    result = dataclasses.replace(result, diagnostics={"y": designed})
+    assert "estimated from the design's own estimate" in _verdict_line(result, tmp_path)

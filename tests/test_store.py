@@ -293,3 +293,18 @@ def test_a_stored_severity_that_is_neither_warning_nor_note_is_refused(written, 
         owner.attrs["warnings"] = json.dumps(kept)
     with pytest.raises(ResultFileError, match="severity 'fatal'"):
         pcmb.load(path)
+
+
+def test_where_an_estimate_comes_from_is_stored_and_older_files_tell_it(written, tmp_path):
+    """``estimated_by`` is an attribute of /diagnostics/<output>; a file written before it
+    loads with the source its held-out check and arrays tell (drawn held-out runs here)."""
+    path, result = written
+    assert result.diagnostics["y"].estimated_by == "held-out"
+    with h5py.File(path) as file:
+        assert file["diagnostics/y"].attrs["estimated_by"] == "held-out"
+    assert pcmb.load(path).diagnostics["y"].estimated_by == "held-out"
+    old = tmp_path / "old.h5"
+    old.write_bytes(path.read_bytes())
+    with h5py.File(old, "r+") as file:
+        del file["diagnostics/y"].attrs["estimated_by"]
+    assert pcmb.load(old).diagnostics["y"].estimated_by == "held-out"

@@ -141,3 +141,90 @@ def test_a_tolerated_failure_does_not_stop_an_aborting_campaign():
     tolerated = np.array([True, False, False, False])
     went_on = run_nodes(model, params, TIMES, ["y"], tolerated=tolerated, **run)
     assert list(went_on.status) == [Status.FAILED, Status.OK, Status.OK, Status.OK]
+
+
+def _refusing_beyond(limit):
+    """A model of standard normal inputs that raises where one of them lies beyond ±``limit``."""
+
+    @pcmb.batched(outputs=("y",))
+    def refusing(params, times):
+        z = np.column_stack(list(params.values()))
+        if np.any(np.abs(z) > limit):
+            raise ValueError(f"an input beyond ±{limit:g}: {np.abs(z).max():.2f}")
+        return {"y": z.sum(axis=1)[:, None] * np.sin(times)}
+
+    return refusing
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_a_model_failing_within_three_sigma_of_many_normal_inputs_aborts():
+    """A Karhunen–Loève forcing of 10 normal germs on a Smolyak grid whose nodes reach ±1.73:
+    most held-out draws lie beyond them in some germ, but a model that fails beyond ±2 (a bug
+    that 37 % of real inputs meet) fails where its inputs are not rare; such a failure is no
+    tail draw's and stops the study (it finished with a nodes-failed record)."""
+    inputs = {f"xi{i}": pcmb.Normal(0.0, 1.0) for i in range(10)}
+    study = pcmb.Study(
+        _refusing_beyond(2.0),
+        inputs,
+        TIMES,
+        method={"kind": "collocation", "grid": "smolyak", "level": 1, "seed": 0},
+        execution={"backend": "inprocess", "on_failure": "abort"},
+    )
+    assert np.abs(study.node_set().nodes).max() < 2.0  # the design's nodes all work
+    with pytest.raises(ModelRunError, match=r"the model failed at \d of 8 held-out run"):
+        study.run()
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_a_check_most_of_whose_runs_fail_in_the_tails_aborts():
+    """One normal input at order 4, its held-out runs placed (±3.9, ±5.0, 0.66, −2.0, 2.2,
+    −6.1): a model that refuses its input beyond ±3 σ fails at 5 of the 8, all in the tails.
+    The check cannot stand on the other 3: the study stops and says why."""
+    study = pcmb.Study(
+        _refusing_beyond(3.0),
+        {"K": pcmb.Normal(0.0, 1.0)},
+        TIMES,
+        method={"kind": "collocation", "order": 4},
+        execution={"backend": "inprocess", "on_failure": "abort"},
+    )
+    with pytest.raises(ModelRunError) as raised:
+        study.run()
+    message = str(raised.value)
+    assert "the model failed at 5 of 8 held-out run(s)" in message
+    assert "5 of them in the tails, more than 50% of the check's runs: too many" in message
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_tail_draws_are_retried_under_on_failure_retry():
+    """Under ``on_failure: retry`` a tail draw is retried like any run: a failure is not known
+    to be the tail's until it recurs (a killed worker, a lost licence), and one left out costs
+    the check a run where a surrogate errs most; a failure that recurs costs ``retries`` calls
+    of its one run. A tail draw failing once is then kept; under ``abort`` it is left out."""
+    inputs = {"a": STIFFNESS}
+    method = {"kind": "collocation", "order": 4}
+    execution = {"backend": "inprocess", "chunk_size": 1, "nominal_run": False}
+    plain = pcmb.Study(em.Ramp, inputs, TIMES, method=method, outputs=["y"], execution=execution)
+    held_out = plain.run().held_out
+    tails = held_out.params[np.abs(held_out.germ[:, 0]) > 3, 0]
+    assert tails.size == 5  # placed at ±3.9, ±5.0 and -6.1 σ
+
+    def flaky(policy):
+        params = {"bad": tails[:2].tolist(), "failures": 1, "nonce": policy}
+        settings = {"on_failure": policy, "retries": 1, **execution}
+        study = pcmb.Study(
+            em.FlakyRamp,
+            inputs,
+            TIMES,
+            params=params,
+            method=method,
+            outputs=["y"],
+            execution=settings,
+        )
+        return study.run()
+
+    retried = flaky("retry")
+    assert retried.held_out.ok.all() and not _tail_records(retried)
+    left_out = flaky("abort")
+    assert left_out.held_out.ok.sum() == 6
+    (record,) = _tail_records(left_out)
+    assert "transient failure 1" in record

@@ -751,6 +751,15 @@ def _inputs_table(result: StudyResult) -> list[str]:
     return [*rows, "</table>"]
 
 
+#: How the verdict names where an output's estimate comes from (``estimated_by``).
+_ESTIMATED_BY = {
+    "held-out": "held-out runs drawn at random",
+    "placed": "held-out runs placed to extend the design's nodes",
+    "design": "no held-out runs: estimated from the design's own estimate",
+    "decay": "no held-out runs: estimated from the spectral decay",
+}
+
+
 def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]:
     """(CSS class, text) of the diagnostics' verdict on an output, with its numbers: the
     estimates of a sound output; the range, the shading and the diagnostics' explanation
@@ -773,18 +782,12 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
         return "warn", f"undecided ({tolerance}): {why}"
     error = float(np.nanmax(found.estimate, initial=0.0))
     numbers = [f"error up to {error:.2g} of the largest std ({tolerance})"]
+    source = _ESTIMATED_BY[found.estimated_by]
     if found.holdout is None:
-        source = (
-            "the design's own estimate"
-            if np.any(found.estimate < found.decay)
-            else "the spectral decay"
-        )
-        numbers.append(f"no held-out runs: estimated from {source}")
+        numbers.append(source)
     else:
         surrogate = float(np.nanmax(found.holdout.error, initial=0.0))
-        numbers.append(
-            f"{found.holdout.count} held-out runs, surrogate error up to {surrogate:.2g}"
-        )
+        numbers.append(f"{found.holdout.count} {source}, surrogate error up to {surrogate:.2g}")
     numbers.append(f"decay up to {float(np.nanmax(found.decay, initial=0.0)):.2g}")
     axis = result.axis(name)
     where = "" if axis is None else f" at every {'time' if result.on_time(name) else axis.name}"

@@ -202,6 +202,7 @@ class AdaptiveCollocation(GrowingGrid):
         self._changes: list[float] = []
         self._rounds: list[AdaptiveRound] = []
         self._stopped: str | None = None
+        self._at_budget = False  # the rounds ended as the next would pass method.max_runs
 
     @property
     def rounds(self) -> tuple[AdaptiveRound, ...]:
@@ -275,9 +276,9 @@ class AdaptiveCollocation(GrowingGrid):
             if added is None:
                 step = "probing blind axes" if converged else "the next refinement"
                 self._stopped = (
-                    f"{step} would pass method.max_runs ({self.max_runs} runs): raise "
-                    "method.max_runs, or the tolerance"
+                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
                 )
+                self._at_budget = True
                 return None
             if added:
                 return self._grow(added)
@@ -489,11 +490,14 @@ class AdaptiveCollocation(GrowingGrid):
         )
         if self._stopped is not None:
             reached = f"{self._rounds[-1].estimate:.3g}" if self._rounds else "unknown"
+            runs = f"{self._grid.size} runs ("
+            if self._at_budget:
+                runs = f"{self._grid.size} of {self.max_runs} runs (method.max_runs;"
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {self._grid.size} runs (estimated "
-                    f"error {reached}, tolerance {self.tolerance:g}): {self._stopped}",
+                    f"the refinement ended early, after {runs} estimated error {reached}, "
+                    f"tolerance {self.tolerance:g}): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))

@@ -93,9 +93,10 @@ class AnisotropicTensor(AdaptiveCollocation):
             box = box_index_set(levels)
             if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
                 self._stopped = (
-                    f"raising {self.names[k]} would pass method.max_runs ({self.max_runs} "
-                    "runs): raise method.max_runs, or the tolerance"
+                    f"raising {self.names[k]} would pass method.max_runs: raise "
+                    "method.max_runs, or the tolerance"
                 )
+                self._at_budget = True
                 return None
             present = set(self._index)
             added = [tuple(row) for row in box.tolist() if tuple(row) not in present]

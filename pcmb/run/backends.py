@@ -99,6 +99,8 @@ class LokyPool:
     ) -> None:
         self.slots = workers
         self._executor: Any = None
+        # The named semaphores of the executors made (rebuilt ones too), which close waits for.
+        self._semaphores: set[str] = set()
         remove_orphaned_semaphores()
         self.rebuild()
 
@@ -112,14 +114,17 @@ class LokyPool:
         if self._executor is not None:
             self._settle()
             self._executor.shutdown(wait=False, kill_workers=True)
-        self._executor = ProcessPoolExecutor(
-            max_workers=self.slots,
-            # Tagged: what the workers start ends with this process too (see lifeline.tag).
-            env={**dict.fromkeys(THREAD_LIMITS, share), **tag()},
-            # A worker must not go on running a model after pcmb died (kill -9, a crash).
-            initializer=die_with_parent,
-            initargs=(os.getpid(),),
-        )
+        with _MAKING:  # no other pool's semaphores are made meanwhile
+            before = _semaphores_of_this_process()
+            self._executor = ProcessPoolExecutor(
+                max_workers=self.slots,
+                # Tagged: what the workers start ends with this process too (see lifeline.tag).
+                env={**dict.fromkeys(THREAD_LIMITS, share), **tag()},
+                # A worker must not go on running a model after pcmb died (kill -9, a crash).
+                initializer=die_with_parent,
+                initargs=(os.getpid(),),
+            )
+            self._semaphores |= _semaphores_of_this_process() - before
         # Start the workers now, while the caller prepares the work.
         self._submitted = [self._executor.submit(_warm_up) for _ in range(self.slots)]
 
@@ -162,13 +167,54 @@ class LokyPool:
         self._executor.shutdown(wait=True, kill_workers=kill)
         self._executor = None
         gc.collect()
+        _until_unlinked(self._semaphores, _FREE_SECONDS)
 
 
 #: A loky named semaphore's file, named after the process that made it (loky's SemLock names).
 _LOKY_SEMAPHORE = re.compile(r"sem\.loky-(\d+)-\w+")
 
+#: Where named semaphores are files (Linux); elsewhere none is seen, and none waited for.
+_SEMAPHORE_FOLDER = "/dev/shm"
 
-def remove_orphaned_semaphores(folder: str | os.PathLike[str] = "/dev/shm") -> int:
+#: Held while a loky pool is made, so that the semaphores made meanwhile are its own.
+_MAKING = threading.Lock()
+
+#: The most seconds :meth:`LokyPool.close` waits for its pool's semaphores to be unlinked.
+_FREE_SECONDS = 5.0
+
+
+def _semaphores_of_this_process() -> set[str]:
+    """The files of the loky semaphores this process holds now."""
+    try:
+        names = os.listdir(_SEMAPHORE_FOLDER)
+    except OSError:
+        return set()
+    mine = str(os.getpid())
+    return {
+        os.path.join(_SEMAPHORE_FOLDER, name)
+        for name in names
+        if (match := _LOKY_SEMAPHORE.fullmatch(name)) and match[1] == mine
+    }
+
+
+def _until_unlinked(semaphores: set[str], seconds: float) -> None:
+    """Wait, at most ``seconds``, until none of the files ``semaphores`` exists (a pool's
+    whose executor was rebuilt and shut down without waiting are among them).
+
+    loky's ``shutdown(wait=True)`` returns once its manager thread has ended, but its call
+    queue's feeder thread may still be running: the queue's ``join_thread`` waits only for
+    queues made by another process (multiprocessing's rule), and the thread holds the queue's
+    two locks and bounded semaphore until it ends, under load after ``shutdown`` returned.
+    They are unlinked when the queue is collected, right after.
+    """
+    deadline, pause = time.monotonic() + seconds, 0.002
+    while any(map(os.path.exists, semaphores)) and time.monotonic() < deadline:
+        time.sleep(pause)
+        gc.collect()
+        pause = min(2 * pause, 0.1)
+
+
+def remove_orphaned_semaphores(folder: str | os.PathLike[str] = _SEMAPHORE_FOLDER) -> int:
     """Unlink the named semaphores of loky pools whose process is gone: a ``kill -9`` of
     pcmb's process group kills loky's resource tracker too, which would have unlinked them.
     Only this user's regular files named ``sem.loky-PID-*`` whose process PID has ended (a

@@ -9,7 +9,7 @@ and the mean and std those runs correct.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from statistics import NormalDist
 
 import numpy as np
@@ -80,6 +80,17 @@ class HeldOutCheck:
     def statistics(self) -> NDArray[np.float64]:
         """(T,) the larger of the estimated errors of the mean and the std."""
         return np.fmax(self.mean_error, self.std_error)
+
+    def widened(self, error: ArrayLike, scale: float) -> HeldOutCheck:
+        """This check with ``error`` (T,), over the scale, added in quadrature to its standard
+        errors (:attr:`spread`, and those of the corrected mean and std)."""
+        error = np.asarray(error, dtype=float)
+        return replace(
+            self,
+            spread=np.hypot(self.spread, error),
+            corrected_mean_se=np.hypot(self.corrected_mean_se, error * scale),
+            corrected_std_se=np.hypot(self.corrected_std_se, error * scale),
+        )
 
     @property
     def noise(self) -> NDArray[np.float64]:

@@ -24,7 +24,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import HeldOutCheck, holdout_error
 from pcmb.analysis.diagnostics.decay import Expansion, spectral_decay
-from pcmb.analysis.diagnostics.draws import FIRST_BATCH, HeldOut, judging_weights
+from pcmb.analysis.diagnostics.draws import (
+    FIRST_BATCH,
+    HeldOut,
+    coverage_error,
+    judging_weights,
+)
 from pcmb.analysis.diagnostics.phrases import as_percent, time_count, time_span
 from pcmb.analysis.diagnostics.placed import placed_check
 from pcmb.analysis.diagnostics.ranges import finite_rows, out_of_range, range_checks, runs_vary
@@ -32,7 +37,7 @@ from pcmb.analysis.diagnostics.remedies import element_errors, error_at_ends, re
 from pcmb.analysis.diagnostics.verdict import TOLERANCE, flag_margin, verdict
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
-from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.expansion import RELATIVE_NOISE, ChaosExpansion
 from pcmb.result import WarningRecord
 
 #: Codes of the warning records the diagnostics make.
@@ -68,6 +73,10 @@ class OutputDiagnostics:
     estimate:
         (T,) the estimated error: the larger of the held-out estimates of the errors of the
         mean and the std (:attr:`HeldOutCheck.statistics`), or the decay without held-out runs.
+    estimated_by:
+        Where ``estimate`` comes from: ``"held-out"`` (runs drawn at random), ``"placed"``
+        (runs placed to extend the design's nodes), ``"design"`` (no held-out runs: the
+        design's own estimate, where it bounds the decay) or ``"decay"``.
     noise:
         (T,) how far the estimate may be off at the held-out check's confidence
         (:attr:`HeldOutCheck.noise`; 0 for the decay).
@@ -91,6 +100,7 @@ class OutputDiagnostics:
     holdout: HeldOutCheck | None
     out_of_range: NDArray[np.float64]
     estimate: NDArray[np.float64]
+    estimated_by: str
     noise: NDArray[np.float64]
     undecided: NDArray[np.bool_]
     tolerance: float
@@ -201,15 +211,24 @@ def diagnose(
         judged, paired = judging_weights(expansion, scale, weights, holdout_germ)
         paired = paired if stratified else None
         checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
+        # Draws that missed the tails carrying the variance saw none of the error there, unless
+        # they find the surrogate exact (to round-off): then its outer terms are the response's.
+        kept = np.isfinite(np.atleast_2d(holdout[1])).all(axis=1)
+        drawn = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
+        missed = coverage_error(expansion, np.asarray(holdout[0])[kept], drawn[kept], scale)
+        checked = checked.widened(np.where(checked.error > RELATIVE_NOISE, missed, 0.0), scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
     estimate = decay if checked is None else checked.statistics
+    estimated_by = "decay" if checked is None else "placed" if placed else "held-out"
     # Without them, a design that measured its own convergence (an adaptive grid, order:
     # auto) outweighs the decay, which reads an exact polynomial's top terms (or a sparse
     # set's edge) as a tail.
     if checked is None and design_error is not None and design_error <= tolerance:
         estimate = np.minimum(decay, design_error)
+        if np.any(design_error < decay):
+            estimated_by = "design"
     noise = (
         np.zeros(times.size)
         if checked is None
@@ -279,6 +298,7 @@ def diagnose(
         checked,
         share,
         estimate,
+        estimated_by,
         noise,
         undecided,
         tolerance,

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies, top_layer
 from pcmb.analysis.diagnostics.placed import interpolated
+from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
@@ -139,13 +140,70 @@ def linear_in_widened(expansion: Expansion, scale: float) -> NDArray[np.bool_]:
     :func:`held_out_draws` widens (the normal ones) hold at most ``LINEAR_SHARE`` of the
     expansion's variance: the response is linear in them (a damped oscillator in its initial
     displacement), not heavy-tailed; all False without normal inputs."""
-    normal = widened_inputs(expansion.distributions)
     index = np.asarray(expansion.multi_index)
-    if not normal.any() or not scale > 0 or not np.isfinite(scale):
+    if not widened_inputs(expansion.distributions).any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape, dtype=bool)
     energy = coefficient_energies(expansion, scale)
-    curved = np.sum(energy[np.any(index[:, normal] >= 2, axis=1)], axis=0)
+    curved = np.sum(energy[_curved_in_widened(expansion)], axis=0)
     return curved <= LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0], axis=0)
+
+
+def _curved_in_widened(expansion: Expansion) -> NDArray[np.bool_]:
+    """(S,) the terms of degree 2 or more along some input :func:`held_out_draws` widens."""
+    normal = widened_inputs(expansion.distributions)
+    return np.any(np.asarray(expansion.multi_index)[:, normal] >= 2, axis=1)
+
+
+def _slowness(expansion: Expansion, energies: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(T,) r / (1 - r), at most 1 (1 where r >= 1), r the slowest rate at which the (S, T)
+    coefficient ``energies`` fall per degree along a widened input, read from its top three
+    degrees in pairs (E_P + E_P-1) / (E_P-1 + E_P-2) (a response even in an input has every
+    other one zero): the energy beyond the top degree over the outer ones' is about r², so
+    a fast fall leaves little unseen; 1 along an input of fewer than three degrees."""
+    index = np.asarray(expansion.multi_index)
+    rate = np.zeros(energies.shape[1:])
+    for k in np.flatnonzero(widened_inputs(expansion.distributions)):
+        top = int(index[:, k].max())
+        if top < 3:
+            return np.ones(rate.shape)
+        layers = [np.sum(energies[index[:, k] == top - j], axis=0) for j in range(3)]
+        outer, before = layers[0] + layers[1], layers[1] + layers[2]
+        rate = np.fmax(rate, np.divide(outer, before, out=np.ones(rate.shape), where=before > 0))
+    falls = rate < 0.5
+    return np.where(falls, rate / np.where(falls, 1.0 - rate, 1.0), 1.0)
+
+
+def coverage_error(
+    expansion: Expansion, predicted: ArrayLike, weights: ArrayLike, scale: float
+) -> NDArray[np.float64]:
+    """(T,) how far the drawn check's estimates may be off, over the scale, where its draws
+    missed the tails of the normal inputs that carry the variance (heavy tails along a
+    direction of several normal inputs: ``docs/diagnostics.md``).
+
+    The draws' weighted estimate of the surrogate's own variance, ρ σ² = mean w (s - μ)² over
+    the (K, T) surrogate values ``predicted`` at them (importance ``weights``), falls short
+    by (1 - ρ) σ² where they missed where it lives; the variance the surrogate itself misses
+    lives there or beyond, taken as the energy E of its outer layers
+    (:func:`~pcmb.chaos.basis.tail_terms`) curved along the widened inputs, so the check may
+    miss as much of it: (1 - ρ) (within [0, 1]) times E / σ, as Δσ <= ΔV / σ. Zero where
+    the draws recover the surrogate's variance, where it is linear in the widened inputs
+    (none: zero) or where it does not vary; an exact polynomial's outer terms are its own,
+    which :func:`~pcmb.analysis.diagnostics.diagnose` tells by its residuals."""
+    outer = tail_terms(expansion.multi_index) & _curved_in_widened(expansion)
+    if not outer.any() or not scale > 0 or not np.isfinite(scale):
+        return np.zeros(expansion.shape)
+    sigma = expansion.std() / scale
+    energies = coefficient_energies(expansion, scale)
+    energy = np.sum(energies[outer], axis=0) * _slowness(expansion, energies)
+    predicted = np.asarray(predicted, dtype=float)
+    weights = np.asarray(weights, dtype=float).reshape((-1,) + (1,) * (predicted.ndim - 1))
+    seen = np.mean(weights * ((predicted - expansion.mean()) / scale) ** 2, axis=0)
+    varies = sigma > 0
+    missed = np.zeros(sigma.shape)
+    np.divide(sigma**2 - seen, sigma**2, out=missed, where=varies)
+    error = np.zeros(sigma.shape)
+    np.divide(np.clip(missed, 0.0, 1.0) * energy, sigma, out=error, where=varies)
+    return error
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
