@@ -23,23 +23,24 @@ their difference in percent of the horizon, the outcome (``ok``: both never or b
 ``FALSE ALARM``; ``MISSED``) and when the surrogate's pointwise error crosses it.
 
 The cases of issue 23 (``lognormal``, ``jump``, ``ball``, ``drift``, ``smooth4``, and
-``sliver``, a kink ``elements: auto`` misreads) and the held-out dynamical cases measured
-after them (``pendulum``: phase drift with the release angle; ``sinh``: heavy tails;
-``switch``: a lag switched on at an uncertain time; ``oscillator`` and ``oscillator_wide``:
-three smooth inputs; ``diagonal`` and ``largest``: kinks across two and three uniform
-inputs, whose drawn check runs a second batch; ``lognormal2`` and ``cosh2``: heavy tails
-along a direction of two normal inputs), closed forms or numpy Gauss rules the tests
+``sliver``, a kink ``elements: auto`` misreads) and the held-out dynamical cases measured after
+them (``pendulum``: phase drift with the release angle; ``sinh``: heavy tails; ``switch``: a
+lag switched on at an uncertain time; ``oscillator`` and ``oscillator_wide``: three smooth
+inputs; ``diagonal`` and ``largest``: kinks across two and three uniform inputs, whose drawn
+check runs a second batch; ``lognormal2`` and ``cosh2``: heavy tails along a direction of two
+normal inputs; ``cosine``: phase drift in two uniform inputs over a long horizon, where the
+first of many drawn times once flagged on noise), closed forms or numpy Gauss rules the tests
 do not tune on, run each study with the default held-out check and seeds 0..S-1
-(``method.seed``: it moves the held-out draws; a collocation design is the same) and print,
-per study: its runs, the check's runs (fewest–most over the seeds), the true crossing, the
-flags, the worst distance of a flag from the truth in percent of the horizon, false alarms
-(a flag where the truth never crosses, or more than 5 % of the horizon before it), misses
-(no flag, or one more than 5 % after it), of those the silent ones (where, from 5 % of the
-horizon after the crossing on, the true error exceeds the tolerance at a time that neither a
-flag nor a ``chaos-undecided`` record covers), and the seeds whose check is undecided at
-some time. ``--validation K`` fixes the check's runs instead; ``--mean-error`` prints
-instead, per study, the mean's true and estimated errors (``mean_error``) where the truth
-crosses and the largest of each."""
+(``method.seed``: it moves the held-out draws; a collocation design is the same) and print, per
+study: its runs, the check's runs (fewest–most over the seeds), the true crossing, the flags,
+the worst distance of a flag from the truth in percent of the horizon, false alarms (a flag
+where the truth never crosses, or more than 5 % of the horizon before it), misses (no flag, or
+one more than 5 % after it), of those the silent ones (where, from 5 % of the horizon after the
+crossing on, the true error exceeds the tolerance at a time that neither a flag nor a
+``chaos-undecided`` record covers), and the seeds whose check is undecided at some time.
+``--validation K`` fixes the check's runs instead; ``--mean-error`` prints instead, per study,
+the mean's true and estimated errors (``mean_error``) where the truth crosses and the largest
+of each."""
 
 from __future__ import annotations
 
@@ -357,6 +358,25 @@ def largest_moments(times):
     return 0.75 * (1 + times), np.sqrt(0.6 - 0.5625) * (1 + times)
 
 
+@pcmb.batched(outputs=("y",))
+def cosine(params, times):
+    """cos(1 + t (a + b)), a, b ~ U[0, 1]: a phase drifting over a long horizon, two inputs."""
+    return {"y": np.cos(1 + np.outer(np.add(params["a"], params["b"]), times))}
+
+
+def cosine_moments(times):
+    """E e^{i s t} = φ(t)² for s = a + b, φ(t) = (e^{it} - 1) / (it) that of one U[0, 1]; so
+    E y = Re(e^{i} φ(t)²) and E y² = 1/2 + Re(e^{2i} φ(2t)²) / 2."""
+
+    def phi(t):
+        t = np.asarray(t, dtype=complex)
+        return np.divide(np.expm1(1j * t), 1j * t, out=np.ones_like(t), where=t != 0)
+
+    mean = np.real(np.exp(1j) * phi(times) ** 2)
+    square = 0.5 + 0.5 * np.real(np.exp(2j) * phi(2 * times) ** 2)
+    return mean, np.sqrt(np.maximum(square - mean**2, 0.0))
+
+
 #: Case -> (model, inputs, times, exact (mean, std) of times, studies' settings by label; the
 #: truth is judged at the tolerance of the study's own verdict).
 CASES = {
@@ -475,6 +495,13 @@ CASES = {
         np.linspace(0.0, 30.0, 151),
         functools.partial(oscillator_moments, stiffness=WIDE_STIFFNESS),
         {f"order {order}": {"order": order} for order in (3, 4, 6)},
+    ),
+    "cosine": (
+        cosine,
+        {"a": pcmb.Uniform(0.0, 1.0), "b": pcmb.Uniform(0.0, 1.0)},
+        np.linspace(0.0, 20.0, 201),
+        cosine_moments,
+        {f"order {order}": {"order": order} for order in (4, 7, 9)},
     ),
     # Tolerances 0.6 of each design's true error at t = 2, so that the truth crosses at 0.8.
     "diagonal": (

@@ -229,6 +229,9 @@ def test_batches_extend_the_sobol_sequence_until_the_tolerance_is_met():
     assert next_batch(history, 1e-9, 10**6) == 1024 - 128
     assert next_batch([(512, 1e-3)], 1e-6, 700) == 700 - 512
     assert next_batch([(700, 1e-3)], 1e-6, 700) == 0
+    # From 40 runs the next power of two at least 1.5 N is 64, not 128: a start that is not
+    # a power of two grows by 1.6 N, not 3.2 N (an audit's 40 -> 128 where 64 met 1e-2).
+    assert next_batch([(40, 0.05)], 1e-2, 1000) == 64 - 40
 
 
 def test_rounds_stop_on_the_error_of_the_mean_and_std_not_on_the_loo_error():
