@@ -113,20 +113,14 @@ def ball(params, times):
 def test_the_placed_checks_standard_errors_cover_a_kinked_response():
     # h ~ U[0.5, 1.5] to t = 4, order 5, the default placed check: where the estimates with
     # and without the last two held-out runs cross, their move (the noise) was ~0 (1e-6 of
-    # the scale at 21 of 201 times where the corrected std was off by up to 1.8 %); the
-    # verdict's noise (1.28 standard errors at 90 %) likewise. The truth: the midpoint rule
-    # over 40,000 heights (the kinks need no more).
+    # the scale at 21 of 201 times where the corrected std was off by up to 1.8 %). The
+    # truth: the midpoint rule over 40,000 heights (the kinks need no more).
     times = np.linspace(0.0, 4.0, 201)
     study = pcmb.Study(ball, {"h": pcmb.Uniform(0.5, 1.5)}, times, order=5, backend="inprocess")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        result = study.run()
-    found = result.diagnostics["y"]
-    truth = bounce(0.5 + (np.arange(40000) + 0.5) / 40000, times)
-    true_mean, true_std = truth.mean(axis=0), truth.std(axis=0)
+        found = study.run().diagnostics["y"]
+    true_std = bounce(0.5 + (np.arange(40000) + 0.5) / 40000, times).std(axis=0)
     off = np.abs(found.holdout.corrected_std - true_std) / found.scale
     covered = off <= np.fmax(3 * found.holdout.corrected_std_se / found.scale, 0.005)
-    assert np.sum(~covered) <= 0.05 * times.size  # 21 before, 5 now
-    error = np.fmax(abs(result.mean("y") - true_mean), abs(result.std("y") - true_std))
-    off = np.abs(found.estimate - error / found.scale)
-    assert np.sum(off > np.fmax(3 * found.noise / 1.28, 0.005)) <= 0.05 * times.size  # 36, 10
+    assert np.sum(~covered) <= 0.05 * times.size

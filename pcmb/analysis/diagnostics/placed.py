@@ -26,9 +26,9 @@ PLACED_SPARE = 2
 #: A placed check extrapolates its interpolant's spectrum up to this many times its degree
 #: to estimate the mean's error beyond it (:func:`_unseen_mean_error`).
 UNSEEN_DEGREES = 3
-#: A move is bridged across a dip from the largest moves within this many points each side
-#: (:func:`_envelope`).
-PLACED_REACH = 3
+#: The noise at a point is the largest move within this fraction of the grid's points each
+#: side (:func:`_envelope`).
+PLACED_REACH = 0.01
 #: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
 _EXACT = 1e-8
 
@@ -112,8 +112,8 @@ def placed_check(
     means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
     Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
     runs (of each element) are left out, shrunk by the rate at which they converge
-    (:func:`_converging`; infinite with no more runs than that), bridged across the dips where
-    two estimates cross (:func:`_envelope`), plus in quadrature the next
+    (:func:`_converging`; infinite with no more runs than that), the largest such move near
+    each point (:func:`_envelope`), plus in quadrature the next
     coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
     it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
     surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
@@ -195,15 +195,13 @@ def placed_check(
 
 
 def _envelope(moved: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(T,) the (T,) moves ``moved`` with each dip bridged: no less than the smaller of the
-    largest moves within ``PLACED_REACH`` points before and after it. Two leave-out
-    estimates that cross at one time move nothing there, which says nothing of their noise
-    (the bouncing ball's kink: standard errors of 1e-6 where the corrected std was 1 % of
-    the scale off); a move that rises or falls over time is kept."""
-    padded = np.pad(moved, PLACED_REACH, mode="edge")
-    windows = sliding_window_view(padded, PLACED_REACH)
-    before, after = windows[: moved.size].max(axis=-1), windows[-moved.size :].max(axis=-1)
-    return np.maximum(moved, np.minimum(before, after))
+    """(T,) the largest of the (T,) moves ``moved`` within ``PLACED_REACH`` of the points each
+    side (at least one): two leave-out estimates that cross at one time move nothing there,
+    which says nothing of their noise (the bouncing ball's kink: standard errors of 1e-6
+    where the corrected std was 1 % of the scale off)."""
+    reach = max(1, round(PLACED_REACH * moved.size))
+    padded = np.pad(moved, reach, mode="edge")
+    return sliding_window_view(padded, 2 * reach + 1).max(axis=-1)
 
 
 def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
