@@ -112,8 +112,7 @@ def placed_check(
     means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
     Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
     runs (of each element) are left out, shrunk by the rate at which they converge
-    (:func:`_converging`; infinite with no more runs than that), the largest such move near
-    each point (:func:`_envelope`), plus in quadrature the next
+    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
     coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
     it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
     surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
