@@ -8,7 +8,6 @@ plus the mean's part beyond its degree.
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
@@ -26,9 +25,6 @@ PLACED_SPARE = 2
 #: A placed check extrapolates its interpolant's spectrum up to this many times its degree
 #: to estimate the mean's error beyond it (:func:`_unseen_mean_error`).
 UNSEEN_DEGREES = 3
-#: The noise at a point is the largest move within this fraction of the grid's points each
-#: side (:func:`_envelope`).
-PLACED_REACH = 0.01
 #: A rule whose error on an orthonormal polynomial is below this integrates it exactly.
 _EXACT = 1e-8
 
@@ -173,8 +169,8 @@ def placed_check(
             least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
             mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
             std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
-        mean_se = np.hypot(_envelope(mean_moved), unchecked)
-        std_se = np.hypot(_envelope(std_moved), unchecked)
+        mean_se = np.hypot(mean_moved, unchecked)
+        std_se = np.hypot(std_moved, unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
@@ -191,16 +187,6 @@ def placed_check(
         count,
         confidence,
     )
-
-
-def _envelope(moved: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(T,) the largest of the (T,) moves ``moved`` within ``PLACED_REACH`` of the points each
-    side (at least one): two leave-out estimates that cross at one time move nothing there,
-    which says nothing of their noise (the bouncing ball's kink: standard errors of 1e-6
-    where the corrected std was 1 % of the scale off)."""
-    reach = max(1, round(PLACED_REACH * moved.size))
-    padded = np.pad(moved, reach, mode="edge")
-    return sliding_window_view(padded, 2 * reach + 1).max(axis=-1)
 
 
 def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
