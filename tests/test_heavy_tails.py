@@ -24,12 +24,14 @@ def _diagonal(params, times):
 
 
 def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
-    # Tensor order 4 (25 runs) and the default drawn check of 8 (the budget: no second
-    # batch), method seeds 0-19: the std's error passes 5 % of the largest std at t = 3.5
-    # (lognormal moments). Before, 8 seeds of 20 called a time past it reliable, their
-    # estimates 0.3-1.3 % ± 0.5-1.9 % at t = 3.5 where the truth is 5.3 %: their 8 draws
-    # recovered 4-30 % of the surrogate's own variance (or twice it), which the check now
-    # weighs (coverage_error).
+    """Tensor order 4 (25 runs) and the default drawn check of 8 (the budget: no second
+    batch), method seeds 0-19: the std's error passes 5 % of the largest std at t = 3.5
+    (lognormal moments). A time past it is called reliable in at most 4 seeds: the binomial
+    96 % bound (P(<= 4 of 20) = 0.957) of the 10 % the one-sided 90 % confidence allows;
+    measured, 2 of seeds 0-39 (14 and 30), 5 %. Before, 8 seeds of 20 did, their estimates
+    0.3-1.3 % ± 0.5-1.9 % at t = 3.5 where the truth is 5.3 %: their 8 draws recovered
+    4-30 % of the surrogate's own variance (or twice it), which the check now weighs
+    (coverage_error)."""
     inputs = {"x1": NORMAL, "x2": NORMAL}
     study = pcmb.Study(_diagonal, inputs, TIMES, backend="inprocess", order=4, validation=0)
     result = study.run(progress=False)
@@ -37,6 +39,8 @@ def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
     mean = np.exp(0.16 * TIMES**2)
     std = np.sqrt(np.exp(0.64 * TIMES**2) - np.exp(0.32 * TIMES**2))
     true = np.fmax(abs(expansion.mean() - mean), abs(expansion.std() - std))
+    error = true / np.max(expansion.std())
+    assert TIMES[np.argmax(error > 0.05)] == 3.5
     silent = []
     for seed in range(20):
         draws, weights = held_out_draws(tuple(inputs.values()), 8, seed + HELD_OUT_SEED)
@@ -51,12 +55,10 @@ def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
             holdout_germ=draws.nodes,
             weights=weights,
         )
-        error = true / found.scale
-        assert TIMES[np.argmax(error > 0.05)] == 3.5
         judged = found.undecided | (found.failing_from <= TIMES)
         if np.any((error > 0.05) & ~judged):
             silent.append(seed)
-    assert len(silent) <= 1, silent
+    assert len(silent) <= 4, silent
 
 
 def test_the_coverage_error_is_the_missed_share_of_the_variance_times_the_outer_energy():

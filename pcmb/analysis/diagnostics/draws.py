@@ -24,7 +24,7 @@ from pcmb.chaos.elements import Partition
 from pcmb.chaos.expansion import RELATIVE_NOISE
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, unit_nodes
+from pcmb.chaos.nodes import NodeSet, latin_hypercube, unit_nodes
 from pcmb.chaos.polynomials import Hermite
 from pcmb.chaos.truncated import MAX_TERMS
 
@@ -80,15 +80,14 @@ def held_out_unit(
     count: int, inputs: int, seed: int, before: NDArray[np.float64] | None = None
 ) -> NDArray[np.float64]:
     """(count, inputs) points in the unit cube of a batch of held-out draws: a Latin
-    hypercube, one point in each of ``count`` equal slices of every input (those of
+    hypercube (:func:`~pcmb.chaos.nodes.latin_hypercube`, the points of
     :func:`~pcmb.chaos.nodes.random_nodes`'s ``"lhs"`` with the same ``seed``); after an
     earlier batch of K points ``before``, one point in each of ``count`` slices of K +
     ``count`` that those leave empty, so that the union stratifies every input as one Latin
     hypercube of K + ``count`` does (exactly where that is a multiple of K)."""
     rng = np.random.default_rng(seed)
     if before is None:
-        slices = np.column_stack([rng.permutation(count) for _ in range(inputs)])
-        return (slices + rng.random((count, inputs))) / count
+        return latin_hypercube(count, inputs, rng)
     total = before.shape[0] + count
     taken = np.floor(before * total).astype(int)
     empty = [np.setdiff1d(np.arange(total), taken[:, k]) for k in range(inputs)]
