@@ -24,12 +24,14 @@ def _diagonal(params, times):
 
 
 def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
-    # Tensor order 4 (25 runs) and the default drawn check of 8 (the budget: no second
-    # batch), method seeds 0-19: the std's error passes 5 % of the largest std at t = 3.5
-    # (lognormal moments). Before, 8 seeds of 20 called a time past it reliable, their
-    # estimates 0.3-1.3 % ± 0.5-1.9 % at t = 3.5 where the truth is 5.3 %: their 8 draws
-    # recovered 4-30 % of the surrogate's own variance (or twice it), which the check now
-    # weighs (coverage_error).
+    """Tensor order 4 (25 runs) and the default drawn check of 8 (the budget: no second
+    batch), method seeds 0-19: the std's error passes 5 % of the largest std at t = 3.5
+    (lognormal moments). A time past it is called reliable in at most 4 seeds: the binomial
+    96 % bound (P(<= 4 of 20) = 0.957) of the 10 % the one-sided 90 % confidence allows;
+    measured, 2 of seeds 0-39 (14 and 30), 5 %. Before, 8 seeds of 20 did, their estimates
+    0.3-1.3 % ± 0.5-1.9 % at t = 3.5 where the truth is 5.3 %: their 8 draws recovered
+    4-30 % of the surrogate's own variance (or twice it), which the check now weighs
+    (coverage_error)."""
     inputs = {"x1": NORMAL, "x2": NORMAL}
     study = pcmb.Study(_diagonal, inputs, TIMES, backend="inprocess", order=4, validation=0)
     result = study.run(progress=False)
@@ -37,6 +39,8 @@ def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
     mean = np.exp(0.16 * TIMES**2)
     std = np.sqrt(np.exp(0.64 * TIMES**2) - np.exp(0.32 * TIMES**2))
     true = np.fmax(abs(expansion.mean() - mean), abs(expansion.std() - std))
+    error = true / np.max(expansion.std())
+    assert TIMES[np.argmax(error > 0.05)] == 3.5
     silent = []
     for seed in range(20):
         draws, weights = held_out_draws(tuple(inputs.values()), 8, seed + HELD_OUT_SEED)
@@ -51,25 +55,37 @@ def test_draws_that_miss_the_tails_along_a_direction_leave_the_time_undecided():
             holdout_germ=draws.nodes,
             weights=weights,
         )
-        error = true / found.scale
-        assert TIMES[np.argmax(error > 0.05)] == 3.5
         judged = found.undecided | (found.failing_from <= TIMES)
         if np.any((error > 0.05) & ~judged):
             silent.append(seed)
-    assert len(silent) <= 1, silent
+    assert len(silent) <= 4, silent
 
 
 def test_the_coverage_error_is_the_missed_share_of_the_variance_times_the_outer_energy():
     # s = ψ1 + ψ4 of one normal input at order 4: σ² = 2, its outer layers (degrees 3 and 4)
     # hold E = 1. Draws where s = μ recover none of σ²: (1 - 0) E / σ = 1/√2; draws that
-    # recover it all (or more), nothing.
+    # recover it all (or more), or where the model equals s, nothing.
     expansion = pcmb.ChaosExpansion(
         [[0.0], [1.0], [0.0], [0.0], [1.0]], [[p] for p in range(5)], (NORMAL,)
     )
-    blind = coverage_error(expansion, np.zeros((4, 1)), np.ones(4), 1.0)
+    model = np.ones((4, 1))
+    blind = coverage_error(expansion, np.zeros((4, 1)), model, np.ones(4), 1.0)
     assert blind == pytest.approx([2**-0.5])
-    seeing = coverage_error(expansion, np.full((4, 1), 2.0), np.ones(4), 1.0)
+    seeing = coverage_error(expansion, np.full((4, 1), 2.0), model, np.ones(4), 1.0)
     assert seeing == pytest.approx([0.0])
+    assert coverage_error(expansion, np.zeros((4, 1)), np.zeros((4, 1)), None, 1.0) == [0.0]
+
+
+def test_the_outer_energy_is_weighted_by_how_slowly_the_spectrum_falls():
+    # s = ψ1 + ψ2/2 + ψ3/4 + ψ4/8 of one normal input: energies 1, 1/4, 1/16, 1/64, so
+    # σ² = 85/64, the outer layers hold E = 5/64 and fall at r = (1/64 + 1/16) / (1/16 + 1/4)
+    # = 1/4, weighted r / (1 - r) = 1/3: draws that recover none of σ² miss
+    # (5/64) (1/3) / (√85 / 8) = 5 / (24 √85).
+    expansion = pcmb.ChaosExpansion(
+        [[0.0], [1.0], [0.5], [0.25], [0.125]], [[p] for p in range(5)], (NORMAL,)
+    )
+    blind = coverage_error(expansion, np.zeros((4, 1)), np.ones((4, 1)), np.ones(4), 1.0)
+    assert blind == pytest.approx([5.0 / (24.0 * np.sqrt(85.0))])
 
 
 def test_no_coverage_error_where_the_surrogate_is_linear_in_the_normal_inputs_or_has_none():
@@ -81,4 +97,23 @@ def test_no_coverage_error_where_the_surrogate_is_linear_in_the_normal_inputs_or
     linear = pcmb.ChaosExpansion(coefficients, index, (uniform, NORMAL))
     plain = pcmb.ChaosExpansion(coefficients, index, (uniform, uniform))
     for expansion in (linear, plain):
-        assert coverage_error(expansion, np.ones((4, 1)), np.ones(4), 1.0) == pytest.approx([0.0])
+        found = coverage_error(expansion, np.ones((4, 1)), np.zeros((4, 1)), np.ones(4), 1.0)
+        assert found == pytest.approx([0.0])
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e5, 1e8])
+def test_an_exact_polynomial_on_a_large_baseline_is_vouched_for(offset):
+    # y = c + a t + b², a, b ~ N(0, 1), at order 3: the surrogate is exact, its residuals
+    # round-off of the output's size, not of its std's. Before, at c = 1e5 the residual's
+    # 4e-11 of the std passed for an error: the coverage error widened the noise to 0.18
+    # and every time was undecided.
+    @pcmb.batched(outputs=("y",))
+    def baseline(params, times):
+        a, b = np.asarray(params["a"]), np.asarray(params["b"])
+        return {"y": offset + np.outer(a, times) + (b**2)[:, None]}
+
+    inputs = {"a": NORMAL, "b": NORMAL}
+    study = pcmb.Study(baseline, inputs, TIMES[:21], backend="inprocess", order=3, validation=8)
+    found = study.run(progress=False).diagnostics["y"]
+    assert found.vouched
+    assert np.max(found.noise) < 1e-6

@@ -24,6 +24,7 @@ __all__ = [
     "NodeSet",
     "TensorGrid",
     "draw_germs",
+    "latin_hypercube",
     "overflowing_inputs",
     "random_nodes",
     "unit_nodes",
@@ -176,9 +177,8 @@ def random_nodes(
     if method == "montecarlo":
         germ = draw_germs(distributions, samples, rng)
     elif method in ("lhs", "sobol"):
-        if method == "lhs":  # one point in each of N equal-probability slices, per input
-            slices = np.column_stack([rng.permutation(samples) for _ in range(n)])
-            u = (slices + rng.random((samples, n))) / samples
+        if method == "lhs":
+            u = latin_hypercube(samples, n, rng)
         else:
             from scipy.stats import qmc  # deferred: scipy.stats is slow to import
 
@@ -192,6 +192,13 @@ def random_nodes(
     else:
         raise ValueError(f"unknown sampling method {method!r}: use montecarlo, lhs or sobol")
     return NodeSet(distributions, germ, _physical(distributions, germ))
+
+
+def latin_hypercube(samples: int, inputs: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    """(samples, inputs) points in the unit cube, one in each of ``samples`` equal slices of
+    every input, drawn from ``rng``."""
+    slices = np.column_stack([rng.permutation(samples) for _ in range(inputs)])
+    return (slices + rng.random((samples, inputs))) / samples
 
 
 def unit_nodes(distributions: Sequence[Distribution], u: ArrayLike) -> NodeSet:

@@ -37,7 +37,7 @@ from pcmb.analysis.diagnostics.remedies import element_errors, error_at_ends, re
 from pcmb.analysis.diagnostics.verdict import TOLERANCE, flag_margin, verdict
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import PiecewiseExpansion
-from pcmb.chaos.expansion import RELATIVE_NOISE, ChaosExpansion
+from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.result import WarningRecord
 
 #: Codes of the warning records the diagnostics make.
@@ -197,8 +197,13 @@ def diagnose(
     # Where the design's runs are all equal and the held-out runs are not, the design saw
     # none of the spread (nodes symmetric about a kink): no expansion can learn it.
     blind = np.zeros(times.size, dtype=bool)
-    if holdout is not None:
-        observed = finite_rows(holdout[1])
+    germ = None
+    if holdout is not None:  # the held-out runs that did not fail
+        predicted, observed = (np.atleast_2d(np.asarray(a, dtype=float)) for a in holdout)
+        kept = np.isfinite(observed).all(axis=1)
+        predicted, observed = predicted[kept], observed[kept]
+        germ = None if holdout_germ is None else np.asarray(holdout_germ, dtype=float)[kept]
+        weights = None if weights is None else np.asarray(weights, dtype=float)[kept]
         blind = equal & runs_vary(observed, times.size)
         if not scale > 0 and blind.any():  # the held-out runs' spread is the only scale
             size = float(np.max(np.abs(observed)))  # scaled before squaring: outputs near 1e200
@@ -206,17 +211,16 @@ def diagnose(
     decay = spectral_decay(expansion, scale)
     checked = None
     if holdout is not None and placed:
-        checked = placed_check(expansion, node_germ, node_values, holdout_germ, holdout[1], scale)
+        checked = placed_check(expansion, node_germ, node_values, germ, observed, scale)
     elif holdout is not None:
-        judged, paired = judging_weights(expansion, scale, weights, holdout_germ)
+        judged, paired = judging_weights(expansion, scale, weights, germ)
         paired = paired if stratified else None
-        checked = holdout_error(*holdout, expansion.mean(), std, scale, weights=judged, germ=paired)
-        # Draws that missed the tails carrying the variance saw none of the error there, unless
-        # they find the surrogate exact (to round-off): then its outer terms are the response's.
-        kept = np.isfinite(np.atleast_2d(holdout[1])).all(axis=1)
-        drawn = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
-        missed = coverage_error(expansion, np.asarray(holdout[0])[kept], drawn[kept], scale)
-        checked = checked.widened(np.where(checked.error > RELATIVE_NOISE, missed, 0.0), scale)
+        checked = holdout_error(
+            predicted, observed, expansion.mean(), std, scale, weights=judged, germ=paired
+        )
+        # Draws that missed the tails carrying the variance saw none of the error there.
+        missed = coverage_error(expansion, predicted, observed, weights, scale)
+        checked = checked.widened(missed, scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
@@ -264,10 +268,8 @@ def diagnose(
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
         ends, by_element = None, ""
-        if holdout is not None and holdout_germ is not None:
-            predicted, observed = (np.atleast_2d(a) for a in holdout)
-            kept = np.isfinite(observed).all(axis=1)
-            germ, residual = np.asarray(holdout_germ)[kept], observed[kept] - predicted[kept]
+        if germ is not None:
+            residual = observed - predicted
             ends = error_at_ends(germ, residual, failing)
             if isinstance(expansion, PiecewiseExpansion):
                 by_element = element_errors(expansion, germ, residual, failing)

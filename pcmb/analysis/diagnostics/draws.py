@@ -21,9 +21,10 @@ from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies, top
 from pcmb.analysis.diagnostics.placed import interpolated
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import Partition
+from pcmb.chaos.expansion import RELATIVE_NOISE
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, unit_nodes
+from pcmb.chaos.nodes import NodeSet, latin_hypercube, unit_nodes
 from pcmb.chaos.polynomials import Hermite
 from pcmb.chaos.truncated import MAX_TERMS
 
@@ -79,15 +80,14 @@ def held_out_unit(
     count: int, inputs: int, seed: int, before: NDArray[np.float64] | None = None
 ) -> NDArray[np.float64]:
     """(count, inputs) points in the unit cube of a batch of held-out draws: a Latin
-    hypercube, one point in each of ``count`` equal slices of every input (those of
+    hypercube (:func:`~pcmb.chaos.nodes.latin_hypercube`, the points of
     :func:`~pcmb.chaos.nodes.random_nodes`'s ``"lhs"`` with the same ``seed``); after an
     earlier batch of K points ``before``, one point in each of ``count`` slices of K +
     ``count`` that those leave empty, so that the union stratifies every input as one Latin
     hypercube of K + ``count`` does (exactly where that is a multiple of K)."""
     rng = np.random.default_rng(seed)
     if before is None:
-        slices = np.column_stack([rng.permutation(count) for _ in range(inputs)])
-        return (slices + rng.random((count, inputs))) / count
+        return latin_hypercube(count, inputs, rng)
     total = before.shape[0] + count
     taken = np.floor(before * total).astype(int)
     empty = [np.setdiff1d(np.arange(total), taken[:, k]) for k in range(inputs)]
@@ -169,41 +169,47 @@ def _slowness(expansion: Expansion, energies: NDArray[np.float64]) -> NDArray[np
         layers = [np.sum(energies[index[:, k] == top - j], axis=0) for j in range(3)]
         outer, before = layers[0] + layers[1], layers[1] + layers[2]
         rate = np.fmax(rate, np.divide(outer, before, out=np.ones(rate.shape), where=before > 0))
-    falls = rate < 0.5
-    return np.where(falls, rate / np.where(falls, 1.0 - rate, 1.0), 1.0)
+    slowest = np.fmin(rate, 0.5)
+    return slowest / (1.0 - slowest)
 
 
 def coverage_error(
-    expansion: Expansion, predicted: ArrayLike, weights: ArrayLike, scale: float
+    expansion: Expansion,
+    predicted: ArrayLike,
+    observed: ArrayLike,
+    weights: ArrayLike | None,
+    scale: float,
 ) -> NDArray[np.float64]:
     """(T,) how far the drawn check's estimates may be off, over the scale, where its draws
     missed the tails of the normal inputs that carry the variance (heavy tails along a
     direction of several normal inputs: ``docs/diagnostics.md``).
 
     The draws' weighted estimate of the surrogate's own variance, ρ σ² = mean w (s - μ)² over
-    the (K, T) surrogate values ``predicted`` at them (importance ``weights``), falls short
-    by (1 - ρ) σ² where they missed where it lives; the variance the surrogate itself misses
-    lives there or beyond, taken as the energy E of its outer layers
+    the (K, T) surrogate values ``predicted`` at them (importance ``weights``; ``None``: 1),
+    falls short by (1 - ρ) σ² where they missed where it lives; the variance the surrogate
+    itself misses lives there or beyond, taken as the energy E of its outer layers
     (:func:`~pcmb.chaos.basis.tail_terms`) curved along the widened inputs, so the check may
     miss as much of it: (1 - ρ) (within [0, 1]) times E / σ, as Δσ <= ΔV / σ. Zero where
     the draws recover the surrogate's variance, where it is linear in the widened inputs
-    (none: zero) or where it does not vary; an exact polynomial's outer terms are its own,
-    which :func:`~pcmb.analysis.diagnostics.diagnose` tells by its residuals."""
+    (none: zero), where it does not vary, and where it matches the model's (K, T) finite
+    ``observed`` values to round-off (``RELATIVE_NOISE`` of their largest size, at least the
+    scale): an exact polynomial's outer terms are its own."""
     outer = tail_terms(expansion.multi_index) & _curved_in_widened(expansion)
     if not outer.any() or not scale > 0 or not np.isfinite(scale):
         return np.zeros(expansion.shape)
     sigma = expansion.std() / scale
     energies = coefficient_energies(expansion, scale)
     energy = np.sum(energies[outer], axis=0) * _slowness(expansion, energies)
-    predicted = np.asarray(predicted, dtype=float)
-    weights = np.asarray(weights, dtype=float).reshape((-1,) + (1,) * (predicted.ndim - 1))
+    predicted, observed = np.asarray(predicted, dtype=float), np.asarray(observed, dtype=float)
+    weights = 1.0 if weights is None else np.asarray(weights, dtype=float)
+    weights = np.reshape(weights, (-1,) + (1,) * (predicted.ndim - 1))
     seen = np.mean(weights * ((predicted - expansion.mean()) / scale) ** 2, axis=0)
-    varies = sigma > 0
-    missed = np.zeros(sigma.shape)
-    np.divide(sigma**2 - seen, sigma**2, out=missed, where=varies)
-    error = np.zeros(sigma.shape)
-    np.divide(np.clip(missed, 0.0, 1.0) * energy, sigma, out=error, where=varies)
-    return error
+    # Ranges, not squares: outputs near 1e200 must not overflow.
+    size = np.fmax(np.max(np.abs(observed), axis=0, initial=0.0), scale)
+    exact = np.max(np.abs(predicted - observed), axis=0, initial=0.0) <= RELATIVE_NOISE * size
+    with np.errstate(divide="ignore", invalid="ignore"):
+        missed = np.clip((sigma**2 - seen) / sigma**2, 0.0, 1.0) * energy / sigma
+    return np.where((sigma > 0) & ~exact, missed, 0.0)
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
