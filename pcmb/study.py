@@ -774,6 +774,7 @@ class Study:
                     min(wanted, most - first),
                     nodes.nodes,
                     batch=1,  # drawn: a placed check makes its runs at once
+                    earlier=held_out,
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
@@ -1049,6 +1050,7 @@ class Study:
         keep: bool = True,
         runs_of: str = "node",
         tolerated: NDArray[np.bool_] | None = None,
+        earlier: tuple[int, int] = (0, 0),
     ) -> tuple[RunResult, Journal | None]:
         """Run every node (checked by the caller, :meth:`_check_finite`), journaled in the
         run's journal (its ``folder``, if given) when it has one (the journal is returned, to
@@ -1056,7 +1058,8 @@ class Study:
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study); ``runs_of``: what the runs are, for the error, and
-        ``tolerated``: the runs whose failure the policy lets by (:meth:`_judge_failures`)."""
+        ``tolerated`` and ``earlier``: the runs whose failure the policy lets by, and the
+        check's earlier batches (:meth:`_judge_failures`)."""
         journal, fresh_journal = self._journal(run, nodes, folder)
         with removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
@@ -1068,7 +1071,7 @@ class Study:
                 keep=keep,
                 tolerated=tolerated,
             ).of(runs_of)
-        self._judge_failures(run, runs, journal, runs_of, tolerated)
+        self._judge_failures(run, runs, journal, runs_of, tolerated, earlier)
         return runs, journal
 
     def _journal(
@@ -1126,15 +1129,18 @@ class Study:
         journal: Journal | None,
         runs_of: str = "node",
         tolerated: NDArray[np.bool_] | None = None,
+        earlier: tuple[int, int] = (0, 0),
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on, or
-        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and at most
-        ``TAIL_FAILURE_SHARE`` of the runs; ``runs_of``: what the runs are (``"held-out
-        run"``: numbered among those, and kept beside the design's nodes, which the error
-        names too: ``--resume`` keeps both)."""
+        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and, with
+        the ``earlier`` (runs, tail failures) of the check's batches before, at most
+        ``TAIL_FAILURE_SHARE`` of the check's runs fail in the tails; ``runs_of``: what the
+        runs are (``"held-out run"``: numbered among those, and kept beside the design's
+        nodes, which the error names too: ``--resume`` keeps both)."""
         failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
         in_tails = len(runs.failures) - len(failures)
-        too_many = in_tails > TAIL_FAILURE_SHARE * runs.status.size
+        checked, failed_before = earlier
+        too_many = in_tails + failed_before > TAIL_FAILURE_SHARE * (runs.status.size + checked)
         if too_many:
             failures = list(runs.failures)
         if not failures or self.execution.on_failure == "regress":
@@ -1161,7 +1167,9 @@ class Study:
             else ""
         )
         tails = (
-            f", {in_tails} of them in the tails, more than {TAIL_FAILURE_SHARE:.0%} of the "
+            f", {in_tails} of them in the tails"
+            + (f" and {failed_before} of the check's {checked} earlier runs" if checked else "")
+            + f", more than {TAIL_FAILURE_SHARE:.0%} of the "
             "check's runs: too many for it to stand on the rest"
             if too_many
             else ""
@@ -1190,14 +1198,16 @@ class Study:
         design: NDArray[np.float64],
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
+        earlier: HeldOut | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
         by the design's ``record``), batch ``batch`` of the check, placed to extend the
         design's nodes ``design`` (germ points) or drawn
         (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
         folder (``validation-<batch>`` after the first), under the failure policy, which the
-        tail draws' failures never trigger; and ``nodes-failed`` records naming those that
-        failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
+        tail draws' failures trigger only where, with the ``earlier`` batches' runs, too many
+        of the check's fail (:meth:`_judge_failures`); and ``nodes-failed`` records naming
+        those that failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
         if not count or record.basis is None:
             return None, ()
         draws = self._held_out.draws(count, design, values, batch)
@@ -1207,6 +1217,9 @@ class Study:
         halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
+        # An earlier batch's failures are all tail draws': any other stopped the study, but
+        # under `regress`, which judges none.
+        before = (0, 0) if earlier is None else (earlier.ok.size, int(np.sum(~earlier.ok)))
         found, journal = self._run_nodes(
             run,
             draws.nodes,
@@ -1215,6 +1228,7 @@ class Study:
             proven=proven,
             runs_of=HELD_OUT_RUN,
             tolerated=draws.tails,
+            earlier=before,
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
