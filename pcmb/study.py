@@ -780,7 +780,7 @@ class Study:
                 held_out_failed = (*held_out_failed, *more_failed)
                 result = self._diagnosed(found, held_out, held_out_failed)
         if not intrusive:
-            result = self._final_fit(nodes, runs, nominal, found, result, stream)
+            result = self._final_fit(nodes, runs, found, result, stream)
         if self.analysis is not None and analysis is None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 analysis = analyse(result, self.analysis)
@@ -1275,7 +1275,6 @@ class Study:
         self,
         nodes: TensorGrid | NodeSet,
         runs: RunResult,
-        nominal: RunResult | None,
         found: StudyResult,
         judged: StudyResult,
         stream: TextIO | None,
@@ -1283,11 +1282,13 @@ class Study:
         """The ``judged`` result (``found``, the design's own fit, diagnosed) with the final
         fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`): every
         output the check does not vouch for fitted over the ``runs`` at its ``nodes`` and the
-        held-out runs that succeeded, weighted back by their importance weights; the others
-        keep the fit the check vouched for. Its expansions, report and records replace
-        ``found``'s; the diagnostics, verdict and corrected mean and std stay those of the
-        checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself for any other
-        design, without a held-out run that succeeded, or where the check vouches for all."""
+        held-out runs that succeeded, weighted back by their importance weights, its
+        expansion, report entry and records replacing ``found``'s (and a record of the
+        design's fit the final fit makes again: ``regression-budget``); the others keep the
+        fit the check vouched for. The diagnostics, verdict and corrected mean and std stay
+        those of the checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself
+        for any other design, without a held-out run that succeeded, or where the check
+        vouches for all."""
         held_out = judged.held_out
         if not hasattr(self.design, "refit") or held_out is None or not held_out.ok.any():
             return judged
@@ -1296,32 +1297,34 @@ class Study:
             return judged
         every = join_nodes(nodes, NodeSet(nodes.distributions, held_out.germ, held_out.params))
         values = {
-            name: np.concatenate([y, held_out.values[name]]) for name, y in runs.values.items()
+            name: np.concatenate([y, held_out.values[name]])
+            for name, y in runs.values.items()
+            if name not in vouched
         }
         ok = np.concatenate([runs.status == Status.OK, held_out.ok])
-        left_out = np.zeros_like(held_out.weights)
-        weights = {
-            name: np.concatenate(
-                [np.ones(nodes.size), left_out if name in vouched else held_out.weights]
-            )
-            for name in values
-        }
+        weights = np.concatenate([np.ones(nodes.size), held_out.weights])
         fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
         with phase(fitting, stream):
-            recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
-        fitted = dataclasses.replace(
-            found,
-            expansions=recovery.expansions,
-            report=recovery.report,
-            warnings=(*_nodes_failed(runs.failures, nodes.size), *recovery.warnings),
+            recovery = self._recover_by_axis(
+                every, values, ok, found.axes, dict.fromkeys(values, weights)
+            )
+        remade = {(record.code, record.output) for record in recovery.warnings}
+        kept = tuple(
+            record
+            for record in found.warnings
+            if record.output not in values and (record.code, record.output) not in remade
         )
-        fitted = self._with_nominal(fitted, nominal)
-        checked = tuple(record for record in judged.warnings if record not in found.warnings)
+        expansions = {
+            name: recovery.expansions.get(name, expansion)
+            for name, expansion in found.expansions.items()
+        }
+        report = recovery.report if found.report is None else found.report.merged(recovery.report)
         return dataclasses.replace(
             judged,
-            expansions=fitted.expansions,
-            report=fitted.report,
-            warnings=(*fitted.warnings, *checked),
+            expansions=expansions,
+            report=report,
+            # The check's records come after the design's (_diagnosed).
+            warnings=(*kept, *recovery.warnings, *judged.warnings[len(found.warnings) :]),
         )
 
     def _start_nominal(self, run: _RunContext) -> PendingRun | None:
