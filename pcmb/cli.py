@@ -526,11 +526,10 @@ def _inspect(path: str) -> str:
             if undecided:
                 first = axis.values[np.argmax(found.undecided)]
                 verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
-        fit = result.regression.get(name)
-        before = "; of the fit before the final fit" if fit and fit.held_out_fitted else ""
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
-            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g}{before})"
+            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g}"
+            f"{result.checked_fit(name)})"
         )
     if result.report is not None:  # what the design concluded, in its own words
         lines += [f"{label:<9}{text}" for label, text in result.report.summary(result)]
