@@ -201,14 +201,8 @@ def _summary(config, address: str | None = None) -> str:
     made = "no nodes: solved from the model's equations" if design.grid == "none" else "nodes"
     grid = "" if design.grid == "none" else f"{design.grid} "
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
-    budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
+    budget, first, most = study.planned_runs(nodes.size)
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    # The check is sized to the design's final runs: a refining one's up to its budget.
-    first, most = (
-        (study.held_out_runs(nodes.size)[0], study.held_out_runs(budget)[1])
-        if design.basis is not None
-        else (0, 0)
-    )
     upto = f"{first} to {most}" if most > first else f"{most}"
     checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(

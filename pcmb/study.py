@@ -482,12 +482,14 @@ class Study:
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> SizeEstimate:
-        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`),
-        every output (the derived ones too) counted as wide as the widest (``axes``: the
-        model's ``output_axes``)."""
+        """Upper estimate of the space a run from ``n_nodes`` nodes writes
+        (:func:`pcmb.run.output.estimate_size`): the most design and held-out runs it may make
+        (:meth:`planned_runs`), every output (the derived ones too) counted as wide as the
+        widest (``axes``: the model's ``output_axes``)."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
         count = len(outputs) + len(self.derived)
-        return estimate_size(n_nodes, max(widths, default=1), count, len(self.inputs))
+        design, _, held_out = self.planned_runs(n_nodes)
+        return estimate_size(design + held_out, max(widths, default=1), count, len(self.inputs))
 
     def memory_estimate(
         self,
@@ -495,19 +497,28 @@ class Study:
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> MemoryEstimate:
-        """Upper estimate of the memory a run needs (:mod:`pcmb.run.memory`): ``n_nodes``
-        nodes (an adaptive design: its budget is counted), the held-out runs and the range
-        check's draws of a method with an expansion, every output (the derived ones too) as
-        wide as the widest."""
+        """Upper estimate of the memory a run from ``n_nodes`` nodes needs
+        (:mod:`pcmb.run.memory`): the most design and held-out runs it may make
+        (:meth:`planned_runs`), the range check's draws of a method with an expansion, every
+        output (the derived ones too) as wide as the widest."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
-        chaos = self.design.record().basis is not None
+        design, _, held_out = self.planned_runs(n_nodes)
         return MemoryEstimate(
-            nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
+            nodes=design,
+            held_out=held_out,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
-            draws=RANGE_DRAWS if chaos else 0,
+            draws=RANGE_DRAWS if self.design.record().basis is not None else 0,
         )
+
+    def planned_runs(self, n_nodes: int) -> tuple[int, int, int]:
+        """(most design runs, first batch and most in all of the held-out runs) of a run from
+        ``n_nodes`` nodes: a refining design may make up to its budget, and its check is sized
+        to those (:meth:`held_out_runs`); no held-out run without an expansion."""
+        design = max(n_nodes, getattr(self.design, "budget", n_nodes))
+        if self.design.record().basis is None:
+            return design, 0, 0
+        return design, self.held_out_runs(n_nodes)[0], self.held_out_runs(design)[1]
 
     def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
         """Build the model in a worker, check it against the study, and return the outputs
