@@ -158,11 +158,20 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     assert back.regression["y"].held_out_fitted == 12
 
 
-def test_an_output_the_check_vouches_for_keeps_the_fit_it_checked():
+def test_an_output_the_check_vouches_for_keeps_the_fit_it_checked(monkeypatch):
     """p is a polynomial of the candidates: the check vouches for its design-only fit, which
-    stays (bit for bit the design's ``recover``); y is refitted."""
+    stays (bit for bit the design's ``recover``) and is not fitted again; y is refitted."""
+    refitted = []
+    refit = SparseRegression.refit
+
+    def spied(self, nodes, values, *args, **kwargs):
+        refitted.extend(values)
+        return refit(self, nodes, values, *args, **kwargs)
+
+    monkeypatch.setattr(SparseRegression, "refit", spied)
     method = {"kind": "regression", "samples": 32, "order": 3, "validation": 10}
     result = _run(_study(method))
+    assert refitted == ["y"]
     assert result.diagnostics["p"].vouched and not result.diagnostics["y"].vouched
     assert result.regression["p"].held_out_fitted == 0
     assert result.regression["y"].held_out_fitted == 10
