@@ -23,7 +23,7 @@ from pcmb.chaos.nodes import NodeSet, join_nodes
 from pcmb.chaos.sparse import SparseGrid, project_sparse
 from pcmb.config.schema import load_config
 from pcmb.designs import MethodSettings, make_design, method_section
-from pcmb.designs.adaptive import LAST_LEVEL_REMEDY, estimated_error
+from pcmb.designs.adaptive import GUARDED, LAST_LEVEL_REMEDY, estimated_error
 from pcmb.errors import ConfigError, UsageError
 from pcmb.references import (
     ishigami,
@@ -572,8 +572,11 @@ def test_each_round_is_a_public_record_the_history_is_made_of():
     assert rounds[0].change == pytest.approx(1.0, rel=1e-12)
     for k, record in enumerate(rounds):
         changes = [r.change for r in rounds[: k + 1]]
-        tail = estimated_error(changes, geometric=not record.nonsmooth, guarded=2)  # 2 inputs
-        assert record.estimate == max(tail, record.left)
+        guarded = min(GUARDED, len(inputs))
+        assert record.reducible == estimated_error(
+            changes, geometric=not record.nonsmooth, guarded=guarded
+        )
+        assert record.estimate == max(record.reducible, record.left)
     assert [name for name, _ in rounds[-1].nonsmooth] == ["a"]
 
 

@@ -17,6 +17,7 @@ import h5py
 import numpy as np
 import pytest
 from cli_process import pcmb_here
+from economy import inspect, run_study, runs_line_agrees_with_the_file, true_error
 from scipy.stats import norm
 
 pytestmark = pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
@@ -65,7 +66,6 @@ UNIFORM = "{dist: uniform, low: -1.0, high: 1.0}"
 
 def _study(tmp_path: Path, entry: str, inputs: int, method: str, stop: float, *extra: str):
     """Write the model file and a config, ``pcmb run`` it; the result file's path."""
-    (tmp_path / "fresh.py").write_text(MODELS)
     names = [f"x{k}" for k in range(1, inputs + 1)]
     normal = entry in ("sinh_growth", "lognormal2")
     law = "{dist: normal, mean: 0.0, std: 1.0}" if normal else UNIFORM
@@ -84,10 +84,7 @@ def _study(tmp_path: Path, entry: str, inputs: int, method: str, stop: float, *e
         output: out.h5
         """
     )
-    (tmp_path / "study.yaml").write_text(config + "".join(f"{line}\n" for line in extra))
-    done = pcmb_here("run", "study.yaml", "--quiet", cwd=tmp_path)
-    assert done.returncode == 0, done.stderr
-    return tmp_path / "out.h5"
+    return run_study(tmp_path, MODELS, config + "".join(f"{line}\n" for line in extra))
 
 
 def _true_error(path: Path, response, *, normal: bool = False, cut: float = 0.0):
@@ -100,22 +97,7 @@ def _true_error(path: Path, response, *, normal: bool = False, cut: float = 0.0)
         pieces = [(-1.0, cut), (cut, 1.0)]
         x = np.concatenate([a + (points + 1) * (b - a) / 2 for a, b in pieces])
         w = np.concatenate([weights * (b - a) / 4 for a, b in pieces])
-    with h5py.File(path) as file:
-        times = file["time"][:]
-        found = file["diagnostics/y"]
-        verdict = {key: found[key][:] for key in ("undecided", "estimate")}
-        verdict.update(found.attrs)
-        values = response(x[:, None], times[None, :])
-        mean = w @ values
-        std = np.sqrt(np.maximum(w @ values**2 - mean**2, 0.0))
-        error = np.fmax(abs(file["outputs/y/mean"][:] - mean), abs(file["outputs/y/std"][:] - std))
-    return times, error / verdict["scale"], verdict
-
-
-def _inspect(path: Path) -> str:
-    shown = pcmb_here("inspect", str(path))
-    assert shown.returncode == 0, shown.stderr
-    return shown.stdout
+    return true_error(path, "y", lambda times: response(x[:, None], times[None, :]), w)
 
 
 @pytest.mark.parametrize(("inputs", "order", "design"), [(1, 3, 4), (2, 2, 9), (2, 9, 100)])
@@ -128,11 +110,8 @@ def test_inspect_states_every_run_made_and_the_check_stays_within_its_budget(
     path = _study(tmp_path, entry, inputs, f"{{kind: collocation, order: {order}}}", 2.0)
     with h5py.File(path) as file:
         nodes, held = file["nodes/params"].shape[0], file["validation/params"].shape[0]
-        nominal = int("nominal" in file["outputs/y"])
     assert nodes == design and 0 < held <= max(8, design // 4)
-    total = nodes + held + nominal
-    expected = f"{total} in all: {nodes} of the design, {held} held-out ({held} ok), 1 nominal"
-    assert re.search(rf"^runs +{re.escape(expected)}$", _inspect(path), re.M)
+    runs_line_agrees_with_the_file(path)
 
 
 def test_a_heavy_tailed_hermite_response_is_flagged_at_its_true_crossing(tmp_path):
@@ -178,7 +157,7 @@ def test_a_degenerate_design_without_a_check_is_not_called_reliable(tmp_path):
     ``runs-all-equal`` record must not stand beside a verdict of "reliable"."""
     method = "{kind: collocation, order: 1, validation: 0}"
     path = _study(tmp_path, "kinks", 2, method, 2.0)
-    shown = _inspect(path)
+    shown = inspect(path)
     assert "[runs-all-equal]" in shown
     (checked,) = [line for line in shown.splitlines() if line.startswith("checked")]
     assert "reliable" not in checked.replace("UNRELIABLE", ""), checked
@@ -189,7 +168,7 @@ def test_a_zero_variance_at_the_initial_time_raises_no_leave_one_out_error(tmp_p
     within 1e-4 of the std; the output that does not vary at t = 0 is recorded
     (``sobol-undefined``), not read as a leave-one-out error."""
     path = _study(tmp_path, "smooth", 2, "{kind: regression, samples: 40, order: 6, seed: 3}", 3.0)
-    shown = _inspect(path)
+    shown = inspect(path)
     assert "[sobol-undefined]" in shown
     (fit,) = [line for line in shown.splitlines() if line.startswith("fit")]
     loo = float(re.search(r"leave-one-out error up to (\S+),", fit).group(1))

@@ -295,16 +295,37 @@ def test_a_stored_severity_that_is_neither_warning_nor_note_is_refused(written, 
         pcmb.load(path)
 
 
-def test_where_an_estimate_comes_from_is_stored_and_older_files_tell_it(written, tmp_path):
+@pytest.mark.parametrize(
+    ("inputs", "method", "source"),
+    [
+        (INPUTS, {"order": 3}, "held-out"),
+        ({"a": pcmb.Normal(2.0, 0.5)}, {"order": 6}, "placed"),
+        ({"a": pcmb.Uniform(1.0, 3.0)}, {"order": 4, "validation": 0}, "decay"),
+        ({"a": pcmb.Uniform(1.0, 3.0)}, {"order": "auto", "validation": 0}, "design"),
+    ],
+    ids=["drawn", "placed", "decay", "design"],
+)
+def test_where_an_estimate_comes_from_is_stored_and_older_files_tell_it(
+    tmp_path, inputs, method, source
+):
     """``estimated_by`` is an attribute of /diagnostics/<output>; a file written before it
-    loads with the source its held-out check and arrays tell (drawn held-out runs here)."""
-    path, result = written
-    assert result.diagnostics["y"].estimated_by == "held-out"
+    loads with the source its held-out check and arrays tell, for each source (of ``w``:
+    ``y``, linear in ``a``, is read from the decay under ``order: auto`` too)."""
+    study = pcmb.Study(
+        model,
+        inputs,
+        TIMES,
+        method={"kind": "collocation", **method},
+        params={"a": 2.0, "b": 0.0},
+        execution={"backend": "inprocess"},
+    )
+    result = study.run()
+    assert result.diagnostics["w"].estimated_by == source
+    path = tmp_path / "result.h5"
+    store.write_result(path, result, provenance={})
     with h5py.File(path) as file:
-        assert file["diagnostics/y"].attrs["estimated_by"] == "held-out"
-    assert pcmb.load(path).diagnostics["y"].estimated_by == "held-out"
-    old = tmp_path / "old.h5"
-    old.write_bytes(path.read_bytes())
-    with h5py.File(old, "r+") as file:
-        del file["diagnostics/y"].attrs["estimated_by"]
-    assert pcmb.load(old).diagnostics["y"].estimated_by == "held-out"
+        assert file["diagnostics/w"].attrs["estimated_by"] == source
+    assert pcmb.load(path).diagnostics["w"].estimated_by == source
+    with h5py.File(path, "r+") as file:
+        del file["diagnostics/w"].attrs["estimated_by"]
+    assert pcmb.load(path).diagnostics["w"].estimated_by == source

@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pcmb.analysis.diagnostics import TOLERANCE
-from pcmb.chaos.expansion import sample_mean, unsafe_to_square
+from pcmb.chaos.expansion import power_of_two, sample_mean, unsafe_to_square
 from pcmb.errors import UsageError
 from pcmb.result import StudyResult
 
@@ -298,7 +298,7 @@ def _rms(values: NDArray[np.float64]) -> float:
         return float("nan")
     if not unsafe_to_square(values):
         return float(np.sqrt(np.mean(values**2)))
-    scale = np.ldexp(1.0, np.frexp(np.max(np.abs(values)))[1] - 1)
+    scale = power_of_two(np.max(np.abs(values)))
     return float(np.sqrt(np.mean((values / scale) ** 2)) * scale)
 
 

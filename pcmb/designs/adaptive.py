@@ -140,7 +140,9 @@ class AdaptiveRound:
     reducible:
         The estimated error that refining can lower (:func:`estimated_error`).
     estimate:
-        The estimated error of the mean and std: the larger of ``reducible`` and ``left``.
+        The estimated error of the mean and std: the larger of ``reducible`` and ``left``
+        (for :class:`~pcmb.designs.anisotropic.AnisotropicTensor`, the largest error left in
+        an input instead).
     """
 
     runs: int
@@ -203,6 +205,13 @@ class AdaptiveCollocation(GrowingGrid):
         self._rounds: list[AdaptiveRound] = []
         self._stopped: str | None = None
         self._at_budget = False  # the rounds ended as the next would pass method.max_runs
+
+    def _stop_at_budget(self, step: str) -> None:
+        """End the rounds as ``step`` would pass ``method.max_runs``."""
+        self._stopped = (
+            f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
+        )
+        self._at_budget = True
 
     @property
     def rounds(self) -> tuple[AdaptiveRound, ...]:
@@ -274,11 +283,7 @@ class AdaptiveCollocation(GrowingGrid):
                 return None
             added = self._refine(refinable, bulk=not converged)
             if added is None:
-                step = "probing blind axes" if converged else "the next refinement"
-                self._stopped = (
-                    f"{step} would pass method.max_runs: raise method.max_runs, or the tolerance"
-                )
-                self._at_budget = True
+                self._stop_at_budget("probing blind axes" if converged else "the next refinement")
                 return None
             if added:
                 return self._grow(added)

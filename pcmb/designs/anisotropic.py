@@ -92,11 +92,7 @@ class AnisotropicTensor(AdaptiveCollocation):
             levels = tuple(top + (j == k) for j, top in enumerate(self._levels))
             box = box_index_set(levels)
             if SparseGrid(self.distributions, box, self.rules).size > self.max_runs:
-                self._stopped = (
-                    f"raising {self.names[k]} would pass method.max_runs: raise "
-                    "method.max_runs, or the tolerance"
-                )
-                self._at_budget = True
+                self._stop_at_budget(f"raising {self.names[k]}")
                 return None
             present = set(self._index)
             added = [tuple(row) for row in box.tolist() if tuple(row) not in present]

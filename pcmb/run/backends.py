@@ -183,18 +183,24 @@ _MAKING = threading.Lock()
 _FREE_SECONDS = 5.0
 
 
+def _loky_semaphores(
+    folder: str | os.PathLike[str],
+) -> Iterator[tuple[os.DirEntry[str], int]]:
+    """The files in ``folder`` named as loky's semaphores, each with the pid of the process
+    that made it (none without ``folder``)."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:  # no such folder: named semaphores live elsewhere on this system
+        return
+    for entry in entries:
+        if match := _LOKY_SEMAPHORE.fullmatch(entry.name):
+            yield entry, int(match[1])
+
+
 def _semaphores_of_this_process() -> set[str]:
     """The files of the loky semaphores this process holds now."""
-    try:
-        names = os.listdir(_SEMAPHORE_FOLDER)
-    except OSError:
-        return set()
-    mine = str(os.getpid())
-    return {
-        os.path.join(_SEMAPHORE_FOLDER, name)
-        for name in names
-        if (match := _LOKY_SEMAPHORE.fullmatch(name)) and match[1] == mine
-    }
+    mine = os.getpid()
+    return {entry.path for entry, pid in _loky_semaphores(_SEMAPHORE_FOLDER) if pid == mine}
 
 
 def _until_unlinked(semaphores: set[str], seconds: float) -> None:
@@ -219,17 +225,9 @@ def remove_orphaned_semaphores(folder: str | os.PathLike[str] = _SEMAPHORE_FOLDE
     pcmb's process group kills loky's resource tracker too, which would have unlinked them.
     Only this user's regular files named ``sem.loky-PID-*`` whose process PID has ended (a
     pid reused since keeps them). The number removed (0 without ``folder``)."""
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:  # no such folder: named semaphores live elsewhere on this system
-        return 0
     ended: dict[int, bool] = {}
     removed = 0
-    for entry in entries:
-        match = _LOKY_SEMAPHORE.fullmatch(entry.name)
-        if match is None:
-            continue
-        pid = int(match[1])
+    for entry, pid in _loky_semaphores(folder):
         if pid not in ended:
             ended[pid] = not process_running(pid)
         try:
