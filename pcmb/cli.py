@@ -201,14 +201,8 @@ def _summary(config, address: str | None = None) -> str:
     made = "no nodes: solved from the model's equations" if design.grid == "none" else "nodes"
     grid = "" if design.grid == "none" else f"{design.grid} "
     lines.append(f"method   {design.kind}: {design.label}, {grid}{made}{seed}")
-    budget = getattr(study.design, "budget", nodes.size)  # an adaptive design's rounds
+    budget, first, most = study.planned_runs(nodes.size)
     rounds = f" in the first round, at most {budget} in all" if budget > nodes.size else ""
-    # The check is sized to the design's final runs: a refining one's up to its budget.
-    first, most = (
-        (study.held_out_runs(nodes.size)[0], study.held_out_runs(budget)[1])
-        if design.basis is not None
-        else (0, 0)
-    )
     upto = f"{first} to {most}" if most > first else f"{most}"
     checks = f" + {upto} held-out runs that check the expansion" if most else ""
     lines.append(
@@ -526,11 +520,10 @@ def _inspect(path: str) -> str:
             if undecided:
                 first = axis.values[np.argmax(found.undecided)]
                 verdict = f"undecided from {axis.name} = {first:.4g} (more held-out runs tell)"
-        fit = result.regression.get(name)
-        before = "; of the fit before the final fit" if fit and fit.held_out_fitted else ""
         lines.append(
             f"checked  {name}: {verdict} (tolerance {found.tolerance:g} of the largest std; "
-            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g}{before})"
+            f"{held}, decay up to {np.nanmax(found.decay, initial=0.0):.3g}"
+            f"{result.checked_fit(name)})"
         )
     if result.report is not None:  # what the design concluded, in its own words
         lines += [f"{label:<9}{text}" for label, text in result.report.summary(result)]

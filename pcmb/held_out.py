@@ -163,8 +163,8 @@ class HeldOutDraws:
 
     @property
     def tails(self) -> NDArray[np.bool_]:
-        """(K,) the tail draws: the runs whose failure does not stop a study, unless more
-        than ``TAIL_FAILURE_SHARE`` of the check's runs fail there."""
+        """(K,) the tail draws: the runs whose failure may not stop a study (``Study`` judges
+        whether more than ``TAIL_FAILURE_SHARE`` of the check's runs fail there)."""
         return self.beyond.any(axis=1)
 
     def checked(self, found: RunResult) -> tuple[HeldOut, tuple[WarningRecord, ...]]:

@@ -602,6 +602,12 @@ class StudyResult(ReportedByDesign):
         held_out = max(refitted.values())  # the same runs for every output refitted
         return f"the fit of {', '.join(refitted)} used {design} design + {held_out} held-out runs"
 
+    def checked_fit(self, output: str) -> str:
+        """``; of the fit before the final fit`` where ``output``'s verdict is of a fit its
+        stored expansion replaced (:attr:`RegressionFit.held_out_fitted`), else empty."""
+        fit = self.regression.get(output)
+        return "; of the fit before the final fit" if fit and fit.held_out_fitted else ""
+
     @property
     def node_params(self) -> dict[str, NDArray[np.float64]]:
         """Input name -> (N,) physical value at every node."""

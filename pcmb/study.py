@@ -482,12 +482,14 @@ class Study:
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> SizeEstimate:
-        """Upper estimate of the space a run writes (:func:`pcmb.run.output.estimate_size`),
-        every output (the derived ones too) counted as wide as the widest (``axes``: the
-        model's ``output_axes``)."""
+        """Upper estimate of the space a run from ``n_nodes`` nodes writes
+        (:func:`pcmb.run.output.estimate_size`): the most design and held-out runs it may make
+        (:meth:`planned_runs`), every output (the derived ones too) counted as wide as the
+        widest (``axes``: the model's ``output_axes``)."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
         count = len(outputs) + len(self.derived)
-        return estimate_size(n_nodes, max(widths, default=1), count, len(self.inputs))
+        design, _, held_out = self.planned_runs(n_nodes)
+        return estimate_size(design + held_out, max(widths, default=1), count, len(self.inputs))
 
     def memory_estimate(
         self,
@@ -495,19 +497,28 @@ class Study:
         outputs: Sequence[str],
         axes: Mapping[str, OutputAxis | None] | None = None,
     ) -> MemoryEstimate:
-        """Upper estimate of the memory a run needs (:mod:`pcmb.run.memory`): ``n_nodes``
-        nodes (an adaptive design: its budget is counted), the held-out runs and the range
-        check's draws of a method with an expansion, every output (the derived ones too) as
-        wide as the widest."""
+        """Upper estimate of the memory a run from ``n_nodes`` nodes needs
+        (:mod:`pcmb.run.memory`): the most design and held-out runs it may make
+        (:meth:`planned_runs`), the range check's draws of a method with an expansion, every
+        output (the derived ones too) as wide as the widest."""
         widths = Layout.of(outputs, self.times, axes or {}).widths
-        chaos = self.design.record().basis is not None
+        design, _, held_out = self.planned_runs(n_nodes)
         return MemoryEstimate(
-            nodes=max(n_nodes, getattr(self.design, "budget", n_nodes)),
-            held_out=self.held_out_runs(n_nodes)[1] if chaos else 0,
+            nodes=design,
+            held_out=held_out,
             width=max(widths, default=1),
             outputs=len(outputs) + len(self.derived),
-            draws=RANGE_DRAWS if chaos else 0,
+            draws=RANGE_DRAWS if self.design.record().basis is not None else 0,
         )
+
+    def planned_runs(self, n_nodes: int) -> tuple[int, int, int]:
+        """(most design runs, first batch and most in all of the held-out runs) of a run from
+        ``n_nodes`` nodes: a refining design may make up to its budget, and its check is sized
+        to those (:meth:`held_out_runs`); no held-out run without an expansion."""
+        design = max(n_nodes, getattr(self.design, "budget", n_nodes))
+        if self.design.record().basis is None:
+            return design, 0, 0
+        return design, self.held_out_runs(n_nodes)[0], self.held_out_runs(design)[1]
 
     def check_model(self, pool: Pool | None = None) -> tuple[str, ...]:
         """Build the model in a worker, check it against the study, and return the outputs
@@ -774,12 +785,13 @@ class Study:
                     min(wanted, most - first),
                     nodes.nodes,
                     batch=1,  # drawn: a placed check makes its runs at once
+                    earlier=held_out,
                 )
                 held_out = held_out.joined(self._with_derived(more))
                 held_out_failed = (*held_out_failed, *more_failed)
                 result = self._diagnosed(found, held_out, held_out_failed)
         if not intrusive:
-            result = self._final_fit(nodes, runs, nominal, found, result, stream)
+            result = self._final_fit(nodes, runs, found, result, stream)
         if self.analysis is not None and analysis is None:
             with phase("statistics (quantile bands, PDFs, spectra)", stream):
                 analysis = analyse(result, self.analysis)
@@ -1049,6 +1061,7 @@ class Study:
         keep: bool = True,
         runs_of: str = "node",
         tolerated: NDArray[np.bool_] | None = None,
+        earlier: tuple[int, int] = (0, 0),
     ) -> tuple[RunResult, Journal | None]:
         """Run every node (checked by the caller, :meth:`_check_finite`), journaled in the
         run's journal (its ``folder``, if given) when it has one (the journal is returned, to
@@ -1056,7 +1069,8 @@ class Study:
         overrides the study's; ``proven``: the model ran at the study's nodes already (see
         :func:`~pcmb.run.executor.run_nodes`); ``keep`` False: the values stay in the journal
         only (a streamed study); ``runs_of``: what the runs are, for the error, and
-        ``tolerated``: the runs whose failure the policy lets by (:meth:`_judge_failures`)."""
+        ``tolerated`` and ``earlier``: the runs whose failure the policy lets by, and the
+        check's earlier batches (:meth:`_judge_failures`)."""
         journal, fresh_journal = self._journal(run, nodes, folder)
         with removed_if_rejected(journal, fresh_journal):
             runs = self._campaign(
@@ -1068,7 +1082,7 @@ class Study:
                 keep=keep,
                 tolerated=tolerated,
             ).of(runs_of)
-        self._judge_failures(run, runs, journal, runs_of, tolerated)
+        self._judge_failures(run, runs, journal, runs_of, tolerated, earlier)
         return runs, journal
 
     def _journal(
@@ -1126,15 +1140,18 @@ class Study:
         journal: Journal | None,
         runs_of: str = "node",
         tolerated: NDArray[np.bool_] | None = None,
+        earlier: tuple[int, int] = (0, 0),
     ) -> None:
         """Raise a ModelRunError for failed runs unless the policy (``regress``) goes on, or
-        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and at most
-        ``TAIL_FAILURE_SHARE`` of the runs; ``runs_of``: what the runs are (``"held-out
-        run"``: numbered among those, and kept beside the design's nodes, which the error
-        names too: ``--resume`` keeps both)."""
+        all of them are ``tolerated`` (:attr:`~pcmb.held_out.HeldOutDraws.tails`) and, with
+        the ``earlier`` (runs, tail failures) of the check's batches before, at most
+        ``TAIL_FAILURE_SHARE`` of the check's runs fail in the tails; ``runs_of``: what the
+        runs are (``"held-out run"``: numbered among those, and kept beside the design's
+        nodes, which the error names too: ``--resume`` keeps both)."""
         failures = [f for f in runs.failures if tolerated is None or not tolerated[f.index]]
         in_tails = len(runs.failures) - len(failures)
-        too_many = in_tails > TAIL_FAILURE_SHARE * runs.status.size
+        checked, failed_before = earlier
+        too_many = in_tails + failed_before > TAIL_FAILURE_SHARE * (runs.status.size + checked)
         if too_many:
             failures = list(runs.failures)
         if not failures or self.execution.on_failure == "regress":
@@ -1161,7 +1178,9 @@ class Study:
             else ""
         )
         tails = (
-            f", {in_tails} of them in the tails, more than {TAIL_FAILURE_SHARE:.0%} of the "
+            f", {in_tails} of them in the tails"
+            + (f" and {failed_before} of the check's {checked} earlier runs" if checked else "")
+            + f", more than {TAIL_FAILURE_SHARE:.0%} of the "
             "check's runs: too many for it to stand on the rest"
             if too_many
             else ""
@@ -1190,14 +1209,16 @@ class Study:
         design: NDArray[np.float64],
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
+        earlier: HeldOut | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
         by the design's ``record``), batch ``batch`` of the check, placed to extend the
         design's nodes ``design`` (germ points) or drawn
         (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
         folder (``validation-<batch>`` after the first), under the failure policy, which the
-        tail draws' failures never trigger; and ``nodes-failed`` records naming those that
-        failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
+        tail draws' failures trigger only where, with the ``earlier`` batches' runs, too many
+        of the check's fail (:meth:`_judge_failures`); and ``nodes-failed`` records naming
+        those that failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
         if not count or record.basis is None:
             return None, ()
         draws = self._held_out.draws(count, design, values, batch)
@@ -1207,6 +1228,9 @@ class Study:
         halves = self.execution.chunk_size or -(-count // 2)
         # After the nodes (not after an intrusive solve) the model is known to work.
         proven = not hasattr(self.design, "solve")
+        # An earlier batch's failures are all tail draws': any other stopped the study, but
+        # under `regress`, which judges none.
+        before = (0, 0) if earlier is None else (earlier.ok.size, int(np.sum(~earlier.ok)))
         found, journal = self._run_nodes(
             run,
             draws.nodes,
@@ -1215,6 +1239,7 @@ class Study:
             proven=proven,
             runs_of=HELD_OUT_RUN,
             tolerated=draws.tails,
+            earlier=before,
         )
         if journal is not None:
             journal.close()  # the folder goes with the whole journal at the end
@@ -1261,7 +1286,6 @@ class Study:
         self,
         nodes: TensorGrid | NodeSet,
         runs: RunResult,
-        nominal: RunResult | None,
         found: StudyResult,
         judged: StudyResult,
         stream: TextIO | None,
@@ -1269,11 +1293,13 @@ class Study:
         """The ``judged`` result (``found``, the design's own fit, diagnosed) with the final
         fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`): every
         output the check does not vouch for fitted over the ``runs`` at its ``nodes`` and the
-        held-out runs that succeeded, weighted back by their importance weights; the others
-        keep the fit the check vouched for. Its expansions, report and records replace
-        ``found``'s; the diagnostics, verdict and corrected mean and std stay those of the
-        checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself for any other
-        design, without a held-out run that succeeded, or where the check vouches for all."""
+        held-out runs that succeeded, weighted back by their importance weights, its
+        expansion, report entry and records replacing ``found``'s (and a record of the
+        design's fit the final fit makes again: ``regression-budget``); the others keep the
+        fit the check vouched for. The diagnostics, verdict and corrected mean and std stay
+        those of the checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself
+        for any other design, without a held-out run that succeeded, or where the check
+        vouches for all."""
         held_out = judged.held_out
         if not hasattr(self.design, "refit") or held_out is None or not held_out.ok.any():
             return judged
@@ -1282,32 +1308,34 @@ class Study:
             return judged
         every = join_nodes(nodes, NodeSet(nodes.distributions, held_out.germ, held_out.params))
         values = {
-            name: np.concatenate([y, held_out.values[name]]) for name, y in runs.values.items()
+            name: np.concatenate([y, held_out.values[name]])
+            for name, y in runs.values.items()
+            if name not in vouched
         }
         ok = np.concatenate([runs.status == Status.OK, held_out.ok])
-        left_out = np.zeros_like(held_out.weights)
-        weights = {
-            name: np.concatenate(
-                [np.ones(nodes.size), left_out if name in vouched else held_out.weights]
-            )
-            for name in values
-        }
+        weights = np.concatenate([np.ones(nodes.size), held_out.weights])
         fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
         with phase(fitting, stream):
-            recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
-        fitted = dataclasses.replace(
-            found,
-            expansions=recovery.expansions,
-            report=recovery.report,
-            warnings=(*_nodes_failed(runs.failures, nodes.size), *recovery.warnings),
+            recovery = self._recover_by_axis(
+                every, values, ok, found.axes, dict.fromkeys(values, weights)
+            )
+        remade = {(record.code, record.output) for record in recovery.warnings}
+        kept = tuple(
+            record
+            for record in found.warnings
+            if record.output not in values and (record.code, record.output) not in remade
         )
-        fitted = self._with_nominal(fitted, nominal)
-        checked = tuple(record for record in judged.warnings if record not in found.warnings)
+        expansions = {
+            name: recovery.expansions.get(name, expansion)
+            for name, expansion in found.expansions.items()
+        }
+        report = recovery.report if found.report is None else found.report.merged(recovery.report)
         return dataclasses.replace(
             judged,
-            expansions=fitted.expansions,
-            report=fitted.report,
-            warnings=(*fitted.warnings, *checked),
+            expansions=expansions,
+            report=report,
+            # The check's records come after the design's (_diagnosed).
+            warnings=(*kept, *recovery.warnings, *judged.warnings[len(found.warnings) :]),
         )
 
     def _start_nominal(self, run: _RunContext) -> PendingRun | None:

@@ -287,3 +287,22 @@ def test_listed_times_are_the_grid_and_a_spectrum_refuses_them(tmp_path, capsys)
     config = _decay_config(tmp_path, "{values: [0.0, 0.5, 2.0, 5.0]}", "analysis: {psd: [y]}\n")
     assert main(["validate", config]) == 2
     assert "analysis.psd: a spectrum needs a uniform time grid" in capsys.readouterr().err
+
+
+def test_validate_sizes_the_file_for_the_runs_a_refining_design_may_make(
+    tmp_path, linear_study, capsys
+):
+    """``order: auto`` may end with its ``max_runs`` (200) design runs, checked by up to 50
+    held-out runs (max(8, ¼ of them)), all stored and journaled: the size line counts 250
+    runs, not the first round's nodes."""
+    from pcmb.run.output import estimate_size, format_bytes
+
+    config = linear_study()
+    text = config.read_text().replace("order: 3}", "order: auto, max_runs: 200}")
+    config.write_text(text.replace("  b: {dist: normal, mean: 0.0, std: 1.0}\n", ""))
+    assert main(["validate", str(config)]) == 0
+    summary = capsys.readouterr().out
+    assert "at most 200 in all + 8 to 50 held-out runs" in summary
+    # 5 times, outputs y and z, input a.
+    size = format_bytes(estimate_size(200 + 50, 5, 2, 1).total)
+    assert f"\nsize     about {size} at most" in summary, summary.splitlines()[-2]

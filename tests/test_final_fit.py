@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_sparse_regression import _settings
 
 import pcmb
 from pcmb.analysis.diagnostics import held_out_draws
@@ -77,19 +77,13 @@ def test_lars_reselects_its_terms_over_every_run():
     result = _run(_study(method))
     germ, values, weights = _all_runs(result, "y")
     design = result.expansions["y"]
-    candidates = SparseRegression(MIXED, _settings(orders=(5, 5), q=1.0)).candidates
+    candidates = SparseRegression(MIXED, _settings(orders=(5, 5), q=1.0, samples=32)).candidates
     every = fit_sparse(candidates, germ, values, "lars", weights)
     own = fit_sparse(candidates, result.germ, result.values["y"], "lars")
     assert not np.array_equal(every.multi_index, own.multi_index)  # the runs change the terms
     np.testing.assert_array_equal(result.regression["y"].selected, every.multi_index)
     np.testing.assert_allclose(result.regression["y"].loo, every.loo_error, rtol=1e-9)
     np.testing.assert_allclose(design.mean(), every.coefficients[0], rtol=1e-12)
-
-
-def _settings(**changes):
-    base = dict(kind="regression", orders=(6, 6, 6), basis="hyperbolic", samples=32, seed=0)
-    base.update(selection="lars", sampling="sobol", q=0.75, tolerance=None, max_samples=None)
-    return SimpleNamespace(**{**base, **changes})
 
 
 def test_the_final_fit_is_closer_to_the_closed_form_than_the_design_s_alone():
@@ -164,15 +158,24 @@ def test_a_resumed_study_makes_the_same_final_fit(tmp_path):
     assert back.regression["y"].held_out_fitted == 12
 
 
-def test_an_output_the_check_vouches_for_keeps_the_fit_it_checked():
+def test_an_output_the_check_vouches_for_keeps_the_fit_it_checked(monkeypatch):
     """p is a polynomial of the candidates: the check vouches for its design-only fit, which
-    stays (bit for bit the design's ``recover``); y is refitted."""
+    stays (bit for bit the design's ``recover``) and is not fitted again; y is refitted."""
+    refitted = []
+    refit = SparseRegression.refit
+
+    def spied(self, nodes, values, *args, **kwargs):
+        refitted.extend(values)
+        return refit(self, nodes, values, *args, **kwargs)
+
+    monkeypatch.setattr(SparseRegression, "refit", spied)
     method = {"kind": "regression", "samples": 32, "order": 3, "validation": 10}
     result = _run(_study(method))
+    assert refitted == ["y"]
     assert result.diagnostics["p"].vouched and not result.diagnostics["y"].vouched
     assert result.regression["p"].held_out_fitted == 0
     assert result.regression["y"].held_out_fitted == 10
-    design = SparseRegression(MIXED, _settings(orders=(3, 3), q=1.0))
+    design = SparseRegression(MIXED, _settings(orders=(3, 3), q=1.0, samples=32))
     nodes = design.nodes()
     own = design.recover(nodes, result.values, np.ones(nodes.size, dtype=bool))
     p = own.expansions["p"]

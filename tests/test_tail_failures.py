@@ -228,3 +228,26 @@ def test_tail_draws_are_retried_under_on_failure_retry():
     assert left_out.held_out.ok.sum() == 6
     (record,) = _tail_records(left_out)
     assert "transient failure 1" in record
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.PcmbWarning")
+def test_the_tail_share_is_judged_over_the_whole_check(monkeypatch):
+    """A second batch of held-out runs is judged with the first: at order 6 (nodes to ±3.75)
+    seed 8 draws two tail runs among its first 8, and its one more run at a germ of -4.07; all
+    three failing is 3 of the check's 9 runs, not too many, though the second batch's one run
+    fails (it stopped the study)."""
+    monkeypatch.setattr("pcmb.study.more_runs", lambda found: 1)
+    inputs = {"a": STIFFNESS, "b": pcmb.Uniform(0.0, 1.0)}
+    settings = {
+        "method": {"kind": "collocation", "order": 6, "seed": 8},
+        "outputs": ["y"],
+        "execution": {"backend": "inprocess", "on_failure": "abort", "nominal_run": False},
+    }
+    held_out = pcmb.Study(em.Ramp, inputs, TIMES, **settings).run().held_out
+    assert held_out.ok.size == 9
+    tails = np.flatnonzero(np.abs(held_out.germ[:, 0]) > 3.75)
+    assert list(tails) == [0, 2, 8], held_out.germ[tails, 0]
+    bad = held_out.params[tails, 0].tolist()
+    result = pcmb.Study(em.RaisingRamp, inputs, TIMES, params={"bad": bad}, **settings).run()
+    assert list(np.flatnonzero(~result.held_out.ok)) == [0, 2, 8]
+    assert all("in the tails of a" in record for record in _tail_records(result))

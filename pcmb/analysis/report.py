@@ -767,10 +767,7 @@ def _verdict(result: StudyResult, name: str, labels: _Labels) -> tuple[str, str]
     found = result.diagnostics.get(name)
     if found is None:
         return "info", "not checked (no chaos expansion)"
-    tolerance = f"tolerance {found.tolerance:g} of the largest std"
-    fit = result.regression.get(name)
-    if fit is not None and fit.held_out_fitted:  # the final fit is not the one checked
-        tolerance += "; of the fit before the final fit"
+    tolerance = f"tolerance {found.tolerance:g} of the largest std{result.checked_fit(name)}"
     if not found.reliable:
         axis = result.axis(name)
         where = "" if axis is None else f" from {labels.where(result, name, found.failing_from)}"

@@ -108,12 +108,13 @@ def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
     return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
 
 
-def estimated_error(fits: Mapping[str, SparseFit], runs: float) -> float:
-    """The largest :func:`loo_statistics_error` over outputs (0 without an output)."""
+def estimated_error(fits: Mapping[str, SparseFit], runs: Mapping[str, float]) -> float:
+    """The largest :func:`loo_statistics_error` over outputs, each fitted to the ``runs`` it
+    counts as (0 without an output)."""
     worst = 0.0
-    for fit in fits.values():
+    for name, fit in fits.items():
         std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
-        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs))
+        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs[name]))
     return worst
 
 
@@ -269,7 +270,8 @@ class SparseRegression:
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
         fits = {name: found.fit for name, found in self._fits(nodes, values, ok).items()}
-        self._history.append((nodes.size, estimated_error(fits, int(np.sum(ok)))))
+        runs = dict.fromkeys(fits, int(np.sum(ok)))
+        self._history.append((nodes.size, estimated_error(fits, runs)))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
@@ -279,15 +281,20 @@ class SparseRegression:
         ok: NDArray[np.bool_],
         weights: Mapping[str, NDArray[np.float64]] | None = None,
     ) -> dict[str, _Fit]:
-        """Each output's fit over its rows (``ok``, and a weight above 0); one that keeps no
-        held-out row is fitted unweighted, as :meth:`recover` fits the design's runs."""
+        """Each output's fit over its rows (``ok``, and with ``weights`` a weight above 0),
+        weighted by them."""
         fits = {}
         for name, y in values.items():
             rows = ok if weights is None else ok & (weights[name] > 0)
-            held_out = 0 if weights is None else int(rows[self._made :].sum())
-            kept = weights[name][rows] if held_out else None
+            kept = None if weights is None else weights[name][rows]
             fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
-            fits[name] = _Fit(fit, np.ones(int(rows.sum())) if kept is None else kept, held_out)
+            runs = int(rows.sum())
+            fits[name] = _Fit(
+                fit,
+                runs,
+                runs if kept is None else _effective(kept),
+                int(rows[self._made :].sum()),
+            )
         return fits
 
     def recover(
@@ -312,8 +319,7 @@ class SparseRegression:
         again, with the same candidates and selection (LARS and OMP select again), over
         ``nodes``, the design's runs followed by the held-out runs, by least squares weighted
         by its ``weights`` (N,): 1 for the design's runs, the held-out draws' importance
-        weights, 0 for a row left out. An output none of whose held-out runs is kept gets
-        the fit :meth:`recover` made. The records describe these fits; the design's record
+        weights, 0 for a row left out. The records describe these fits; the design's record
         is unchanged."""
         return self._recovery(nodes, values, ok, weights, times)
 
@@ -345,15 +351,11 @@ class SparseRegression:
                 )
         records = tuple(
             record
-            for name, (fit, rows, _) in weighted.items()
-            if (record := self._loo_warning(name, fit, rows.size, times)) is not None
+            for name, (fit, runs, _, _) in weighted.items()
+            if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        estimate = max(
-            (
-                estimated_error({name: fit}, _effective(rows))
-                for name, (fit, rows, _) in weighted.items()
-            ),
-            default=0.0,
+        estimate = estimated_error(
+            fits, {name: found.effective for name, found in weighted.items()}
         )
         if self.tolerance is not None and estimate > self.tolerance:
             records += (
@@ -370,7 +372,7 @@ class SparseRegression:
             name: RegressionFit(
                 fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out
             )
-            for name, (fit, _, held_out) in weighted.items()
+            for name, (fit, _, _, held_out) in weighted.items()
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
@@ -399,11 +401,12 @@ class SparseRegression:
 
 
 class _Fit(NamedTuple):
-    """An output's fit, the weights of the rows it was fitted to and how many of those rows
-    are held-out runs."""
+    """An output's fit, the rows it was fitted to, the runs they count as (weighted:
+    :func:`_effective`) and how many of them are held-out runs."""
 
     fit: SparseFit
-    weights: NDArray[np.float64]
+    runs: int
+    effective: float
     held_out: int
 
 
