@@ -52,6 +52,9 @@ CODES = frozenset(
         "output-constant",
     }
 )
+#: Runs needed beyond this many times those made: more held-out runs decide only slowly, and
+#: the ``chaos-undecided`` record says what makes the noise smaller instead.
+SLOW_DECISION = 10
 
 
 @dataclass(frozen=True)
@@ -355,6 +358,11 @@ def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) 
     else:
         more = more_runs(found)
         decide = f"about {more} more held-out runs would decide (method.validation: {count + more})"
+        if more > SLOW_DECISION * count:
+            decide += (
+                "; so many because the noise is the spread of the surrogate's own error, "
+                "which a finer design (a higher order, or elements) makes smaller"
+            )
     return WarningRecord(
         "chaos-undecided",
         f"the held-out check cannot tell whether mean and std hold within the tolerance "
