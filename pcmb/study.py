@@ -893,11 +893,11 @@ class Study:
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
         axes: Mapping[str, OutputAxis | None],
-        weights: Mapping[str, NDArray[np.float64]] | None = None,
+        weights: NDArray[np.float64] | None = None,
     ) -> Recovery:
         """The design's recovery of each axis's outputs (:func:`_by_axis`), merged in output
-        order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`); with row
-        ``weights`` per output, its final fit
+        order, with their reports merged (:meth:`~pcmb.result.DesignReport.merged`); with (N,)
+        row ``weights``, its final fit
         (:meth:`~pcmb.designs.base.RefittingDesign.refit`)."""
         parts = []
         for _, on_time, group in _by_axis(values, axes):
@@ -1316,9 +1316,7 @@ class Study:
         weights = np.concatenate([np.ones(nodes.size), held_out.weights])
         fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
         with phase(fitting, stream):
-            recovery = self._recover_by_axis(
-                every, values, ok, found.axes, dict.fromkeys(values, weights)
-            )
+            recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
         remade = {(record.code, record.output) for record in recovery.warnings}
         kept = tuple(
             record

@@ -105,7 +105,7 @@ def test_the_final_fit_is_closer_to_the_closed_form_than_the_design_s_alone():
         ok = np.ones(every.size, dtype=bool)
         values = {"y": np.exp(every.params @ [1.0, 0.5])}
         own = design.recover(nodes, {"y": values["y"][: nodes.size]}, ok[: nodes.size])
-        final = design.refit(every, values, ok, {"y": np.concatenate([ok[: nodes.size], weights])})
+        final = design.refit(every, values, ok, np.concatenate([ok[: nodes.size], weights]))
         for name, found in (("design", own), ("final", final)):
             expansion = found.expansions["y"]
             errors[name].append(max(abs(expansion.mean() - mean), abs(expansion.std() - sigma)))

@@ -236,13 +236,13 @@ class RefittingDesign(NodeDesign, Protocol):
         nodes: TensorGrid | NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: Mapping[str, NDArray[np.float64]],
+        weights: NDArray[np.float64],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         """Expansions of every output from the (N, T) values of the design's runs followed by
-        the held-out runs, as :meth:`~NodeDesign.recover` makes them, each output's rows
-        weighted by its ``weights`` (N,): 1 for the design's runs, the held-out draws'
-        importance weights, 0 for a row left out."""
+        the held-out runs, as :meth:`~NodeDesign.recover` makes them, the rows weighted by
+        ``weights`` (N,): 1 for the design's runs, the held-out draws' importance weights, 0
+        for a row left out."""
         ...
 
 

@@ -279,14 +279,14 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: Mapping[str, NDArray[np.float64]] | None = None,
+        weights: NDArray[np.float64] | None = None,
     ) -> dict[str, _Fit]:
         """Each output's fit over its rows (``ok``, and with ``weights`` a weight above 0),
         weighted by them."""
+        rows = ok if weights is None else ok & (weights > 0)
+        kept = None if weights is None else weights[rows]
         fits = {}
         for name, y in values.items():
-            rows = ok if weights is None else ok & (weights[name] > 0)
-            kept = None if weights is None else weights[name][rows]
             fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
             runs = int(rows.sum())
             fits[name] = _Fit(
@@ -312,7 +312,7 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: Mapping[str, NDArray[np.float64]],
+        weights: NDArray[np.float64],
         times: NDArray[np.float64] | None = None,
     ) -> Recovery:
         """The final fit (:class:`~pcmb.designs.base.RefittingDesign`): each output fitted
@@ -328,7 +328,7 @@ class SparseRegression:
         nodes: NodeSet,
         values: Mapping[str, NDArray[np.float64]],
         ok: NDArray[np.bool_],
-        weights: Mapping[str, NDArray[np.float64]] | None,
+        weights: NDArray[np.float64] | None,
         times: NDArray[np.float64] | None,
     ) -> Recovery:
         """The expansions of :meth:`recover` (``weights`` ``None``) or :meth:`refit`."""
