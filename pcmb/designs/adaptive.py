@@ -495,14 +495,13 @@ class AdaptiveCollocation(GrowingGrid):
         )
         if self._stopped is not None:
             reached = f"{self._rounds[-1].estimate:.3g}" if self._rounds else "unknown"
-            runs = f"{self._grid.size} runs ("
-            if self._at_budget:
-                runs = f"{self._grid.size} of {self.max_runs} runs (method.max_runs;"
+            # The budget is named only where it ended the rounds.
+            limit = f" of {self.max_runs} runs (method.max_runs;" if self._at_budget else " runs ("
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {runs} estimated error {reached}, "
-                    f"tolerance {self.tolerance:g}): {self._stopped}",
+                    f"the refinement ended early, after {self._grid.size}{limit} estimated error "
+                    f"{reached}, tolerance {self.tolerance:g}): {self._stopped}",
                 ),
             )
         return Recovery(recovery.expansions, warnings, AdaptiveReport(fit))

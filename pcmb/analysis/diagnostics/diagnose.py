@@ -222,8 +222,8 @@ def diagnose(
             predicted, observed, expansion.mean(), std, scale, weights=judged, germ=paired
         )
         # Draws that missed the tails carrying the variance saw none of the error there.
-        missed = coverage_error(expansion, predicted, observed, weights, scale)
-        checked = checked.widened(missed, scale)
+        unseen = coverage_error(expansion, predicted, observed, weights, scale)
+        checked = checked.widened(unseen, scale)
     # The held-out runs measure the errors of the statistics themselves; the decay only hints
     # at them (it is large for a response that is exactly a polynomial of the expansion's
     # order), so it decides only where there are no held-out runs.
