@@ -515,15 +515,14 @@ def test_order_auto_on_a_bouncing_ball_is_not_flagged_early(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_drawn_check_of_a_drifting_oscillator_keeps_its_measured_verdicts_on_seeds_0_to_9(
-    tmp_path,
-):
-    """Item 4, a pin of ten seeds (too few to show a confidence): x and v of
+def test_the_drawn_check_of_a_drifting_oscillator_is_within_its_confidence_on_ten_seeds(tmp_path):
+    """Item 4: x and v of
     x'' + 0.1 w x' + w² x = 0, w ~ U[1.8, 2.2], x(0) = x0 ~ N(1, 0.1²), to t = 20, tensor
-    order 3 (16 runs, a drawn check of 8): the truth's error passes 5 % at t = 18.8. Measured
-    on seeds 0-9: no seed calls a time past the crossing reliable, and one flags more than
-    5 % of the horizon early (seed 4, at t = 14.3); at each seed the corrected mean is within
-    two of its standard errors of the truth at 95 % of the times."""
+    order 3 (16 runs, a drawn check of 8): the truth's error passes 5 % at t = 18.8. At the
+    verdict's 90 % one-sided confidence, at most 3 of 10 seeds may call a time past the
+    crossing reliable, and at most 3 may flag 5 % of the horizon early (the binomial bound of a
+    10 % rate, 99 %; measured on seeds 0-9: none and one, seed 4 at t = 14.3); at each seed the
+    corrected mean is within two of its standard errors of the truth at 95 % of the times."""
     misses, early = set(), set()  # the seeds
     for seed in range(10):
         folder = tmp_path / str(seed)
@@ -543,7 +542,7 @@ def test_the_drawn_check_of_a_drifting_oscillator_keeps_its_measured_verdicts_on
                 early.add(seed)
             off = np.abs(verdict["corrected_mean"] - verdict["true_mean"])
             assert np.mean(off[1:] > 2 * verdict["corrected_mean_se"][1:]) <= 0.05
-    assert (misses, early) == (set(), {4})
+    assert len(misses) <= 3 and len(early) <= 3, (misses, early)
 
 
 @pytest.mark.parametrize(("stop", "batches", "held"), [(20.0, 1, 8), (40.0, 2, 12)])
