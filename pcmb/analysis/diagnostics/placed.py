@@ -169,7 +169,7 @@ def placed_check(
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         rich_std = np.sqrt(variance)
-        moved = np.sqrt(np.sum((probability * stds * unseen_std) ** 2, axis=0))
+        moved = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
         return (
             rich_mean,
             rich_std,
