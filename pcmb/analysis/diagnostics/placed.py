@@ -139,7 +139,9 @@ def placed_check(
     runs (of each element) are left out, shrunk by the rate at which they converge
     (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
     coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
-    it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
+    it) and, for the std, the interpolant's own error from the degrees beyond it
+    (:func:`_unseen_std_error`; at most each element's L2 distance); the spread is that of the
+    larger estimate (:func:`_larger_spread`; the corrected mean's adds the unseen error); the
     surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
     upper bound that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
@@ -161,7 +163,7 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
         means, stds, errors, unseen, unseen_std = (
             np.array(column) for column in zip(*found, strict=True)
@@ -169,13 +171,15 @@ def placed_check(
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         rich_std = np.sqrt(variance)
-        moved = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
+        # Each element's own std error, at most its distance from the expansion (the premise:
+        # the interpolant errs less than the design), moves the whole std by p_e s_e / std.
+        own = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
         return (
             rich_mean,
             rich_std,
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
-            np.divide(moved, rich_std, out=np.zeros_like(moved), where=rich_std > 0),
+            np.divide(own, rich_std, out=np.zeros_like(own), where=rich_std > 0),
         )
 
     rich_mean, rich_std, error, unseen, unseen_std = moments(0)
@@ -297,11 +301,12 @@ def _placed_moments(
     scale: float,
     spare: int,
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
+    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients), unseen
     mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
-    interpolant's degrees, at most its mean's difference from the design's) of the interpolant
-    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
-    without its last ``spare`` held-out runs, over the scale."""
+    interpolant's degrees, at most its mean's difference from the design's) and unseen std
+    error (:func:`_unseen_std_error`) of the interpolant through an element's nodes and
+    held-out runs (its first ``nodes`` points are its nodes) without its last ``spare``
+    held-out runs, over the scale."""
     kept = max(nodes, points.size - spare)
     own = own / scale
     coefficients = interpolated(family, points[:kept], values[:kept] / scale)
