@@ -300,7 +300,7 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients), unseen
     mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
     interpolant's degrees, at most its mean's difference from the design's) and unseen std
