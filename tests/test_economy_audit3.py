@@ -318,13 +318,13 @@ def test_a_jump_in_an_initial_condition_run_as_a_program_is_never_called_reliabl
     assert "Caution on the PDFs, quantile bands and Sobol' indices" in text
 
 
-@pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
     reason="a miss by the issue's measure: the drawn check of 8 runs (the budget, max(8, 25 // "
     "4)) calls the switch undecided at 56-60 of 61 times for seeds 0-2 (estimate 20 % ± 25 % "
     "against a truth of 12 %) and never flags it: no second batch fits the budget "
-    "(pcmb/analysis/diagnostics, held_out_budget), the chaos-undecided record asks for 819 more",
+    "(pcmb/analysis/diagnostics/draws.py, held_out_budget); the chaos-undecided record asks "
+    "for 819 more",
 )
 def test_a_jump_in_an_initial_condition_is_flagged_at_its_true_crossing(tmp_path):
     """Done when, line 1: the switch above (its Python twin, the same response) is flagged
@@ -509,14 +509,21 @@ def _chaospy_runs(function: str, error: float) -> int:
     ("function", "tolerance"),
     [
         ("shifted", 1e-2),
-        ("shifted", 1e-3),
         ("shifted", 1e-4),
-        ("ratio", 1e-2),
         ("ratio", 1e-3),
         ("ratio", 1e-4),
         ("ratio", 1e-5),
-        ("bend", 1e-2),
         ("bend", 1e-5),
+        pytest.param(
+            "ratio",
+            1e-2,
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="in band (true error 5.3e-3, estimate 5.2e-3) but 57 runs where "
+                "chaospy's level-2 Clenshaw-Curtis Smolyak grid (41 runs) is within 4.9e-3 "
+                "(cause not traced)",
+            ),
+        ),
         pytest.param(
             "shifted",
             1e-5,
