@@ -700,6 +700,44 @@ def test_the_adaptive_budget_record_reads_cleanly_where_a_rule_ran_out(tmp_path)
     assert "( " not in budget, budget
 
 
+REGRESSION = "{kind: regression, samples: 40, order: 8, tolerance: 0.01, max_samples: 1500, seed: 1"
+
+
+@pytest.mark.slow
+def test_regression_to_a_tolerance_is_judged_reliable_by_its_check(tmp_path):
+    """Item 1 for ``kind: regression`` with ``tolerance``: the shifted exp-sin function to
+    1e-2 (128 runs) ends with a true error of 6.2e-3 of the std; the default check (8 drawn
+    runs) calls it reliable, its estimate within 10x of the truth."""
+    path = _adaptive(tmp_path, "shifted", 3, REGRESSION + "}")
+    error = _adaptive_error(path, "shifted")
+    assert error <= 0.01
+    with h5py.File(path) as file:
+        estimate = file["diagnostics/y/estimate"][0]
+        assert np.isnan(file["diagnostics/y"].attrs["failing_from"])
+    assert error / 10 <= estimate <= 10 * error, (estimate, error)
+    _one_signal(inspect(path))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="without held-out runs the verdict reads the decay alone (17 % of the std in the "
+    "outer layers of the selected terms) and says UNRELIABLE from t = 0 (--strict exits 4) for "
+    "a true error of 6.2e-3, sending an entire function to multi-element chaos along x3 and x2 "
+    "('fall algebraically, energy ~ p^-6.5'; arctan(2 x1 + x2) + x3 e^{x4/2} to 1e-3 likewise, "
+    "true error 4.3e-4): RegressionReport (pcmb/designs/regression.py) does not give its "
+    "calibrated corrected-LOO estimate as statistics_error (pcmb/result.py returns None), so it "
+    "never bounds the decay as adaptive's and order: auto's do (docs/diagnostics.md)",
+)
+@pytest.mark.slow
+def test_regression_to_a_tolerance_without_a_check_is_not_a_false_alarm(tmp_path):
+    """Item 1 and Done when, no false alarm: the same fit with ``validation: 0`` is judged by
+    the design's own estimate, which met the tolerance; the verdict may not flag it."""
+    path = _adaptive(tmp_path, "shifted", 3, REGRESSION + ", validation: 0}")
+    assert _adaptive_error(path, "shifted") <= 0.01  # the premise: 0.62 % of the std
+    (checked,) = lines(inspect(path), "checked")
+    assert "UNRELIABLE" not in checked, checked
+
+
 # -- Items 3 and 5 through the contract: budgets, runs, bad keys ------------------------------
 
 
