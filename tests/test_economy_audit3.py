@@ -215,13 +215,12 @@ def _flag_near_crossing(times, error, verdict, tolerance=0.05) -> tuple[float, f
 # -- Done when, line 1: the five families, fresh ---------------------------------------------
 
 
-def test_a_heavy_tailed_hermite_sum_is_flagged_at_its_true_crossing(tmp_path):
-    """Item 4: y = exp(0.45 z t) + 0.3 z, z ~ N(0, 1), order 4 (5 runs). Mean e^{a²/2} and
-    E y² = e^{2a²} + 0.6 a e^{a²/2} + 0.09 (a = 0.45 t) in closed form: the truth passes 5 % at
-    t = 3.75; the placed check (8 runs, the budget) flags it within 5 % of the horizon, calls
-    no failing time reliable, and inspect states the runs the file holds."""
+def _tails(folder: Path):
+    """y = exp(0.45 z t) + 0.3 z, z ~ N(0, 1), order 4 (5 runs) to t = 5: :func:`true_error`
+    with mean e^{a²/2} and E y² = e^{2a²} + 0.6 a e^{a²/2} + 0.09 (a = 0.45 t), the closed
+    form, and the result file's path."""
     path = _run(
-        tmp_path,
+        folder,
         _model("tails", {"z": 0.0}),
         f"{{z: {NORMAL}}}",
         "{kind: collocation, order: 4}",
@@ -234,7 +233,14 @@ def test_a_heavy_tailed_hermite_sum_is_flagged_at_its_true_crossing(tmp_path):
         std = np.sqrt(np.exp(2 * a * a) + 0.6 * a * np.exp(a * a / 2) + 0.09 - mean * mean)
         return np.vstack([mean - std, mean + std])
 
-    times, error, verdict = true_error(path, "y", moments, np.array([0.5, 0.5]))
+    return *true_error(path, "y", moments, np.array([0.5, 0.5])), path
+
+
+def test_a_heavy_tailed_hermite_sum_is_flagged_at_its_true_crossing(tmp_path):
+    """Item 4: y = exp(0.45 z t) + 0.3 z, z ~ N(0, 1), order 4: the truth passes 5 % at
+    t = 3.75; the placed check (8 runs, the budget) flags it within 5 % of the horizon, calls
+    no failing time reliable, and inspect states the runs the file holds."""
+    times, error, verdict, path = _tails(tmp_path)
     crossing, flagged = _flag_near_crossing(times, error, verdict)
     assert 3.6 < crossing < 3.9  # the closed form's
     assert abs(flagged - crossing) <= 0.05 * times[-1]
@@ -242,6 +248,23 @@ def test_a_heavy_tailed_hermite_sum_is_flagged_at_its_true_crossing(tmp_path):
     assert verdict["holdout_count"] <= 8
     runs_line_agrees_with_the_file(path)
     _one_signal(inspect(path))
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the placed check's corrected_std_se (pcmb/analysis/diagnostics/placed.py, "
+    "placed_check: the move of the rich interpolant's std when 2 and 4 placed runs are left "
+    "out, shrunk by _converging) is 1e-6 to 5e-4 of the scale at t = 4.45-5 where the stored "
+    "corrected std is 0.6-6.6 % off the closed form: 12 % of the times beyond 3 standard "
+    "errors; the three interpolants share the error the leave-out moves cannot see",
+)
+def test_the_corrected_std_of_a_heavy_tailed_sum_is_within_its_standard_errors(tmp_path):
+    """Item 3: the corrected std the placed check stores beside the expansion's is within 3 of
+    its standard errors (or 0.5 % of the scale) of the closed form at 95 % of the times."""
+    times, _, verdict, _ = _tails(tmp_path)
+    off = np.abs(verdict["corrected_std"] - verdict["true_std"])
+    beyond = off > np.fmax(3 * verdict["corrected_std_se"], 0.005 * verdict["scale"])
+    assert np.mean(beyond) <= 0.05, times[beyond]
 
 
 def test_a_phase_drift_in_a_normal_frequency_is_flagged_and_told_to_raise_the_order(tmp_path):
