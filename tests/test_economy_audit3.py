@@ -311,8 +311,9 @@ def test_a_jump_in_an_initial_condition_run_as_a_program_is_never_called_reliabl
     U[0, 1] to 1 if x0 > 0.3, else to 0 (a jump in the initial condition), written by an
     external program; tensor order 4 (25 runs). The truth passes 5 % at t = 0.3 and reaches
     12 %: no failing time is called reliable, the drawn check stays within max(8, 25 // 4),
-    inspect and the report state the file's runs, and the surrogate's caution (its held-out
-    error passes the tolerance) is in the file, inspect and the report."""
+    inspect and the report state the file's runs, the surrogate's caution (its held-out error
+    passes the tolerance) is in the file, inspect and the report, and the PDF at t = 2, with
+    mass outside [0, 1] where y cannot go, is noted (``pdf-outside-runs``)."""
     (tmp_path / "switch.py").write_text(SWITCH)
     model = (
         "model: {kind: command, command: [python3, switch.py], files: [switch.py], "
@@ -335,6 +336,11 @@ def test_a_jump_in_an_initial_condition_run_as_a_program_is_never_called_reliabl
     assert '"surrogate-inaccurate"' in verdict["warnings"]
     shown = inspect(path)
     assert [line for line in lines(shown, "note") if "[surrogate-inaccurate]" in line]
+    with h5py.File(path) as file:  # y stays in [0, 1]: mass beyond is where no run can go
+        value, density = file["outputs/y/pdf/value"][0], file["outputs/y/pdf/density"][0]
+    assert np.sum((density * np.gradient(value))[(value < 0) | (value > 1)]) > 0.1
+    (outside,) = [line for line in lines(shown, "note") if "[pdf-outside-runs]" in line]
+    assert "the PDF at t = 2 " in outside, outside
     _one_signal(shown)
     text = report_text(path)
     assert "25 design nodes (25 ok, 0 failed, 0 pending); 8 held-out (8 ok); nominal run" in text
