@@ -767,6 +767,35 @@ def test_regression_to_a_tolerance_without_a_check_is_not_a_false_alarm(tmp_path
     assert "UNRELIABLE" not in checked, checked
 
 
+@pytest.mark.slow
+def test_a_sweep_of_adaptive_tolerances_measures_the_true_error(tmp_path):
+    """``pcmb sweep`` against ``{kind: collocation, order: 24}`` (exact to round-off here): its
+    table's runs are each setting's design and its errors of the mean and std are the true
+    errors of the independent Gauss–Legendre truth (adaptive on the shifted exp-sin function
+    at 1e-2..1e-4: 63, 79 and 127 runs, std errors 5.5e-4, 1.4e-4 and 1.4e-4 of the std)."""
+    names = {f"x{k}": 0.0 for k in (1, 2, 3)}
+    (tmp_path / "fresh.py").write_text(MODELS)
+    (tmp_path / "study.yaml").write_text(
+        f"name: sweep\n{_model('adaptive_shifted', names)}\n"
+        "time: {start: 0.0, stop: 1.0, points: 2}\n"
+        f"inputs: {{{', '.join(f'{name}: {UNIT}' for name in names)}}}\n"
+        "method: {kind: adaptive, tolerance: 1.0e-3}\nexecution: {backend: inprocess}\n"
+        "sweep:\n  methods:\n    - {kind: adaptive, tolerance: [1.0e-2, 1.0e-3, 1.0e-4]}\n"
+        "  reference: {kind: collocation, order: 24}\n"
+    )
+    done = pcmb_here("sweep", "study.yaml", "-o", "out", "--quiet", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    with h5py.File(tmp_path / "out" / "sweep.h5") as file:
+        table = {key: file[f"table/{key}"][:] for key in ("runs", "err_mean", "err_std", "file")}
+    assert len(table["runs"]) == 3
+    for runs, err_mean, err_std, name in zip(*table.values(), strict=True):
+        path = tmp_path / "out" / (name.decode() if isinstance(name, bytes) else str(name))
+        with h5py.File(path) as file:
+            assert file["nodes/params"].shape[0] == runs
+        error = _adaptive_error(path, "shifted")
+        assert max(err_mean, err_std) == pytest.approx(error, rel=1e-3, abs=1e-9)
+
+
 # -- Items 3 and 5 through the contract: budgets, runs, bad keys ------------------------------
 
 
