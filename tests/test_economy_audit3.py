@@ -370,6 +370,24 @@ def test_a_jump_in_an_initial_condition_is_flagged_at_its_true_crossing(tmp_path
     assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
 
 
+def test_the_held_out_runs_an_undecided_record_asks_for_decide_it(tmp_path):
+    """Item 4: the switch's ``chaos-undecided`` record says "about 819 more held-out runs would
+    decide (method.validation: 827)"; with ``validation: 827`` the verdict flags it within 5 %
+    of the horizon of the true crossing (t = 0.3) and calls no failing time reliable."""
+    path = _run(
+        tmp_path,
+        _model("switch", {"x0": 0.5, "k": 2.0}),
+        SWITCH_INPUTS,
+        "{kind: collocation, order: 4, validation: 827}",
+        "{start: 0.0, stop: 3.0, points: 61}",
+    )
+    times, error, verdict = _switch_error(path)
+    crossing, flagged = _flag_near_crossing(times, error, verdict)
+    assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
+    assert silent_times(times, error, verdict).size == 0
+    runs_line_agrees_with_the_file(path)
+
+
 @pytest.mark.xfail(
     strict=True,
     reason="seed 0: the drawn check calls v reliable at t = 1.6-1.9 where the truth is 6-8 % "
