@@ -953,3 +953,35 @@ def test_a_bad_key_in_a_methods_settings_is_named_before_any_run(tmp_path, metho
         done = pcmb_here(command, "study.yaml", cwd=tmp_path)
         assert done.returncode == 2 and named in done.stderr, done.stderr
     assert sorted(path.name for path in tmp_path.iterdir()) == ["fresh.py", "study.yaml"]
+
+
+@pytest.mark.parametrize(
+    ("method", "expected"),
+    [
+        (
+            "{kind: adaptive, tolerance: 1.0e-3, max_runs: 200}",
+            "7 model runs in the first round, at most 200 in all + 8 to 50 held-out runs",
+        ),
+        ("{kind: collocation, grid: smolyak, level: 3}", "111 model runs + 8 to 27 held-out runs"),
+        (
+            "{kind: regression, samples: 40, order: 6, tolerance: 1.0e-3, max_samples: 400}",
+            "40 model runs in the first round, at most 400 in all + 8 to 100 held-out runs",
+        ),
+    ],
+)
+def test_validate_counts_the_held_out_runs_of_nested_and_growing_designs(
+    tmp_path, method, expected
+):
+    """Item 2 through ``pcmb validate``: the check of a Smolyak grid, an adaptive grid and a
+    regression grown to a tolerance is at most max(8, ¼ of the most runs the design may make)."""
+    names = {f"x{k}": 0.0 for k in (1, 2, 3)}
+    (tmp_path / "fresh.py").write_text(MODELS)
+    (tmp_path / "study.yaml").write_text(
+        f"name: counts\n{_model('adaptive_shifted', names)}\n"
+        "time: {start: 0.0, stop: 1.0, points: 2}\n"
+        f"inputs: {{{', '.join(f'{name}: {UNIT}' for name in names)}}}\nmethod: {method}\n"
+    )
+    done = pcmb_here("validate", "study.yaml", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    (runs,) = lines(done.stdout, "runs")
+    assert runs == f"runs     {expected} that check the expansion (abort on failure)", runs
