@@ -82,6 +82,12 @@ def smooth4(params, times):
 
 
 @pcmb.batched(outputs=("y",))
+def tails2(params, times):
+    z1, z2 = (np.asarray(params[name])[:, None] for name in ("z1", "z2"))
+    return {"y": np.exp(0.35 * z1 * times) * (1 + 0.2 * z2)}
+
+
+@pcmb.batched(outputs=("y",))
 def square(params, times):
     z1, z2 = (np.asarray(params[name])[:, None] for name in ("z1", "z2"))
     return {"y": (z1 * z1 + 0.5 * z2 * z2) * np.sin(times)}
@@ -265,6 +271,38 @@ def test_the_corrected_std_of_a_heavy_tailed_sum_is_within_its_standard_errors(t
     off = np.abs(verdict["corrected_std"] - verdict["true_std"])
     beyond = off > np.fmax(3 * verdict["corrected_std_se"], 0.005 * verdict["scale"])
     assert np.mean(beyond) <= 0.05, times[beyond]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="no flag on seeds 0-5: undecided from t = 3.75-4.4 to the end (none silent) while the "
+    "truth reaches 92 % of the largest std at t = 6; seed 4's 8 drawn runs (the budget for 25; "
+    "pcmb/analysis/diagnostics/draws.py) reach z1 = 3.13, short of z1 ≈ 2a = 4.2 that carries "
+    "the std there: 7.9 % ± 36 %, its 90 % bound half the truth, 17788 more runs asked; seed 0 "
+    "reaches 4.02 at weight 1e-3: 63 % ± 118 %",
+)
+def test_a_heavy_tailed_response_of_two_normal_inputs_is_flagged_at_its_true_crossing(tmp_path):
+    """Item 4 and Done when, line 1: y = exp(0.35 z1 t) (1 + 0.2 z2), z ~ N(0, 1)², tensor
+    order 4 (25 runs), to t = 6, seed 4: mean e^{a²/2} and E y² = 1.04 e^{2a²} (a = 0.35 t)
+    in closed form; the truth passes 5 % at t = 4.65; the flag is within 5 % of the horizon."""
+    path = _run(
+        tmp_path,
+        _model("tails2", {"z1": 0.0, "z2": 0.0}),
+        f"{{z1: {NORMAL}, z2: {NORMAL}}}",
+        "{kind: collocation, order: 4, seed: 4}",
+        "{start: 0.0, stop: 6.0, points: 121}",
+    )
+
+    def moments(t):
+        a = 0.35 * t
+        mean = np.exp(a * a / 2)
+        std = np.sqrt(1.04 * np.exp(2 * a * a) - mean * mean)
+        return np.vstack([mean - std, mean + std])
+
+    times, error, verdict = true_error(path, "y", moments, np.array([0.5, 0.5]))
+    crossing, flagged = _flag_near_crossing(times, error, verdict)
+    assert 4.5 < crossing < 4.8  # the closed form's
+    assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
 
 
 def test_a_phase_drift_in_a_normal_frequency_is_flagged_and_told_to_raise_the_order(tmp_path):
