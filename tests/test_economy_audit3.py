@@ -411,7 +411,8 @@ def test_a_jump_in_an_initial_condition_is_flagged_at_its_true_crossing(tmp_path
 def test_the_held_out_runs_an_undecided_record_asks_for_decide_it(tmp_path):
     """Item 4: the switch's ``chaos-undecided`` record says "about 819 more held-out runs would
     decide (method.validation: 827)"; with ``validation: 827`` the verdict flags it within 5 %
-    of the horizon of the true crossing (t = 0.3) and calls no failing time reliable."""
+    of the horizon of the true crossing (t = 0.3), calls no failing time reliable, and sends
+    the jump in x0 to multi-element chaos along it."""
     path = _run(
         tmp_path,
         _model("switch", {"x0": 0.5, "k": 2.0}),
@@ -424,6 +425,23 @@ def test_the_held_out_runs_an_undecided_record_asks_for_decide_it(tmp_path):
     assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
     assert silent_times(times, error, verdict).size == 0
     runs_line_agrees_with_the_file(path)
+    (flag,) = [line for line in lines(inspect(path), "warning") if "[chaos-unreliable]" in line]
+    assert "consider multi-element chaos along x0 (method.elements)" in flag, flag
+
+
+def test_a_discontinuous_contact_is_sent_to_elements(tmp_path):
+    """Item 5: the wall below (seed 1, its flag at t = 1.15) is told multi-element chaos along
+    v0, the input its velocity jumps in, with the coefficients' algebraic decay as evidence."""
+    path = _run(
+        tmp_path,
+        _model("wall", {"v0": 1.0, "e": 0.5}, "[v]"),
+        WALL_INPUTS,
+        "{kind: collocation, order: 5, seed: 1}",
+        "{start: 0.0, stop: 4.0, points: 81}",
+    )
+    (flag,) = [line for line in lines(inspect(path), "warning") if "[chaos-unreliable]" in line]
+    assert "consider multi-element chaos along v0 (method.elements)" in flag, flag
+    assert "fall algebraically" in flag, flag
 
 
 @pytest.mark.xfail(
