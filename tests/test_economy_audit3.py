@@ -256,14 +256,6 @@ def test_a_heavy_tailed_hermite_sum_is_flagged_at_its_true_crossing(tmp_path):
     _one_signal(inspect(path))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the placed check's corrected_std_se (pcmb/analysis/diagnostics/placed.py, "
-    "placed_check: the move of the rich interpolant's std when 2 and 4 placed runs are left "
-    "out, shrunk by _converging) is 1e-6 to 5e-4 of the scale at t = 4.45-5 where the stored "
-    "corrected std is 0.6-6.6 % off the closed form: 12 % of the times beyond 3 standard "
-    "errors; the three interpolants share the error the leave-out moves cannot see",
-)
 def test_the_corrected_std_of_a_heavy_tailed_sum_is_within_its_standard_errors(tmp_path):
     """Item 3: the corrected std the placed check stores beside the expansion's is within 3 of
     its standard errors (or 0.5 % of the scale) of the closed form at 95 % of the times."""
@@ -856,12 +848,6 @@ def test_adaptive_on_a_step_never_ends_below_its_tolerance_while_the_truth_is_te
     _one_signal(shown)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="pcmb/designs/adaptive.py, AdaptiveCollocation.recover: where the budget is not the "
-    "limit, `limit` is ' runs (' before ' estimated error', so the record reads 'after 79 "
-    "runs ( estimated error 0.0469'",
-)
 def test_the_adaptive_budget_record_reads_cleanly_where_a_rule_ran_out(tmp_path):
     """The ``adaptive-budget`` record of the step (x1 at its rule's last level) is well formed."""
     path = _adaptive(tmp_path, "step", 3, "{kind: adaptive, tolerance: 0.01, validation: 0}")
