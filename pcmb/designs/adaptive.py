@@ -498,11 +498,11 @@ class AdaptiveCollocation(GrowingGrid):
         if self._stopped is not None:
             reached = f"{self._rounds[-1].estimate:.3g}" if self._rounds else "unknown"
             # The budget is named only where it ended the rounds.
-            limit = f" of {self.max_runs} runs (method.max_runs;" if self._at_budget else " runs ("
+            limit = f" of {self.max_runs} runs (method.max_runs; " if self._at_budget else " runs ("
             warnings += (
                 WarningRecord(
                     "adaptive-budget",
-                    f"the refinement ended early, after {self._grid.size}{limit} estimated error "
+                    f"the refinement ended early, after {self._grid.size}{limit}estimated error "
                     f"{reached}, tolerance {self.tolerance:g}): {self._stopped}",
                 ),
             )
