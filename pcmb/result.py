@@ -284,8 +284,14 @@ class DesignReport(ABC):
     def statistics_error(self) -> float | None:
         """The design's own estimate of the error of the mean and std, relative to the
         output's largest std (the largest over outputs and times), where it makes one that
-        is calibrated (``docs/methods.md``); ``None`` otherwise."""
+        is calibrated (``docs/methods.md``) from its records alone; ``None`` otherwise."""
         return None
+
+    def output_statistics_error(self, result: StudyResult, output: str) -> float | None:
+        """That estimate for ``output`` alone (the largest over its times), where the design
+        makes one per output from what ``result`` holds (a sparse regression's fit of each);
+        by default :meth:`statistics_error`, the largest over outputs, which bounds each."""
+        return self.statistics_error()
 
 
 #: A field of a :class:`RecordReport`'s record stored as a dataset whose last axis is the

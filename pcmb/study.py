@@ -1272,7 +1272,9 @@ class Study:
             axes=result.axes,
             nominal=result.nominal,
             budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
-            design_error=None if result.report is None else result.report.statistics_error(),
+            design_error=None
+            if result.report is None
+            else {name: result.report.output_statistics_error(result, name) for name in judged},
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

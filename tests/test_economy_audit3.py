@@ -873,16 +873,6 @@ def test_regression_to_a_tolerance_is_judged_reliable_by_its_check(tmp_path):
     _one_signal(inspect(path))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="without held-out runs the verdict reads the decay alone (17 % of the std in the "
-    "outer layers of the selected terms) and says UNRELIABLE from t = 0 (--strict exits 4) for "
-    "a true error of 6.2e-3, sending an entire function to multi-element chaos along x3 and x2 "
-    "('fall algebraically, energy ~ p^-6.5'; arctan(2 x1 + x2) + x3 e^{x4/2} to 1e-3 likewise, "
-    "true error 4.3e-4): RegressionReport (pcmb/designs/regression.py) does not give its "
-    "calibrated corrected-LOO estimate as statistics_error (pcmb/result.py returns None), so it "
-    "never bounds the decay as adaptive's and order: auto's do (docs/diagnostics.md)",
-)
 @pytest.mark.slow
 def test_regression_to_a_tolerance_without_a_check_is_not_a_false_alarm(tmp_path):
     """Item 1 and Done when, no false alarm: the same fit with ``validation: 0`` is judged by

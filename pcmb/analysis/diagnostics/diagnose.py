@@ -187,9 +187,9 @@ def diagnose(
         understated the spread; a second batch that completes the first's hypercube,
         :func:`~pcmb.analysis.diagnostics.draws.held_out_unit`, is not always exact).
     design_error:
-        The design's own calibrated estimate of the statistics' error
-        (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out
-        runs, where it meets the tolerance it bounds the decay's reading.
+        The design's own calibrated estimate of this output's statistics' error
+        (:meth:`pcmb.result.DesignReport.output_statistics_error`), or ``None``: without
+        held-out runs, where it meets the tolerance it bounds the decay's reading.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -472,7 +472,7 @@ def diagnose_all(
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
     budgets: Collection[str] = (),
-    design_error: float | None = None,
+    design_error: Mapping[str, float | None] | None = None,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -482,7 +482,8 @@ def diagnose_all(
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
     holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
     ``budgets`` the codes of the design's budget records and ``design_error`` its own
-    estimate of the statistics' error (:func:`diagnose`).
+    estimate of each output's statistics' error (output name -> :func:`diagnose`'s
+    ``design_error``; an output not in it has none).
     """
     found = {}
     for name, expansion in expansions.items():
@@ -510,7 +511,7 @@ def diagnose_all(
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
             held_out is not None and held_out.placed,
-            design_error,
+            None if design_error is None else design_error.get(name),
             held_out is None or held_out.batches == 1,
         )
     return found
