@@ -281,17 +281,17 @@ class DesignReport(ABC):
         another axis); a report of the whole study keeps its own."""
         return self
 
-    def statistics_error(self) -> float | None:
-        """The design's own estimate of the error of the mean and std, relative to the
-        output's largest std (the largest over outputs and times), where it makes one that
-        is calibrated (``docs/methods.md``) from its records alone; ``None`` otherwise."""
-        return None
+    #: How many times below the true error the design's estimate (:meth:`statistics_error`)
+    #: was measured to fall at worst: the verdict vouches by the estimate alone only where
+    #: this many times it meets the tolerance (``docs/diagnostics.md``).
+    UNDERSTATES: ClassVar[float] = 1.0
 
-    def output_statistics_error(self, result: StudyResult, output: str) -> float | None:
-        """That estimate for ``output`` alone (the largest over its times), where the design
-        makes one per output from what ``result`` holds (a sparse regression's fit of each);
-        by default :meth:`statistics_error`, the largest over outputs, which bounds each."""
-        return self.statistics_error()
+    def statistics_error(self, result: StudyResult, output: str) -> float | None:
+        """The design's own estimate of the error of ``output``'s mean and std, relative to
+        its largest std (the largest over its times; a design with one estimate for all
+        outputs gives the largest over them, which bounds each), where it makes one that is
+        calibrated (``docs/methods.md``) from what ``result`` holds; ``None`` otherwise."""
+        return None
 
 
 #: A field of a :class:`RecordReport`'s record stored as a dataset whose last axis is the

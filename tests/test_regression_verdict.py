@@ -1,6 +1,6 @@
 """A sparse regression's own estimate in the verdict: without held-out runs, each output's
 corrected-LOO estimate of the error of its mean and std
-(:meth:`~pcmb.designs.regression.RegressionReport.output_statistics_error`) bounds the decay's
+(:meth:`~pcmb.designs.regression.RegressionReport.statistics_error`) bounds the decay's
 reading where it meets the tolerance (``docs/diagnostics.md``)."""
 
 from __future__ import annotations
@@ -79,10 +79,10 @@ def test_each_output_is_judged_by_its_own_estimate_without_held_out_runs(method)
     assert (
         _true_error(result, "smooth") < TOLERANCE / 2 < 2 * TOLERANCE < _true_error(result, "wavy")
     )
-    own = result.report.output_statistics_error(result, "smooth")
+    own = result.report.statistics_error(result, "smooth")
     assert smooth.estimated_by == "design" and smooth.vouched, smooth
     np.testing.assert_allclose(smooth.estimate, own, rtol=1e-12)
-    assert result.report.output_statistics_error(result, "wavy") > TOLERANCE
+    assert result.report.statistics_error(result, "wavy") > TOLERANCE
     assert wavy.failing_from == 0.0 and not wavy.vouched, wavy
     assert [w.output for w in result.warnings if w.code == "chaos-unreliable"] == ["wavy"]
 
@@ -111,10 +111,8 @@ def test_a_file_read_back_gives_each_fit_the_same_estimate(tmp_path):
     assert not result.regression["p"].held_out_fitted
     assert {d.estimated_by for d in result.diagnostics.values()} == {"held-out"}
     back = pcmb.load(tmp_path / "r.h5")
-    estimates = {name: result.report.output_statistics_error(result, name) for name in ("y", "p")}
-    assert estimates == {
-        name: back.report.output_statistics_error(back, name) for name in estimates
-    }
+    estimates = {name: result.report.statistics_error(result, name) for name in ("y", "p")}
+    assert estimates == {name: back.report.statistics_error(back, name) for name in estimates}
     (record,) = [w for w in result.warnings if w.code == "regression-budget"]
     assert record.output == "y" and f"{estimates['y']:.3g} > 1e-09" in record.message
     held_out = result.held_out.weights[result.held_out.ok]
@@ -126,3 +124,34 @@ def test_a_file_read_back_gives_each_fit_the_same_estimate(tmp_path):
     assert estimates["p"] == loo_statistics_error(
         result.regression["p"].loo, result.expansions["p"].std(), 64
     )
+
+
+def test_an_estimate_within_its_calibration_of_the_tolerance_leaves_the_time_undecided():
+    """The G-function in 8 inputs (scripts/calibrate_adaptive.py), LARS on 64 runs, seed 3,
+    ``validation: 0``: the corrected-LOO estimate, 0.045, meets the tolerance 0.05 while the
+    decay says 1 and the true error is 0.17 (the estimate fell to 0.26 of the truth in its
+    calibration, docs/methods.md). Vouched for by the estimate at face value before; now
+    undecided, with a record that says held-out runs would decide."""
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "calibrate_adaptive.py"
+    calibration = runpy.run_path(str(script))
+    inputs, function, mean, std = calibration["FUNCTIONS"]["g_function"]()
+    names = list(inputs)
+
+    @pcmb.batched(outputs=("y",))
+    def g_function(params, times):
+        x = np.column_stack([np.asarray(params[name], dtype=float) for name in names])
+        return {"y": function(x)[:, None] * np.ones_like(times)}
+
+    order = calibration["REGRESSION_ORDER"]
+    method = {"kind": "regression", "order": order, "q": 0.75, "samples": 64, "seed": 3}
+    result = _run(g_function, inputs, {**method, "validation": 0})
+    true = max(abs(result.mean("y")[0] - mean), abs(result.std("y")[0] - std)) / std
+    own = result.report.statistics_error(result, "y")
+    assert own <= TOLERANCE < true  # the premise: the estimate understates the truth
+    found = result.diagnostics["y"]
+    assert not found.vouched and found.undecided.all() and np.isnan(found.failing_from)
+    (record,) = [w for w in result.warnings if w.code == "chaos-undecided"]
+    assert "held-out runs (method.validation) would decide" in record.message
