@@ -195,13 +195,14 @@ def test_validate_prints_the_first_round_and_the_budget(tmp_path):
 
 
 SLOW_WELL = """
+import os
 import time
 from double_well import DoubleWell
 
 
 class SlowWell(DoubleWell):
     def simulate(self, params, times):
-        time.sleep(0.1)
+        time.sleep(float(os.environ.get("WELL_DELAY", 0.0)))
         return super().simulate(params, times)
 """
 
@@ -220,10 +221,10 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     whole = pcmb_here("run", "whole.yaml", "-o", "whole.h5", cwd=tmp_path)
     assert whole.returncode == 0, whole.stderr
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "models"), str(ROOT)])}
-    process = subprocess.Popen(
+    process = subprocess.Popen(  # 0.1 s a run here, none in the resume
         [sys.executable, "-m", "pcmb.cli", "run", str(config), "-o", "cut.h5"],
         cwd=tmp_path,
-        env=env,
+        env={**env, "WELL_DELAY": "0.1"},
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
