@@ -208,7 +208,7 @@ class SlowWell(DoubleWell):
 
 
 @pytest.mark.slow
-def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
+def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path, monkeypatch):
     (tmp_path / "slow_well.py").write_text(SLOW_WELL)
     config = _auto_config(tmp_path, "SlowWell")
     data = yaml.safe_load(config.read_text())
@@ -236,14 +236,8 @@ def test_a_run_killed_between_rounds_resumes_to_the_same_result(tmp_path):
     os.killpg(process.pid, signal.SIGKILL)  # round 1 is journaled, round 2 has started
     process.wait()
     assert second.exists() and not (tmp_path / "cut.h5").exists()
-    resumed = subprocess.run(
-        [sys.executable, "-m", "pcmb.cli", "run", str(config), "-o", "cut.h5", "--resume"],
-        cwd=tmp_path,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    monkeypatch.syspath_prepend(ROOT / "models")  # slow_well.py's import, in this process
+    resumed = pcmb_here("run", str(config), "-o", "cut.h5", "--resume", cwd=tmp_path)
     assert resumed.returncode == 0, resumed.stderr
     a, b = pcmb.load(tmp_path / "whole.h5"), pcmb.load(tmp_path / "cut.h5")
     np.testing.assert_array_equal(a.params, b.params)
