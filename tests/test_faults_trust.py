@@ -10,9 +10,7 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-import shutil
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -325,10 +323,12 @@ def test_a_planted_fmu_cache_entry_never_runs(
     marker = tmp_path / "planted-code-ran"
     digest = hashlib.sha256(oscillator_fmu.read_bytes()).hexdigest()[:32]
     cache = tmp_path / "cache"
-    # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it), and
-    # where it does now: the user's own cache, private, whose entries it checks (an entry
-    # edited in place, or a link to a folder elsewhere).
-    shared = Path(tempfile.gettempdir()) / "pcmb-fmu" / digest
+    # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it: the
+    # run's $TMPDIR, this test's own so that no other test process meets it), and where it
+    # does now: the user's own cache, private, whose entries it checks (an entry edited in
+    # place, or a link to a folder elsewhere).
+    temporary = tmp_path / "tmp"
+    shared = temporary / "pcmb-fmu" / digest
     private = cache / "pcmb" / "fmu" / digest
     plant(oscillator_fmu, shared, marker)
     if how == "edited":
@@ -343,10 +343,8 @@ def test_a_planted_fmu_cache_entry_never_runs(
     (tmp_path / "study.yaml").write_text(
         FMU_CONFIG.format(fmu=oscillator_fmu, inputs=f"{K_INPUT}\n{C_INPUT}")
     )
-    try:
-        done = pcmb_cli("run", "study.yaml", "--quiet", env=study_env(cache), cwd=tmp_path)
-    finally:
-        shutil.rmtree(shared)
+    environment = {**study_env(cache), "TMPDIR": str(temporary)}
+    done = pcmb_cli("run", "study.yaml", "--quiet", env=environment, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not marker.exists()
     import pcmb
