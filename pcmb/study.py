@@ -1294,12 +1294,11 @@ class Study:
         fit of a design that refits (:class:`~pcmb.designs.base.RefittingDesign`): every
         output the check does not vouch for fitted over the ``runs`` at its ``nodes`` and the
         held-out runs that succeeded, weighted back by their importance weights, its
-        expansion, report entry and records replacing ``found``'s (and a record of the
-        design's fit the final fit makes again: ``regression-budget``); the others keep the
-        fit the check vouched for. The diagnostics, verdict and corrected mean and std stay
-        those of the checked fit (``docs/methods.md``, "The final fit"). ``judged`` itself
-        for any other design, without a held-out run that succeeded, or where the check
-        vouches for all."""
+        expansion, report entry and records (``regression-budget`` among them: judged on the
+        final fit) replacing ``found``'s; the others keep the fit the check vouched for. The
+        diagnostics, verdict and corrected mean and std stay those of the checked fit
+        (``docs/methods.md``, "The final fit"). ``judged`` itself for any other design,
+        without a held-out run that succeeded, or where the check vouches for all."""
         held_out = judged.held_out
         if not hasattr(self.design, "refit") or held_out is None or not held_out.ok.any():
             return judged
@@ -1317,12 +1316,7 @@ class Study:
         fitting = f"final fit with {plural(int(held_out.ok.sum()), 'held-out run')}"
         with phase(fitting, stream):
             recovery = self._recover_by_axis(every, values, ok, found.axes, weights)
-        remade = {(record.code, record.output) for record in recovery.warnings}
-        kept = tuple(
-            record
-            for record in found.warnings
-            if record.output not in values and (record.code, record.output) not in remade
-        )
+        kept = tuple(record for record in found.warnings if record.output not in values)
         expansions = {
             name: recovery.expansions.get(name, expansion)
             for name, expansion in found.expansions.items()

@@ -3,6 +3,8 @@ run as a user would, what ``pcmb inspect`` prints, and the true error of a resul
 
 from __future__ import annotations
 
+import html
+import re
 from pathlib import Path
 
 import h5py
@@ -60,3 +62,20 @@ def true_error(path: Path, output: str, response, weights: np.ndarray):
             abs(file[f"outputs/{output}/std"][:] - std),
         )
     return times, error / verdict["scale"], verdict
+
+
+def report_text(path: Path) -> str:
+    """``pcmb report``'s index page of the result file at ``path`` as text (tags, styles and
+    images dropped)."""
+    done = pcmb_here("report", str(path), "-o", str(path.parent / "report"))
+    assert done.returncode == 0, done.stderr
+    page = (path.parent / "report" / "index.html").read_text()
+    page = re.sub(r"<(style|script)\b.*?</\1>", " ", page, flags=re.S)
+    return html.unescape(re.sub(r"\s+", " ", re.sub(r"<[^>]+>", " ", page)))
+
+
+def silent_times(times: np.ndarray, error: np.ndarray, verdict: dict, tolerance: float = 0.05):
+    """The times whose true ``error`` passes ``tolerance`` that the verdict neither flags nor
+    calls undecided: where it calls the output reliable while it is not."""
+    judged = verdict["undecided"].astype(bool) | (times >= verdict["failing_from"])
+    return times[(error > tolerance) & ~judged]

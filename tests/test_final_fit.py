@@ -16,7 +16,7 @@ from pcmb.chaos.basis import PolynomialBasis
 from pcmb.chaos.nodes import join_nodes
 from pcmb.chaos.sparse_regression import fit_sparse
 from pcmb.cli import _inspect, _runs_made
-from pcmb.designs.regression import SparseRegression
+from pcmb.designs.regression import SparseRegression, loo_statistics_error
 from pcmb.errors import ModelRunError
 
 TIMES = np.array([0.0, 0.5, 1.0])
@@ -232,3 +232,40 @@ def test_a_file_written_before_the_final_fit_reads_as_fitted_to_the_design_alone
             del file[f"outputs/{name}"].attrs["held_out_fitted"]
     back = pcmb.load(tmp_path / "r.h5")
     assert back.regression["y"].held_out_fitted == 0 and not back.fitted_runs
+
+
+def test_the_budget_record_names_the_output_that_missed_the_tolerance():
+    """``regression-budget`` is about the output whose estimate missed ``method.tolerance``: y,
+    not p (an exact polynomial of the candidates, its estimate at round-off)."""
+    method = {"kind": "regression", "samples": 32, "order": 3, "tolerance": 1e-3}
+    result = _run(_study({**method, "max_samples": 64, "validation": 0}))
+    records = [w for w in result.warnings if w.code == "regression-budget"]
+    assert [w.output for w in records] == ["y"]
+
+
+def test_the_budget_record_is_the_final_fit_s_own():
+    """A refitted output's ``regression-budget`` is judged on its final fit: at a tolerance
+    between y's estimate over the design's 64 runs (its budget) and over those and 32 held-out
+    runs, the design's record does not stay; below both, its figure is the final fit's."""
+    method = {"kind": "regression", "samples": 32, "order": 3, "max_samples": 64}
+    probe = _run(_study({**method, "tolerance": 1e-9, "validation": 32}))
+    design = SparseRegression(MIXED, _settings(orders=(3, 3), q=1.0, samples=64))
+    nodes = design.nodes()
+    ok = probe.status == pcmb.Status.OK
+    own = design.recover(nodes, {"y": probe.values["y"]}, ok)
+    germ, values, weights = _all_runs(probe, "y")
+    every = pcmb.chaos.nodes.NodeSet(nodes.distributions, germ, germ)
+    final = design.refit(every, {"y": values}, np.ones(len(weights), dtype=bool), weights)
+    effective = np.sum(weights) ** 2 / np.sum(weights**2)  # the runs the rows count as
+    before, after = _estimate(own, "y", nodes.size), _estimate(final, "y", effective)
+    assert after < before / 1.5  # the premise: the held-out runs lower the estimate
+    between = _run(_study({**method, "tolerance": np.sqrt(before * after), "validation": 32}))
+    assert not [w for w in between.warnings if w.code == "regression-budget"]
+    (record,) = [w for w in probe.warnings if w.code == "regression-budget"]
+    assert f"{after:.3g} > 1e-09" in record.message
+
+
+def _estimate(found, name: str, runs: float) -> float:
+    """The estimated error of the mean and std of a recovery's fit of ``name`` to ``runs``."""
+    fit = found.report.regression[name]
+    return loo_statistics_error(fit.loo, found.expansions[name].std(), runs)

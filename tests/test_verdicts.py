@@ -163,6 +163,16 @@ def test_adaptive_stopped_by_max_runs_names_it_with_the_numbers():
     assert f"{result.n_nodes} of 12 runs" in message and "raise method.max_runs" in message
 
 
+def test_adaptive_stopped_by_its_rule_s_last_level_reads_cleanly():
+    """Where the rule's last level, not ``max_runs``, ended the rounds, the record neither
+    names the budget nor leaves a stray bracket ("after 31 runs ( estimated error")."""
+    result, message = _budget_record(
+        "adaptive-budget", method="adaptive", tolerance=1e-9, max_runs=5000
+    )
+    assert f"after {result.n_nodes} runs (estimated error " in message
+    assert "method.max_runs" not in message
+
+
 def test_regression_stopped_by_max_samples_names_it_with_the_numbers():
     result, message = _budget_record(
         "regression-budget",

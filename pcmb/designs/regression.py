@@ -103,19 +103,19 @@ LOO_WARNING = 1e-2
 MAX_GROWTH = 16
 
 
-def _worst_loo(fits: Mapping[str, SparseFit]) -> float:
-    """The largest corrected LOO error over outputs and times (0 without an output)."""
-    return max((float(np.nanmax(f.loo_error, initial=0.0)) for f in fits.values()), default=0.0)
+def output_errors(fits: Mapping[str, SparseFit], runs: Mapping[str, float]) -> dict[str, float]:
+    """Each output's :func:`loo_statistics_error`, fitted to the ``runs`` it counts as."""
+    return {
+        name: loo_statistics_error(
+            fit.loo_error, np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0)), runs[name]
+        )
+        for name, fit in fits.items()
+    }
 
 
 def estimated_error(fits: Mapping[str, SparseFit], runs: Mapping[str, float]) -> float:
-    """The largest :func:`loo_statistics_error` over outputs, each fitted to the ``runs`` it
-    counts as (0 without an output)."""
-    worst = 0.0
-    for name, fit in fits.items():
-        std = np.sqrt(np.sum(fit.coefficients[1:] ** 2, axis=0))
-        worst = max(worst, loo_statistics_error(fit.loo_error, std, runs[name]))
-    return worst
+    """The largest :func:`output_errors` (0 without an output)."""
+    return max(output_errors(fits, runs).values(), default=0.0)
 
 
 def loo_statistics_error(loo: ArrayLike, std: ArrayLike, runs: float) -> float:
@@ -354,20 +354,12 @@ class SparseRegression:
             for name, (fit, runs, _, _) in weighted.items()
             if (record := self._loo_warning(name, fit, runs, times)) is not None
         )
-        estimate = estimated_error(
-            fits, {name: found.effective for name, found in weighted.items()}
+        errors = output_errors(fits, {name: found.effective for name, found in weighted.items()})
+        records += tuple(
+            self._budget_warning(name, error, fits[name])
+            for name, error in errors.items()
+            if self.tolerance is not None and error > self.tolerance
         )
-        if self.tolerance is not None and estimate > self.tolerance:
-            records += (
-                WarningRecord(
-                    "regression-budget",
-                    f"the rounds ended after {self._made} of {self.max_samples} runs "
-                    f"(method.max_samples) before the tolerance was met: estimated error of the "
-                    f"mean and std {estimate:.3g} > {self.tolerance:g} (from the worst corrected "
-                    f"leave-one-out error {_worst_loo(fits):.3g}); raise method.max_samples, or "
-                    "lower the order",
-                ),
-            )
         regression = {
             name: RegressionFit(
                 fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out
@@ -376,6 +368,19 @@ class SparseRegression:
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
+
+    def _budget_warning(self, name: str, estimate: float, fit: SparseFit) -> WarningRecord:
+        """The ``regression-budget`` record of an output whose estimated error of the mean and
+        std, ``estimate``, missed ``method.tolerance`` when ``max_samples`` ended the rounds."""
+        return WarningRecord(
+            "regression-budget",
+            f"the rounds ended after {self._made} of {self.max_samples} runs "
+            f"(method.max_samples) before the tolerance was met: estimated error of the mean "
+            f"and std {estimate:.3g} > {self.tolerance:g} (from the corrected leave-one-out "
+            f"error up to {float(np.nanmax(fit.loo_error, initial=0.0)):.3g}); raise "
+            "method.max_samples, or lower the order",
+            name,
+        )
 
     def _loo_warning(
         self, name: str, fit: SparseFit, runs: int, times: NDArray[np.float64] | None

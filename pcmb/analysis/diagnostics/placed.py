@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
+from pcmb.analysis.diagnostics.check import CONFIDENCE, STANDARD_NORMAL, HeldOutCheck
 from pcmb.analysis.diagnostics.decay import SHAPE_LAYERS, next_coefficient
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
@@ -34,32 +34,61 @@ def _unseen_mean_error(
 ) -> NDArray[np.float64]:
     """(T,) estimated error of the mean of the interpolant of (M, T) ``coefficients`` through
     the (M,) germ ``points`` from the degrees beyond it: the error of its interpolatory rule
-    on them. Where the design's own rule integrates every degree below M exactly, the two
-    rules agree on every response, and this is the design mean's error itself.
+    on them (:func:`_unseen_energies`). Where the design's own rule integrates every degree
+    below M exactly, the two rules agree on every response, and this is the design mean's
+    error itself."""
+    energies = _unseen_energies(coefficients)
+    if energies is None:
+        return np.zeros(coefficients.shape[1:])
+    first = coefficients.shape[0]
+    last = first + energies.shape[0] - 1
+    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
+    return np.sqrt(np.sum(energies * rule_errors[first:, None] ** 2, axis=0))
+
+
+def _unseen_std_error(
+    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """(T,) estimated error of the std of the interpolant of (M, T) ``coefficients`` through
+    the (M,) germ ``points`` from the degrees beyond it (:func:`_unseen_energies`): each
+    aliases onto degrees 1 to M - 1 as its own interpolant there, which moves the std by that
+    interpolant's projection on the interpolant's own direction (to first order)."""
+    energies = _unseen_energies(coefficients)
+    if energies is None:
+        return np.zeros(coefficients.shape[1:])
+    first = coefficients.shape[0]
+    last = first + energies.shape[0] - 1
+    aliased = interpolated(family, points, family.evaluate(points, last)[:, first:])[1:]
+    varying = coefficients[1:]
+    norm = np.sqrt(np.sum(varying**2, axis=0))
+    along = np.divide(aliased.T @ varying, norm, out=np.zeros(energies.shape), where=norm > 0)
+    return np.sqrt(np.sum(energies * along**2, axis=0))
+
+
+def _unseen_energies(coefficients: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """(U, T) extrapolated energies of degrees M to ``UNSEEN_DEGREES`` × M of the function
+    whose interpolant has (M, T) ``coefficients``, or None with fewer than ``SHAPE_LAYERS``
+    averages to fit (M < 5: an element without placed runs, whose own three degrees once read
+    flat extrapolated its 4-point rule's errors into a false alarm).
 
     The energies of degrees 1 to M - 1 (neighbours averaged), from the spectrum's peak on
     (all of them with fewer than ``SHAPE_LAYERS`` after it), are fitted by a line against p
-    and against log p, each extrapolated up to degree ``UNSEEN_DEGREES`` × M, the larger
-    kept, and weighted by the squared error of the rule on each degree; zeros with fewer than
-    ``SHAPE_LAYERS`` averages (M < 5: an element without placed runs, whose own three degrees
-    once read flat extrapolated its 4-point rule's errors into a false alarm)."""
+    and against log p, each extrapolated, and the larger kept."""
     first = coefficients.shape[0]
-    last = UNSEEN_DEGREES * first
     # Degrees 1 to M - 1 make M - 2 neighbour averages; fewer than three cannot tell a shape.
     if first - 2 < SHAPE_LAYERS:
-        return np.zeros(coefficients.shape[1:])
-    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
+        return None
     energy = coefficients[1:] ** 2
     paired = np.log(0.5 * (energy[:-1] + energy[1:]) + np.finfo(float).tiny)
     seen = np.arange(1.0, first - 1)
     fitted = np.arange(seen.size)[:, None] >= np.argmax(paired, axis=0)
     fitted[:, fitted.sum(axis=0) < SHAPE_LAYERS] = True
-    unseen = np.arange(first, last + 1.0)[:, None]
+    unseen = np.arange(first, UNSEEN_DEGREES * first + 1.0)[:, None]
     tails = [
         _extrapolated(transform(seen), paired, fitted, transform(unseen))
         for transform in (np.asarray, np.log)
     ]
-    return np.sqrt(np.sum(np.fmax(*tails) * rule_errors[first:, None] ** 2, axis=0))
+    return np.fmax(*tails)
 
 
 def _extrapolated(
@@ -110,7 +139,9 @@ def placed_check(
     runs (of each element) are left out, shrunk by the rate at which they converge
     (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
     coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
-    it), the spread that of the larger estimate (the corrected mean's adds the unseen error); the
+    it) and, for the std, the interpolant's own error from the degrees beyond it
+    (:func:`_unseen_std_error`; at most each element's L2 distance); the spread is that of the
+    larger estimate (:func:`_larger_spread`; the corrected mean's adds the unseen error); the
     surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
     upper bound that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
@@ -132,19 +163,26 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
-        means, stds, errors, unseen = (np.array(column) for column in zip(*found, strict=True))
+        means, stds, errors, unseen, unseen_std = (
+            np.array(column) for column in zip(*found, strict=True)
+        )
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
+        rich_std = np.sqrt(variance)
+        # Each element's own std error, at most its distance from the expansion (the premise:
+        # the interpolant errs less than the design), moves the whole std by p_e s_e / std.
+        own = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
         return (
             rich_mean,
-            np.sqrt(variance),
+            rich_std,
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
+            np.divide(own, rich_std, out=np.zeros_like(own), where=rich_std > 0),
         )
 
-    rich_mean, rich_std, error, unseen = moments(0)
+    rich_mean, rich_std, error, unseen, unseen_std = moments(0)
     # The elements without held-out runs, which nothing checks, add their next coefficients.
     unchecked = np.sqrt(
         sum(
@@ -158,19 +196,19 @@ def placed_check(
         np.abs(rich_std - std / scale),
     )
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_error, fewer_unseen = moments(PLACED_SPARE)
+        fewer_mean, fewer_std, fewer_error, fewer_unseen, _ = moments(PLACED_SPARE)
         fewer_mean_error = np.abs(fewer_mean - mean / scale) + fewer_unseen
         # The unseen mean's noise, like the rest, is how far the estimate holding it moves (its
         # size is a bias, which the corrected mean, leaving it out, adds to that noise); the
         # elements without runs, which nothing checks, add their next coefficients.
         mean_moved, std_moved = np.abs(mean_error - fewer_mean_error), np.abs(rich_std - fewer_std)
         if count > 2 * PLACED_SPARE:
-            least_mean, least_std, _, least_unseen = moments(2 * PLACED_SPARE)
+            least_mean, least_std, _, least_unseen, _ = moments(2 * PLACED_SPARE)
             least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
             mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
             std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
         mean_se = np.hypot(mean_moved, unchecked)
-        std_se = np.hypot(std_moved, unchecked)
+        std_se = np.hypot(np.hypot(std_moved, unseen_std), unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
@@ -179,7 +217,7 @@ def placed_check(
         error + moved,
         mean_error,
         std_error,
-        np.where(mean_error >= std_error, mean_se, std_se),
+        _larger_spread(mean_error, mean_se, std_error, std_se, confidence),
         rich_mean * scale,
         rich_std * scale,
         (mean_se + unseen) * scale,
@@ -187,6 +225,21 @@ def placed_check(
         count,
         confidence,
     )
+
+
+def _larger_spread(
+    mean_error: NDArray[np.float64],
+    mean_se: NDArray[np.float64],
+    std_error: NDArray[np.float64],
+    std_se: NDArray[np.float64],
+    confidence: float,
+) -> NDArray[np.float64]:
+    """(T,) standard error of the larger of the two estimates, each with its own: the larger
+    lies above the larger of their lower confidence bounds (a std estimate that is mostly the
+    interpolant's own error leaves a steady mean's flag standing)."""
+    quantile = STANDARD_NORMAL.inv_cdf(confidence)
+    lower = np.fmax(mean_error - quantile * mean_se, std_error - quantile * std_se)
+    return (np.fmax(mean_error, std_error) - lower) / quantile
 
 
 def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -247,17 +300,19 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients) and unseen
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients), unseen
     mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
-    interpolant's degrees, at most its mean's difference from the design's) of the interpolant
-    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
-    without its last ``spare`` held-out runs, over the scale."""
+    interpolant's degrees, at most its mean's difference from the design's) and unseen std
+    error (:func:`_unseen_std_error`) of the interpolant through an element's nodes and
+    held-out runs (its first ``nodes`` points are its nodes) without its last ``spare``
+    held-out runs, over the scale."""
     kept = max(nodes, points.size - spare)
     own = own / scale
     coefficients = interpolated(family, points[:kept], values[:kept] / scale)
     missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
     unseen = _unseen_mean_error(family, points[:kept], coefficients)
+    unseen_std = _unseen_std_error(family, points[:kept], coefficients)
     design = points[:nodes]
     rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
     if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
@@ -269,4 +324,5 @@ def _placed_moments(
         np.sqrt(np.sum(coefficients[1:] ** 2, axis=0)),
         np.sqrt(missed + np.sum(own[kept:] ** 2, axis=0)),
         unseen,
+        unseen_std,
     )
