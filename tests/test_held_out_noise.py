@@ -286,7 +286,7 @@ def test_the_unseen_region_error_is_the_rule_of_three_times_the_largest_residual
     predicted = np.full((9, 4), 1e5)
     observed = predicted.copy()
     observed[4] += [5e-8, 0.2, 0.0, -0.1]  # round-off of 1e5 (1e-12 of it), then errors
-    found = unseen_region_error(predicted, observed, 0.5, 0.9)
+    found = unseen_region_error(predicted, observed, None, 0.5, 0.9)
     np.testing.assert_allclose(found, np.array([0.0, 0.4, 0.4, 0.4]) * math.log(10) / 9)
 
 

@@ -250,7 +250,7 @@ def diagnose(
     blind &= estimate + noise > tolerance
     if checked is not None and not placed:
         # No time is called reliable on draws that may have missed where the error lives.
-        unseen = unseen_region_error(predicted, observed, scale, checked.confidence)
+        unseen = unseen_region_error(predicted, observed, weights, scale, checked.confidence)
         noise = np.fmax(noise, unseen)
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))

@@ -222,21 +222,32 @@ def _largest_residual(predicted: ArrayLike, observed: ArrayLike, scale: float) -
 
 
 def unseen_region_error(
-    predicted: ArrayLike, observed: ArrayLike, scale: float, confidence: float
+    predicted: ArrayLike,
+    observed: ArrayLike,
+    weights: ArrayLike | None,
+    scale: float,
+    confidence: float,
 ) -> NDArray[np.float64]:
     """(T,) how large an error of the mean the K drawn runs may have missed, over the scale,
-    at the one-sided ``confidence``: a region of inputs of mass m is missed by all K draws
-    with probability (1 - m)^K, so one of mass up to -ln(1 - confidence) / K (2.3 / K at
-    90 %, the rule of three) may hold no run; where the response changes abruptly there (a
-    contact's jump moving through the inputs), its residual may be as large as the largest
-    the check has seen at this time or before (:func:`_largest_residual` over the (K, T)
-    finite runs, its running maximum along the axis): the error is their product. Zero
-    until the check sees a residual above round-off (an exact polynomial's never does)."""
-    count = np.shape(predicted)[0]
+    at the one-sided ``confidence``: a region of mass m under the draws' density is missed by
+    all K draws with probability (1 - m)^K, so one of mass up to -ln(1 - confidence) / K (2.3
+    / K at 90 %, the rule of three) may hold no run; where the response changes abruptly
+    there (a contact's jump moving through the inputs), its residual, times the importance
+    weight that carries the draws' mass to the inputs', may be as large as the largest the
+    check has seen at this time or before: the running maximum along the axis of
+    :func:`_largest_residual` over the (K, T) finite runs, each times its (K,) ``weights``
+    (``None``: 1). Zero until the check sees a residual above round-off (an exact
+    polynomial's never does)."""
+    predicted, observed = np.asarray(predicted, dtype=float), np.asarray(observed, dtype=float)
+    count = predicted.shape[0]
     if count == 0 or not scale > 0 or not np.isfinite(scale):
-        return np.zeros(np.shape(predicted)[1:])
-    seen = np.maximum.accumulate(_largest_residual(predicted, observed, scale), axis=0)
-    return -math.log1p(-confidence) / count * seen
+        return np.zeros(predicted.shape[1:])
+    weights = np.ones(count) if weights is None else np.asarray(weights, dtype=float)
+    largest = np.zeros(predicted.shape[1:])
+    for k in range(count):  # run by run: the weight scales its residual, not its round-off
+        one = _largest_residual(predicted[k : k + 1], observed[k : k + 1], scale)
+        largest = np.fmax(largest, weights[k] * one)
+    return -math.log1p(-confidence) / count * np.maximum.accumulate(largest, axis=0)
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
