@@ -281,13 +281,14 @@ def test_the_sequential_check_of_two_kinks_misses_at_most_at_its_confidence():
 def test_the_unseen_region_error_is_the_rule_of_three_times_the_largest_residual_so_far():
     """K draws all miss a region of mass m with probability (1 - m)^K: at 90 % one of mass
     -ln(0.1) / K may hold none. The error it may hide is that mass times the largest
-    |residual| over the scale seen at this time or before; round-off of a large baseline
-    (1e5 here) counts as none."""
-    predicted = np.full((9, 4), 1e5)
+    |residual| over the scale seen at this time or before, where every residual now is below
+    it; round-off of a large baseline (1e5 here) counts as none."""
+    predicted = np.full((9, 5), 1e5)
     observed = predicted.copy()
-    observed[4] += [5e-8, 0.2, 0.0, -0.1]  # round-off of 1e5 (1e-12 of it), then errors
+    observed[4] += [5e-8, 0.2, 0.0, -0.1, 0.02]  # round-off of 1e5 (1e-12 of it), then errors
     found = unseen_region_error(predicted, observed, None, 0.5, 0.9)
-    np.testing.assert_allclose(found, np.array([0.0, 0.4, 0.4, 0.4]) * math.log(10) / 9)
+    floor = 0.4 * math.log(10) / 9  # 0.4: the largest residual so far over the scale
+    np.testing.assert_allclose(found, [0.0, 0.0, floor, 0.0, floor])
 
 
 def test_draws_that_all_miss_a_moving_jump_leave_the_time_undecided():

@@ -229,15 +229,17 @@ def unseen_region_error(
     confidence: float,
 ) -> NDArray[np.float64]:
     """(T,) how large an error of the mean the K drawn runs may have missed, over the scale,
-    at the one-sided ``confidence``: a region of mass m under the draws' density is missed by
-    all K draws with probability (1 - m)^K, so one of mass up to -ln(1 - confidence) / K (2.3
-    / K at 90 %, the rule of three) may hold no run; where the response changes abruptly
-    there (a contact's jump moving through the inputs), its residual, times the importance
-    weight that carries the draws' mass to the inputs', may be as large as the largest the
-    check has seen at this time or before: the running maximum along the axis of
-    :func:`_largest_residual` over the (K, T) finite runs, each times its (K,) ``weights``
-    (``None``: 1). Zero until the check sees a residual above round-off (an exact
-    polynomial's never does)."""
+    at the one-sided ``confidence``, where they no longer see residuals of the size the
+    output has shown (0 elsewhere). A region of mass m under the draws' density holds none of
+    K draws with probability (1 - m)^K, so one of mass -ln(1 - confidence) / K (2.3 / K at
+    90 %, the rule of three) may hold none; where the response changes abruptly (a contact's
+    jump moving through the inputs), its residual there may be as large as the largest the
+    check has seen at this time or before, J: the running maximum along the axis of
+    :func:`_largest_residual` over the (K, T) finite runs, each times its (K,) importance
+    ``weights`` (``None``: 1), which carry the draws' mass to the inputs'. The floor 2.3 J / K
+    applies where every weighted residual now is below it: the error has moved where the
+    draws are not, or settled, which they cannot tell apart. Zero while the check sees no
+    residual above round-off (an exact polynomial's)."""
     predicted, observed = np.asarray(predicted, dtype=float), np.asarray(observed, dtype=float)
     count = predicted.shape[0]
     if count == 0 or not scale > 0 or not np.isfinite(scale):
@@ -247,7 +249,8 @@ def unseen_region_error(
     for k in range(count):  # run by run: the weight scales its residual, not its round-off
         one = _largest_residual(predicted[k : k + 1], observed[k : k + 1], scale)
         largest = np.fmax(largest, weights[k] * one)
-    return -math.log1p(-confidence) / count * np.maximum.accumulate(largest, axis=0)
+    floor = -math.log1p(-confidence) / count * np.maximum.accumulate(largest, axis=0)
+    return np.where(largest < floor, floor, 0.0)
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:
