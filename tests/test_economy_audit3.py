@@ -436,41 +436,54 @@ def test_a_discontinuous_contact_is_sent_to_elements(tmp_path):
     assert "fall algebraically" in flag, flag
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="seed 0: the drawn check calls v reliable at t = 1.6-1.9 where the truth is 6-8 % "
-    "(the 9 held-out runs all miss v0 < 1/t, which no node reaches either, so every residual "
-    "is 0, and so is the standard error of pcmb/analysis/diagnostics/check.py, statistics_error: "
-    "estimate 0 ± 0 at t = 1.9; seeds 7 and 9 of 0-9 likewise); seeds 1 and 2 flag at 1.15 against "
-    "a true crossing at 0.75 (10 % of the horizon late, undecided in between)",
-)
-def test_a_discontinuous_contact_is_flagged_at_its_true_crossing_on_three_seeds(tmp_path):
-    """Done when, line 1: a mass at v0 ~ U[0.5, 1.5] hits a wall at distance 1 and rebounds
-    with restitution e ~ U[0.3, 0.7]; its velocity jumps in v0 at v0 = 1/t while t is in
-    [2/3, 2]. Tensor order 5 (36 runs): over seeds 0-2 no failing time is called reliable and
-    every flag is within 5 % of the horizon of the truth's crossing (t = 0.75)."""
+def _contact(folder: Path, seed: int):
+    """The discontinuous contact, tensor order 5 (36 runs) drawn with ``seed``: a mass at v0 ~
+    U[0.5, 1.5] hits a wall at distance 1 and rebounds with restitution e ~ U[0.3, 0.7]; its
+    velocity jumps in v0 at v0 = 1/t while t is in [2/3, 2]. :func:`true_error` by a fine
+    midpoint rule in v0 (the jump) and Gauss-Legendre in e (linear)."""
     (v0, e), weights = _product(
         ((0.5 + (np.arange(20000) + 0.5) / 20000), np.full(20000, 1 / 20000)),
         _legendre(0.3, 0.7, 4),
     )
     contact = _fresh()["contact"]
+    folder.mkdir()
+    path = _run(
+        folder,
+        _model("wall", {"v0": 1.0, "e": 0.5}, "[v]"),
+        WALL_INPUTS,
+        f"{{kind: collocation, order: 5, seed: {seed}}}",
+        "{start: 0.0, stop: 4.0, points: 81}",
+    )
+    return true_error(path, "v", lambda t: contact(v0, e, t), weights)
+
+
+def test_a_discontinuous_contact_is_never_called_reliable_where_it_fails_on_three_seeds(
+    tmp_path,
+):
+    """Done when, line 1: over seeds 0-2 of the contact no failing time is called reliable,
+    within 9 held-out runs. Before, seed 0 called t = 1.6-1.9 reliable where the truth is
+    6-8 %: the draws saw the jump before, not there ("0 ± 0" at t = 1.9)."""
     for seed in range(3):
-        folder = tmp_path / str(seed)
-        folder.mkdir()
-        method = f"{{kind: collocation, order: 5, seed: {seed}}}"
-        path = _run(
-            folder,
-            _model("wall", {"v0": 1.0, "e": 0.5}, "[v]"),
-            WALL_INPUTS,
-            method,
-            "{start: 0.0, stop: 4.0, points: 81}",
-        )
-        times, error, verdict = true_error(path, "v", lambda t: contact(v0, e, t), weights)
+        times, error, verdict = _contact(tmp_path / str(seed), seed)
         assert verdict["holdout_count"] <= 9
         assert silent_times(times, error, verdict).size == 0, (
             seed,
             silent_times(times, error, verdict),
         )
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the budget's 9 draws: seed 0 never flags (undecided from t = 0.7 to 4.0: its "
+    "estimate passes 5 % by less than its noise, and after t = 1.6 the draws may have missed "
+    "the jump), seeds 1 and 2 flag at 1.15 against a true crossing at 0.75 (10 % of the "
+    "horizon late, undecided in between)",
+)
+def test_a_discontinuous_contact_is_flagged_at_its_true_crossing_on_three_seeds(tmp_path):
+    """Done when, line 1: over seeds 0-2 of the contact every flag is within 5 % of the
+    horizon of the truth's crossing (t = 0.75)."""
+    for seed in range(3):
+        times, error, verdict = _contact(tmp_path / str(seed), seed)
         crossing, flagged = _flag_near_crossing(times, error, verdict)
         assert abs(flagged - crossing) <= 0.05 * times[-1], (seed, flagged, crossing)
 

@@ -29,6 +29,7 @@ from pcmb.analysis.diagnostics.draws import (
     HeldOut,
     coverage_error,
     judging_weights,
+    unseen_region_error,
 )
 from pcmb.analysis.diagnostics.phrases import as_percent, time_count, time_span
 from pcmb.analysis.diagnostics.placed import placed_check
@@ -256,6 +257,10 @@ def diagnose(
     # A blind time fails unless the held-out runs, which saw the spread there, say it holds
     # beyond their noise (a switch the nodes have not reached yet, its spread still small).
     blind &= estimate + noise > tolerance
+    if checked is not None and not placed:
+        # No time is called reliable on draws that may have missed where the error lives.
+        unseen = unseen_region_error(predicted, observed, weights, scale, checked.confidence)
+        noise = np.fmax(noise, unseen)
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     # Without held-out runs, design runs all equal at every time say nothing: where the
