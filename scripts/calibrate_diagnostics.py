@@ -37,7 +37,9 @@ the worst distance of a flag from the truth in percent of the horizon, false ala
 where the truth never crosses, or more than 5 % of the horizon before it), misses (no flag, or
 one more than 5 % after it), of those the silent ones (where, from 5 % of the horizon after the
 crossing on, the true error exceeds the tolerance at a time that neither a flag nor a
-``chaos-undecided`` record covers), and the seeds whose check is undecided at some time.
+``chaos-undecided`` record covers), the seeds whose check is undecided at some time, and what
+each seed's ``chaos-unreliable`` record asks for (``order``, ``elements``, ``sampling``;
+``order|elements`` where it names both, the first first; ``-`` without one).
 ``--validation K`` fixes the check's runs instead; ``--mean-error`` prints instead, per study,
 the mean's true and estimated errors (``mean_error``) where the truth crosses and the largest
 of each."""
