@@ -807,11 +807,13 @@ def two_input_oscillator(params, times):
     return {"x": damped_oscillator(times, np.asarray(params["k"]), np.asarray(params["c"]))}
 
 
-@pytest.mark.parametrize("order", [3, 4])
+@pytest.mark.parametrize("order", [2, 3, 4])
 def test_the_remedy_of_a_two_input_phase_drift_does_not_flip_with_the_held_out_draws(order):
     # k ~ U[3, 5], c ~ U[0.05, 0.15] to t = 40: 8 drawn runs put the error "inside the range
     # of k" at seed 0 (mean |2u - 1| 0.29, carried by about 3 runs) and sent it to elements;
-    # seeds 1-3 said order.
+    # seeds 1-3 said order (at order 2, 8 of 10 seeds said elements). At orders 3 and 4 the
+    # energy along k peaks past its first degree; at order 2, two degrees tell nothing: both,
+    # the higher order first.
     inputs = {"k": pcmb.Uniform(3.0, 5.0), "c": pcmb.Uniform(0.05, 0.15)}
     for seed in range(4):
         study = pcmb.Study(
@@ -822,3 +824,5 @@ def test_the_remedy_of_a_two_input_phase_drift_does_not_flip_with_the_held_out_d
             warnings.simplefilter("ignore", pcmb.PcmbWarning)
             remedy = _remedy(study.run())
         assert remedy.startswith("raising the order of k (method.order)"), (seed, remedy)
+        both = "or, if the response has a jump or kink in k, multi-element chaos along k"
+        assert (both in remedy) == (order == 2), (seed, remedy)

@@ -55,7 +55,7 @@ def remedy_for(
     out (``budgets``: the codes of the design's budget records), with where a multi-element
     surrogate's error sits (``by_element``, :func:`element_errors`) and what was tried: the
     order, the elements and the refinement's end."""
-    actions, inputs, cause = _cause_remedy(
+    action, inputs, cause = _cause_remedy(
         expansion, estimate, failing, out_of_range_share, held_out
     )
     orders = expansion.multi_index.max(axis=0)
@@ -74,19 +74,16 @@ def remedy_for(
     else:
         split = f"multi-element chaos{along} (method.elements)"
     raise_order = f"raising the order{' of ' + inputs if inputs else ''} (method.order)"
-    which = inputs or "the inputs"
-    if actions == ("sampling",):
+    if action == "sampling":
         remedy = "sampling (method.kind: montecarlo, lhs or sobol)"
-    elif "order" in actions and "order-budget" in budgets:
+    elif action != "elements" and "order-budget" in budgets:
         remedy = f"{split} or an order above {order} set by hand (method.order)"
-    elif actions == ("order",):
+    elif action == "order":
         remedy = raise_order
-    elif actions == ("elements",):
+    elif action == "elements":
         remedy = split
-    elif actions[0] == "order":
-        remedy = f"{raise_order}, or, if the response has a jump or kink in {which}, {split}"
     else:
-        remedy = f"{split}, or, if the response is smooth in {which}, {raise_order}"
+        remedy = f"{raise_order}, or, if the response has a jump or kink in {inputs}, {split}"
     remedy = f"{remedy}: {cause}"
     if by_element:
         remedy = f"{remedy}; {by_element}"
@@ -246,10 +243,10 @@ def _cause_remedy(
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
     held_out: HeldOutPlace | None,
-) -> tuple[tuple[str, ...], str, str]:
+) -> tuple[str, str, str]:
     """What may help, read from where the tail's energy sits over the failing times:
-    ``(actions, inputs, cause)``, the actions ``"sampling"``, ``"order"`` or ``"elements"``
-    (two: either, the first the likelier) along the named inputs (``""``: all), the cause in
+    ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"``, ``"elements"`` or
+    ``"either"`` (a higher order first) along the named inputs (``""``: all), the cause in
     words.
 
     - energy spread over several inputs and an error that grows (more than doubles from
@@ -287,11 +284,11 @@ def _cause_remedy(
     top = int(np.argmax(by_input))
     name = expansion.names[top]
     if total <= 0:
-        return ("order",), "", "the outer two layers of the expansion carry no energy to read"
+        return "order", "", "the outer two layers of the expansion carry no energy to read"
     grows = estimate[-1] > _GROWTH * estimate[np.argmax(failing)]
     if expansion.n > 1 and by_input[top] < _CONCENTRATED * total and grows:
         return (
-            ("sampling",),
+            "sampling",
             "",
             "the error grows with time and spreads over the inputs, as in chaotic or "
             "long-horizon dynamics, which a higher order does not fix",
@@ -315,7 +312,7 @@ def _cause_remedy(
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k], _OWN) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
         if jumps:
-            return ("elements",), " and ".join(jumps), reads
+            return "elements", " and ".join(jumps), reads
         # A kink's first degrees may look geometric: the held-out error sits inside the range,
         # or, where too few runs carry it to tell, the richer interpolant decays algebraically.
         kink = where == "inside" or (
@@ -326,8 +323,8 @@ def _cause_remedy(
         )
         if kink:
             but = place if where == "inside" else f"{place}, and {richer_read}"
-            return ("elements",), name, f"{reads}, but {but}, around a kink or steep front"
-        return ("order",), " and ".join(expansion.names[k] for k in read), reads
+            return "elements", name, f"{reads}, but {but}, around a kink or steep front"
+        return "order", " and ".join(expansion.names[k] for k in read), reads
     order = int(index[:, top].max())
     unknown = (
         f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
@@ -335,14 +332,14 @@ def _cause_remedy(
     )
     if richer is not None:
         action = "elements" if richer[0][0] == "algebraic" else "order"
-        return (action,), name, f"{richer_read}{unknown} alone"
+        return action, name, f"{richer_read}{unknown} alone"
     if where == "ends":
-        return ("order",), name, f"{place}, as that of a smooth response converging slowly{unknown}"
+        return "order", name, f"{place}, as that of a smooth response converging slowly{unknown}"
     if where == "inside":
-        return ("elements",), name, f"{place}, around a jump, kink or steep front{unknown}"
+        return "elements", name, f"{place}, around a jump, kink or steep front{unknown}"
     if _peaks_past_first(energy, index, top):
         return (
-            ("order",),
+            "order",
             name,
             f"the energy of the chaos coefficients along {name} peaks past its first degree: "
             "an oscillation that the order does not yet resolve, as a smooth response's "
@@ -360,4 +357,4 @@ def _cause_remedy(
         read = f"the surrogate {'leaves' if overshoots else 'stays within'} the runs' range"
     spread = f"; {place}" if place else ""
     # Raising the order by one costs a run per line of nodes, elements at least double them.
-    return ("order", "elements"), name, f"{read}{spread}{unknown}, which a higher order tries first"
+    return "either", name, f"{read}{spread}{unknown}; a higher order is the cheaper try"
