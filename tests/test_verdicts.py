@@ -826,3 +826,25 @@ def test_the_remedy_of_a_two_input_phase_drift_does_not_flip_with_the_held_out_d
         assert remedy.startswith("raising the order of k (method.order)"), (seed, remedy)
         both = "or, if the response has a jump or kink in k, multi-element chaos along k"
         assert (both in remedy) == (order == 2), (seed, remedy)
+
+
+@pcmb.batched(outputs=("y",))
+def sine_drift(params, times):
+    """sin(ω t): entire in ω, its phase drifts over a long horizon."""
+    return {"y": np.sin(np.outer(params["omega"], times))}
+
+
+def test_a_phase_drift_whose_own_spectrum_falls_algebraically_past_a_late_peak_raises_the_order():
+    # ω ~ U[0.8, 1.2] to t = 60 at order 12 (scripts/calibrate_diagnostics.py's drift),
+    # flagged at its last time: its own energy peaks at degree 9 and falls as p^-2.1 over the
+    # four degrees after it, which read as a jump's; the interpolant through the 13 nodes and
+    # the 8 held-out runs falls geometrically from the same peak to degree 20.
+    study = pcmb.Study(
+        sine_drift, {"omega": pcmb.Uniform(0.8, 1.2)}, np.linspace(0.0, 60.0, 301), order=12,
+        backend="inprocess",
+    )  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        remedy = _remedy(study.run())
+    assert remedy.startswith("raising the order of omega (method.order)"), remedy
+    assert "held-out runs along omega fall geometrically" in remedy

@@ -254,7 +254,10 @@ def _cause_remedy(
       order fixes — sampling;
     - else, along every input that holds at least ``_SHARED`` of the tail (each failing
       time weighing the same), the decay of the coefficients (:func:`decay_shape`):
-      algebraic along any, as those of a jump or kink — multi-element chaos along those;
+      algebraic along any, as those of a jump or kink — multi-element chaos along those,
+      unless, past a peak above the first degree, the interpolant through nodes and held-out
+      runs of a one-input expansion (:func:`_held_out_decay`) decays geometrically — a higher
+      order;
       geometric along all, as those of an analytic response — a higher order, unless the
       held-out error sits inside the input's range (:meth:`HeldOutPlace.where`), or, where too
       few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through nodes
@@ -311,6 +314,16 @@ def _cause_remedy(
     if top in read:
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k], _OWN) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
+        # Past a late peak, the few top degrees of a still unresolved oscillation may fall as
+        # a jump's (a jump's spectrum peaks at its first degree): the richer interpolant,
+        # reading more degrees past it, tells.
+        late = richer is not None and shapes[top][2] > 1 and richer[0][0] == "geometric"
+        if jumps and late:
+            return (
+                "order",
+                name,
+                f"{reads}, past a peak at degree {shapes[top][2]}, but {richer_read}",
+            )
         if jumps:
             return "elements", " and ".join(jumps), reads
         # A kink's first degrees may look geometric: the held-out error sits inside the range,
