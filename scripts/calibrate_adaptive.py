@@ -24,13 +24,17 @@ and log(a + 0.005) + b too) and replays each stopping rule of :data:`REPLAYED` (
 readings of the decay from the surpluses themselves) over its rounds: per rule, the rows outside
 the band and those that differ from today's (``docs/methods.md``).
 
+``--probes`` runs issue 23's probes and fresh functions that neither table holds (sin and 1 / (1 +
+c·x), which lost to chaospy at 1e-2; poly4, blind to x0 x1 x2 x3; four written to check the
+rule). ``--rule`` sets ``method.rule`` (a rule not for a function's inputs is refused in its row).
+
 ``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
 corrected LOO error, :func:`pcmb.designs.regression.loo_statistics_error`; ``--max-runs`` is
 then ``max_samples``).
 
-    python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--held-out]
-        [--max-runs 6000] [--method adaptive|tensor|regression] [--replay]
+    python scripts/calibrate_adaptive.py [exp8,genz_oscillatory,...] [--held-out] [--probes]
+        [--max-runs 6000] [--method adaptive|tensor|regression] [--rule auto|...] [--replay]
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from scipy.special import erf, sici
 
 import pcmb
 from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.nested import RULES
 from pcmb.chaos.nodes import NodeSet
 from pcmb.designs import MethodSettings, make_design
 from pcmb.designs.adaptive import GUARDED, AdaptiveCollocation
@@ -404,6 +409,108 @@ def log_plus() -> Case:
     )
 
 
+def gauss_legendre_moments(
+    function: Callable[[np.ndarray], np.ndarray], n: int, points: int, low: float, high: float
+) -> tuple[float, float]:
+    """(mean, std) of ``function`` of n independent U[low, high] inputs by a tensor
+    Gauss–Legendre rule of ``points`` per input."""
+    germ, weight = np.polynomial.legendre.leggauss(points)
+    axis = low + (high - low) * (germ + 1) / 2
+    grid = np.array(list(itertools.product(axis, repeat=n)))
+    weights = np.prod(np.array(list(itertools.product(weight / 2, repeat=n))), axis=1)
+    values = function(grid)
+    mean = float(weights @ values)
+    return mean, float(np.sqrt(weights @ (values - mean) ** 2))
+
+
+def sine4() -> Case:
+    """sin(x0 + 0.7 x1 + 0.5 x2 + 0.3 x3) in 4 uniform inputs (a probe): E e^(i a·x) = Π (e^(i
+    a_k) - 1) / (i a_k), so E sin = Im φ(a) and E sin² = (1 - Re φ(2a)) / 2."""
+    a = np.array([1.0, 0.7, 0.5, 0.3])
+
+    def phi(b: np.ndarray) -> complex:
+        return np.prod((np.exp(1j * b) - 1) / (1j * b))
+
+    mean = float(np.imag(phi(a)))
+    second = 0.5 - 0.5 * float(np.real(phi(2 * a)))
+    return _unit(4), lambda x: np.sin(x @ a), mean, math.sqrt(second - mean**2)
+
+
+def rational5() -> Case:
+    """1 / (1 + Σ c_k x_k), c = 0.5 .. 0.1, in 5 uniform inputs (a probe): moments by a tensor
+    Gauss–Legendre rule of 14 points per input (its pole lies outside [-1, 0) of c·x: 14 and
+    16 points agree to 1e-15 of the std)."""
+    c = np.array([0.5, 0.4, 0.3, 0.2, 0.1])
+
+    def function(x: np.ndarray) -> np.ndarray:
+        return 1 / (1 + x @ c)
+
+    return _unit(5), function, *gauss_legendre_moments(function, 5, 14, 0.0, 1.0)
+
+
+def poly4() -> Case:
+    """x0⁴ + x0 x1 x2 x3 + 2 x1² x4 + x3³ / 2 + x3 x4 + x0 - x4² in 5 uniform inputs on [-1, 1]
+    (a probe: x0 x1 x2 x3 vanishes on every centre plane): degree 4, so its moments are a
+    tensor Gauss–Legendre rule's of 5 points per input (exact to degree 9)."""
+
+    def function(x: np.ndarray) -> np.ndarray:
+        x0, x1, x2, x3, x4 = x.T
+        return x0**4 + x0 * x1 * x2 * x3 + 2 * x1**2 * x4 + x3**3 / 2 + x3 * x4 + x0 - x4**2
+
+    inputs = {f"x{k}": pcmb.Uniform(-1.0, 1.0) for k in range(5)}
+    return inputs, function, *gauss_legendre_moments(function, 5, 5, -1.0, 1.0)
+
+
+def exp_product3() -> Case:
+    """exp(x0 x1) + x2 in 3 uniform inputs (a fresh function): E exp(m x0 x1) = ∫ (e^(m x) - 1)
+    / (m x) dx over [0, 1], by a 1-D Gauss–Legendre rule of 30 points (entire)."""
+    germ, weight = np.polynomial.legendre.leggauss(30)
+    x, weight = (germ + 1) / 2, weight / 2
+    mean, second = weight @ (np.expm1(x) / x), weight @ (np.expm1(2 * x) / (2 * x))
+    return (
+        _unit(3),
+        lambda x: np.exp(x[:, 0] * x[:, 1]) + x[:, 2],
+        float(mean + 0.5),
+        math.sqrt(second - mean**2 + 1 / 12),
+    )
+
+
+def trig_normal4() -> Case:
+    """sin z0 + cos z1 + z2 z3 in 4 standard normal inputs (a fresh function): E sin² z = (1 -
+    e^-2) / 2, E cos z = e^(-1/2), E cos² z = (1 + e^-2) / 2, z2 z3 of variance 1."""
+    inputs = {f"z{k}": pcmb.Normal(0.0, 1.0) for k in range(4)}
+    variance = (1 - math.exp(-2)) / 2 + (1 + math.exp(-2)) / 2 - math.exp(-1) + 1
+    return (
+        inputs,
+        lambda x: np.sin(x[:, 0]) + np.cos(x[:, 1]) + x[:, 2] * x[:, 3],
+        math.exp(-0.5),
+        math.sqrt(variance),
+    )
+
+
+def rational2() -> Case:
+    """(1 + x0 + x1 / 2)⁻² + x2³ in 3 uniform inputs (a fresh function): the first part's
+    moments integrated in closed form, E = 2 log 1.2, E² = ((1 - 1.5⁻²) - (2⁻² - 2.5⁻²)) / 3;
+    x2³'s 1/4 and 1/7."""
+    mean = 2 * math.log(1.2)
+    second = ((1 - 1.5**-2) - (2**-2 - 2.5**-2)) / 3
+    return (
+        _unit(3),
+        lambda x: (1 + x[:, 0] + x[:, 1] / 2) ** -2.0 + x[:, 2] ** 3,
+        mean + 0.25,
+        math.sqrt(second - mean**2 + 1 / 7 - 1 / 16),
+    )
+
+
+def gauss_bump4() -> Case:
+    """exp(-Σ c_k z_k² / 4), c = 1, 1/2, 1/4, 0.1, in 4 standard normal inputs (a fresh
+    function): E exp(-a z²) = (1 + 2a)^(-1/2)."""
+    c = np.array([1.0, 0.5, 0.25, 0.1]) / 4
+    inputs = {f"z{k}": pcmb.Normal(0.0, 1.0) for k in range(4)}
+    mean, second = float(np.prod((1 + 2 * c) ** -0.5)), float(np.prod((1 + 4 * c) ** -0.5))
+    return inputs, lambda x: np.exp(-(x**2) @ c), mean, math.sqrt(second - mean**2)
+
+
 #: Gauss–Legendre points per input of g in :func:`borehole`'s reference.
 BOREHOLE_POINTS = (24, 80, 6, 8, 8, 8)
 
@@ -461,9 +568,14 @@ HELD_OUT = {
         welch20,
     )
 }
+#: Issue 23's probes and fresh functions not in the tables above (``--probes``).
+PROBES = {
+    f.__name__: f
+    for f in (sine4, rational5, poly4, exp_product3, trig_normal4, rational2, gauss_bump4)
+}
 #: Analytic responses near a singularity, outside both tables, only replayed (``--replay``).
 NEAR_SINGULAR = {f.__name__: f for f in (sqrt_exp, log_plus)}
-FUNCTIONS = CASES | HELD_OUT | NEAR_SINGULAR
+FUNCTIONS = CASES | HELD_OUT | PROBES | NEAR_SINGULAR
 #: Candidate order of the regression's hyperbolic set.
 REGRESSION_ORDER = 6
 #: A true error at round-off: an exact polynomial's (Rosenbrock's 2e-16 against chaospy's 1e-15).
@@ -472,12 +584,17 @@ ROUND_OFF = 1e-14
 CHAOSPY_RUNS = 60000
 
 
-def settings(method: str, inputs: dict, tolerance: float, max_runs: int) -> MethodSettings:
-    """``method``'s settings: kind adaptive (``tensor``: with basis tensor), or LARS from 32
-    Sobol' points on the hyperbolic set of order :data:`REGRESSION_ORDER`, q = 0.75."""
+def settings(
+    method: str, inputs: dict, tolerance: float, max_runs: int, rule: str = "auto"
+) -> MethodSettings:
+    """``method``'s settings: kind adaptive (``tensor``: with basis tensor) on the nested
+    ``rule``, or LARS from 32 Sobol' points on the hyperbolic set of order
+    :data:`REGRESSION_ORDER`, q = 0.75."""
     if method in ("adaptive", "tensor"):
         basis = "tensor" if method == "tensor" else None
-        return MethodSettings("adaptive", tolerance=tolerance, max_runs=max_runs, basis=basis)
+        return MethodSettings(
+            "adaptive", tolerance=tolerance, max_runs=max_runs, basis=basis, rule=rule
+        )
     orders = (REGRESSION_ORDER,) * len(inputs)
     return MethodSettings(
         "regression", orders=orders, samples=32, q=0.75, tolerance=tolerance, max_samples=max_runs
@@ -485,12 +602,12 @@ def settings(method: str, inputs: dict, tolerance: float, max_runs: int) -> Meth
 
 
 def run(
-    case: str, tolerance: float, max_runs: int, method: str = "adaptive"
+    case: str, tolerance: float, max_runs: int, method: str = "adaptive", rule: str = "auto"
 ) -> tuple[int, float, float, str]:
     """(runs, the design's final estimate, the true error, whether an
-    ``adaptive-nonsmooth`` warning came) of one study of ``method``."""
+    ``adaptive-nonsmooth`` warning came) of one study of ``method`` on the nested ``rule``."""
     inputs, function, mean, std = FUNCTIONS[case]()
-    design = make_design(inputs, settings(method, inputs, tolerance, max_runs))
+    design = make_design(inputs, settings(method, inputs, tolerance, max_runs, rule))
     first = design.nodes()
     germ, params = first.nodes, first.params
     values = function(params)[:, None]
@@ -702,7 +819,8 @@ def replay(max_runs: int) -> None:
     at the first round whose estimate meets ε; per rule, the rows outside the band (estimate
     within 10x of the true error; where it met ε, a true error in [ε/100, 10 ε] or at
     round-off: an exact polynomial's) and the rows that differ from today's."""
-    runs = {case: replayed_rounds(case, max_runs) for case in FUNCTIONS if case not in NOT_REPLAYED}
+    replayed = CASES | HELD_OUT | NEAR_SINGULAR
+    runs = {case: replayed_rounds(case, max_runs) for case in replayed if case not in NOT_REPLAYED}
     stops = {name: {} for name in REPLAYED}
     for name, rule in REPLAYED.items():
         for case, rounds in runs.items():
@@ -729,6 +847,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("cases", nargs="?", default=",".join(CASES))
     parser.add_argument("--held-out", action="store_true", help="the held-out functions")
+    parser.add_argument("--probes", action="store_true", help="issue 23's probes and fresh ones")
     parser.add_argument(
         "--replay", action="store_true", help="replay the stopping rules over one run each"
     )
@@ -736,6 +855,7 @@ def main() -> None:
     parser.add_argument(
         "--method", choices=("adaptive", "tensor", "regression"), default="adaptive"
     )
+    parser.add_argument("--rule", choices=RULES, default="auto", help="method.rule")
     args = parser.parse_args()
     if args.replay:
         replay(args.max_runs)
@@ -745,12 +865,16 @@ def main() -> None:
         " nonsmooth | chaospy |"
     )
     print("|---|---|---:|---:|---:|---:|---:|---|---:|")
-    for case in ",".join(HELD_OUT).split(",") if args.held_out else args.cases.split(","):
+    cases = HELD_OUT if args.held_out else PROBES if args.probes else args.cases.split(",")
+    for case in cases:
         peer = chaospy_errors(case)
         for tolerance in TOLERANCES:
             try:
-                runs, estimate, error, nonsmooth = run(case, tolerance, args.max_runs, args.method)
-            except ValueError as refused:  # a first round beyond --max-runs (3^8 for tensor)
+                runs, estimate, error, nonsmooth = run(
+                    case, tolerance, args.max_runs, args.method, args.rule
+                )
+            # A first round beyond --max-runs (3^8 for tensor), or a rule not for the inputs.
+            except ValueError as refused:
                 print(f"| {case} | | | | | | | | {refused} |", flush=True)
                 break
             print(

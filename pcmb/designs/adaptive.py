@@ -336,17 +336,19 @@ class AdaptiveCollocation(GrowingGrid):
                 )
         mean, std = self._statistics(self._grid, values)
         spread = std.max(axis=-1)
+        # A std of 0 while the runs vary (a response even in every input, on rules whose first
+        # level projects to degree 1) cannot measure what changed: that counts as 1, as the
+        # first round's change of the std does.
+        unmeasured = (spread <= 0) & (np.ptp(values, axis=0).max(axis=-1) > 0)
         norms = np.array([self._norms[level] for level in self._index])  # (K, 2, outputs)
-        relative = np.divide(norms, spread, out=np.zeros_like(norms), where=spread > 0)
+        relative = _relative(norms, spread, unmeasured)
         self._indicators, self._mean_changes = relative.max(axis=-1).T
         old = SparseGrid(self.distributions, np.array(self._index)[~self._active()], self.rules)
         old_mean, old_std = self._statistics(
             old, values[find_rows(self._grid.node_ids, old.node_ids)]
         )
         change = np.maximum(np.abs(mean - old_mean), np.abs(std - old_std)).max(axis=-1)
-        self._changes.append(
-            float(np.divide(change, spread, out=np.zeros_like(change), where=spread > 0).max())
-        )
+        self._changes.append(float(_relative(change, spread, unmeasured).max()))
 
     def _statistics(
         self, grid: SparseGrid, values: NDArray[np.float64]
@@ -539,6 +541,15 @@ def _algebraic_decay(degrees: list[int], sizes: NDArray[np.float64]) -> float | 
     if np.all(algebraic > 0) and np.ptp(np.log(algebraic)) < np.ptp(np.log(geometric)):
         return float(algebraic[-1])
     return math.inf
+
+
+def _relative(
+    sizes: NDArray[np.float64], spread: NDArray[np.float64], unmeasured: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """``sizes`` (..., outputs) relative to each output's largest std ``spread``: 0 where the
+    std is 0, but 1 for a nonzero size where the std, ``unmeasured``, cannot measure it."""
+    relative = np.divide(sizes, spread, out=np.zeros_like(sizes), where=spread > 0)
+    return np.where(unmeasured & (sizes > 0), 1.0, relative)
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
