@@ -457,6 +457,7 @@ def _contact(folder: Path, seed: int):
     return true_error(path, "v", lambda t: contact(v0, e, t), weights)
 
 
+@pytest.mark.slow
 def test_a_discontinuous_contact_is_never_called_reliable_where_it_fails_on_three_seeds(
     tmp_path,
 ):
@@ -846,6 +847,7 @@ def test_adaptive_ends_within_its_band_in_no_more_runs_than_smolyak(tmp_path, fu
     assert runs <= _chaospy_runs(function, error), runs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("tolerance", [1e-2, 1e-3])
 def test_adaptive_on_a_step_never_ends_below_its_tolerance_while_the_truth_is_ten_times_above(
     tmp_path, tolerance
@@ -868,6 +870,7 @@ def test_adaptive_on_a_step_never_ends_below_its_tolerance_while_the_truth_is_te
     _one_signal(shown)
 
 
+@pytest.mark.slow
 def test_the_adaptive_budget_record_reads_cleanly_where_a_rule_ran_out(tmp_path):
     """The ``adaptive-budget`` record of the step (x1 at its rule's last level) is well formed."""
     path = _adaptive(tmp_path, "step", 3, "{kind: adaptive, tolerance: 0.01, validation: 0}")
