@@ -335,6 +335,19 @@ def _switch_error(path: Path):
     return true_error(path, "y", lambda t: settle(x0, k, t), weights)
 
 
+def _switch(tmp_path: Path, method: str) -> tuple[Path, float, float]:
+    """The switch's Python twin at tensor order 4 with the ``method`` keys besides, to t = 3:
+    its file, true crossing and flag (:func:`_flag_near_crossing`)."""
+    path = _run(
+        tmp_path,
+        _model("switch", {"x0": 0.5, "k": 2.0}),
+        SWITCH_INPUTS,
+        f"{{kind: collocation, order: 4{method}}}",
+        "{start: 0.0, stop: 3.0, points: 61}",
+    )
+    return path, *_flag_near_crossing(*_switch_error(path))
+
+
 @pytest.mark.slow
 def test_a_jump_in_an_initial_condition_run_as_a_program_is_never_called_reliable(tmp_path):
     """Items 3, 4 and 6 through ``kind: command``: y relaxes at rate k ~ U[1, 3] from x0 ~
@@ -388,16 +401,8 @@ def test_a_jump_in_an_initial_condition_run_as_a_program_is_never_called_reliabl
 def test_a_jump_in_an_initial_condition_is_flagged_at_its_true_crossing(tmp_path):
     """Done when, line 1: the switch above (its Python twin, the same response) is flagged
     within 5 % of the horizon of its true crossing (t = 0.3)."""
-    path = _run(
-        tmp_path,
-        _model("switch", {"x0": 0.5, "k": 2.0}),
-        SWITCH_INPUTS,
-        "{kind: collocation, order: 4}",
-        "{start: 0.0, stop: 3.0, points: 61}",
-    )
-    times, error, verdict = _switch_error(path)
-    crossing, flagged = _flag_near_crossing(times, error, verdict)
-    assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
+    _, crossing, flagged = _switch(tmp_path, "")
+    assert abs(flagged - crossing) <= 0.05 * 3.0, flagged
 
 
 def test_the_held_out_runs_an_undecided_record_asks_for_decide_it(tmp_path):
@@ -405,17 +410,9 @@ def test_the_held_out_runs_an_undecided_record_asks_for_decide_it(tmp_path):
     decide (method.validation: 827)"; with ``validation: 827`` the verdict flags it within 5 %
     of the horizon of the true crossing (t = 0.3), calls no failing time reliable, and sends
     the jump in x0 to multi-element chaos along it."""
-    path = _run(
-        tmp_path,
-        _model("switch", {"x0": 0.5, "k": 2.0}),
-        SWITCH_INPUTS,
-        "{kind: collocation, order: 4, validation: 827}",
-        "{start: 0.0, stop: 3.0, points: 61}",
-    )
-    times, error, verdict = _switch_error(path)
-    crossing, flagged = _flag_near_crossing(times, error, verdict)
-    assert abs(flagged - crossing) <= 0.05 * times[-1], flagged
-    assert silent_times(times, error, verdict).size == 0
+    path, crossing, flagged = _switch(tmp_path, ", validation: 827")
+    assert abs(flagged - crossing) <= 0.05 * 3.0, flagged
+    assert silent_times(*_switch_error(path)).size == 0
     runs_line_agrees_with_the_file(path)
     (flag,) = [line for line in lines(inspect(path), "warning") if "[chaos-unreliable]" in line]
     assert "consider multi-element chaos along x0 (method.elements)" in flag, flag

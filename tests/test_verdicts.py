@@ -248,7 +248,11 @@ def test_a_zero_variance_at_a_fixed_initial_state_is_recorded_not_warned(tmp_pat
 # -- remedies that fit the cause ---------------------------------------------------------------
 
 
-def _remedy(result: pcmb.StudyResult) -> str:
+def _remedy(study: pcmb.Study) -> str:
+    """The remedy of the one ``chaos-unreliable`` record of ``study``, run without warnings."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        result = study.run()
     (record,) = [w for w in result.warnings if w.code == "chaos-unreliable"]
     return record.message.partition("; consider ")[2]
 
@@ -276,8 +280,7 @@ def test_a_jump_in_an_initial_condition_is_told_to_use_elements(order, points, e
     # shape, the decay of the interpolant through the nodes and the held-out runs.
     # The remedy is the subject: enough held-out runs that the check decides.
     study = _double_well(points, order=order, validation=32)
-    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable, maybe chaos-undecided before it
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("multi-element chaos along x0 (method.elements)")
     assert all(phrase in remedy for phrase in evidence)
     assert absent is None or absent not in remedy
@@ -306,8 +309,7 @@ def test_an_analytic_response_is_told_to_raise_the_order():
         backend="inprocess",
         validation=32,  # the remedy is the subject: enough runs that the check decides
     )
-    with pytest.warns(pcmb.PcmbWarning):  # chaos-unreliable, maybe chaos-undecided before it
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("raising the order of mu (method.order)")
     assert "along mu fall geometrically" in remedy and "smooth" in remedy
 
@@ -553,9 +555,7 @@ def steep_exponential(params, times):
 def _remedy_of(model, **settings) -> str:
     settings.setdefault("validation", 64)  # the remedy is the subject: a check that decides
     study = pcmb.Study(model, KINK_INPUTS, G_TIMES, backend="inprocess", **settings)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        return _remedy(study.run())
+    return _remedy(study)
 
 
 @pytest.mark.parametrize("order", [3, 4])
@@ -630,9 +630,7 @@ def test_the_remedy_follows_the_input_that_holds_the_error_at_every_failing_time
         backend="inprocess",
         validation=64,  # the remedy is the subject: a check that decides
     )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("multi-element chaos along x0 (method.elements)")
     assert "along x0 fall algebraically" in remedy and "order of x1" not in remedy
 
@@ -772,9 +770,7 @@ def test_an_analytic_phase_drift_at_a_low_order_is_told_to_raise_the_order(order
         released, {"a": pcmb.Uniform(0.6, 1.4)}, np.linspace(0.0, 20.0, 201), order=order,
         backend="inprocess",
     )  # fmt: skip
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("raising the order of a (method.order)"), remedy
     assert "method.elements" not in remedy
 
@@ -794,9 +790,7 @@ def test_a_kink_at_order_two_is_told_to_use_elements():
         lag, {"tau": pcmb.Uniform(1.0, 3.0)}, np.linspace(0.0, 6.0, 121), order=2,
         backend="inprocess",
     )  # fmt: skip
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("multi-element chaos along tau (method.elements)"), remedy
     assert "fall algebraically" in remedy
 
@@ -820,9 +814,7 @@ def test_the_remedy_of_a_two_input_phase_drift_does_not_flip_with_the_held_out_d
             two_input_oscillator, inputs, np.linspace(0.0, 40.0, 401), order=order, seed=seed,
             backend="inprocess",
         )  # fmt: skip
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", pcmb.PcmbWarning)
-            remedy = _remedy(study.run())
+        remedy = _remedy(study)
         assert remedy.startswith("raising the order of k (method.order)"), (seed, remedy)
         both = "or, if the response has a jump or kink in k, multi-element chaos along k"
         assert (both in remedy) == (order == 2), (seed, remedy)
@@ -843,8 +835,6 @@ def test_a_phase_drift_whose_own_spectrum_falls_algebraically_past_a_late_peak_r
         sine_drift, {"omega": pcmb.Uniform(0.8, 1.2)}, np.linspace(0.0, 60.0, 301), order=12,
         backend="inprocess",
     )  # fmt: skip
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", pcmb.PcmbWarning)
-        remedy = _remedy(study.run())
+    remedy = _remedy(study)
     assert remedy.startswith("raising the order of omega (method.order)"), remedy
     assert "held-out runs along omega fall geometrically" in remedy
