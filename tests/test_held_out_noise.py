@@ -9,6 +9,7 @@ Gauss-Legendre rule split at the kink.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -16,7 +17,14 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.analysis.diagnostics import CONFIDENCE, HELD_OUT_SEED, diagnose, held_out_draws
+from pcmb.analysis.diagnostics import (
+    CONFIDENCE,
+    HELD_OUT_SEED,
+    diagnose,
+    held_out_draws,
+    more_runs,
+)
+from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.draws import unseen_region_error
 from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.held_out import HeldOutPlan
@@ -331,20 +339,46 @@ def _settling(params, times):
     return {"y": (1 / (1 + 25 * a * a) + b) * np.exp(-times)}
 
 
-@pytest.mark.parametrize("seed", range(4))
-def test_a_response_that_settles_is_not_floored_by_the_rule_of_three(seed):
-    """y = (1 / (1 + 25 a²) + b) e^(-t), a, b ~ U[-1, 1], t in [0, 5], tensor order 7: every
-    residual and the runs' spread are the same functions of (a, b) times e^(-t), so the
-    draws see the error at every time as large against what the output varies by there as
-    before; nothing settled out of their sight, and the noise is the sampling noise alone.
-    Before, the residuals fell below 2.3 / K of the largest so far against the fixed scale:
-    36-46 of the 51 times undecided on seeds 0-3 (5-15 on the sampling noise)."""
+def _settled(seed):
+    """The diagnostics of y = (1 / (1 + 25 a²) + b) e^(-t), a, b ~ U[-1, 1], t in [0, 5] (51
+    points), tensor order 7, drawn with ``seed``."""
     inputs = {"a": pcmb.Uniform(-1, 1), "b": pcmb.Uniform(-1, 1)}
     method = {"kind": "collocation", "order": 7, "seed": seed}
-    study = pcmb.Study(
-        _settling, inputs, np.linspace(0, 5, 51), method=method, backend="inprocess"
-    )
+    study = pcmb.Study(_settling, inputs, np.linspace(0, 5, 51), method=method, backend="inprocess")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        found = study.run().diagnostics["y"]
+        return study.run().diagnostics["y"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_response_that_settles_is_not_floored_by_the_rule_of_three(seed):
+    """The response above: every residual and the runs' spread are the same functions of
+    (a, b) times e^(-t), so the draws see the error at every time as large against what the
+    output varies by there as before; nothing settled out of their sight, and the noise is
+    the sampling noise alone. Before, the residuals fell below 2.3 / K of the largest so far
+    against the fixed scale: 36-46 of the 51 times undecided on seeds 0-3 (5-15 on the
+    sampling noise)."""
+    found = _settled(seed)
     np.testing.assert_array_equal(found.noise, found.holdout.noise)
+    assert not found.unseen.any()
+
+
+def test_more_runs_lets_the_sampling_noise_fall_as_one_over_root_k_and_the_floor_as_one_over_k():
+    """16 runs, an estimate of 3 % against a 5 % tolerance (margin 2 %): a sampling noise of
+    1 % falls below the margin at 16 (1 / 2)² = 4 runs, a rule-of-three floor of 4 % at
+    16 x 4 / 2 = 32 (its mass is 2.3 / K): 16 more. Before, the floor was squared as if it
+    were sampling noise: 16 x 2² = 64, 48 more."""
+    found = _settled(0)
+    times = np.ones(found.estimate.shape)
+    confidence = found.holdout.confidence
+    spread = 0.01 / STANDARD_NORMAL.inv_cdf(confidence) * times
+    found = dataclasses.replace(
+        found,
+        holdout=dataclasses.replace(found.holdout, spread=spread, count=16),
+        estimate=0.03 * times,
+        noise=0.04 * times,
+        unseen=0.04 * times,
+        undecided=times > 0,
+        tolerance=0.05,
+    )
+    assert more_runs(found) == 16
