@@ -359,7 +359,8 @@ def _runs_needed(found: OutputDiagnostics) -> float:
     undecided = found.undecided
     margin = np.abs(found.estimate - found.tolerance)[undecided]
     margin = np.maximum(margin, found.tolerance / 10)
-    sampling = np.nan_to_num(found.holdout.noise[undecided], nan=np.inf) / margin
+    sampling = found.holdout.noise[undecided]
+    sampling = np.where(np.isnan(sampling), np.inf, sampling) / margin
     unseen = 0.0 if found.unseen is None else found.unseen[undecided] / margin
     return found.holdout.count * float(np.max(np.fmax(sampling**2, unseen)))
 
