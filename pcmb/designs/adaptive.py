@@ -373,7 +373,7 @@ class AdaptiveCollocation(GrowingGrid):
         levels = np.array(self._index)
         null = [k for k in range(levels.shape[1]) if blind[levels[:, k] == 0].all()]
         seen = {_inputs(level) for level in self._index}
-        hidden = {k for k in range(levels.shape[1]) if blind[position[_axis(k, levels.shape[1])]]}
+        hidden = self._hidden()
         found = set()
         for level in self._refined:
             if self._indicators[position[level]] <= self.tolerance:
@@ -471,11 +471,18 @@ class AdaptiveCollocation(GrowingGrid):
             added += children
         return added
 
+    def _hidden(self) -> set[int]:
+        """The inputs blind on their own axes (level-1 axis surplus below :data:`BLIND`)."""
+        n = len(self.distributions)
+        position = {level: k for k, level in enumerate(self._index)}
+        return {k for k in range(n) if self._indicators[position[_axis(k, n)]] <= BLIND}
+
     def _hiding(self, level: tuple[int, ...]) -> list[tuple[int, ...]]:
         """The blind active indices (below :data:`BLIND`) that alone block a forward neighbour
-        of the mixed index ``level`` in its own inputs: its interaction goes on behind them
-        (e^x1 x2 x3's (2, 1, 1) behind (2, 1, 0) and (2, 0, 1), zero on their planes)."""
-        if len(_inputs(level)) < 2:
+        of ``level`` in its own inputs, where two or more of them are blind on their axes: the
+        interaction goes on behind them (e^x1 x2 x3's (2, 1, 1) behind (2, 1, 0) and (2, 0, 1),
+        zero on their planes)."""
+        if len(_inputs(level) & self._hidden()) < 2:
             return []
         position = {index: k for k, index in enumerate(self._index)}
         hiding: list[tuple[int, ...]] = []
