@@ -283,7 +283,9 @@ class AdaptiveCollocation(GrowingGrid):
                 return None
             added = self._refine(refinable, bulk=not converged)
             if added is None:
-                self._stop_at_budget("probing blind axes" if converged else "the next refinement")
+                self._stop_at_budget(
+                    "probing blind indices" if converged else "the next refinement"
+                )
                 return None
             if added:
                 return self._grow(added)
