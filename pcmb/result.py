@@ -281,10 +281,16 @@ class DesignReport(ABC):
         another axis); a report of the whole study keeps its own."""
         return self
 
-    def statistics_error(self) -> float | None:
-        """The design's own estimate of the error of the mean and std, relative to the
-        output's largest std (the largest over outputs and times), where it makes one that
-        is calibrated (``docs/methods.md``); ``None`` otherwise."""
+    #: How many times below the true error the design's estimate (:meth:`statistics_error`)
+    #: was measured to fall at worst: the verdict vouches by the estimate alone only where
+    #: this many times it meets the tolerance (``docs/diagnostics.md``).
+    UNDERSTATES: ClassVar[float] = 1.0
+
+    def statistics_error(self, result: StudyResult, output: str) -> float | None:
+        """The design's own estimate of the error of ``output``'s mean and std, relative to
+        its largest std (the largest over its times; a design with one estimate for all
+        outputs gives the largest over them, which bounds each), where it makes one that is
+        calibrated (``docs/methods.md``) from what ``result`` holds; ``None`` otherwise."""
         return None
 
 

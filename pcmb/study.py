@@ -1272,7 +1272,10 @@ class Study:
             axes=result.axes,
             nominal=result.nominal,
             budgets={w.code for w in result.warnings if w.code.endswith("-budget")},
-            design_error=None if result.report is None else result.report.statistics_error(),
+            design_error=None
+            if result.report is None
+            else {name: result.report.statistics_error(result, name) for name in judged},
+            design_understates=1.0 if result.report is None else result.report.UNDERSTATES,
         )
         records = tuple(record for diagnosis in found.values() for record in diagnosis.warnings)
         return dataclasses.replace(

@@ -37,7 +37,9 @@ the worst distance of a flag from the truth in percent of the horizon, false ala
 where the truth never crosses, or more than 5 % of the horizon before it), misses (no flag, or
 one more than 5 % after it), of those the silent ones (where, from 5 % of the horizon after the
 crossing on, the true error exceeds the tolerance at a time that neither a flag nor a
-``chaos-undecided`` record covers), and the seeds whose check is undecided at some time.
+``chaos-undecided`` record covers), the seeds whose check is undecided at some time, and what
+each seed's ``chaos-unreliable`` record asks for (``order``, ``elements``, ``sampling``;
+``order|elements`` where it names both, the first first; ``-`` without one).
 ``--validation K`` fixes the check's runs instead; ``--mean-error`` prints instead, per study,
 the mean's true and estimated errors (``mean_error``) where the truth crosses and the largest
 of each."""
@@ -47,6 +49,7 @@ from __future__ import annotations
 import argparse
 import functools
 import warnings
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -532,6 +535,22 @@ def _run_case(case: str, label: str, tolerance: float | None, **changes) -> Stud
     return study.run(progress=False)
 
 
+#: A word of a remedy -> what it asks for (:func:`remedy_kind`).
+REMEDY_WORDS = {"sampling": "sampling", "element": "elements", "order": "order"}
+
+
+def remedy_kind(result: StudyResult, name: str) -> str:
+    """What the ``chaos-unreliable`` record of output ``name`` asks for, read from its remedy
+    up to the cause: ``order``, ``elements`` or ``sampling``, two joined by ``|`` in the
+    order the remedy names them; ``-`` without a record."""
+    records = [w for w in result.warnings if w.code == "chaos-unreliable" and w.output == name]
+    if not records:
+        return "-"
+    asked = records[0].message.partition("; consider ")[2].split(": ")[0]
+    found = {kind: asked.find(word) for word, kind in REMEDY_WORDS.items()}
+    return "|".join(sorted((k for k in found if found[k] >= 0), key=found.get)) or "?"
+
+
 def calibrate_case(
     case: str, seeds: int, tolerance: float | None, validation: int | None = None
 ) -> list[str]:
@@ -545,6 +564,7 @@ def calibrate_case(
     rows = []
     for label in studies:
         flags, runs, undecided, true_from, worst = [], [], 0, np.nan, 0.0
+        remedies = Counter()
         alarms = misses = silent = 0
         fixed = {} if validation is None else {"validation": validation}
         for seed in range(seeds):
@@ -556,6 +576,7 @@ def calibrate_case(
             true_from = verdict(times, true / found.scale, judged)
             flag = found.failing_from
             flags.append(flag)
+            remedies[remedy_kind(result, name)] += 1
             runs.append(0 if result.held_out is None else result.held_out.ok.size)
             open_ = found.undecided
             undecided += bool(open_.any())
@@ -577,7 +598,7 @@ def calibrate_case(
         rows.append(
             f"{case:10s} {label:28s} {result.n_nodes:5d} {min(runs):3d}–{max(runs):<3d} "
             f"{true_from:8.4g} {span:>22s} {worst:6.1f} {alarms:3d} {misses:3d} {silent:3d} "
-            f"{undecided:3d}"
+            f"{undecided:3d}  {', '.join(f'{kind} {count}' for kind, count in remedies.items())}"
         )
     return rows
 

@@ -33,21 +33,20 @@ import numpy as np
 
 
 class Linear:
-    """y = a t + b², z = a b: closed-form statistics; optional failure and slowness."""
+    """y = a t + b², z = a b: closed-form statistics; optional failure. A process with
+    $LINEAR_DELAY set sleeps that many seconds a run (the config is the same without)."""
 
     outputs = ("y", "z")
 
-    def __init__(self, a=1.0, b=0.0, fail_above=None, delay=0.0):
+    def __init__(self, a=1.0, b=0.0, fail_above=None):
         self.parameters = {"a": a, "b": b}
         self.fail_above = fail_above
-        self.delay = delay
 
     def simulate(self, params, times):
         a = np.asarray(params.get("a", self.parameters["a"]), float)
         b = np.asarray(params.get("b", self.parameters["b"]), float)
         a, b = np.broadcast_arrays(a, b)
-        if self.delay:
-            time.sleep(self.delay * a.size)
+        time.sleep(float(os.environ.get("LINEAR_DELAY", 0.0)) * a.size)
         y = a[:, None] * times + b[:, None] ** 2
         if self.fail_above is not None:
             if a.size == 1 and a[0] > self.fail_above:

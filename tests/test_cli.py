@@ -187,14 +187,15 @@ def test_regress_policy_records_the_failures(tmp_path, linear_study):
 def test_sigkill_then_resume_gives_identical_results(tmp_path, linear_study):
     """Kill a real `pcmb run` mid-way; --resume runs only the rest and matches a clean run.
 
-    64 nodes at 0.05 s each (3.2 s) in chunks of 4: the kill after 3 records leaves ~2.6 s
-    of slack before the run could finish on its own.
+    64 nodes at 0.05 s each in the killed run (3.2 s; none in the resume) in chunks of 4:
+    the kill after 3 records leaves ~2.6 s of slack before the run could finish on its own.
     """
-    config = linear_study(order=7, extra_params=", delay: 0.05", execution="jobs: 1, chunk_size: 4")
+    config = linear_study(order=7, execution="jobs: 1, chunk_size: 4")
     out = tmp_path / "out.h5"
     journal = tmp_path / "out.h5.journal"
     command = [sys.executable, "-m", "pcmb.cli", "run", str(config), "--quiet"]
-    process = subprocess.Popen(command, cwd=tmp_path, start_new_session=True)
+    slow = {**os.environ, "LINEAR_DELAY": "0.05"}
+    process = subprocess.Popen(command, cwd=tmp_path, env=slow, start_new_session=True)
     deadline = time.monotonic() + 60
     while len(list(journal.glob("record-*.npz"))) < 3:
         assert process.poll() is None, "the run ended before it could be killed"
@@ -210,7 +211,7 @@ def test_sigkill_then_resume_gives_identical_results(tmp_path, linear_study):
     resumed = pcmb.load(out)
     assert not journal.exists()
 
-    # The reference: the same study without the model's delay, which changes no value.
+    # The reference: the same study run whole.
     again = linear_study(order=7, execution="jobs: 1, chunk_size: 4", name="clean")
     clean = tmp_path / "clean.h5"
     assert main(["run", str(again), "-o", str(clean), "--quiet"]) == 0

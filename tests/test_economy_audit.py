@@ -149,6 +149,7 @@ def _ball(folder: Path, method: str) -> Path:
     return _run(folder, BALL, inputs, method, "{start: 0.0, stop: 4.0, points: 201}")
 
 
+@pytest.mark.slow
 def test_a_bouncing_ball_is_flagged_at_its_first_true_crossing_and_sent_to_elements(tmp_path):
     """Items 4 and 5: a ball dropped from h ~ U[0.5, 1.5] onto a floor (restitution 0.8),
     order 5 (6 runs), the default placed check (8 runs): the contact puts a kink in h, the
@@ -189,6 +190,7 @@ def test_order_auto_on_an_oscillator_keeps_every_run_and_its_estimate_is_calibra
     assert worst / 10 <= indicator[-1] <= 10 * worst, (indicator[-1], worst)
 
 
+@pytest.mark.slow
 def test_elements_auto_out_of_elements_names_its_limit_and_never_contradicts_the_verdict(
     tmp_path,
 ):
@@ -278,6 +280,7 @@ def test_a_mujoco_slider_with_uncertain_dry_friction_is_reliable_where_it_is(tmp
     runs_line_agrees_with_the_file(path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "method",
     [
@@ -496,6 +499,7 @@ def test_a_pdf_below_every_run_of_a_positive_output_is_flagged(tmp_path):
     assert [line for line in outside if "the PDF at t = 3 " in line], outside
 
 
+@pytest.mark.slow
 def test_order_auto_on_a_bouncing_ball_is_not_flagged_early(tmp_path):
     """Done when, no false alarm: the bouncing ball, ``order: auto`` (it stops at order 5 on
     its own estimate, 0.0092), the default placed check: a flag within 5 % of the horizon of

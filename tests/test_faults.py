@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_process import pcmb_cli, pcmb_here
+from cli_process import pcmb_here
 from executor_models import edges
 
 import pcmb
@@ -404,7 +404,7 @@ def test_a_stopped_run_leaves_nothing_behind_and_resumes_to_the_same_bits(
             os.killpg(process.pid, signal.SIGKILL)
         process.wait()
     assert {p.name for p in (tmp_path / "out").iterdir()} == {"result.h5.journal"}
-    resumed = pcmb_cli("run", str(config), "--quiet", "--resume")
+    resumed = pcmb_here("run", str(config), "--quiet", "--resume")
     assert resumed.returncode == 0, resumed.stderr
     whole = pcmb.load(tmp_path / "whole" / "out" / "result.h5")
     again = pcmb.load(tmp_path / "out" / "result.h5")

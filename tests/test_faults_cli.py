@@ -12,7 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from cli_process import gated_pcmb, pcmb_cli
+from cli_process import gated_pcmb, pcmb_cli, pcmb_here
 
 import pcmb
 from pcmb.cli import main
@@ -99,7 +99,7 @@ def test_a_resumed_sweep_is_refused_while_another_writes_the_folder(tmp_path: Pa
         *sweep, "--quiet", cwd=tmp_path, gate=tmp_path / "gate", ready=reached
     ) as first:
         before = _stamps(tmp_path / "out")
-        second = pcmb_cli(*sweep, "--resume", "--quiet", cwd=tmp_path)
+        second = pcmb_here(*sweep, "--resume", "--quiet", cwd=tmp_path)
         assert second.returncode == 2, second.stderr
         assert _stamps(tmp_path / "out") == before  # nothing written, not even the ledger
         assert f"(PID {first.pid}) is writing the sweep folder out;" in second.stderr

@@ -10,15 +10,13 @@ from __future__ import annotations
 import hashlib
 import os
 import re
-import shutil
 import sys
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_process import pcmb_cli
+from cli_process import pcmb_cli, pcmb_here
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -136,7 +134,7 @@ def test_resume_refuses_an_edited_imported_module_or_listed_file(
     changed = folder / edited
     original = changed.read_text()
     changed.write_text(content)
-    refused = pcmb_cli("run", "study.yaml", "--quiet", "--resume", cwd=folder)
+    refused = pcmb_here("run", "study.yaml", "--quiet", "--resume", cwd=folder)
     assert refused.returncode == 2, refused.stderr
     assert f"model file {changed.resolve()} has changed since" in refused.stderr
     assert not (folder / "out.h5").exists()
@@ -156,7 +154,7 @@ def test_a_missing_listed_model_file_is_named_at_its_key(tmp_path: Path) -> None
     (tmp_path / "model.py").write_text(ENTRY)
     (tmp_path / "helper.py").write_text(HELPER)
     (tmp_path / "study.yaml").write_text(PYTHON_CONFIG)
-    done = pcmb_cli("validate", "study.yaml", cwd=tmp_path)
+    done = pcmb_here("validate", "study.yaml", cwd=tmp_path)
     assert done.returncode == 2, done.stdout + done.stderr
     assert "model.files[0]: file " in done.stderr and "scale.txt does not exist" in done.stderr
 
@@ -274,7 +272,7 @@ def test_fmu_variables_aliasing_one_value_reference_are_not_two_inputs(
         FMU_CONFIG.format(fmu=aliased, inputs=f"{K_INPUT}\n{C_INPUT}")
     )
     for command in (("validate", "study.yaml"), ("run", "study.yaml", "--quiet")):
-        done = pcmb_cli(*command, cwd=tmp_path)
+        done = pcmb_here(*command, cwd=tmp_path)
         assert done.returncode == 2, done.stdout + done.stderr
         assert re.search(r"inputs\.c: .*inputs\.k", done.stderr), done.stderr
         assert "valueReference 0" in done.stderr
@@ -325,10 +323,12 @@ def test_a_planted_fmu_cache_entry_never_runs(
     marker = tmp_path / "planted-code-ran"
     digest = hashlib.sha256(oscillator_fmu.read_bytes()).hexdigest()[:32]
     cache = tmp_path / "cache"
-    # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it), and
-    # where it does now: the user's own cache, private, whose entries it checks (an entry
-    # edited in place, or a link to a folder elsewhere).
-    shared = Path(tempfile.gettempdir()) / "pcmb-fmu" / digest
+    # Where pcmb extracted an FMU (the shared temporary folder, anyone could plant it: the
+    # run's $TMPDIR, this test's own so that no other test process meets it), and where it
+    # does now: the user's own cache, private, whose entries it checks (an entry edited in
+    # place, or a link to a folder elsewhere).
+    temporary = tmp_path / "tmp"
+    shared = temporary / "pcmb-fmu" / digest
     private = cache / "pcmb" / "fmu" / digest
     plant(oscillator_fmu, shared, marker)
     if how == "edited":
@@ -343,10 +343,8 @@ def test_a_planted_fmu_cache_entry_never_runs(
     (tmp_path / "study.yaml").write_text(
         FMU_CONFIG.format(fmu=oscillator_fmu, inputs=f"{K_INPUT}\n{C_INPUT}")
     )
-    try:
-        done = pcmb_cli("run", "study.yaml", "--quiet", env=study_env(cache), cwd=tmp_path)
-    finally:
-        shutil.rmtree(shared)
+    environment = {**study_env(cache), "TMPDIR": str(temporary)}
+    done = pcmb_cli("run", "study.yaml", "--quiet", env=environment, cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert not marker.exists()
     import pcmb

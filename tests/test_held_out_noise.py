@@ -17,6 +17,7 @@ import pytest
 
 import pcmb
 from pcmb.analysis.diagnostics import CONFIDENCE, HELD_OUT_SEED, diagnose, held_out_draws
+from pcmb.analysis.diagnostics.draws import unseen_region_error
 from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.held_out import HeldOutPlan
 
@@ -275,3 +276,45 @@ def test_the_sequential_check_of_two_kinks_misses_at_most_at_its_confidence():
         found = result.diagnostics["y"]
         misses += bool(np.any((error > 0.02) & ~(found.undecided | (times >= found.failing_from))))
     assert misses <= 15, misses
+
+
+def test_the_unseen_region_error_is_the_rule_of_three_times_the_largest_residual_so_far():
+    """K draws all miss a region of mass m with probability (1 - m)^K: at 90 % one of mass
+    -ln(0.1) / K may hold none. The error it may hide is that mass times the largest
+    |residual| over the scale seen at this time or before, where every residual now is below
+    it; round-off of a large baseline (1e5 here) counts as none."""
+    predicted = np.full((9, 5), 1e5)
+    observed = predicted.copy()
+    observed[4] += [5e-8, 0.2, 0.0, -0.1, 0.02]  # round-off of 1e5 (1e-12 of it), then errors
+    found = unseen_region_error(predicted, observed, None, 0.5, 0.9)
+    floor = 0.4 * math.log(10) / 9  # 0.4: the largest residual so far over the scale
+    np.testing.assert_allclose(found, [0.0, 0.0, floor, 0.0, floor])
+
+
+def test_draws_that_all_miss_a_moving_jump_leave_the_time_undecided():
+    """A mass at v0 ~ U[0.5, 1.5] meets a wall at t = 1 / v0 and rebounds at -e v0, e ~
+    U[0.3, 0.7]; tensor order 5, seed 7, 9 drawn runs. At t = 1.9 the jump sits at v0 =
+    0.53, below every node and draw: each residual is 0 (the velocity is linear in v0 and e
+    on each side) while the truth's error is 8 % of the scale. Before, "0 ± 0": reliable.
+    The draws saw residuals up to 1.3 of the scale before; the jump may hide in the 2.3 / 9
+    of the mass they may miss: undecided."""
+
+    @pcmb.batched(outputs=("v",))
+    def wall(params, times):
+        v0, e = (np.asarray(params[name])[:, None] for name in ("v0", "e"))
+        return {"v": np.where(times < 1 / v0, v0, -e * v0)}
+
+    inputs = {"v0": pcmb.Uniform(0.5, 1.5), "e": pcmb.Uniform(0.3, 0.7)}
+    times = np.linspace(0.0, 4.0, 81)
+    method = {"kind": "collocation", "order": 5, "seed": 7}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = pcmb.Study(wall, inputs, times, method=method, backend="inprocess").run()
+    found, at = result.diagnostics["v"], 38  # t = 1.9
+    assert result.held_out.ok.sum() == 9
+    predicted = result.expansions["v"].evaluate_germ(result.held_out.germ)
+    residual = np.abs(result.held_out.values["v"] - predicted) / found.scale
+    assert np.max(residual[:, at]) < 1e-9 < 1.0 < np.max(residual[:, :at])
+    assert found.reliable and found.undecided[at]
+    floor = math.log(10) / 9 * np.max(residual[:, :at])
+    assert found.noise[at] == pytest.approx(floor, rel=1e-6)

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import io
 import re
-import subprocess
-import sys
 
 import pytest
+from cli_process import pcmb_here
 from test_resume import PYTHON_CONFIG, PYTHON_MODEL, run_and_kill
 
 from pcmb.run.progress import Progress, phase
@@ -67,13 +66,7 @@ def test_a_run_in_a_log_shows_its_runs_and_phases_and_a_resume_its_reused_runs(t
     (python_study / "study.yaml").write_text(PYTHON_CONFIG)
 
     def pcmb_run(*args: str) -> str:
-        done = subprocess.run(
-            [sys.executable, "-m", "pcmb.cli", "run", "study.yaml", *args],
-            cwd=python_study,
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        done = pcmb_here("run", "study.yaml", *args, cwd=python_study)  # stderr: a log
         assert done.returncode == 0, done.stderr
         return done.stderr
 

@@ -25,7 +25,7 @@ import pytest
 import pcmb
 from pcmb.references import ishigami, ishigami_moments
 
-pytestmark = pytest.mark.slow  # 500 small studies in this process, about 4 s
+pytestmark = pytest.mark.slow  # 500 small studies in this process, about 3 s
 
 SIZES = 2 ** np.arange(7, 14)
 SEEDS = range(24)
@@ -56,6 +56,7 @@ def _rmse(method):
                 samples=int(size),
                 seed=seed,
                 backend="inprocess",  # the estimator is under test, not the workers
+                chunk_size=int(size),  # one batch a study, as a batch model takes it
             )
             errors[i, j] = study.run().mean("y")[0] - exact
     return np.sqrt(np.mean(errors**2, axis=0))

@@ -212,6 +212,7 @@ class Collector:
 """
 
 
+@pytest.mark.slow  # a whole run in a pcmb process of its own: 1.9 s of CPU
 def test_the_command_collects_garbage_while_its_models_run(tmp_path):
     """The command turns garbage collection off only while it imports and reads its config:
     a long study's cycles are still collected (the model runs in pcmb's own process here)."""

@@ -30,30 +30,30 @@ from pcmb.sweep.table import COLUMNS, read_sweep
 CONFIGS = sorted((Path(__file__).parent.parent / "configs").glob("*.yaml"))
 
 GROWTH_MODEL = '''
+import os
 import time
 
 import numpy as np
 
 
 class Growth:
-    """y = exp(a t) + b: E y = (e^t - 1)/t + E b, closed form for a ~ U[0, 1]."""
+    """y = exp(a t) + b: E y = (e^t - 1)/t + E b, closed form for a ~ U[0, 1]. A process
+    with $GROWTH_DELAY set sleeps that many seconds a run (the config is the same without)."""
 
     outputs = ("y",)
 
-    def __init__(self, a=0.5, b=0.0, delay=0.0):
+    def __init__(self, a=0.5, b=0.0):
         self.parameters = {"a": a, "b": b}
-        self.delay = delay
 
     def simulate(self, params, times):
         a = np.asarray(params["a"], float)
         b = np.broadcast_to(np.asarray(params["b"], float), a.shape)
-        if self.delay:
-            time.sleep(self.delay * a.size)
+        time.sleep(float(os.environ.get("GROWTH_DELAY", 0.0)) * a.size)
         return {"y": np.exp(a[:, None] * times) + b[:, None]}
 '''
 
 
-def _study(folder: Path, sweep: str, *, delay: float = 0.0, points: int = 21) -> Path:
+def _study(folder: Path, sweep: str, *, points: int = 21) -> Path:
     (folder / "growth.py").write_text(GROWTH_MODEL)
     config = folder / "study.yaml"
     config.write_text(
@@ -63,7 +63,7 @@ def _study(folder: Path, sweep: str, *, delay: float = 0.0, points: int = 21) ->
             model:
               kind: python
               entry: growth.py:Growth
-              params: {{a: 0.5, b: 0.0, delay: {delay}}}
+              params: {{a: 0.5, b: 0.0}}
             time: {{start: 0.0, stop: 2.0, points: {points}}}
             inputs:
               a: {{dist: uniform, low: 0.0, high: 1.0}}
@@ -252,9 +252,11 @@ def test_bad_sweeps_name_their_key_before_anything_runs(tmp_path, capsys, sweep,
 
 
 def _sweep_process(folder: Path) -> subprocess.Popen[bytes]:
+    """``pcmb sweep`` of ``folder/study.yaml`` in a child whose model runs take 10 ms each."""
     return subprocess.Popen(
         [sys.executable, "-m", "pcmb.cli", "sweep", "study.yaml", "-o", "out", "--quiet"],
         cwd=folder,
+        env={**os.environ, "GROWTH_DELAY": "0.01"},
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
@@ -276,8 +278,8 @@ def test_a_sweep_killed_midway_resumes_where_it_stopped(tmp_path):
         - {kind: montecarlo, samples: [400], seed: 1}
       reference: {kind: collocation, order: 6}
     """
-    config = _study(tmp_path, slow, delay=0.01)
-    process = _sweep_process(tmp_path)
+    config = _study(tmp_path, slow)
+    process = _sweep_process(tmp_path)  # slow: killed within the 4 s of Monte Carlo runs
     try:
         deadline = time.monotonic() + 90
         while len(_finished(tmp_path)) < 3:  # the reference and two orders

@@ -636,8 +636,9 @@ class AdaptiveReport(RecordReport):
 
     adaptive: AdaptiveFit
 
-    def statistics_error(self) -> float | None:
-        """The last round's estimated error (``None`` before any round)."""
+    def statistics_error(self, result: StudyResult, output: str) -> float | None:
+        """The last round's estimated error, the same for every output (``None`` before any
+        round)."""
         estimate = self.adaptive.estimate
         return estimate if math.isfinite(estimate) else None
 

@@ -463,8 +463,9 @@ class RefinementReport(RecordReport):
 
     refinement: Refinement
 
-    def statistics_error(self) -> float | None:
-        """The last round's estimated error (``None`` before any round)."""
+    def statistics_error(self, result: StudyResult, output: str) -> float | None:
+        """The last round's estimated error, the same for every output (``None`` before any
+        round)."""
         last = self.refinement.indicator[-1:]
         return float(last[0]) if last.size and np.isfinite(last[0]) else None
 

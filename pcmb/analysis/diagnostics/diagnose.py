@@ -29,6 +29,7 @@ from pcmb.analysis.diagnostics.draws import (
     HeldOut,
     coverage_error,
     judging_weights,
+    unseen_region_error,
 )
 from pcmb.analysis.diagnostics.phrases import as_percent, time_count, time_span
 from pcmb.analysis.diagnostics.placed import placed_check
@@ -138,6 +139,7 @@ def diagnose(
     placed: bool = False,
     design_error: float | None = None,
     stratified: bool = True,
+    design_understates: float = 1.0,
 ) -> OutputDiagnostics:
     """Every check of one output's expansion, its verdict and its warnings.
 
@@ -187,9 +189,14 @@ def diagnose(
         understated the spread; a second batch that completes the first's hypercube,
         :func:`~pcmb.analysis.diagnostics.draws.held_out_unit`, is not always exact).
     design_error:
-        The design's own calibrated estimate of the statistics' error
+        The design's own calibrated estimate of this output's statistics' error
         (:meth:`pcmb.result.DesignReport.statistics_error`), or ``None``: without held-out
         runs, where it meets the tolerance it bounds the decay's reading.
+    design_understates:
+        How many times below the truth ``design_error`` was measured to fall at worst
+        (:attr:`pcmb.result.DesignReport.UNDERSTATES`): where the decay disagrees, a time
+        is vouched for only where that many times the estimate meets the tolerance, and
+        undecided where it does not.
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
@@ -232,21 +239,28 @@ def diagnose(
     # Without them, a design that measured its own convergence (an adaptive grid, order:
     # auto) outweighs the decay, which reads an exact polynomial's top terms (or a sparse
     # set's edge) as a tail.
-    if checked is None and design_error is not None and design_error <= tolerance:
-        estimate = np.minimum(decay, design_error)
-        if np.any(design_error < decay):
-            estimated_by = "design"
     noise = (
         np.zeros(times.size)
         if checked is None
         else np.where(np.isnan(checked.noise), np.inf, checked.noise)
     )
+    if checked is None and design_error is not None and design_error <= tolerance:
+        estimate = np.minimum(decay, design_error)
+        if np.any(design_error < decay):
+            estimated_by = "design"
+        # Where the decay disagrees, the truth may be up to its calibration's factor above
+        # the design's estimate: undecided there unless that factor meets the tolerance too.
+        noise = np.where(decay > tolerance, (design_understates - 1.0) * design_error, 0.0)
     failing_from = verdict(
         times, estimate, tolerance, noise if checked is None else flag_margin(checked, tolerance)
     )
     # A blind time fails unless the held-out runs, which saw the spread there, say it holds
     # beyond their noise (a switch the nodes have not reached yet, its spread still small).
     blind &= estimate + noise > tolerance
+    if checked is not None and not placed:
+        # No time is called reliable on draws that may have missed where the error lives.
+        unseen = unseen_region_error(predicted, observed, weights, scale, checked.confidence)
+        noise = np.fmax(noise, unseen)
     if blind.any():
         failing_from = float(np.fmin(failing_from, times[blind][0]))
     # Without held-out runs, design runs all equal at every time say nothing: where the
@@ -322,9 +336,9 @@ def more_runs(found: OutputDiagnostics) -> int:
     ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
     undecided, at least 1 otherwise): the noise falls as 1/√K. Too few runs to measure any
     noise (one): the first batch."""
-    if not found.undecided.any():
+    if not found.undecided.any() or found.holdout is None:  # no check to extend
         return 0
-    count = found.holdout.count  # a time is undecided only by a held-out check's noise
+    count = found.holdout.count
     needed = _runs_needed(found)
     if not np.isfinite(needed):
         return max(FIRST_BATCH - count, 1)
@@ -349,6 +363,18 @@ def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) 
     worst = int(np.flatnonzero(undecided)[np.argmax(found.estimate[undecided])])
     holdout = found.holdout
     where = f" at {axis} = {times[worst]:.4g}" if axis else ""
+    if holdout is None:
+        return WarningRecord(
+            "chaos-undecided",
+            f"without held-out runs, the design's own estimate of the error of mean and std, "
+            f"{as_percent(found.estimate[worst])}{where}, meets the tolerance "
+            f"{as_percent(found.tolerance)} of the largest std at {time_count(undecided)} but "
+            f"not by the factor it was measured to understate the truth by, while the "
+            f"coefficients' decay says {as_percent(found.decay[worst])}; held-out runs "
+            "(method.validation) would decide",
+            found.output,
+            time_span(times, undecided),
+        )
     count = holdout.count
     if _runs_needed(found) <= count:
         decide = (
@@ -472,7 +498,8 @@ def diagnose_all(
     axes: Mapping[str, OutputAxis | None] | None = None,
     nominal: Mapping[str, NDArray[np.float64]] | None = None,
     budgets: Collection[str] = (),
-    design_error: float | None = None,
+    design_error: Mapping[str, float | None] | None = None,
+    design_understates: float = 1.0,
 ) -> dict[str, OutputDiagnostics]:
     """:func:`diagnose` every output with a chaos expansion (one element or several), each on
     its own points: ``times``, or per ``axes`` (:class:`pcmb.result.StudyResult`) the points
@@ -482,7 +509,9 @@ def diagnose_all(
     nodes that succeeded; the held-out check uses the successful held-out runs; ``nominal``
     holds the run at the nominal parameters (output name -> (T,)), when one succeeded;
     ``budgets`` the codes of the design's budget records and ``design_error`` its own
-    estimate of the statistics' error (:func:`diagnose`).
+    estimate of each output's statistics' error (output name -> :func:`diagnose`'s
+    ``design_error``; an output not in it has none), understated by at most
+    ``design_understates``.
     """
     found = {}
     for name, expansion in expansions.items():
@@ -510,7 +539,8 @@ def diagnose_all(
             None if holdout is None else held_out.germ[held_out.ok],
             None if holdout is None else held_out.weights[held_out.ok],
             held_out is not None and held_out.placed,
-            design_error,
+            None if design_error is None else design_error.get(name),
             held_out is None or held_out.batches == 1,
+            design_understates,
         )
     return found

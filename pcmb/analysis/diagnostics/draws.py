@@ -204,12 +204,53 @@ def coverage_error(
     weights = 1.0 if weights is None else np.asarray(weights, dtype=float)
     weights = np.reshape(weights, (-1,) + (1,) * (predicted.ndim - 1))
     seen = np.mean(weights * ((predicted - expansion.mean()) / scale) ** 2, axis=0)
-    # Ranges, not squares: outputs near 1e200 must not overflow.
-    size = np.fmax(np.max(np.abs(observed), axis=0, initial=0.0), scale)
-    exact = np.max(np.abs(predicted - observed), axis=0, initial=0.0) <= RELATIVE_NOISE * size
+    exact = _largest_residual(predicted, observed, scale) == 0.0
     with np.errstate(divide="ignore", invalid="ignore"):
         missed = np.clip((sigma**2 - seen) / sigma**2, 0.0, 1.0) * energy / sigma
     return np.where((sigma > 0) & ~exact, missed, 0.0)
+
+
+def _largest_residual(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
+    """(T,) the largest |model - surrogate| over the (K, T) finite runs, over the scale; 0
+    where it is round-off (``RELATIVE_NOISE`` of the runs' largest size, at least the
+    scale): an exact polynomial's."""
+    residual = np.abs(np.asarray(observed, dtype=float) - np.asarray(predicted, dtype=float))
+    largest = np.max(residual, axis=0, initial=0.0)
+    # Ranges, not squares: outputs near 1e200 must not overflow.
+    size = np.fmax(np.max(np.abs(observed), axis=0, initial=0.0), scale)
+    return np.where(largest <= RELATIVE_NOISE * size, 0.0, largest / scale)
+
+
+def unseen_region_error(
+    predicted: ArrayLike,
+    observed: ArrayLike,
+    weights: ArrayLike | None,
+    scale: float,
+    confidence: float,
+) -> NDArray[np.float64]:
+    """(T,) how large an error of the mean the K drawn runs may have missed, over the scale,
+    at the one-sided ``confidence``, where they no longer see residuals of the size the
+    output has shown (0 elsewhere). A region of mass m under the draws' density holds none of
+    K draws with probability (1 - m)^K, so one of mass -ln(1 - confidence) / K (2.3 / K at
+    90 %, the rule of three) may hold none; where the response changes abruptly (a contact's
+    jump moving through the inputs), its residual there may be as large as the largest the
+    check has seen at this time or before, J: the running maximum along the axis of
+    :func:`_largest_residual` over the (K, T) finite runs, each times its (K,) importance
+    ``weights`` (``None``: 1), which carry the draws' mass to the inputs'. The floor 2.3 J / K
+    applies where every weighted residual now is below it: the error has moved where the
+    draws are not, or settled, which they cannot tell apart. Zero while the check sees no
+    residual above round-off (an exact polynomial's)."""
+    predicted, observed = np.asarray(predicted, dtype=float), np.asarray(observed, dtype=float)
+    count = predicted.shape[0]
+    if count == 0 or not scale > 0 or not np.isfinite(scale):
+        return np.zeros(predicted.shape[1:])
+    weights = np.ones(count) if weights is None else np.asarray(weights, dtype=float)
+    largest = np.zeros(predicted.shape[1:])
+    for k in range(count):  # run by run: the weight scales its residual, not its round-off
+        one = _largest_residual(predicted[k : k + 1], observed[k : k + 1], scale)
+        largest = np.fmax(largest, weights[k] * one)
+    floor = -math.log1p(-confidence) / count * np.maximum.accumulate(largest, axis=0)
+    return np.where(largest < floor, floor, 0.0)
 
 
 def _moment_weights(distributions: Sequence[Distribution], germ: ArrayLike) -> NDArray:

@@ -2,25 +2,27 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Collection
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies, decay_shape
 from pcmb.analysis.diagnostics.phrases import as_percent
+from pcmb.analysis.diagnostics.placed import interpolated
 from pcmb.analysis.diagnostics.ranges import RANGE_SHARE
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import PiecewiseExpansion
+from pcmb.chaos.expansion import ChaosExpansion
+from pcmb.chaos.nodes import TensorGrid
 from pcmb.wording import plural
 
 #: A tail holding more than this share of its energy in one input is "concentrated".
 _CONCENTRATED = 0.75
 #: An error that ends above this multiple of its value where it first failed grows.
 _GROWTH = 2.0
-#: A tail holding at least this share of the energy of the two layers before it does not
-#: decay as an analytic response's does, over the degrees the expansion has.
-_FLAT = 0.5
 #: The remedy reads the decay along every input holding at least this share of the tail.
 _SHARED = 0.25
 #: A held-out error whose weighted distance from the centre of an input's range
@@ -28,6 +30,16 @@ _SHARED = 0.25
 _AT_ENDS = 0.75
 #: ... and where it is at most this, inside it: around a jump, kink or steep front.
 _INSIDE = 0.4
+#: Either only where it lies that far from the 0.5 of an error spread evenly at this one-sided
+#: confidence, given how many runs carry the error (:attr:`HeldOutPlace.carriers`): 8 drawn runs
+#: of a two-input phase drift put it at 0.29, carried by 3 runs, at one seed of four.
+_PLACE_CONFIDENCE = 0.95
+#: The variance of |2u - 1|, u uniform in (0, 1): the spread of one run's distance from the
+#: centre where the error is spread evenly.
+_SPREAD_VARIANCE = 1 / 12
+#: The energy of a degree below this share of its spectrum's peak is round-off or the
+#: simulator's noise, which no decay reads.
+_FLOOR = 1e-12
 
 
 def remedy_for(
@@ -36,14 +48,16 @@ def remedy_for(
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
     budgets: Collection[str],
-    ends: NDArray[np.float64] | None = None,
+    held_out: HeldOutPlace | None = None,
     by_element: str = "",
 ) -> str:
     """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
     out (``budgets``: the codes of the design's budget records), with where a multi-element
     surrogate's error sits (``by_element``, :func:`element_errors`) and what was tried: the
     order, the elements and the refinement's end."""
-    action, inputs, cause = _cause_remedy(expansion, estimate, failing, out_of_range_share, ends)
+    action, inputs, cause = _cause_remedy(
+        expansion, estimate, failing, out_of_range_share, held_out
+    )
     orders = expansion.multi_index.max(axis=0)
     order = int(orders.max())
     elements = expansion.partition.size if isinstance(expansion, PiecewiseExpansion) else 1
@@ -54,39 +68,75 @@ def remedy_for(
         tried.append(f"order: auto ended at order {order} (order-budget)")
     if "element-budget" in budgets:
         tried.append(f"elements: auto ended at {elements} elements (element-budget)")
-    if action == "sampling":
-        remedy = f"sampling (method.kind: montecarlo, lhs or sobol): {cause}"
-    elif action == "order" and "order-budget" in budgets:
-        remedy = (
-            f"multi-element chaos{along} (method.elements) or an order above {order} set by "
-            f"hand (method.order): {cause}"
-        )
-    elif action == "order":
-        remedy = f"raising the order{' of ' + inputs if inputs else ''} (method.order): {cause}"
-    elif isinstance(expansion, PiecewiseExpansion):
+    if isinstance(expansion, PiecewiseExpansion):
         more = "raise method.max_elements" if "element-budget" in budgets else "finer cuts, or auto"
-        remedy = f"more elements{along} (method.elements: {more}): {cause}"
+        split = f"more elements{along} (method.elements: {more})"
     else:
-        remedy = f"multi-element chaos{along} (method.elements): {cause}"
+        split = f"multi-element chaos{along} (method.elements)"
+    raise_order = f"raising the order{' of ' + inputs if inputs else ''} (method.order)"
+    if action == "sampling":
+        remedy = "sampling (method.kind: montecarlo, lhs or sobol)"
+    elif action != "elements" and "order-budget" in budgets:
+        remedy = f"{split} or an order above {order} set by hand (method.order)"
+    elif action == "order":
+        remedy = raise_order
+    elif action == "elements":
+        remedy = split
+    else:
+        remedy = f"{raise_order}, or, if the response has a jump or kink in {inputs}, {split}"
+    remedy = f"{remedy}: {cause}"
     if by_element:
         remedy = f"{remedy}; {by_element}"
     return f"{remedy}; tried: {'; '.join(tried)}"
 
 
+@dataclasses.dataclass(frozen=True)
+class HeldOutPlace:
+    """The held-out runs' errors where the verdict fails, which the remedy reads
+    (:func:`error_at_ends`)."""
+
+    #: (K, n) the runs' germ.
+    germ: NDArray[np.float64]
+    #: (K, T) the model's value less the surrogate's at each run.
+    residual: NDArray[np.float64]
+    #: (n,) along each input, the mean of |2u - 1|, u the runs' ranks along it in (0, 1),
+    #: weighted by their squared error over the failing times: 0.5 for an error spread
+    #: evenly, near 1 for one at the ends of the range, lower for one around a point inside.
+    ends: NDArray[np.float64]
+    #: How many runs carry the error: (Σw)² / Σw², w the weights of ``ends``.
+    carriers: float
+
+    def where(self, k: int) -> str:
+        """``"ends"`` or ``"inside"`` where the error along input k sits at the ends of its
+        range (``ends`` at least ``_AT_ENDS``) or inside it (at most ``_INSIDE``), each only
+        if that far from an even spread's 0.5 at ``_PLACE_CONFIDENCE`` given the
+        ``carriers``; else ``""``."""
+        if not self.carriers > 0:
+            return ""
+        noise = np.sqrt(_SPREAD_VARIANCE / self.carriers) * STANDARD_NORMAL.inv_cdf(
+            _PLACE_CONFIDENCE
+        )
+        if self.ends[k] >= max(_AT_ENDS, 0.5 + noise):
+            return "ends"
+        if self.ends[k] <= min(_INSIDE, 0.5 - noise):
+            return "inside"
+        return ""
+
+
 def error_at_ends(
     germ: NDArray[np.float64], residual: NDArray[np.float64], failing: NDArray[np.bool_]
-) -> NDArray[np.float64]:
-    """(n,) where along each input the (K, T) held-out residual sits over the failing times:
-    the mean of |2u - 1|, u the runs' ranks along the input in (0, 1), weighted by the
-    squared residual; 0.5 for an error spread evenly, near 1 for one at the ends of the
-    range (a smooth response converging slowly), lower for one around a point inside it."""
+) -> HeldOutPlace:
+    """Where along each input the (K, T) held-out ``residual`` sits over the failing times
+    (:class:`HeldOutPlace`): near the ends of the range for a smooth response converging
+    slowly, around a point inside it for a jump or kink there."""
     ranks = np.argsort(np.argsort(germ, axis=0), axis=0)
     distance = np.abs(2 * (ranks + 0.5) / germ.shape[0] - 1)
     size = np.max(np.abs(residual[:, failing]))
     if not size > 0 or not np.isfinite(size):
-        return np.full(germ.shape[1], 0.5)
+        return HeldOutPlace(germ, residual, np.full(germ.shape[1], 0.5), 0.0)
     weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
-    return weight @ distance / weight.sum()
+    carriers = float(weight.sum() ** 2 / np.sum(weight**2))
+    return HeldOutPlace(germ, residual, weight @ distance / weight.sum(), carriers)
 
 
 def element_errors(
@@ -124,28 +174,67 @@ def element_errors(
     )
 
 
-def _decay_read(name: str, kind: str, rate: float, first: int, last: int) -> str:
-    """The decay of the chaos coefficients along one input (:func:`decay_shape`) in words."""
+def _decay_read(name: str, kind: str, rate: float, first: int, last: int, whose: str) -> str:
+    """The decay of ``whose`` coefficients along one input (:func:`decay_shape`) in words."""
     if kind == "geometric":
         return (
-            f"the chaos coefficients along {name} fall geometrically (energy × {rate:.2g} per "
-            f"degree, degrees {first} to {last}), as those of a smooth response, which a "
-            "higher order resolves"
+            f"{whose} along {name} fall geometrically (energy × {rate:.2g} per degree, degrees "
+            f"{first} to {last}), as those of a smooth response, which a higher order resolves"
         )
     return (
-        f"the chaos coefficients along {name} fall algebraically (energy ~ p^-{rate:.2g}, "
-        f"degrees {first} to {last}), as those of a jump or a kink, which a higher order "
-        "resolves only slowly"
+        f"{whose} along {name} fall algebraically (energy ~ p^-{rate:.2g}, degrees {first} to "
+        f"{last}), as those of a jump or a kink, which a higher order resolves only slowly"
     )
 
 
-def _rises_to_top(energy: NDArray[np.float64], index: NDArray[np.int64], k: int) -> bool:
-    """Whether the ``energy`` of the terms (of ``index``) along input k peaks at its top degree,
-    by degree and by pairs of neighbouring degrees (as :func:`decay_shape` reads them: a
+#: Whose coefficients :func:`_decay_read` reads from the expansion itself.
+_OWN = "the chaos coefficients"
+
+
+def _held_out_decay(
+    expansion: Expansion, held_out: HeldOutPlace | None, failing: NDArray[np.bool_]
+) -> tuple[tuple[str, float, int, int], str] | None:
+    """The decay (:func:`decay_shape`) of the interpolant through a one-input expansion at its
+    Gauss nodes (the design's runs, for a collocation) and the held-out runs, of degree N +
+    K - 1, each failing time weighing the same, read up to the degree where its energy falls
+    below ``_FLOOR`` of its peak; with whose coefficients they are, in words. ``None`` for
+    several inputs or elements, without held-out runs, or with too few degrees to read."""
+    if not isinstance(expansion, ChaosExpansion) or expansion.n != 1 or held_out is None:
+        return None
+    (distribution,) = expansion.distributions
+    nodes = TensorGrid((distribution,), (int(expansion.multi_index.max()),)).nodes
+    observed = held_out.residual + expansion.evaluate_germ(held_out.germ)
+    values = np.vstack([expansion.evaluate_germ(nodes), observed])[:, failing]
+    size = np.max(np.abs(values))
+    if not size > 0 or not np.isfinite(size):
+        return None
+    points = np.concatenate([nodes[:, 0], held_out.germ[:, 0]])
+    try:
+        coefficients = interpolated(distribution.family, points, values / size)
+    except np.linalg.LinAlgError:  # a held-out run on a node
+        return None
+    energies = coefficients[1:] ** 2
+    variance = energies.sum(axis=0)
+    varies = np.isfinite(variance) & (variance > 0)
+    energy = np.concatenate([[0.0], np.sum(energies[:, varies] / variance[varies], axis=1)])
+    paired = energy[1:-1] + energy[2:]
+    below = np.flatnonzero(paired < _FLOOR * paired.max(initial=0.0))
+    degrees = points.size if below.size == 0 else below[0] + 2
+    shape = decay_shape(energy[:degrees], np.arange(degrees)[:, None], 0)
+    whose = (
+        f"the coefficients of the interpolant through the expansion's {nodes.shape[0]} nodes "
+        f"and the {held_out.germ.shape[0]} held-out runs"
+    )
+    return None if shape is None else (shape, whose)
+
+
+def _peaks_past_first(energy: NDArray[np.float64], index: NDArray[np.int64], k: int) -> bool:
+    """Whether the ``energy`` of the terms (of ``index``) along input k peaks past its first
+    degree, by degree and by pairs of neighbouring degrees (as :func:`decay_shape` reads them: a
     response even or odd about the centre has every other coefficient zero)."""
     by_degree = np.bincount(index[:, k], weights=energy)[1:]
     pairs = by_degree[:-1] + by_degree[1:]
-    return pairs.size > 0 and by_degree.argmax() == by_degree.size - 1 == pairs.argmax() + 1
+    return pairs.size > 0 and by_degree.argmax() > 0 and pairs.argmax() > 0
 
 
 def _cause_remedy(
@@ -153,33 +242,35 @@ def _cause_remedy(
     estimate: NDArray[np.float64],
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
-    ends: NDArray[np.float64] | None,
+    held_out: HeldOutPlace | None,
 ) -> tuple[str, str, str]:
     """What may help, read from where the tail's energy sits over the failing times:
-    ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"`` or ``"elements"``
-    along the named inputs (``""``: all), the cause in words.
+    ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"``, ``"elements"`` or
+    ``"either"`` (a higher order first) along the named inputs (``""``: all), the cause in
+    words.
 
     - energy spread over several inputs and an error that grows (more than doubles from
       the first failing time to the end): chaotic or long-horizon dynamics, which no
       order fixes — sampling;
     - else, along every input that holds at least ``_SHARED`` of the tail (each failing
       time weighing the same), the decay of the coefficients (:func:`decay_shape`):
-      algebraic along any, as those of a jump or kink — multi-element chaos along those;
+      algebraic along any, as those of a jump or kink — multi-element chaos along those,
+      unless, past a peak above the first degree, the interpolant through nodes and held-out
+      runs of a one-input expansion (:func:`_held_out_decay`) decays geometrically — a higher
+      order;
       geometric along all, as those of an analytic response — a higher order, unless the
-      held-out error sits inside the input's range (at most ``_INSIDE``, below), as a
-      kink's does whose first degrees look geometric — multi-element chaos;
-    - too few degrees to tell: a higher order when the held-out error sits at the ends of
-      the input's range (``ends``, :func:`error_at_ends`, at least ``_AT_ENDS``), as that
-      of a smooth response; multi-element chaos when it sits inside (at most ``_INSIDE``),
-      around a jump or kink; else, with the error over the range, a higher order when the
-      energy along the input rises to its top degree (:func:`_rises_to_top`): a smooth
-      response's spectrum rises to its peak (an oscillation faster than the order
-      resolves, as a phase drifting over a long horizon) and falls geometrically past it,
-      a jump's or kink's peaks at the first degrees; steep, oscillating or discontinuous
-      when the spectrum does not decay but peaks below the top (the outer two layers hold
-      at least half the energy of the layers before them, the linear ones at order 3) or,
-      below order 3, the surrogate overshoots the runs — multi-element chaos; otherwise a
-      higher order. The message says that the order was too low to tell.
+      held-out error sits inside the input's range (:meth:`HeldOutPlace.where`), or, where too
+      few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through nodes
+      and held-out runs of a one-input expansion (:func:`_held_out_decay`) decays
+      algebraically: a kink whose first degrees look geometric — multi-element chaos;
+    - too few degrees to tell: the decay of that interpolant, algebraic — multi-element
+      chaos, geometric — a higher order; without it, a higher order when the held-out error
+      sits at the ends of the input's range, as that of a smooth response; multi-element chaos
+      when it sits inside, around a jump or kink; else a higher order when the energy along
+      the input peaks past its first degree (:func:`_peaks_past_first`): more extrema than
+      the order holds, as a phase drifting over a long horizon, where a jump's or kink's
+      spectrum peaks at its first degree; else either, a higher order first (the cheaper
+      try), and the message says that the order was too low to tell.
     """
     index = expansion.multi_index
     tail = tail_terms(index)
@@ -208,69 +299,75 @@ def _cause_remedy(
     holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
     shapes = {k: decay_shape(energy, index, k) for k in holders}
     read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
+    richer = _held_out_decay(expansion, held_out, failing)
+    richer_read = "" if richer is None else _decay_read(name, *richer[0], richer[1])
+    where = "" if held_out is None else held_out.where(top)
     place = ""
-    if ends is not None:
+    if held_out is not None:
+        sits = {"ends": "at the ends of", "inside": "inside", "": "over"}[where]
         place = (
-            f"the range of {name} (mean |2u - 1| of their ranks u along it, weighted by the "
-            f"squared error: {ends[top]:.2f}; 0.5 if spread evenly)"
+            f"the surrogate's error at the held-out runs sits {sits} the range of {name} (mean "
+            f"|2u - 1| of their ranks u along it, weighted by the squared error: "
+            f"{held_out.ends[top]:.2f}, carried by about {held_out.carriers:.2g} runs; 0.5 if "
+            "spread evenly)"
         )
     if top in read:
-        reads = "; ".join(_decay_read(expansion.names[k], *shapes[k]) for k in read)
+        reads = "; ".join(_decay_read(expansion.names[k], *shapes[k], _OWN) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
+        # Past a late peak, the few top degrees of a still unresolved oscillation may fall as
+        # a jump's (a jump's spectrum peaks at its first degree): the richer interpolant,
+        # reading more degrees past it, tells.
+        late = richer is not None and shapes[top][2] > 1 and richer[0][0] == "geometric"
+        if jumps and late:
+            return (
+                "order",
+                name,
+                f"{reads}, past a peak at degree {shapes[top][2]}, but {richer_read}",
+            )
         if jumps:
             return "elements", " and ".join(jumps), reads
-        if place and ends[top] <= _INSIDE:  # a kink's first degrees may look geometric
-            return (
-                "elements",
-                name,
-                f"{reads}, but the surrogate's error at the held-out runs sits inside {place}, "
-                "around a kink or steep front there",
-            )
+        # A kink's first degrees may look geometric: the held-out error sits inside the range,
+        # or, where too few runs carry it to tell, the richer interpolant decays algebraically.
+        kink = where == "inside" or (
+            held_out is not None
+            and held_out.ends[top] <= _INSIDE
+            and richer is not None
+            and richer[0][0] == "algebraic"
+        )
+        if kink:
+            but = place if where == "inside" else f"{place}, and {richer_read}"
+            return "elements", name, f"{reads}, but {but}, around a kink or steep front"
         return "order", " and ".join(expansion.names[k] for k in read), reads
     order = int(index[:, top].max())
     unknown = (
         f"; at order {order} too few degrees follow the peak of the spectrum along {name} "
         "to tell a jump or kink from a slowly converging smooth response by it"
     )
-    previous = energy[before].sum()
-    if place and ends[top] >= _AT_ENDS:
+    if richer is not None:
+        action = "elements" if richer[0][0] == "algebraic" else "order"
+        return action, name, f"{richer_read}{unknown} alone"
+    if where == "ends":
+        return "order", name, f"{place}, as that of a smooth response converging slowly{unknown}"
+    if where == "inside":
+        return "elements", name, f"{place}, around a jump, kink or steep front{unknown}"
+    if _peaks_past_first(energy, index, top):
         return (
             "order",
             name,
-            f"the surrogate's error at the held-out runs sits at the ends of {place}, as "
-            f"that of a smooth response converging slowly{unknown}",
-        )
-    if place and ends[top] <= _INSIDE:
-        return (
-            "elements",
-            name,
-            f"the surrogate's error at the held-out runs sits inside {place}, around a "
-            f"jump, kink or steep front there{unknown}",
-        )
-    if _rises_to_top(energy, index, top):
-        return (
-            "order",
-            name,
-            f"the energy of the chaos coefficients along {name} rises to its top degree "
-            f"({order}): an oscillation that order does not yet resolve, as a smooth response's "
+            f"the energy of the chaos coefficients along {name} peaks past its first degree: "
+            "an oscillation that the order does not yet resolve, as a smooth response's "
             "spectrum rises to its peak before it falls geometrically (a jump's or kink's "
-            "peaks at the first degrees and falls algebraically)",
+            f"peaks at the first degree and falls algebraically){unknown}",
         )
+    previous = energy[before].sum()
     if previous > 0:
-        ratio = energy[tail].sum() / previous
-        steep = ratio >= _FLAT
         read = (
-            f"the outer two layers of its spectrum hold {ratio:.2g} times the energy of the "
-            "layers before them"
+            f"the outer two layers of its spectrum hold {energy[tail].sum() / previous:.2g} "
+            "times the energy of the layers before them"
         )
-    else:  # order 2: no layer before the tail, the overshoot tells
-        steep = bool(np.any(out_of_range_share[failing] > RANGE_SHARE))
-        read = f"the surrogate {'leaves' if steep else 'stays within'} the runs' range"
-    if not steep:
-        return "order", name, f"{read}: a smooth response converging slowly{unknown}"
-    spread = ", with the surrogate's error over the range, not at its ends" if place else ""
-    return (
-        "elements",
-        name,
-        f"the response is steep, oscillating or discontinuous in {name}: {read}{spread}{unknown}",
-    )
+    else:  # order 2: no layer before the tail
+        overshoots = np.any(out_of_range_share[failing] > RANGE_SHARE)
+        read = f"the surrogate {'leaves' if overshoots else 'stays within'} the runs' range"
+    spread = f"; {place}" if place else ""
+    # Raising the order by one costs a run per line of nodes, elements at least double them.
+    return "either", name, f"{read}{spread}{unknown}; a higher order is the cheaper try"
