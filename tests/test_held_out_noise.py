@@ -9,6 +9,7 @@ Gauss-Legendre rule split at the kink.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -16,7 +17,14 @@ import numpy as np
 import pytest
 
 import pcmb
-from pcmb.analysis.diagnostics import CONFIDENCE, HELD_OUT_SEED, diagnose, held_out_draws
+from pcmb.analysis.diagnostics import (
+    CONFIDENCE,
+    HELD_OUT_SEED,
+    diagnose,
+    held_out_draws,
+    more_runs,
+)
+from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.draws import unseen_region_error
 from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.held_out import HeldOutPlan
@@ -280,14 +288,18 @@ def test_the_sequential_check_of_two_kinks_misses_at_most_at_its_confidence():
 
 def test_the_unseen_region_error_is_the_rule_of_three_times_the_largest_residual_so_far():
     """K draws all miss a region of mass m with probability (1 - m)^K: at 90 % one of mass
-    -ln(0.1) / K may hold none. The error it may hide is that mass times the largest
-    |residual| over the scale seen at this time or before, where every residual now is below
-    it; round-off of a large baseline (1e5 here) counts as none."""
-    predicted = np.full((9, 5), 1e5)
-    observed = predicted.copy()
-    observed[4] += [5e-8, 0.2, 0.0, -0.1, 0.02]  # round-off of 1e5 (1e-12 of it), then errors
+    -ln(0.1) / K may hold none. The error it may hide there is that mass times the largest
+    |residual| seen at this time or before, against the largest spread of the runs seen so
+    far, times their spread now, where every residual now is below it; round-off of a large
+    baseline (1e5 here) counts as none."""
+    spread = np.array([1.0, 1.0, 1.0, 0.25, 1.0])  # the runs' values 1e5 + spread x u
+    observed = 1e5 + np.linspace(-1.0, 1.0, 9)[:, None] * spread
+    predicted = observed.copy()
+    predicted[4] -= [5e-8, 0.2, 0.0, 0.02, 0.02]  # round-off of 1e5 (1e-12 of it), then errors
     found = unseen_region_error(predicted, observed, None, 0.5, 0.9)
-    floor = 0.4 * math.log(10) / 9  # 0.4: the largest residual so far over the scale
+    # 0.4 of the scale seen at the full spread; at t3 the runs vary by a quarter of it, and
+    # 0.04 is more than 2.3 / 9 of a quarter of 0.4 (settled with the output): no floor.
+    floor = math.log(10) / 9 * 0.4
     np.testing.assert_allclose(found, [0.0, 0.0, floor, 0.0, floor])
 
 
@@ -297,7 +309,8 @@ def test_draws_that_all_miss_a_moving_jump_leave_the_time_undecided():
     0.53, below every node and draw: each residual is 0 (the velocity is linear in v0 and e
     on each side) while the truth's error is 8 % of the scale. Before, "0 ± 0": reliable.
     The draws saw residuals up to 1.3 of the scale before; the jump may hide in the 2.3 / 9
-    of the mass they may miss: undecided."""
+    of the mass they may miss, as large against the runs' spread there as the largest
+    residual against the largest spread before: undecided."""
 
     @pcmb.batched(outputs=("v",))
     def wall(params, times):
@@ -316,5 +329,57 @@ def test_draws_that_all_miss_a_moving_jump_leave_the_time_undecided():
     residual = np.abs(result.held_out.values["v"] - predicted) / found.scale
     assert np.max(residual[:, at]) < 1e-9 < 1.0 < np.max(residual[:, :at])
     assert found.reliable and found.undecided[at]
-    floor = math.log(10) / 9 * np.max(residual[:, :at])
-    assert found.noise[at] == pytest.approx(floor, rel=1e-6)
+    spread = np.std(result.held_out.values["v"], axis=0) / found.scale
+    seen = np.max(residual[:, :at]) / np.max(spread[: at + 1])
+    assert found.noise[at] == pytest.approx(math.log(10) / 9 * seen * spread[at], rel=1e-6)
+
+
+@pcmb.batched(outputs=("y",))
+def _settling(params, times):
+    a, b = (np.asarray(params[name])[:, None] for name in ("a", "b"))
+    return {"y": (1 / (1 + 25 * a * a) + b) * np.exp(-times)}
+
+
+def _settled(seed):
+    """The diagnostics of y = (1 / (1 + 25 a²) + b) e^(-t), a, b ~ U[-1, 1], t in [0, 5] (51
+    points), tensor order 7, drawn with ``seed``."""
+    inputs = {"a": pcmb.Uniform(-1, 1), "b": pcmb.Uniform(-1, 1)}
+    method = {"kind": "collocation", "order": 7, "seed": seed}
+    study = pcmb.Study(_settling, inputs, np.linspace(0, 5, 51), method=method, backend="inprocess")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return study.run().diagnostics["y"]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_response_that_settles_is_not_floored_by_the_rule_of_three(seed):
+    """The response above: every residual and the runs' spread are the same functions of
+    (a, b) times e^(-t), so the draws see the error at every time as large against what the
+    output varies by there as before; nothing settled out of their sight, and the noise is
+    the sampling noise alone. Before, the residuals fell below 2.3 / K of the largest so far
+    against the fixed scale: 36-46 of the 51 times undecided on seeds 0-3 (5-15 on the
+    sampling noise)."""
+    found = _settled(seed)
+    np.testing.assert_array_equal(found.noise, found.holdout.noise)
+    assert not found.unseen.any()
+
+
+def test_more_runs_lets_the_sampling_noise_fall_as_one_over_root_k_and_the_floor_as_one_over_k():
+    """16 runs, an estimate of 3 % against a 5 % tolerance (margin 2 %): a sampling noise of
+    1 % falls below the margin at 16 (1 / 2)² = 4 runs, a rule-of-three floor of 4 % at
+    16 x 4 / 2 = 32 (its mass is 2.3 / K): 16 more. Before, the floor was squared as if it
+    were sampling noise: 16 x 2² = 64, 48 more."""
+    found = _settled(0)
+    times = np.ones(found.estimate.shape)
+    confidence = found.holdout.confidence
+    spread = 0.01 / STANDARD_NORMAL.inv_cdf(confidence) * times
+    found = dataclasses.replace(
+        found,
+        holdout=dataclasses.replace(found.holdout, spread=spread, count=16),
+        estimate=0.03 * times,
+        noise=0.04 * times,
+        unseen=0.04 * times,
+        undecided=times > 0,
+        tolerance=0.05,
+    )
+    assert more_runs(found) == 16

@@ -233,23 +233,30 @@ def unseen_region_error(
     output has shown (0 elsewhere). A region of mass m under the draws' density holds none of
     K draws with probability (1 - m)^K, so one of mass -ln(1 - confidence) / K (2.3 / K at
     90 %, the rule of three) may hold none; where the response changes abruptly (a contact's
-    jump moving through the inputs), its residual there may be as large as the largest the
-    check has seen at this time or before, J: the running maximum along the axis of
-    :func:`_largest_residual` over the (K, T) finite runs, each times its (K,) importance
-    ``weights`` (``None``: 1), which carry the draws' mass to the inputs'. The floor 2.3 J / K
-    applies where every weighted residual now is below it: the error has moved where the
-    draws are not, or settled, which they cannot tell apart. Zero while the check sees no
-    residual above round-off (an exact polynomial's)."""
+    jump moving through the inputs), its residual there may be as large, against the runs'
+    spread s now (their std over the scale), as the largest seen at this time or before
+    against the largest spread so far: J = running maxima along the axis of the largest
+    |model - surrogate| over the (K, T) finite runs, each times its (K,) importance
+    ``weights`` (``None``: 1), which carry the draws' mass to the inputs', and of s. The
+    floor 2.3 J s / K applies where every weighted residual now is below it: the error has
+    moved where the draws are not, or settled faster than the output, which they cannot tell
+    apart; one that settles with the output keeps pace with s and is not floored. Residuals
+    at round-off (``RELATIVE_NOISE`` of a run's size, at least the scale; an exact
+    polynomial's) count as none."""
     predicted, observed = np.asarray(predicted, dtype=float), np.asarray(observed, dtype=float)
     count = predicted.shape[0]
     if count == 0 or not scale > 0 or not np.isfinite(scale):
         return np.zeros(predicted.shape[1:])
     weights = np.ones(count) if weights is None else np.asarray(weights, dtype=float)
-    largest = np.zeros(predicted.shape[1:])
-    for k in range(count):  # run by run: the weight scales its residual, not its round-off
-        one = _largest_residual(predicted[k : k + 1], observed[k : k + 1], scale)
-        largest = np.fmax(largest, weights[k] * one)
-    floor = -math.log1p(-confidence) / count * np.maximum.accumulate(largest, axis=0)
+    residual = np.abs(observed - predicted)
+    size = np.fmax(np.abs(observed), scale)  # the weight scales a residual, not its round-off
+    residual = np.where(residual <= RELATIVE_NOISE * size, 0.0, residual / scale)
+    largest = np.max(np.reshape(weights, (-1,) + (1,) * (residual.ndim - 1)) * residual, axis=0)
+    spread = np.std(observed, axis=0) / scale
+    widest = np.maximum.accumulate(spread, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):  # nothing varied yet: nothing hides
+        seen = np.where(widest > 0, np.maximum.accumulate(largest, axis=0) / widest, 0.0)
+    floor = -math.log1p(-confidence) / count * seen * spread
     return np.where(largest < floor, floor, 0.0)
 
 
