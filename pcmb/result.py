@@ -136,12 +136,16 @@ class RegressionFit:
     held_out_fitted:
         Held-out runs the fit used besides the design's (the final fit, ``docs/methods.md``);
         0: the design's runs alone (files without it: 0).
+    effective_runs:
+        The runs the fit counts as: its rows, weighted, as (Σ w)² / Σ w² (files without it:
+        NaN, and no estimate is made from the fit).
     """
 
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
     held_out_fitted: int = 0
+    effective_runs: float = np.nan
 
 
 @dataclass(frozen=True)
