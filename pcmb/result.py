@@ -286,7 +286,8 @@ class DesignReport(ABC):
         return self
 
     #: How many times below the true error the design's estimate (:meth:`statistics_error`)
-    #: was measured to fall at worst: the verdict vouches by the estimate alone only where
+    #: was measured to fall at worst, each design from its own calibration on smooth
+    #: functions (``docs/methods.md``): the verdict vouches by the estimate alone only where
     #: this many times it meets the tolerance (``docs/diagnostics.md``).
     UNDERSTATES: ClassVar[float] = 1.0
 
