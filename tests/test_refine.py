@@ -110,6 +110,7 @@ def test_smooth_responses_stop_once_the_estimate_meets_the_tolerance(
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+@pytest.mark.filterwarnings("ignore:.*would decide.*:pcmb.errors.PcmbWarning")
 def test_the_double_well_reuses_every_run():
     """x' = x - x³ to t = 8: the runs split between the wells ever more sharply. Gauss rules
     re-ran every order to 12, 85 runs of which 72 were discarded, and ended 0.096 off; the
