@@ -136,12 +136,16 @@ class RegressionFit:
     held_out_fitted:
         Held-out runs the fit used besides the design's (the final fit, ``docs/methods.md``);
         0: the design's runs alone (files without it: 0).
+    effective_runs:
+        The runs the fit counts as: its rows, weighted, as (Σ w)² / Σ w² (files without it:
+        NaN, and no estimate is made from the fit).
     """
 
     selected: NDArray[np.int64]
     loo: NDArray[np.float64]
     condition: float
     held_out_fitted: int = 0
+    effective_runs: float = np.nan
 
 
 @dataclass(frozen=True)
@@ -282,7 +286,8 @@ class DesignReport(ABC):
         return self
 
     #: How many times below the true error the design's estimate (:meth:`statistics_error`)
-    #: was measured to fall at worst: the verdict vouches by the estimate alone only where
+    #: was measured to fall at worst, each design from its own calibration on smooth
+    #: functions (``docs/methods.md``): the verdict vouches by the estimate alone only where
     #: this many times it meets the tolerance (``docs/diagnostics.md``).
     UNDERSTATES: ClassVar[float] = 1.0
 

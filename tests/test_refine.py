@@ -5,6 +5,7 @@ out of orders and says so; errors name their key; a run killed between rounds re
 from __future__ import annotations
 
 import importlib.util
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +110,7 @@ def test_smooth_responses_stop_once_the_estimate_meets_the_tolerance(
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")
+@pytest.mark.filterwarnings("ignore:.*would decide.*:pcmb.errors.PcmbWarning")
 def test_the_double_well_reuses_every_run():
     """x' = x - x³ to t = 8: the runs split between the wells ever more sharply. Gauss rules
     re-ran every order to 12, 85 runs of which 72 were discarded, and ended 0.096 off; the
@@ -496,3 +498,34 @@ def test_the_error_ratio_reads_geometric_faster_and_oscillating_decays():
     steep = [1.1, 0.23, 0.058, 0.039, 0.015, 0.0022]
     slope = np.polyfit(np.arange(2, 6), np.log(steep[2:]), 1)[0]
     assert error_ratio(steep, 2) == pytest.approx(np.exp(6 * slope))
+
+
+def test_without_held_out_runs_an_estimate_within_its_calibration_leaves_the_time_undecided():
+    """Logistic growth (scripts/calibrate_order_auto.py --held-out) to 1e-2, ``validation:
+    0``: order: auto stops at 9 runs with an estimate of 7.8e-3 while the decay says 0.1 and
+    the true error is 1.8e-2. Vouched for by the estimate at face value before; now
+    undecided, as the estimate fell to 0.15 of the truth in its calibration
+    (docs/methods.md)."""
+    inputs, function, times, mean, std = CALIBRATION.HELD_OUT["logistic growth"]()
+    names = list(inputs)
+
+    @pcmb.batched(outputs=("y",))
+    def model(params, times):
+        return {"y": function(np.column_stack([params[name] for name in names]))}
+
+    study = Study(
+        model,
+        inputs,
+        times,
+        method={"kind": "collocation", "order": "auto", "validation": 0},
+        execution={"backend": "inprocess"},
+        diagnostics={"tolerance": 1e-2},
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", pcmb.PcmbWarning)
+        result = study.run()
+    gap = np.maximum(np.abs(result.mean("y") - mean), np.abs(result.std("y") - std))
+    assert result.report.statistics_error(result, "y") <= 1e-2 < gap.max() / std.max()
+    found = result.diagnostics["y"]
+    assert not found.vouched and np.isnan(found.failing_from)
+    assert "chaos-undecided" in {w.code for w in result.warnings}

@@ -126,6 +126,24 @@ def test_a_file_read_back_gives_each_fit_the_same_estimate(tmp_path):
     )
 
 
+def test_a_file_without_the_fits_effective_runs_loads_without_an_estimate(tmp_path):
+    """Each fit stores the runs it counts as (``effective_runs``, beside ``held_out_fitted``
+    under ``/outputs/<name>``); a file written before it existed loads, its fits making no
+    estimate (the verdict stored in it is read, not remade)."""
+    import h5py
+
+    method = {"kind": "regression", "samples": 32, "order": 3, "validation": 0}
+    result = _run(_ramp, MIXED, method, tmp_path / "r.h5")
+    assert result.regression["y"].effective_runs == 32
+    with h5py.File(tmp_path / "r.h5", "a") as file:
+        for name in ("y", "p"):
+            del file[f"outputs/{name}"].attrs["effective_runs"]
+    back = pcmb.load(tmp_path / "r.h5")
+    assert np.isnan(back.regression["y"].effective_runs)
+    assert back.report.statistics_error(back, "y") is None
+    assert back.diagnostics["y"].vouched == result.diagnostics["y"].vouched
+
+
 def test_an_estimate_within_its_calibration_of_the_tolerance_leaves_the_time_undecided():
     """The G-function in 8 inputs (scripts/calibrate_adaptive.py), LARS on 64 runs, seed 3,
     ``validation: 0``: the corrected-LOO estimate, 0.045, meets the tolerance 0.05 while the

@@ -636,6 +636,9 @@ class AdaptiveReport(RecordReport):
 
     adaptive: AdaptiveFit
 
+    #: The estimate fell to 0.14 of the true error on smooth functions (docs/methods.md).
+    UNDERSTATES: ClassVar[float] = 1.0 / 0.14
+
     def statistics_error(self, result: StudyResult, output: str) -> float | None:
         """The last round's estimated error, the same for every output (``None`` before any
         round)."""

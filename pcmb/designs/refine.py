@@ -463,6 +463,9 @@ class RefinementReport(RecordReport):
 
     refinement: Refinement
 
+    #: The estimate fell to 0.15 of the true error on smooth responses (docs/methods.md).
+    UNDERSTATES: ClassVar[float] = 1.0 / 0.15
+
     def statistics_error(self, result: StudyResult, output: str) -> float | None:
         """The last round's estimated error, the same for every output (``None`` before any
         round)."""

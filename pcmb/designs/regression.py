@@ -362,9 +362,9 @@ class SparseRegression:
         )
         regression = {
             name: RegressionFit(
-                fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out
+                fit.multi_index, np.atleast_1d(fit.loo_error), fit.condition, held_out, effective
             )
-            for name, (fit, _, _, held_out) in weighted.items()
+            for name, (fit, _, effective, held_out) in weighted.items()
         }
         warnings = records + statistics_warnings(expansions, values, ok, times)
         return Recovery(expansions, warnings, RegressionReport(regression))
@@ -429,7 +429,7 @@ def _effective(weights: NDArray[np.float64]) -> float:
 class RegressionReport(RecordReport):
     """Each output's sparse regression fit (:class:`~pcmb.result.RegressionFit`), stored
     beside its values: ``/outputs/<name>/loo`` (T,), ``selected`` (S_k, n), attributes
-    ``condition`` and ``held_out_fitted``."""
+    ``condition``, ``held_out_fitted`` and ``effective_runs``."""
 
     key: ClassVar[str] = "regression"
     GROUP: ClassVar[str] = "outputs/{output}"
@@ -439,6 +439,7 @@ class RegressionReport(RecordReport):
         "selected": (None, "input"),
         "condition": ATTRIBUTE,
         "held_out_fitted": ATTRIBUTE,
+        "effective_runs": ATTRIBUTE,
     }
 
     regression: dict[str, RegressionFit]
@@ -459,22 +460,11 @@ class RegressionReport(RecordReport):
 
     def statistics_error(self, result: StudyResult, output: str) -> float | None:
         """:func:`loo_statistics_error` of ``output``'s fit: its stored ``loo``, the std of
-        its expansion in ``result``, and the runs the fit counts as (:func:`_fitted_runs`)."""
+        its expansion in ``result``, and the runs the fit counts as (``effective_runs``)."""
         fit, expansion = self.regression.get(output), result.expansions.get(output)
-        if fit is None or expansion is None:
+        if fit is None or expansion is None or np.isnan(fit.effective_runs):
             return None
-        return loo_statistics_error(fit.loo, expansion.std(), _fitted_runs(result, fit))
+        return loo_statistics_error(fit.loo, expansion.std(), fit.effective_runs)
 
     def merged(self, other: RegressionReport) -> RegressionReport:
         return RegressionReport({**self.regression, **other.regression})
-
-
-def _fitted_runs(result: StudyResult, fit: RegressionFit) -> float:
-    """The runs ``fit`` counts as: the design's runs that succeeded, and for a final fit the
-    held-out runs it used besides, weighted as it weighted them (:func:`_effective`)."""
-    design = np.ones(int(result.ok.sum()))
-    if not fit.held_out_fitted:
-        return float(design.size)
-    held_out = result.held_out
-    used = held_out.weights[held_out.ok & (held_out.weights > 0)]
-    return _effective(np.concatenate([design, used]))

@@ -29,36 +29,53 @@ UNSEEN_DEGREES = 3
 _EXACT = 1e-8
 
 
-def _unseen_mean_error(
-    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """(T,) estimated error of the mean of the interpolant of (M, T) ``coefficients`` through
-    the (M,) germ ``points`` from the degrees beyond it: the error of its interpolatory rule
-    on them (:func:`_unseen_energies`). Where the design's own rule integrates every degree
-    below M exactly, the two rules agree on every response, and this is the design mean's
-    error itself."""
+def _unseen_errors(
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
+    std: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """(T,) estimated errors of the mean (:func:`_unseen_mean_error`) and, with ``std``, of
+    the std (:func:`_unseen_std_error`, else ``None``) of the interpolant of (M, T)
+    ``coefficients`` through the (M,) germ ``points`` from the degrees beyond it
+    (:func:`_unseen_energies`, zero where there are too few degrees to extrapolate)."""
     energies = _unseen_energies(coefficients)
     if energies is None:
-        return np.zeros(coefficients.shape[1:])
-    first = coefficients.shape[0]
-    last = first + energies.shape[0] - 1
-    rule_errors = interpolatory_weights(family, points) @ family.evaluate(points, last)
-    return np.sqrt(np.sum(energies * rule_errors[first:, None] ** 2, axis=0))
+        zero = np.zeros(coefficients.shape[1:])
+        return zero, zero if std else None
+    basis = family.evaluate(points, coefficients.shape[0] + energies.shape[0] - 1)
+    mean = _unseen_mean_error(family, points, energies, basis)
+    return mean, _unseen_std_error(family, points, coefficients, energies, basis) if std else None
+
+
+def _unseen_mean_error(
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    energies: NDArray[np.float64],
+    basis: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """(T,) estimated error of the mean of the interpolant through the (M,) germ ``points``
+    from the (U, T) ``energies`` of the degrees M to M + U - 1 beyond it, the (M, M + U)
+    ``basis`` at the points: the error of its interpolatory rule on them. Where the design's
+    own rule integrates every degree below M exactly, the two rules agree on every response,
+    and this is the design mean's error itself."""
+    rule_errors = interpolatory_weights(family, points) @ basis
+    return np.sqrt(np.sum(energies * rule_errors[points.size :, None] ** 2, axis=0))
 
 
 def _unseen_std_error(
-    family: OrthonormalFamily, points: NDArray[np.float64], coefficients: NDArray[np.float64]
+    family: OrthonormalFamily,
+    points: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
+    energies: NDArray[np.float64],
+    basis: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """(T,) estimated error of the std of the interpolant of (M, T) ``coefficients`` through
-    the (M,) germ ``points`` from the degrees beyond it (:func:`_unseen_energies`): each
-    aliases onto degrees 1 to M - 1 as its own interpolant there, which moves the std by that
-    interpolant's projection on the interpolant's own direction (to first order)."""
-    energies = _unseen_energies(coefficients)
-    if energies is None:
-        return np.zeros(coefficients.shape[1:])
-    first = coefficients.shape[0]
-    last = first + energies.shape[0] - 1
-    aliased = interpolated(family, points, family.evaluate(points, last)[:, first:])[1:]
+    the (M,) germ ``points`` from the (U, T) ``energies`` beyond it (``basis`` as in
+    :func:`_unseen_mean_error`): each aliases onto degrees 1 to M - 1 as its own interpolant
+    there, which moves the std by that interpolant's projection on the interpolant's own
+    direction (to first order)."""
+    aliased = interpolated(family, points, basis[:, points.size :])[1:]
     varying = coefficients[1:]
     norm = np.sqrt(np.sum(varying**2, axis=0))
     along = np.divide(aliased.T @ varying, norm, out=np.zeros(energies.shape), where=norm > 0)
@@ -163,7 +180,9 @@ def placed_check(
         observed[kept],
     )
 
-    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+    def moments(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray | None]:
+        """The check's statistics without the last ``spare`` held-out runs (the unseen std
+        error only with all of them, ``spare`` 0, the only fit it is read from)."""
         found = [_placed_moments(*piece, scale, spare) for piece in pieces]
         means, stds, errors, unseen, unseen_std = (
             np.array(column) for column in zip(*found, strict=True)
@@ -171,15 +190,19 @@ def placed_check(
         rich_mean = np.sum(probability * means, axis=0)
         variance = np.sum(probability * (stds**2 + (means - rich_mean) ** 2), axis=0)
         rich_std = np.sqrt(variance)
-        # Each element's own std error, at most its distance from the expansion (the premise:
-        # the interpolant errs less than the design), moves the whole std by p_e s_e / std.
-        own = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
+        own_std_error = None
+        if spare == 0:
+            # Each element's own std error, at most its distance from the expansion (the
+            # premise: the interpolant errs less than the design), moves the whole std by
+            # p_e s_e / std.
+            own = np.sqrt(np.sum((probability * stds * np.fmin(unseen_std, errors)) ** 2, axis=0))
+            own_std_error = np.divide(own, rich_std, out=np.zeros_like(own), where=rich_std > 0)
         return (
             rich_mean,
             rich_std,
             np.sqrt(np.sum(probability * errors**2, axis=0)),
             np.sum(probability * unseen, axis=0),
-            np.divide(own, rich_std, out=np.zeros_like(own), where=rich_std > 0),
+            own_std_error,
         )
 
     rich_mean, rich_std, error, unseen, unseen_std = moments(0)
@@ -300,19 +323,18 @@ def _placed_moments(
     own: NDArray[np.float64],
     scale: float,
     spare: int,
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray | None]:
     """(T,) mean, std, L2 distance from ``own`` (the expansion's coefficients), unseen
     mean error (:func:`_unseen_mean_error`; where the design's rule is not exact on the
     interpolant's degrees, at most its mean's difference from the design's) and unseen std
-    error (:func:`_unseen_std_error`) of the interpolant through an element's nodes and
-    held-out runs (its first ``nodes`` points are its nodes) without its last ``spare``
-    held-out runs, over the scale."""
+    error (:func:`_unseen_std_error`; ``None`` where ``spare`` is not 0) of the interpolant
+    through an element's nodes and held-out runs (its first ``nodes`` points are its nodes)
+    without its last ``spare`` held-out runs, over the scale."""
     kept = max(nodes, points.size - spare)
     own = own / scale
     coefficients = interpolated(family, points[:kept], values[:kept] / scale)
     missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
-    unseen = _unseen_mean_error(family, points[:kept], coefficients)
-    unseen_std = _unseen_std_error(family, points[:kept], coefficients)
+    unseen, unseen_std = _unseen_errors(family, points[:kept], coefficients, std=spare == 0)
     design = points[:nodes]
     rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
     if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
