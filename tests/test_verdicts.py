@@ -838,3 +838,22 @@ def test_a_phase_drift_whose_own_spectrum_falls_algebraically_past_a_late_peak_r
     remedy = _remedy(study)
     assert remedy.startswith("raising the order of omega (method.order)"), remedy
     assert "held-out runs along omega fall geometrically" in remedy
+
+
+@pcmb.batched(outputs=("y",))
+def cosine_drift(params, times):
+    """cos(w t): entire in w, its phase drifts over a long horizon."""
+    return {"y": np.cos(np.outer(params["w"], times))}
+
+
+def test_a_phase_drift_whose_own_spectrum_peaks_at_degree_one_raises_the_order():
+    # w ~ N(2, 0.05) to t = 40 at order 4: the own energy peaks at degree 1 and its four
+    # degrees read algebraic (p^-0.04, nearly flat), once told elements; the interpolant
+    # through the nodes and the 8 held-out runs reads further, geometric to degree 12.
+    study = pcmb.Study(
+        cosine_drift, {"w": pcmb.Normal(2.0, 0.05)}, np.linspace(0.0, 40.0, 401), order=4,
+        backend="inprocess",
+    )  # fmt: skip
+    remedy = _remedy(study)
+    assert remedy.startswith("raising the order of w (method.order)"), remedy
+    assert "held-out runs along w fall geometrically" in remedy

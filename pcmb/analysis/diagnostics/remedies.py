@@ -37,6 +37,9 @@ _PLACE_CONFIDENCE = 0.95
 #: The variance of |2u - 1|, u uniform in (0, 1): the spread of one run's distance from the
 #: centre where the error is spread evenly.
 _SPREAD_VARIANCE = 1 / 12
+#: Energies falling as p^-s with s at most this sum to infinity: no response of finite
+#: variance has such a tail (a jump's s is about 2, a kink's 4), a spectrum not yet falling.
+_SUMMABLE = 1.0
 #: The energy of a degree below this share of its spectrum's peak is round-off or the
 #: simulator's noise, which no decay reads.
 _FLOOR = 1e-12
@@ -314,16 +317,19 @@ def _cause_remedy(
     if top in read:
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k], _OWN) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
-        # Past a late peak, the few top degrees of a still unresolved oscillation may fall as
-        # a jump's (a jump's spectrum peaks at its first degree): the richer interpolant,
-        # reading more degrees past it, tells.
-        late = richer is not None and shapes[top][2] > 1 and richer[0][0] == "geometric"
-        if jumps and late:
-            return (
-                "order",
-                name,
-                f"{reads}, past a peak at degree {shapes[top][2]}, but {richer_read}",
-            )
+        # The few top degrees of a still unresolved oscillation may fall as a jump's: past a
+        # late peak (a jump's spectrum peaks at its first degree), or barely, from degree 1,
+        # slower than any finite variance's tail. The richer interpolant, reading further
+        # than the own top degree, tells.
+        _, rate, first, last = shapes[top]
+        unresolved = ""
+        if first > 1:
+            unresolved = f"past a peak at degree {first}"
+        elif rate <= _SUMMABLE:
+            unresolved = f"slower than any finite variance's tail (p^-{_SUMMABLE:g})"
+        further = richer is not None and richer[0][0] == "geometric" and richer[0][3] > last
+        if jumps and unresolved and further:
+            return "order", name, f"{reads}, {unresolved}, but {richer_read}"
         if jumps:
             return "elements", " and ".join(jumps), reads
         # A kink's first degrees may look geometric: the held-out error sits inside the range,
