@@ -284,12 +284,11 @@ def diagnose(
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
-        ends, by_element = None, ""
+        place, by_element = None, ""
         if germ is not None:
-            residual = observed - predicted
-            ends = error_at_ends(germ, residual, failing)
+            place = error_at_ends(germ, observed, predicted, failing)
             if isinstance(expansion, PiecewiseExpansion):
-                by_element = element_errors(expansion, germ, residual, failing)
+                by_element = element_errors(expansion, germ, place.residual, failing)
         if blind.any():
             evidence = (
                 f"the design's {runs.shape[0]} runs are all equal at {time_count(blind)} while the "
@@ -304,10 +303,11 @@ def diagnose(
         # The remedy reads the times from where the estimate passes the tolerance, which
         # the flag, waiting for the noise, may follow late.
         passing = times >= times[np.argmax((estimate > tolerance) | failing)]
-        message = (
-            f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{remedy_for(expansion, estimate, passing, share, budgets, ends, by_element)}"
-        )
+        design = None
+        if node_germ is not None:
+            design = tuple(np.asarray(a, dtype=float) for a in (node_germ, node_values))
+        remedy = remedy_for(expansion, estimate, passing, share, budgets, place, by_element, design)
+        message = f"polynomial chaos unreliable{where} ({evidence}); consider {remedy}"
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
     found = OutputDiagnostics(

@@ -16,7 +16,6 @@ from pcmb.analysis.diagnostics.ranges import RANGE_SHARE
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
-from pcmb.chaos.nodes import TensorGrid
 from pcmb.wording import plural
 
 #: A tail holding more than this share of its energy in one input is "concentrated".
@@ -53,13 +52,15 @@ def remedy_for(
     budgets: Collection[str],
     held_out: HeldOutPlace | None = None,
     by_element: str = "",
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> str:
-    """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
-    out (``budgets``: the codes of the design's budget records), with where a multi-element
-    surrogate's error sits (``by_element``, :func:`element_errors`) and what was tried: the
-    order, the elements and the refinement's end."""
+    """What may help (:func:`_cause_remedy`, reading the design's ``runs``: their (N, n) germ
+    and (N, T) values), turned away from a refinement that already ran out (``budgets``: the
+    codes of the design's budget records), with where a multi-element surrogate's error sits
+    (``by_element``, :func:`element_errors`) and what was tried: the order, the elements and
+    the refinement's end."""
     action, inputs, cause = _cause_remedy(
-        expansion, estimate, failing, out_of_range_share, held_out
+        expansion, estimate, failing, out_of_range_share, held_out, runs
     )
     orders = expansion.multi_index.max(axis=0)
     order = int(orders.max())
@@ -100,6 +101,8 @@ class HeldOutPlace:
 
     #: (K, n) the runs' germ.
     germ: NDArray[np.float64]
+    #: (K, T) the model's value at each run.
+    observed: NDArray[np.float64]
     #: (K, T) the model's value less the surrogate's at each run.
     residual: NDArray[np.float64]
     #: (n,) along each input, the mean of |2u - 1|, u the runs' ranks along it in (0, 1),
@@ -127,19 +130,23 @@ class HeldOutPlace:
 
 
 def error_at_ends(
-    germ: NDArray[np.float64], residual: NDArray[np.float64], failing: NDArray[np.bool_]
+    germ: NDArray[np.float64],
+    observed: NDArray[np.float64],
+    predicted: NDArray[np.float64],
+    failing: NDArray[np.bool_],
 ) -> HeldOutPlace:
-    """Where along each input the (K, T) held-out ``residual`` sits over the failing times
-    (:class:`HeldOutPlace`): near the ends of the range for a smooth response converging
-    slowly, around a point inside it for a jump or kink there."""
+    """Where along each input the (K, T) held-out error, ``observed`` less ``predicted``,
+    sits over the failing times (:class:`HeldOutPlace`): near the ends of the range for a
+    smooth response converging slowly, around a point inside it for a jump or kink there."""
+    residual = observed - predicted
     ranks = np.argsort(np.argsort(germ, axis=0), axis=0)
     distance = np.abs(2 * (ranks + 0.5) / germ.shape[0] - 1)
     size = np.max(np.abs(residual[:, failing]))
     if not size > 0 or not np.isfinite(size):
-        return HeldOutPlace(germ, residual, np.full(germ.shape[1], 0.5), 0.0)
+        return HeldOutPlace(germ, observed, residual, np.full(germ.shape[1], 0.5), 0.0)
     weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
     carriers = float(weight.sum() ** 2 / np.sum(weight**2))
-    return HeldOutPlace(germ, residual, weight @ distance / weight.sum(), carriers)
+    return HeldOutPlace(germ, observed, residual, weight @ distance / weight.sum(), carriers)
 
 
 def element_errors(
@@ -195,23 +202,30 @@ _OWN = "the chaos coefficients"
 
 
 def _held_out_decay(
-    expansion: Expansion, held_out: HeldOutPlace | None, failing: NDArray[np.bool_]
+    expansion: Expansion,
+    held_out: HeldOutPlace | None,
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    failing: NDArray[np.bool_],
 ) -> tuple[tuple[str, float, int, int], str] | None:
-    """The decay (:func:`decay_shape`) of the interpolant through a one-input expansion at its
-    Gauss nodes (the design's runs, for a collocation) and the held-out runs, of degree N +
-    K - 1, each failing time weighing the same, read up to the degree where its energy falls
-    below ``_FLOOR`` of its peak; with whose coefficients they are, in words. ``None`` for
-    several inputs or elements, without held-out runs, or with too few degrees to read."""
-    if not isinstance(expansion, ChaosExpansion) or expansion.n != 1 or held_out is None:
+    """The decay (:func:`decay_shape`) of the interpolant through the N design ``runs`` ((N, 1)
+    germ, (N, T) values) of a one-input expansion and its K held-out runs, of degree N + K - 1,
+    each failing time weighing the same, read up to the degree where its energy falls below
+    ``_FLOOR`` of its peak; with whose coefficients they are, in words. ``None`` for several
+    inputs or elements, without the design's or held-out runs, or with too few degrees to
+    read."""
+    if not isinstance(expansion, ChaosExpansion) or expansion.n != 1:
+        return None
+    if held_out is None or runs is None:
         return None
     (distribution,) = expansion.distributions
-    nodes = TensorGrid((distribution,), (int(expansion.multi_index.max()),)).nodes
-    observed = held_out.residual + expansion.evaluate_germ(held_out.germ)
-    values = np.vstack([expansion.evaluate_germ(nodes), observed])[:, failing]
-    size = np.max(np.abs(values))
-    if not size > 0 or not np.isfinite(size):
+    design_germ, design_values = runs
+    points = np.concatenate([design_germ[:, 0], held_out.germ[:, 0]])
+    values = np.vstack([design_values, held_out.observed])[:, failing]
+    finite = np.isfinite(values).all(axis=1)
+    points, values = points[finite], values[finite]
+    size = np.max(np.abs(values), initial=0.0)
+    if not size > 0:
         return None
-    points = np.concatenate([nodes[:, 0], held_out.germ[:, 0]])
     try:
         coefficients = interpolated(distribution.family, points, values / size)
     except np.linalg.LinAlgError:  # a held-out run on a node
@@ -225,7 +239,7 @@ def _held_out_decay(
     degrees = points.size if below.size == 0 else below[0] + 2
     shape = decay_shape(energy[:degrees], np.arange(degrees)[:, None], 0)
     whose = (
-        f"the coefficients of the interpolant through the expansion's {nodes.shape[0]} nodes "
+        f"the coefficients of the interpolant through the design's {design_germ.shape[0]} runs "
         f"and the {held_out.germ.shape[0]} held-out runs"
     )
     return None if shape is None else (shape, whose)
@@ -246,6 +260,7 @@ def _cause_remedy(
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
     held_out: HeldOutPlace | None,
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
 ) -> tuple[str, str, str]:
     """What may help, read from where the tail's energy sits over the failing times:
     ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"``, ``"elements"`` or
@@ -302,7 +317,7 @@ def _cause_remedy(
     holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
     shapes = {k: decay_shape(energy, index, k) for k in holders}
     read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
-    richer = _held_out_decay(expansion, held_out, failing)
+    richer = _held_out_decay(expansion, held_out, runs, failing)
     richer_read = "" if richer is None else _decay_read(name, *richer[0], richer[1])
     where = "" if held_out is None else held_out.where(top)
     place = ""
