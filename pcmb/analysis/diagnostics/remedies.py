@@ -273,13 +273,14 @@ def _cause_remedy(
     - else, along every input that holds at least ``_SHARED`` of the tail (each failing
       time weighing the same), the decay of the coefficients (:func:`decay_shape`):
       algebraic along any, as those of a jump or kink — multi-element chaos along those,
-      unless, past a peak above the first degree, the interpolant through nodes and held-out
-      runs of a one-input expansion (:func:`_held_out_decay`) decays geometrically — a higher
-      order;
+      unless, past a peak above the first degree or slower than ``_SUMMABLE`` from the
+      first, the interpolant through the design's and the held-out runs of a one-input
+      expansion (:func:`_held_out_decay`), reading past the own top degree, decays
+      geometrically — a higher order;
       geometric along all, as those of an analytic response — a higher order, unless the
       held-out error sits inside the input's range (:meth:`HeldOutPlace.where`), or, where too
-      few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through nodes
-      and held-out runs of a one-input expansion (:func:`_held_out_decay`) decays
+      few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through the
+      design's and the held-out runs of a one-input expansion (:func:`_held_out_decay`) decays
       algebraically: a kink whose first degrees look geometric — multi-element chaos;
     - too few degrees to tell: the decay of that interpolant, algebraic — multi-element
       chaos, geometric — a higher order; without it, a higher order when the held-out error
@@ -339,12 +340,12 @@ def _cause_remedy(
         _, rate, first, last = shapes[top]
         unresolved = ""
         if first > 1:
-            unresolved = f"past a peak at degree {first}"
+            unresolved = f"that is past a peak at degree {first} (a jump's is at degree 1)"
         elif rate <= _SUMMABLE:
-            unresolved = f"slower than any finite variance's tail (p^-{_SUMMABLE:g})"
+            unresolved = f"that is slower than any finite variance's tail (p^-{_SUMMABLE:g})"
         further = richer is not None and richer[0][0] == "geometric" and richer[0][3] > last
         if jumps and unresolved and further:
-            return "order", name, f"{reads}, {unresolved}, but {richer_read}"
+            return "order", name, f"{reads}; but {unresolved}, and {richer_read}"
         if jumps:
             return "elements", " and ".join(jumps), reads
         # A kink's first degrees may look geometric: the held-out error sits inside the range,
