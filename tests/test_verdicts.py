@@ -890,3 +890,18 @@ def test_the_remedy_reads_the_interpolant_through_the_design_s_own_runs():
     # The read stops past degree 6, pairing it with the empty degree 7: a few hundredths off.
     rate = float(re.search(r"energy × ([\d.]+) per degree", record.message)[1])
     assert rate == pytest.approx(0.64, abs=0.05), record.message
+
+
+@pytest.mark.slow
+def test_a_one_input_adaptive_design_s_remedy_reads_the_runs_it_made():
+    # cos(w t), w ~ U[1.8, 2.2], to t = 40, Leja points to 9 runs (order 4): the remedy once
+    # read the interpolant through the 5 Gauss nodes of order 4, never run, at the surrogate's
+    # values, falling as p^-2 (elements); through the 9 Leja runs it falls geometrically.
+    study = pcmb.Study(
+        cosine_drift, {"w": pcmb.Uniform(1.8, 2.2)}, np.linspace(0.0, 40.0, 201),
+        method={"kind": "adaptive", "rule": "leja", "tolerance": 1e-6, "max_runs": 9},
+        execution={"backend": "inprocess"},
+    )  # fmt: skip
+    remedy = _remedy(study)
+    assert remedy.startswith("raising the order of w (method.order)"), remedy
+    assert "interpolant through the design's 9 runs and the 8 held-out runs" in remedy, remedy
