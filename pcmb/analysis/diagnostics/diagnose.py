@@ -160,7 +160,7 @@ def diagnose(
         Accepted error relative to the output's largest standard deviation.
     node_germ:
         (N, n) germ of the runs, which bounds where the range check looks (see
-        :func:`out_of_range`).
+        :func:`out_of_range`) and which the remedy's interpolant goes through.
     axis:
         Name of the axis ``times`` are points of, for the message (``"t"``; ``""`` for a
         scalar output, whose ``times`` is ``[0.]``: ``failing_from`` is then 0 when it fails,

@@ -238,9 +238,10 @@ def _held_out_decay(
     below = np.flatnonzero(paired < _FLOOR * paired.max(initial=0.0))
     degrees = points.size if below.size == 0 else below[0] + 2
     shape = decay_shape(energy[:degrees], np.arange(degrees)[:, None], 0)
+    made = design_germ.shape[0]
     whose = (
-        f"the coefficients of the interpolant through the design's {design_germ.shape[0]} runs "
-        f"and the {held_out.germ.shape[0]} held-out runs"
+        f"the coefficients of the interpolant through the design's {finite[:made].sum()} runs "
+        f"and the {finite[made:].sum()} held-out runs"
     )
     return None if shape is None else (shape, whose)
 
