@@ -266,9 +266,10 @@ class AdaptiveCollocation(GrowingGrid):
             # last levels, more runs cannot lower the estimate.
             last = self._rounds[-1]
             converged = last.reducible <= max(self.tolerance, last.left)
+            probes: list[tuple[int, ...]] = []
             if converged:
-                refinable = self._blind()
-                if not refinable:
+                refinable, probes = self._blind()
+                if not refinable and not probes:
                     if last.left > self.tolerance:
                         self._stopped = (
                             f"{' and '.join(last.left_in)} reached the last level of its rule "
@@ -282,8 +283,13 @@ class AdaptiveCollocation(GrowingGrid):
                 )
                 return None
             added = self._refine(refinable, bulk=not converged)
+            probes = [level for level in probes if level not in (added or [])]
+            if probes and self._size([*(added or []), *probes]) <= self.max_runs:
+                added = [*(added or []), *probes]
             if added is None:
-                self._stop_at_budget("probing blind axes" if converged else "the next refinement")
+                self._stop_at_budget(
+                    "probing blind indices" if converged else "the next refinement"
+                )
                 return None
             if added:
                 return self._grow(added)
@@ -357,34 +363,48 @@ class AdaptiveCollocation(GrowingGrid):
         expansion = ChaosExpansion(grid.project(values), grid.multi_index, self.distributions)
         return expansion.mean(), expansion.std()
 
-    def _blind(self) -> list[int]:
+    def _blind(self) -> tuple[list[int], list[tuple[int, ...]]]:
         """Active indices whose surplus vanishes (below :data:`BLIND`) while they block a
         forward neighbour of a refined index whose indicator exceeds the tolerance, where that
         hides interactions: an index on an axis (Ishigami's 0.1 x3⁴ sin x1 vanishes on the x3
         axis through the centre, not off it), or one at level 0 in an input on whose centre
         plane the whole function vanishes (every index there is blind, as for the G-function's
-        factor |4 x0 - 2|): every interaction with that input hides behind one."""
+        factor |4 x0 - 2|): every interaction with that input hides behind one. And the probes:
+        the forward neighbours, in a set of inputs no index has yet, of an index in two or more
+        inputs blind on their own axes, whose backward neighbours are all in the set, refined
+        or blind (their product, zero on the centre planes, may multiply another input's effect:
+        e^x1 x2 x3 vanishes on the planes of (1, 1, 0) and (1, 0, 1)), added alone, one per set
+        of inputs (:meth:`_refine` carries a found one on)."""
         position = {level: k for k, level in enumerate(self._index)}
         blind = self._indicators <= BLIND
         levels = np.array(self._index)
         null = [k for k in range(levels.shape[1]) if blind[levels[:, k] == 0].all()]
-        found = set()
+        seen = {_inputs(level) for level in self._index}
+        hidden = self._hidden()
+        found, probes = set(), {}
         for level in self._refined:
-            if self._indicators[position[level]] > self.tolerance:
-                for child in self._forward(level, room=True):
-                    for parent in _backward(child):
-                        k = position.get(parent, -1)
-                        if (
-                            k >= 0
-                            and parent not in self._refined
-                            and blind[k]
-                            and (
-                                sum(at > 0 for at in parent) == 1
-                                or any(parent[j] == 0 for j in null)
-                            )
-                        ):
-                            found.add(k)
-        return sorted(found)
+            if self._indicators[position[level]] <= self.tolerance:
+                continue
+            for child in self._forward(level, room=True):
+                if (
+                    len(_inputs(level) & hidden) > 1
+                    and _inputs(child) not in seen
+                    and all(
+                        b in self._refined or (b in position and blind[position[b]])
+                        for b in _backward(child)
+                    )
+                ):
+                    probes.setdefault(_inputs(child), child)
+                for parent in _backward(child):
+                    k = position.get(parent, -1)
+                    if (
+                        k >= 0
+                        and parent not in self._refined
+                        and blind[k]
+                        and (len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null))
+                    ):
+                        found.add(k)
+        return sorted(found), list(probes.values())
 
     def _active(self) -> NDArray[np.bool_]:
         return np.array([level not in self._refined for level in self._index])
@@ -452,14 +472,44 @@ class AdaptiveCollocation(GrowingGrid):
         added: list[tuple[int, ...]] = []
         for count, k in enumerate(ranked[:marked]):
             level = self._index[k]
-            self._refined.add(level)
-            children = [c for c in self._forward(level) if c not in added]
-            trial = np.array(self._index + added + children)
-            if SparseGrid(self.distributions, trial, self.rules).size > self.max_runs:
-                self._refined.discard(level)
+            # A probe found something: refine the blind indices it was added over first.
+            below = [b for b in _backward(level) if b not in self._refined]
+            refined = below or [level, *self._hiding(level)]
+            self._refined.update(refined)
+            children = list(dict.fromkeys(c for r in refined for c in self._forward(r)))
+            children = [c for c in children if c not in added]
+            if self._size(added + children) > self.max_runs:
+                self._refined.difference_update(refined)
                 return added if count else None
             added += children
         return added
+
+    def _size(self, added: list[tuple[int, ...]]) -> int:
+        """The runs of the grid with the indices ``added``."""
+        return SparseGrid(self.distributions, np.array(self._index + added), self.rules).size
+
+    def _hidden(self) -> set[int]:
+        """The inputs blind on their own axes (level-1 axis surplus below :data:`BLIND`)."""
+        n = len(self.distributions)
+        position = {level: k for k, level in enumerate(self._index)}
+        return {k for k in range(n) if self._indicators[position[_axis(k, n)]] <= BLIND}
+
+    def _hiding(self, level: tuple[int, ...]) -> list[tuple[int, ...]]:
+        """The blind active indices (below :data:`BLIND`) that alone block a forward neighbour
+        of ``level`` in its own inputs, where two or more of them are blind on their axes: the
+        interaction goes on behind them (e^x1 x2 x3's (2, 1, 1) behind (2, 1, 0) and (2, 0, 1),
+        zero on their planes)."""
+        if len(_inputs(level) & self._hidden()) < 2:
+            return []
+        position = {index: k for k, index in enumerate(self._index)}
+        hiding: list[tuple[int, ...]] = []
+        for child in self._forward(level, room=True):
+            if _inputs(child) != _inputs(level):
+                continue
+            blocking = [b for b in _backward(child) if b != level and b not in self._refined]
+            if all(b in position and self._indicators[position[b]] <= BLIND for b in blocking):
+                hiding += [b for b in blocking if b not in hiding]
+        return hiding
 
     def _grow(self, added: list[tuple[int, ...]]) -> NodeSet:
         """Add indices to the set; the nodes they bring."""
@@ -550,6 +600,16 @@ def _relative(
     std is 0, but 1 for a nonzero size where the std, ``unmeasured``, cannot measure it."""
     relative = np.divide(sizes, spread, out=np.zeros_like(sizes), where=spread > 0)
     return np.where(unmeasured & (sizes > 0), 1.0, relative)
+
+
+def _inputs(level: tuple[int, ...]) -> frozenset[int]:
+    """The inputs a level multi-index is above level 0 in."""
+    return frozenset(k for k, at in enumerate(level) if at > 0)
+
+
+def _axis(k: int, inputs: int) -> tuple[int, ...]:
+    """The level-1 index on input k's axis."""
+    return tuple(int(j == k) for j in range(inputs))
 
 
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
