@@ -16,7 +16,7 @@ from model_loading import model_class
 from scipy.integrate import solve_ivp
 
 import pcmb
-from pcmb.analysis.diagnostics import TOLERANCE
+from pcmb.analysis.diagnostics import TOLERANCE, diagnose
 from pcmb.analysis.statistics import AnalysisSettings
 from pcmb.references import damped_oscillator, pendulum_angle
 
@@ -272,7 +272,12 @@ def _double_well(points: int = 41, **settings) -> pcmb.Study:
     ("order", "points", "evidence", "absent"),
     [
         (5, 81, ("along x0 fall algebraically", "jump or a kink"), None),
-        (3, 41, ("4 nodes and the 32 held-out runs along x0 fall algebraically",), "raising"),
+        (
+            3,
+            41,
+            ("design's 4 runs and the 32 held-out runs along x0 fall algebraically",),
+            "raising",
+        ),
     ],
 )
 def test_a_jump_in_an_initial_condition_is_told_to_use_elements(order, points, evidence, absent):
@@ -838,3 +843,65 @@ def test_a_phase_drift_whose_own_spectrum_falls_algebraically_past_a_late_peak_r
     remedy = _remedy(study)
     assert remedy.startswith("raising the order of omega (method.order)"), remedy
     assert "held-out runs along omega fall geometrically" in remedy
+
+
+@pcmb.batched(outputs=("y",))
+def cosine_drift(params, times):
+    """cos(w t): entire in w, its phase drifts over a long horizon."""
+    return {"y": np.cos(np.outer(params["w"], times))}
+
+
+def test_a_phase_drift_whose_own_spectrum_peaks_at_degree_one_raises_the_order():
+    # w ~ N(2, 0.05) to t = 40 at order 4: the own energy peaks at degree 1 and its four
+    # degrees read algebraic (p^-0.04, nearly flat), once told elements; the interpolant
+    # through the nodes and the 8 held-out runs reads further, geometric to degree 12.
+    study = pcmb.Study(
+        cosine_drift, {"w": pcmb.Normal(2.0, 0.05)}, np.linspace(0.0, 40.0, 401), order=4,
+        backend="inprocess",
+    )  # fmt: skip
+    remedy = _remedy(study)
+    assert remedy.startswith("raising the order of w (method.order)"), remedy
+    assert "held-out runs along w fall geometrically" in remedy
+
+
+def test_the_remedy_reads_the_interpolant_through_the_design_s_own_runs():
+    # y = Σ_{p <= 6} 0.8^p ψ_p(x), x ~ U[-1, 1], run at 5 points off the Gauss nodes (as a
+    # regression or a nested rule places them) and 6 held-out ones: the interpolant of degree
+    # 10 through them is y itself, its energy × 0.64 per degree to degree 6. Through
+    # the Gauss nodes of the order 2 expansion, at its own values, it fell as p^-1.7: elements.
+    uniform = pcmb.Uniform(-1.0, 1.0)
+    coefficients = 0.8 ** np.arange(7)
+
+    def model(x):
+        return uniform.family.evaluate(x, 6) @ coefficients[:, None]
+
+    design = np.array([-0.9, -0.45, 0.1, 0.5, 0.85])
+    held_out = np.array([-0.97, -0.65, -0.2, 0.3, 0.7, 0.95])
+    expansion = pcmb.ChaosExpansion(coefficients[:3, None], np.arange(3)[:, None], (uniform,))
+    found = diagnose(
+        "y", expansion, model(design), [0.0],
+        (expansion.evaluate_germ(held_out[:, None]), model(held_out)),
+        tolerance=1e-3, node_germ=design[:, None], axis="", holdout_germ=held_out[:, None],
+        placed=True,
+    )  # fmt: skip
+    (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
+    assert "the design's 5 runs and the 6 held-out runs" in record.message, record.message
+    assert record.message.partition("; consider ")[2].startswith("raising the order of x0")
+    # The read stops past degree 6, pairing it with the empty degree 7: a few hundredths off.
+    rate = float(re.search(r"energy × ([\d.]+) per degree", record.message)[1])
+    assert rate == pytest.approx(0.64, abs=0.05), record.message
+
+
+@pytest.mark.slow
+def test_a_one_input_adaptive_design_s_remedy_reads_the_runs_it_made():
+    # cos(w t), w ~ U[1.8, 2.2], to t = 40, Leja points to 9 runs (order 4): the remedy once
+    # read the interpolant through the 5 Gauss nodes of order 4, never run, at the surrogate's
+    # values, falling as p^-2 (elements); through the 9 Leja runs it falls geometrically.
+    study = pcmb.Study(
+        cosine_drift, {"w": pcmb.Uniform(1.8, 2.2)}, np.linspace(0.0, 40.0, 201),
+        method={"kind": "adaptive", "rule": "leja", "tolerance": 1e-6, "max_runs": 9},
+        execution={"backend": "inprocess"},
+    )  # fmt: skip
+    remedy = _remedy(study)
+    assert remedy.startswith("raising the order of w (method.order)"), remedy
+    assert "interpolant through the design's 9 runs and the 8 held-out runs" in remedy, remedy

@@ -165,7 +165,7 @@ def diagnose(
         Accepted error relative to the output's largest standard deviation.
     node_germ:
         (N, n) germ of the runs, which bounds where the range check looks (see
-        :func:`out_of_range`).
+        :func:`out_of_range`) and which the remedy's interpolant goes through.
     axis:
         Name of the axis ``times`` are points of, for the message (``"t"``; ``""`` for a
         scalar output, whose ``times`` is ``[0.]``: ``failing_from`` is then 0 when it fails,
@@ -290,12 +290,11 @@ def diagnose(
         failing = times >= failing_from
         where = f" from {axis} = {failing_from:.4g}" if axis else ""
         evidence = _evidence(decay, checked, failing)
-        ends, by_element = None, ""
+        place, by_element = None, ""
         if germ is not None:
-            residual = observed - predicted
-            ends = error_at_ends(germ, residual, failing)
+            place = error_at_ends(germ, observed, predicted, failing)
             if isinstance(expansion, PiecewiseExpansion):
-                by_element = element_errors(expansion, germ, residual, failing)
+                by_element = element_errors(expansion, germ, place.residual, failing)
         if blind.any():
             evidence = (
                 f"the design's {runs.shape[0]} runs are all equal at {time_count(blind)} while the "
@@ -310,10 +309,11 @@ def diagnose(
         # The remedy reads the times from where the estimate passes the tolerance, which
         # the flag, waiting for the noise, may follow late.
         passing = times >= times[np.argmax((estimate > tolerance) | failing)]
-        message = (
-            f"polynomial chaos unreliable{where} ({evidence}); consider "
-            f"{remedy_for(expansion, estimate, passing, share, budgets, ends, by_element)}"
-        )
+        design = None
+        if node_germ is not None:
+            design = tuple(np.asarray(a, dtype=float) for a in (node_germ, node_values))
+        remedy = remedy_for(expansion, estimate, passing, share, budgets, place, by_element, design)
+        message = f"polynomial chaos unreliable{where} ({evidence}); consider {remedy}"
         span = (failing_from, float(times[-1]))
         records.insert(0, WarningRecord("chaos-unreliable", message, output, span))
     found = OutputDiagnostics(

@@ -16,7 +16,6 @@ from pcmb.analysis.diagnostics.ranges import RANGE_SHARE
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.elements import PiecewiseExpansion
 from pcmb.chaos.expansion import ChaosExpansion
-from pcmb.chaos.nodes import TensorGrid
 from pcmb.wording import plural
 
 #: A tail holding more than this share of its energy in one input is "concentrated".
@@ -37,6 +36,9 @@ _PLACE_CONFIDENCE = 0.95
 #: The variance of |2u - 1|, u uniform in (0, 1): the spread of one run's distance from the
 #: centre where the error is spread evenly.
 _SPREAD_VARIANCE = 1 / 12
+#: Energies falling as p^-s with s at most this sum to infinity: no response of finite
+#: variance has such a tail (a jump's s is about 2, a kink's 4), a spectrum not yet falling.
+_SUMMABLE = 1.0
 #: The energy of a degree below this share of its spectrum's peak is round-off or the
 #: simulator's noise, which no decay reads.
 _FLOOR = 1e-12
@@ -50,13 +52,15 @@ def remedy_for(
     budgets: Collection[str],
     held_out: HeldOutPlace | None = None,
     by_element: str = "",
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> str:
-    """What may help (:func:`_cause_remedy`), turned away from a refinement that already ran
-    out (``budgets``: the codes of the design's budget records), with where a multi-element
-    surrogate's error sits (``by_element``, :func:`element_errors`) and what was tried: the
-    order, the elements and the refinement's end."""
+    """What may help (:func:`_cause_remedy`, reading the design's ``runs``: their (N, n) germ
+    and (N, T) values), turned away from a refinement that already ran out (``budgets``: the
+    codes of the design's budget records), with where a multi-element surrogate's error sits
+    (``by_element``, :func:`element_errors`) and what was tried: the order, the elements and
+    the refinement's end."""
     action, inputs, cause = _cause_remedy(
-        expansion, estimate, failing, out_of_range_share, held_out
+        expansion, estimate, failing, out_of_range_share, held_out, runs
     )
     orders = expansion.multi_index.max(axis=0)
     order = int(orders.max())
@@ -97,6 +101,8 @@ class HeldOutPlace:
 
     #: (K, n) the runs' germ.
     germ: NDArray[np.float64]
+    #: (K, T) the model's value at each run.
+    observed: NDArray[np.float64]
     #: (K, T) the model's value less the surrogate's at each run.
     residual: NDArray[np.float64]
     #: (n,) along each input, the mean of |2u - 1|, u the runs' ranks along it in (0, 1),
@@ -124,19 +130,23 @@ class HeldOutPlace:
 
 
 def error_at_ends(
-    germ: NDArray[np.float64], residual: NDArray[np.float64], failing: NDArray[np.bool_]
+    germ: NDArray[np.float64],
+    observed: NDArray[np.float64],
+    predicted: NDArray[np.float64],
+    failing: NDArray[np.bool_],
 ) -> HeldOutPlace:
-    """Where along each input the (K, T) held-out ``residual`` sits over the failing times
-    (:class:`HeldOutPlace`): near the ends of the range for a smooth response converging
-    slowly, around a point inside it for a jump or kink there."""
+    """Where along each input the (K, T) held-out error, ``observed`` less ``predicted``,
+    sits over the failing times (:class:`HeldOutPlace`): near the ends of the range for a
+    smooth response converging slowly, around a point inside it for a jump or kink there."""
+    residual = observed - predicted
     ranks = np.argsort(np.argsort(germ, axis=0), axis=0)
     distance = np.abs(2 * (ranks + 0.5) / germ.shape[0] - 1)
     size = np.max(np.abs(residual[:, failing]))
     if not size > 0 or not np.isfinite(size):
-        return HeldOutPlace(germ, residual, np.full(germ.shape[1], 0.5), 0.0)
+        return HeldOutPlace(germ, observed, residual, np.full(germ.shape[1], 0.5), 0.0)
     weight = np.sum((residual[:, failing] / size) ** 2, axis=1)
     carriers = float(weight.sum() ** 2 / np.sum(weight**2))
-    return HeldOutPlace(germ, residual, weight @ distance / weight.sum(), carriers)
+    return HeldOutPlace(germ, observed, residual, weight @ distance / weight.sum(), carriers)
 
 
 def element_errors(
@@ -192,23 +202,30 @@ _OWN = "the chaos coefficients"
 
 
 def _held_out_decay(
-    expansion: Expansion, held_out: HeldOutPlace | None, failing: NDArray[np.bool_]
+    expansion: Expansion,
+    held_out: HeldOutPlace | None,
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    failing: NDArray[np.bool_],
 ) -> tuple[tuple[str, float, int, int], str] | None:
-    """The decay (:func:`decay_shape`) of the interpolant through a one-input expansion at its
-    Gauss nodes (the design's runs, for a collocation) and the held-out runs, of degree N +
-    K - 1, each failing time weighing the same, read up to the degree where its energy falls
-    below ``_FLOOR`` of its peak; with whose coefficients they are, in words. ``None`` for
-    several inputs or elements, without held-out runs, or with too few degrees to read."""
-    if not isinstance(expansion, ChaosExpansion) or expansion.n != 1 or held_out is None:
+    """The decay (:func:`decay_shape`) of the interpolant through the N design ``runs`` ((N, 1)
+    germ, (N, T) values) of a one-input expansion and its K held-out runs, of degree N + K - 1,
+    each failing time weighing the same, read up to the degree where its energy falls below
+    ``_FLOOR`` of its peak; with whose coefficients they are, in words. ``None`` for several
+    inputs or elements, without the design's or held-out runs, or with too few degrees to
+    read."""
+    if not isinstance(expansion, ChaosExpansion) or expansion.n != 1:
+        return None
+    if held_out is None or runs is None:
         return None
     (distribution,) = expansion.distributions
-    nodes = TensorGrid((distribution,), (int(expansion.multi_index.max()),)).nodes
-    observed = held_out.residual + expansion.evaluate_germ(held_out.germ)
-    values = np.vstack([expansion.evaluate_germ(nodes), observed])[:, failing]
-    size = np.max(np.abs(values))
-    if not size > 0 or not np.isfinite(size):
+    design_germ, design_values = runs
+    points = np.concatenate([design_germ[:, 0], held_out.germ[:, 0]])
+    values = np.vstack([design_values, held_out.observed])[:, failing]
+    finite = np.isfinite(values).all(axis=1)
+    points, values = points[finite], values[finite]
+    size = np.max(np.abs(values), initial=0.0)
+    if not size > 0:
         return None
-    points = np.concatenate([nodes[:, 0], held_out.germ[:, 0]])
     try:
         coefficients = interpolated(distribution.family, points, values / size)
     except np.linalg.LinAlgError:  # a held-out run on a node
@@ -221,9 +238,10 @@ def _held_out_decay(
     below = np.flatnonzero(paired < _FLOOR * paired.max(initial=0.0))
     degrees = points.size if below.size == 0 else below[0] + 2
     shape = decay_shape(energy[:degrees], np.arange(degrees)[:, None], 0)
+    made = design_germ.shape[0]
     whose = (
-        f"the coefficients of the interpolant through the expansion's {nodes.shape[0]} nodes "
-        f"and the {held_out.germ.shape[0]} held-out runs"
+        f"the coefficients of the interpolant through the design's {finite[:made].sum()} runs "
+        f"and the {finite[made:].sum()} held-out runs"
     )
     return None if shape is None else (shape, whose)
 
@@ -243,6 +261,7 @@ def _cause_remedy(
     failing: NDArray[np.bool_],
     out_of_range_share: NDArray[np.float64],
     held_out: HeldOutPlace | None,
+    runs: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
 ) -> tuple[str, str, str]:
     """What may help, read from where the tail's energy sits over the failing times:
     ``(action, inputs, cause)``, the action ``"sampling"``, ``"order"``, ``"elements"`` or
@@ -255,13 +274,14 @@ def _cause_remedy(
     - else, along every input that holds at least ``_SHARED`` of the tail (each failing
       time weighing the same), the decay of the coefficients (:func:`decay_shape`):
       algebraic along any, as those of a jump or kink — multi-element chaos along those,
-      unless, past a peak above the first degree, the interpolant through nodes and held-out
-      runs of a one-input expansion (:func:`_held_out_decay`) decays geometrically — a higher
-      order;
+      unless, past a peak above the first degree or slower than ``_SUMMABLE`` from the
+      first, the interpolant through the design's and the held-out runs of a one-input
+      expansion (:func:`_held_out_decay`), reading past the own top degree, decays
+      geometrically — a higher order;
       geometric along all, as those of an analytic response — a higher order, unless the
       held-out error sits inside the input's range (:meth:`HeldOutPlace.where`), or, where too
-      few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through nodes
-      and held-out runs of a one-input expansion (:func:`_held_out_decay`) decays
+      few runs carry it to tell, lies below ``_INSIDE`` while the interpolant through the
+      design's and the held-out runs of a one-input expansion (:func:`_held_out_decay`) decays
       algebraically: a kink whose first degrees look geometric — multi-element chaos;
     - too few degrees to tell: the decay of that interpolant, algebraic — multi-element
       chaos, geometric — a higher order; without it, a higher order when the held-out error
@@ -299,7 +319,7 @@ def _cause_remedy(
     holders = [int(k) for k in np.argsort(-by_input) if by_input[k] >= _SHARED * total]
     shapes = {k: decay_shape(energy, index, k) for k in holders}
     read = [k for k in holders if shapes[k] is not None]  # too few degrees: not read
-    richer = _held_out_decay(expansion, held_out, failing)
+    richer = _held_out_decay(expansion, held_out, runs, failing)
     richer_read = "" if richer is None else _decay_read(name, *richer[0], richer[1])
     where = "" if held_out is None else held_out.where(top)
     place = ""
@@ -314,16 +334,19 @@ def _cause_remedy(
     if top in read:
         reads = "; ".join(_decay_read(expansion.names[k], *shapes[k], _OWN) for k in read)
         jumps = [expansion.names[k] for k in read if shapes[k][0] == "algebraic"]
-        # Past a late peak, the few top degrees of a still unresolved oscillation may fall as
-        # a jump's (a jump's spectrum peaks at its first degree): the richer interpolant,
-        # reading more degrees past it, tells.
-        late = richer is not None and shapes[top][2] > 1 and richer[0][0] == "geometric"
-        if jumps and late:
-            return (
-                "order",
-                name,
-                f"{reads}, past a peak at degree {shapes[top][2]}, but {richer_read}",
-            )
+        # The few top degrees of a still unresolved oscillation may fall as a jump's: past a
+        # late peak (a jump's spectrum peaks at its first degree), or barely, from degree 1,
+        # slower than any finite variance's tail. The richer interpolant, reading further
+        # than the own top degree, tells.
+        _, rate, first, last = shapes[top]
+        unresolved = ""
+        if first > 1:
+            unresolved = f"that is past a peak at degree {first} (a jump's is at degree 1)"
+        elif rate <= _SUMMABLE:
+            unresolved = f"that is slower than any finite variance's tail (p^-{_SUMMABLE:g})"
+        further = richer is not None and richer[0][0] == "geometric" and richer[0][3] > last
+        if jumps and unresolved and further:
+            return "order", name, f"{reads}; but {unresolved}, and {richer_read}"
         if jumps:
             return "elements", " and ".join(jumps), reads
         # A kink's first degrees may look geometric: the held-out error sits inside the range,
