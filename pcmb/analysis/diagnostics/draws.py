@@ -252,7 +252,7 @@ def unseen_region_error(
     size = np.fmax(np.abs(observed), scale)  # the weight scales a residual, not its round-off
     residual = np.where(residual <= RELATIVE_NOISE * size, 0.0, residual / scale)
     largest = np.max(np.reshape(weights, (-1,) + (1,) * (residual.ndim - 1)) * residual, axis=0)
-    spread = np.std(observed, axis=0) / scale
+    spread = np.std(observed / scale, axis=0)  # scaled first: outputs near 1e200
     widest = np.maximum.accumulate(spread, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):  # nothing varied yet: nothing hides
         seen = np.where(widest > 0, np.maximum.accumulate(largest, axis=0) / widest, 0.0)
