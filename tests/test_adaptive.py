@@ -431,6 +431,25 @@ def test_an_interaction_behind_blind_mixed_indices_is_found():
     std = math.sqrt(math.sinh(2.0) / 2 * 10 / 9 - mean**2)
     result = _adaptive(_hidden_triple, inputs, method="adaptive", tolerance=1e-5)
     assert _statistics_error(result, mean, std) <= 1e-4
+    # Only the hidden input's neighbours are raised behind blind indices, not the blind ones.
+    assert result.n_nodes <= 400
+
+
+@pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
+@pytest.mark.timeout(60)
+def test_a_probe_past_the_budget_ends_the_rounds():
+    """The blind-mixed probe of e^{x1} (1 + x2 x3) at 1e-3 comes at 151 runs and costs 8 more:
+    with ``max_runs`` 156 it does not fit, and the rounds end there with ``adaptive-budget`` (the
+    design once looped for ever, the probe neither added nor refused)."""
+    inputs = {name: pcmb.Uniform(-1.0, 1.0) for name in ("x1", "x2", "x3")}
+    method = {"kind": "adaptive", "tolerance": 1e-3, "max_runs": 156, "validation": 0}
+    study = Study(
+        _model(_hidden_triple, inputs), inputs, np.zeros(1), method=method,
+        execution={"backend": "inprocess"},
+    )  # fmt: skip
+    result = study.run()
+    (record,) = [w for w in result.warnings if w.code == "adaptive-budget"]
+    assert result.n_nodes == 151 and "probing blind indices" in record.message
 
 
 @pytest.mark.filterwarnings("ignore:.*polynomial chaos unreliable:pcmb.errors.PcmbWarning")

@@ -286,6 +286,8 @@ class AdaptiveCollocation(GrowingGrid):
             probes = [level for level in probes if level not in (added or [])]
             if probes and self._size([*(added or []), *probes]) <= self.max_runs:
                 added = [*(added or []), *probes]
+            elif probes and not added:  # nothing else to refine: the probes end the rounds
+                added = None
             if added is None:
                 self._stop_at_budget(
                     "probing blind indices" if converged else "the next refinement"
@@ -496,15 +498,19 @@ class AdaptiveCollocation(GrowingGrid):
 
     def _hiding(self, level: tuple[int, ...]) -> list[tuple[int, ...]]:
         """The blind active indices (below :data:`BLIND`) that alone block a forward neighbour
-        of ``level`` in its own inputs, where two or more of them are blind on their axes: the
-        interaction goes on behind them (e^x1 x2 x3's (2, 1, 1) behind (2, 1, 0) and (2, 0, 1),
-        zero on their planes)."""
-        if len(_inputs(level) & self._hidden()) < 2:
+        of ``level`` in its own inputs that raises an input seen on its axis, where two or more
+        of them are blind on their axes: the interaction goes on behind them (e^x1 x2 x3's
+        (2, 1, 1) behind (2, 1, 0) and (2, 0, 1), zero on their planes)."""
+        hidden = self._hidden()
+        if len(_inputs(level) & hidden) < 2:
             return []
         position = {index: k for k, index in enumerate(self._index)}
         hiding: list[tuple[int, ...]] = []
         for child in self._forward(level, room=True):
-            if _inputs(child) != _inputs(level):
+            raised = next(k for k, (a, b) in enumerate(zip(child, level, strict=True)) if a != b)
+            # Only the neighbours that raise an input seen on its own axis: raising a blind
+            # input behind blind indices multiplies the runs for nothing new.
+            if _inputs(child) != _inputs(level) or raised in hidden:
                 continue
             blocking = [b for b in _backward(child) if b != level and b not in self._refined]
             if all(b in position and self._indicators[position[b]] <= BLIND for b in blocking):
