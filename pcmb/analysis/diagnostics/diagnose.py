@@ -96,10 +96,6 @@ class OutputDiagnostics:
     warnings:
         ``chaos-unreliable`` (when ``failing_from`` is a time), ``chaos-undecided`` (where
         the noise is too large to tell) and the range checks' records (:func:`range_checks`).
-    unseen:
-        (T,) :func:`~pcmb.analysis.diagnostics.draws.unseen_region_error`, the rule of
-        three's floor within ``noise``, which falls as 1/K (:func:`more_runs`); zeros but for
-        drawn runs, ``None`` for diagnostics read from a file, which does not store it.
     """
 
     output: str
@@ -114,7 +110,6 @@ class OutputDiagnostics:
     tolerance: float
     failing_from: float
     warnings: tuple[WarningRecord, ...]
-    unseen: NDArray[np.float64] | None = None
 
     @property
     def reliable(self) -> bool:
@@ -262,7 +257,6 @@ def diagnose(
     # A blind time fails unless the held-out runs, which saw the spread there, say it holds
     # beyond their noise (a switch the nodes have not reached yet, its spread still small).
     blind &= estimate + noise > tolerance
-    unseen = np.zeros(times.size)
     if checked is not None and not placed:
         # No time is called reliable on draws that may have missed where the error lives.
         unseen = unseen_region_error(predicted, observed, weights, scale, checked.confidence)
@@ -329,7 +323,6 @@ def diagnose(
         tolerance,
         failing_from,
         (),
-        unseen,
     )
     if found.undecided.any():
         records.append(_undecided(found, times, axis))
@@ -341,9 +334,10 @@ def diagnose(
 def more_runs(found: OutputDiagnostics) -> int:
     """How many held-out runs, beyond those made, would decide every undecided time of
     ``found`` but those whose estimate is within a tenth of the tolerance of it (0 when none is
-    undecided, at least 1 otherwise): the sampling noise falls as 1/√K, the rule of three's
-    floor (:attr:`OutputDiagnostics.unseen`) as 1/K. Too few runs to measure any noise (one):
-    the first batch."""
+    undecided, at least 1 otherwise): the sampling noise (the check's) falls as 1/√K, the rule
+    of three's floor (where ``noise`` is above it:
+    :func:`~pcmb.analysis.diagnostics.draws.unseen_region_error`) as 1/K. Too few runs to
+    measure any noise (one): the first batch."""
     if not found.undecided.any() or found.holdout is None:  # no check to extend
         return 0
     count = found.holdout.count
@@ -360,9 +354,9 @@ def _runs_needed(found: OutputDiagnostics) -> float:
     margin = np.abs(found.estimate - found.tolerance)[undecided]
     margin = np.maximum(margin, found.tolerance / 10)
     sampling = found.holdout.noise[undecided]
-    sampling = np.where(np.isnan(sampling), np.inf, sampling) / margin
-    unseen = 0.0 if found.unseen is None else found.unseen[undecided] / margin
-    return found.holdout.count * float(np.max(np.fmax(sampling**2, unseen)))
+    sampling = np.where(np.isnan(sampling), np.inf, sampling)
+    unseen = np.where(found.noise[undecided] > sampling, found.noise[undecided], 0.0)
+    return found.holdout.count * float(np.max(np.fmax((sampling / margin) ** 2, unseen / margin)))
 
 
 def _undecided(found: OutputDiagnostics, times: NDArray[np.float64], axis: str) -> WarningRecord:
