@@ -210,15 +210,19 @@ def coverage_error(
     return np.where((sigma > 0) & ~exact, missed, 0.0)
 
 
-def _largest_residual(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
-    """(T,) the largest |model - surrogate| over the (K, T) finite runs, over the scale; 0
-    where it is round-off (``RELATIVE_NOISE`` of the runs' largest size, at least the
-    scale): an exact polynomial's."""
-    residual = np.abs(np.asarray(observed, dtype=float) - np.asarray(predicted, dtype=float))
-    largest = np.max(residual, axis=0, initial=0.0)
+def _residuals(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
+    """(K, T) |model - surrogate| of the finite runs over the scale; 0 where it is round-off
+    (``RELATIVE_NOISE`` of the run's size, at least the scale): an exact polynomial's."""
+    observed = np.asarray(observed, dtype=float)
+    residual = np.abs(observed - np.asarray(predicted, dtype=float))
     # Ranges, not squares: outputs near 1e200 must not overflow.
-    size = np.fmax(np.max(np.abs(observed), axis=0, initial=0.0), scale)
-    return np.where(largest <= RELATIVE_NOISE * size, 0.0, largest / scale)
+    size = np.fmax(np.abs(observed), scale)
+    return np.where(residual <= RELATIVE_NOISE * size, 0.0, residual / scale)
+
+
+def _largest_residual(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
+    """(T,) the largest :func:`_residuals` over the runs."""
+    return np.max(_residuals(predicted, observed, scale), axis=0, initial=0.0)
 
 
 def unseen_region_error(
@@ -248,9 +252,7 @@ def unseen_region_error(
     if count == 0 or not scale > 0 or not np.isfinite(scale):
         return np.zeros(predicted.shape[1:])
     weights = np.ones(count) if weights is None else np.asarray(weights, dtype=float)
-    residual = np.abs(observed - predicted)
-    size = np.fmax(np.abs(observed), scale)  # the weight scales a residual, not its round-off
-    residual = np.where(residual <= RELATIVE_NOISE * size, 0.0, residual / scale)
+    residual = _residuals(predicted, observed, scale)  # a weight scales it, not its round-off
     largest = np.max(np.reshape(weights, (-1,) + (1,) * (residual.ndim - 1)) * residual, axis=0)
     spread = np.std(observed / scale, axis=0)  # scaled first: outputs near 1e200
     widest = np.maximum.accumulate(spread, axis=0)
