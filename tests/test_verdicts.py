@@ -887,9 +887,9 @@ def test_the_remedy_reads_the_interpolant_through_the_design_s_own_runs():
     (record,) = [w for w in found.warnings if w.code == "chaos-unreliable"]
     assert "the design's 5 runs and the 6 held-out runs" in record.message, record.message
     assert record.message.partition("; consider ")[2].startswith("raising the order of x0")
-    # The read stops past degree 6, pairing it with the empty degree 7: a few hundredths off.
-    rate = float(re.search(r"energy × ([\d.]+) per degree", record.message)[1])
-    assert rate == pytest.approx(0.64, abs=0.05), record.message
+    # The message prints the rate to one figure: the true 0.64 reads 0.6 (the read stops past
+    # degree 6, pairing it with the empty degree 7, a few hundredths off, within that figure).
+    assert f"energy × {0.64:.1g} per degree" in record.message, record.message
 
 
 @pytest.mark.slow

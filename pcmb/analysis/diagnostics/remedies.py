@@ -342,7 +342,7 @@ def _cause_remedy(
         unresolved = ""
         if first > 1:
             unresolved = f"that is past a peak at degree {first} (a jump's is at degree 1)"
-        elif rate <= _SUMMABLE:
+        elif shapes[top][0] == "algebraic" and rate <= _SUMMABLE:  # p^-rate, not a ratio
             unresolved = f"that is slower than any finite variance's tail (p^-{_SUMMABLE:g})"
         further = richer is not None and richer[0][0] == "geometric" and richer[0][3] > last
         if jumps and unresolved and further:
