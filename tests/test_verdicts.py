@@ -831,37 +831,39 @@ def sine_drift(params, times):
     return {"y": np.sin(np.outer(params["omega"], times))}
 
 
-def test_a_phase_drift_whose_own_spectrum_falls_algebraically_past_a_late_peak_raises_the_order():
-    # ω ~ U[0.8, 1.2] to t = 60 at order 12 (scripts/calibrate_diagnostics.py's drift),
-    # flagged at its last time: its own energy peaks at degree 9 and falls as p^-2.1 over the
-    # four degrees after it, which read as a jump's; the interpolant through the 13 nodes and
-    # the 8 held-out runs falls geometrically from the same peak to degree 20.
-    study = pcmb.Study(
-        sine_drift, {"omega": pcmb.Uniform(0.8, 1.2)}, np.linspace(0.0, 60.0, 301), order=12,
-        backend="inprocess",
-    )  # fmt: skip
-    remedy = _remedy(study)
-    assert remedy.startswith("raising the order of omega (method.order)"), remedy
-    assert "held-out runs along omega fall geometrically" in remedy
-
-
 @pcmb.batched(outputs=("y",))
 def cosine_drift(params, times):
     """cos(w t): entire in w, its phase drifts over a long horizon."""
     return {"y": np.cos(np.outer(params["w"], times))}
 
 
-def test_a_phase_drift_whose_own_spectrum_peaks_at_degree_one_raises_the_order():
-    # w ~ N(2, 0.05) to t = 40 at order 4: the own energy peaks at degree 1 and its four
-    # degrees read algebraic (p^-0.04, nearly flat), once told elements; the interpolant
-    # through the nodes and the 8 held-out runs reads further, geometric to degree 12.
-    study = pcmb.Study(
-        cosine_drift, {"w": pcmb.Normal(2.0, 0.05)}, np.linspace(0.0, 40.0, 401), order=4,
-        backend="inprocess",
-    )  # fmt: skip
-    remedy = _remedy(study)
-    assert remedy.startswith("raising the order of w (method.order)"), remedy
-    assert "held-out runs along w fall geometrically" in remedy
+@pytest.mark.parametrize(
+    ("model", "inputs", "times", "order"),
+    [
+        # ω ~ U[0.8, 1.2] to t = 60 at order 12 (scripts/calibrate_diagnostics.py's drift),
+        # flagged at its last time: its own energy peaks at degree 9 and falls as p^-2.1 over
+        # the four degrees after it, which read as a jump's; the interpolant through the 13
+        # nodes and the 8 held-out runs falls geometrically from the same peak to degree 20.
+        pytest.param(
+            sine_drift, {"omega": pcmb.Uniform(0.8, 1.2)}, np.linspace(0.0, 60.0, 301), 12,
+            id="past-a-late-peak",
+        ),
+        # w ~ N(2, 0.05) to t = 40 at order 4: the own energy peaks at degree 1 and its four
+        # degrees read algebraic (p^-0.04, nearly flat), once told elements; the interpolant
+        # through the nodes and the 8 held-out runs reads further, geometric to degree 12.
+        pytest.param(
+            cosine_drift, {"w": pcmb.Normal(2.0, 0.05)}, np.linspace(0.0, 40.0, 401), 4,
+            id="flat-from-degree-one",
+        ),
+    ],
+)  # fmt: skip
+def test_a_phase_drift_whose_own_spectrum_reads_algebraic_raises_the_order(
+    model, inputs, times, order
+):
+    (name,) = inputs
+    remedy = _remedy(pcmb.Study(model, inputs, times, order=order, backend="inprocess"))
+    assert remedy.startswith(f"raising the order of {name} (method.order)"), remedy
+    assert f"held-out runs along {name} fall geometrically" in remedy
 
 
 def test_the_remedy_reads_the_interpolant_through_the_design_s_own_runs():
