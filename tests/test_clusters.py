@@ -24,11 +24,14 @@ from pcmb.cli import main
 REFUSED_WITHIN = 10.0
 
 
-def _free_port() -> int:
-    """A port on 127.0.0.1 nothing listens on (bound, then released)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
+@contextlib.contextmanager
+def _silent_address() -> Iterator[str]:
+    """A dask address on 127.0.0.1 that nothing listens on, its port held bound meanwhile (a
+    bound socket that does not listen refuses connections), so no other process (another
+    test worker's) can take it between choosing and using it."""
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        yield f"tcp://127.0.0.1:{held.getsockname()[1]}"
 
 
 def _dask(*args: str, log: Path) -> subprocess.Popen:
@@ -159,8 +162,8 @@ def _refused(argv: list[str], capsys) -> str:
 @pytest.mark.slow
 def test_nothing_listening_at_the_address_exits_2(linear_study, capsys):
     config = linear_study(order=2)
-    address = f"tcp://127.0.0.1:{_free_port()}"
-    err = _refused(["run", str(config), "--address", address, "--quiet"], capsys)
+    with _silent_address() as address:
+        err = _refused(["run", str(config), "--address", address, "--quiet"], capsys)
     assert f"--address: no dask scheduler answered at {address}" in err
     assert "Timed out trying to connect" in err
     assert not (config.parent / "out.h5.journal").exists()
@@ -185,8 +188,8 @@ def test_an_address_that_is_not_one_is_refused(linear_study, capsys):
 
 def test_address_needs_the_dask_backend(linear_study, capsys):
     config = linear_study(order=2)
-    address = f"tcp://127.0.0.1:{_free_port()}"
-    err = _refused(["run", str(config), "--address", address, "--backend", "loky"], capsys)
+    with _silent_address() as address:
+        err = _refused(["run", str(config), "--address", address, "--backend", "loky"], capsys)
     assert "--address" in err and "--backend dask" in err
 
 
