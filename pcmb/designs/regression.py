@@ -269,9 +269,12 @@ class SparseRegression:
             return None
         if nodes.size == self.samples:  # the first round of a (new) run
             self._history = []
-        fits = {name: found.fit for name, found in self._fits(nodes, values, ok).items()}
-        runs = dict.fromkeys(fits, int(np.sum(ok)))
-        self._history.append((nodes.size, estimated_error(fits, runs)))
+        found = self._fits(nodes, values, ok)
+        estimate = estimated_error(
+            {name: fit.fit for name, fit in found.items()},
+            {name: fit.effective for name, fit in found.items()},
+        )
+        self._history.append((nodes.size, estimate))
         return self.next_nodes(nodes.size, self._history)
 
     def _fits(
@@ -285,17 +288,19 @@ class SparseRegression:
         weighted by them."""
         rows = ok if weights is None else ok & (weights > 0)
         kept = None if weights is None else weights[rows]
-        fits = {}
-        for name, y in values.items():
-            fit = fit_sparse(self.candidates, nodes.nodes[rows], y[rows], self.selection, kept)
-            runs = int(rows.sum())
-            fits[name] = _Fit(
-                fit,
+        runs = int(rows.sum())
+        effective = runs if kept is None else _effective(kept)
+        held_out = int(rows[self._made :].sum())
+        germ = nodes.nodes[rows]
+        return {
+            name: _Fit(
+                fit_sparse(self.candidates, germ, y[rows], self.selection, kept),
                 runs,
-                runs if kept is None else _effective(kept),
-                int(rows[self._made :].sum()),
+                effective,
+                held_out,
             )
-        return fits
+            for name, y in values.items()
+        }
 
     def recover(
         self,
