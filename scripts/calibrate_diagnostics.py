@@ -604,20 +604,28 @@ def calibrate_case(
     return rows
 
 
+def _first_seed(case: str, tolerance: float | None):
+    """Each study of a closed-form case at seed 0: its label, its output's diagnostics and the
+    true errors of its mean and std over the largest std (T,)."""
+    _, _, times, exact, studies = CASES[case]
+    mean, std = exact(times)
+    for label in studies:
+        result = _run_case(case, label, tolerance, seed=0)
+        (name,) = result.diagnostics
+        found = result.diagnostics[name]
+        errors = (abs(result.mean(name) - mean), abs(result.std(name) - std))
+        yield label, found, *(error / found.scale for error in errors)
+
+
 def mean_error_rows(case: str, tolerance: float | None) -> list[str]:
     """Table rows of one closed-form case: per study (seed 0), the mean's true and estimated
     errors (``/diagnostics/<output>/mean_error``) over the largest std, where the truth first
     crosses the tolerance the study's verdict uses (else where the true mean error is
     largest), and the largest of each."""
-    _, _, times, exact, studies = CASES[case]
-    mean, std = exact(times)
+    times = CASES[case][2]
     rows = []
-    for label in studies:
-        result = _run_case(case, label, tolerance, seed=0)
-        (name,) = result.diagnostics
-        found = result.diagnostics[name]
-        true_mean = abs(result.mean(name) - mean) / found.scale
-        true = np.fmax(true_mean, abs(result.std(name) - std) / found.scale)
+    for label, found, true_mean, true_std in _first_seed(case, tolerance):
+        true = np.fmax(true_mean, true_std)
         crossing = np.flatnonzero(true > found.tolerance)
         k = crossing[0] if crossing.size else int(np.argmax(true_mean))
         estimate = found.holdout.mean_error
@@ -635,16 +643,12 @@ def decay_rows(case: str, tolerance: float | None) -> list[str]:
     uses, their ratio where the truth crosses, its least and largest within 5 % of the horizon
     of that crossing, and the largest decay over the tolerance where the truth holds (up to 5 %
     of the horizon before its crossing, where a flag is a false alarm)."""
-    _, _, times, exact, studies = CASES[case]
-    mean, std = exact(times)
+    times = CASES[case][2]
     late = 0.05 * (times[-1] - times[0])
     rows = []
-    for label in studies:
-        result = _run_case(case, label, tolerance, seed=0)
-        (name,) = result.diagnostics
-        found = result.diagnostics[name]
+    for label, found, true_mean, true_std in _first_seed(case, tolerance):
         judged = found.tolerance
-        true = np.fmax(abs(result.mean(name) - mean), abs(result.std(name) - std)) / found.scale
+        true = np.fmax(true_mean, true_std)
         true_from = verdict(times, true, judged)
         ratio = found.decay / np.where(true > 0, true, np.nan)
         near = np.abs(times - true_from) <= late
@@ -657,6 +661,22 @@ def decay_rows(case: str, tolerance: float | None) -> list[str]:
             f"{np.max(found.decay[holds], initial=0.0) / judged:9.3g}"
         )
     return rows
+
+
+#: The tables of one seed per study that an option prints instead of the verdicts: option ->
+#: (header, the rows of a closed-form case).
+ONE_SEED_TABLES = {
+    "mean_error": (
+        f"{'case':10s} {'study':28s} {'at t':>8s} {'true %':>8s} {'est. %':>8s} "
+        f"{'true max':>8s} {'est. max':>8s}",
+        mean_error_rows,
+    ),
+    "decay": (
+        f"{'case':10s} {'study':28s} {'check':8s} {'tol':>7s} {'true':>8s} {'decay':>8s} "
+        f"{'d/t at x':>9s} {'d/t within 5 %':>19s} {'d/tol ok':>9s}",
+        decay_rows,
+    ),
+}
 
 
 def main() -> None:
@@ -703,22 +723,12 @@ def main() -> None:
         for row in calibrate(case, args.seeds, args.twin, args.jobs, args.tolerance):
             print(row, flush=True)
     closed = [case for case in args.cases if case in CASES]
-    if closed and args.mean_error:
-        print(
-            f"{'case':10s} {'study':28s} {'at t':>8s} {'true %':>8s} {'est. %':>8s} "
-            f"{'true max':>8s} {'est. max':>8s}"
-        )
+    chosen = [option for option in ONE_SEED_TABLES if getattr(args, option)]
+    if closed and chosen:
+        header, rows = ONE_SEED_TABLES[chosen[0]]
+        print(header)
         for case in closed:
-            for row in mean_error_rows(case, args.tolerance):
-                print(row, flush=True)
-        return
-    if closed and args.decay:
-        print(
-            f"{'case':10s} {'study':28s} {'check':8s} {'tol':>7s} {'true':>8s} {'decay':>8s} "
-            f"{'d/t at x':>9s} {'d/t within 5 %':>19s} {'d/tol ok':>9s}"
-        )
-        for case in closed:
-            for row in decay_rows(case, args.tolerance):
+            for row in rows(case, args.tolerance):
                 print(row, flush=True)
         return
     if closed:
