@@ -42,7 +42,8 @@ each seed's ``chaos-unreliable`` record asks for (``order``, ``elements``, ``sam
 ``order|elements`` where it names both, the first first; ``-`` without one).
 ``--validation K`` fixes the check's runs instead; ``--mean-error`` prints instead, per study,
 the mean's true and estimated errors (``mean_error``) where the truth crosses and the largest
-of each."""
+of each; ``--decay`` prints instead, per study, the spectral decay (the design's own evidence)
+against the true error (:func:`decay_rows`)."""
 
 from __future__ import annotations
 
@@ -603,20 +604,28 @@ def calibrate_case(
     return rows
 
 
+def _first_seed(case: str, tolerance: float | None):
+    """Each study of a closed-form case at seed 0: its label, its output's diagnostics and the
+    true errors of its mean and std over the largest std (T,)."""
+    _, _, times, exact, studies = CASES[case]
+    mean, std = exact(times)
+    for label in studies:
+        result = _run_case(case, label, tolerance, seed=0)
+        (name,) = result.diagnostics
+        found = result.diagnostics[name]
+        errors = (abs(result.mean(name) - mean), abs(result.std(name) - std))
+        yield label, found, *(error / found.scale for error in errors)
+
+
 def mean_error_rows(case: str, tolerance: float | None) -> list[str]:
     """Table rows of one closed-form case: per study (seed 0), the mean's true and estimated
     errors (``/diagnostics/<output>/mean_error``) over the largest std, where the truth first
     crosses the tolerance the study's verdict uses (else where the true mean error is
     largest), and the largest of each."""
-    _, _, times, exact, studies = CASES[case]
-    mean, std = exact(times)
+    times = CASES[case][2]
     rows = []
-    for label in studies:
-        result = _run_case(case, label, tolerance, seed=0)
-        (name,) = result.diagnostics
-        found = result.diagnostics[name]
-        true_mean = abs(result.mean(name) - mean) / found.scale
-        true = np.fmax(true_mean, abs(result.std(name) - std) / found.scale)
+    for label, found, true_mean, true_std in _first_seed(case, tolerance):
+        true = np.fmax(true_mean, true_std)
         crossing = np.flatnonzero(true > found.tolerance)
         k = crossing[0] if crossing.size else int(np.argmax(true_mean))
         estimate = found.holdout.mean_error
@@ -625,6 +634,49 @@ def mean_error_rows(case: str, tolerance: float | None) -> list[str]:
             f"{100 * estimate[k]:8.2f} {100 * true_mean.max():8.2f} {100 * estimate.max():8.2f}"
         )
     return rows
+
+
+def decay_rows(case: str, tolerance: float | None) -> list[str]:
+    """Table rows of one closed-form case: per study (seed 0; the design and its decay do not
+    move with the seed), the spectral decay (``/diagnostics/<output>/decay``) against the true
+    error, both over the largest std: where each first passes the tolerance the study's verdict
+    uses, their ratio where the truth crosses, its least and largest within 5 % of the horizon
+    of that crossing, and the largest decay over the tolerance where the truth holds (up to 5 %
+    of the horizon before its crossing, where a flag is a false alarm)."""
+    times = CASES[case][2]
+    late = 0.05 * (times[-1] - times[0])
+    rows = []
+    for label, found, true_mean, true_std in _first_seed(case, tolerance):
+        judged = found.tolerance
+        true = np.fmax(true_mean, true_std)
+        true_from = verdict(times, true, judged)
+        ratio = found.decay / np.where(true > 0, true, np.nan)
+        near = np.abs(times - true_from) <= late
+        at = ratio[np.argmax(times >= true_from)] if near.any() else np.nan
+        low, high = (f(ratio[near]) if near.any() else np.nan for f in (np.nanmin, np.nanmax))
+        holds = ~(times >= true_from - late)
+        rows.append(
+            f"{case:10s} {label:28s} {found.estimated_by:8s} {judged:7.2g} {true_from:8.4g} "
+            f"{verdict(times, found.decay, judged):8.4g} {at:9.3g} {low:9.3g}–{high:<9.3g} "
+            f"{np.max(found.decay[holds], initial=0.0) / judged:9.3g}"
+        )
+    return rows
+
+
+#: The tables of one seed per study that an option prints instead of the verdicts: option ->
+#: (header, the rows of a closed-form case).
+ONE_SEED_TABLES = {
+    "mean_error": (
+        f"{'case':10s} {'study':28s} {'at t':>8s} {'true %':>8s} {'est. %':>8s} "
+        f"{'true max':>8s} {'est. max':>8s}",
+        mean_error_rows,
+    ),
+    "decay": (
+        f"{'case':10s} {'study':28s} {'check':8s} {'tol':>7s} {'true':>8s} {'decay':>8s} "
+        f"{'d/t at x':>9s} {'d/t within 5 %':>19s} {'d/tol ok':>9s}",
+        decay_rows,
+    ),
+}
 
 
 def main() -> None:
@@ -653,6 +705,11 @@ def main() -> None:
         action="store_true",
         help="closed-form cases: the mean's true and estimated errors instead of the verdicts",
     )
+    parser.add_argument(
+        "--decay",
+        action="store_true",
+        help="closed-form cases: the spectral decay against the true error instead of the verdicts",
+    )
     args = parser.parse_args()
     warnings.simplefilter("ignore")  # the studies' own warnings are not the subject here
     configs = [case for case in args.cases if case not in CASES]
@@ -666,13 +723,12 @@ def main() -> None:
         for row in calibrate(case, args.seeds, args.twin, args.jobs, args.tolerance):
             print(row, flush=True)
     closed = [case for case in args.cases if case in CASES]
-    if closed and args.mean_error:
-        print(
-            f"{'case':10s} {'study':28s} {'at t':>8s} {'true %':>8s} {'est. %':>8s} "
-            f"{'true max':>8s} {'est. max':>8s}"
-        )
+    chosen = [option for option in ONE_SEED_TABLES if getattr(args, option)]
+    if closed and chosen:
+        header, rows = ONE_SEED_TABLES[chosen[0]]
+        print(header)
         for case in closed:
-            for row in mean_error_rows(case, args.tolerance):
+            for row in rows(case, args.tolerance):
                 print(row, flush=True)
         return
     if closed:

@@ -562,11 +562,13 @@ def test_the_default_check_makes_at_most_a_quarter_of_the_design_or_eight(design
 
 
 @pytest.mark.filterwarnings("ignore::pcmb.errors.PcmbWarning")
-def test_the_calibration_reads_the_truth_at_the_tolerance_the_study_s_verdict_uses():
+@pytest.mark.parametrize("table", ["mean_error_rows", "decay_rows"])
+def test_the_calibration_reads_the_truth_at_the_tolerance_the_study_s_verdict_uses(table):
     # The sliver's studies judge at 1e-3 and 1e-4 (diagnostics.tolerance): --mean-error once
     # looked for the truth's crossing of 0.05, never reached (0.15-0.81 % at most), and
-    # printed the last time, 1, instead of the crossings docs/diagnostics.md gives.
-    rows = CALIBRATION["mean_error_rows"]("sliver", None)
+    # printed the last time, 1, instead of the crossings docs/diagnostics.md gives; --decay
+    # reads the decay against the same crossings.
+    rows = CALIBRATION[table]("sliver", None)
     assert [float(row.split()[-5]) for row in rows] == [0.67, 0.07, 0.24, 0.13]
 
 
