@@ -104,7 +104,7 @@ class HeldOutCheck:
         ``confidence``: the standard error times the quantile of Student's t law of
         :attr:`degrees_of_freedom` (1.38 at 90 % for 10 drawn runs; the normal's 1.28 for a
         placed check)."""
-        return student_t_quantile(self.confidence, self.degrees_of_freedom) * self.spread
+        return STANDARD_NORMAL.inv_cdf(self.confidence) * self.spread
 
 
 def drawn_degrees_of_freedom(count: int) -> int:
