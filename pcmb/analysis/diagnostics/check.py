@@ -183,7 +183,7 @@ def _standard_error(
     whose pair is small in most draws (3 times too small a standard error at K = 56).
     """
     count = values.shape[0]
-    plain = values.std(axis=0, ddof=1) / np.sqrt(count)
+    plain = values.std(axis=0, ddof=1) / np.sqrt(max(count - 1, 1))
     if germ is None or count < PAIRED_FROM:
         return plain
     even = count // 2 * 2
