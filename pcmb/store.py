@@ -8,7 +8,6 @@ import dataclasses
 import datetime as dt
 import io
 import json
-import math
 import os
 import platform
 from collections.abc import Iterable, Mapping, Sequence
@@ -19,13 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pcmb.analysis.diagnostics import (
-    CODES,
-    HeldOut,
-    HeldOutCheck,
-    OutputDiagnostics,
-    drawn_degrees_of_freedom,
-)
+from pcmb.analysis.diagnostics import CODES, HeldOut, HeldOutCheck, OutputDiagnostics
 from pcmb.analysis.statistics import Analysis, AnalysisSettings, Density, OutputAnalysis, Spectrum
 from pcmb.axes import OutputAxis
 from pcmb.chaos.elements import Partition, PiecewiseExpansion
@@ -533,8 +526,6 @@ def _read_diagnostics(
         holdout = None
         if "holdout_error" in group:
             error = _columns(group["holdout_error"][()], scalar)
-            count = int(attrs["holdout_count"])
-            placed = "validation" in file and file["validation"].attrs.get("placed", False)
             holdout = HeldOutCheck(
                 error,
                 _columns(group["holdout_upper"][()], scalar),
@@ -542,9 +533,8 @@ def _read_diagnostics(
                     _columns(group[key][()], scalar) if key in group else np.nan * error
                     for key in _HOLDOUT_STATISTICS
                 ),
-                count,
+                int(attrs["holdout_count"]),
                 float(attrs["confidence"]),
-                math.inf if placed else drawn_degrees_of_freedom(count),
             )
         absent = np.zeros(group["decay"].shape)  # older files have no noise (nor undecided)
         arrays = {

@@ -16,7 +16,6 @@ from pcmb.analysis.diagnostics.check import (
     CONFIDENCE,
     HeldOutCheck,
     chi_square_quantile,
-    drawn_degrees_of_freedom,
     holdout_error,
     statistics_error,
 )
@@ -67,7 +66,6 @@ __all__ = [
     "chi_square_quantile",
     "diagnose",
     "diagnose_all",
-    "drawn_degrees_of_freedom",
     "element_importance",
     "held_out_budget",
     "held_out_draws",

@@ -9,7 +9,6 @@ and the mean and std those runs correct.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from statistics import NormalDist
 
@@ -63,10 +62,6 @@ class HeldOutCheck:
         K, the finite runs used.
     confidence:
         The bound's confidence level.
-    degrees_of_freedom:
-        Of the standard errors when they are a sample's (drawn runs: K - 1,
-        :func:`drawn_degrees_of_freedom`), whose noise Student's t law carries into
-        :attr:`noise` and the verdict's margin; infinite where they are not (a placed check).
     """
 
     error: NDArray[np.float64]
@@ -80,7 +75,6 @@ class HeldOutCheck:
     corrected_std_se: NDArray[np.float64]
     count: int
     confidence: float
-    degrees_of_freedom: float = math.inf
 
     @property
     def statistics(self) -> NDArray[np.float64]:
@@ -101,68 +95,8 @@ class HeldOutCheck:
     @property
     def noise(self) -> NDArray[np.float64]:
         """(T,) how far :attr:`statistics` may lie from the truth at the one-sided
-        ``confidence``: the standard error times the quantile of Student's t law of
-        :attr:`degrees_of_freedom` (1.38 at 90 % for 10 drawn runs; the normal's 1.28 for a
-        placed check)."""
+        ``confidence``: the standard error times its normal quantile (1.28 at 90 %)."""
         return STANDARD_NORMAL.inv_cdf(self.confidence) * self.spread
-
-
-def drawn_degrees_of_freedom(count: int) -> int:
-    """The degrees of freedom of a drawn check's standard errors from ``count`` runs: K - 1,
-    at least 1. Paired neighbours (:func:`_standard_error`) are counted so too."""
-    return max(count - 1, 1)
-
-
-def student_t_survival(x: ArrayLike, dof: float) -> NDArray[np.float64]:
-    """P(T > x) elementwise, T of Student's t law of ``dof`` degrees of freedom (whole, >= 1;
-    infinite: the standard normal), by its closed form (Abramowitz and Stegun 26.7.3-4):
-    with θ = arctan(|x| / √dof), P(|T| < |x|) is sin θ Σ_j a_j cos^2j θ for an even ``dof``
-    (a_0 = 1, a_j = a_j-1 (2j - 1) / 2j, j < dof / 2), and (2/π) (θ + sin θ cos θ Σ_j b_j
-    cos^2j θ) for an odd one (b_0 = 1, b_j = b_j-1 2j / (2j + 1), j <= (dof - 3) / 2);
-    scipy.stats' import is too slow for the held-out check (:func:`chi_square_quantile`)."""
-    x = np.asarray(x, dtype=float)
-    if math.isinf(dof):
-        tail = np.frompyfunc(lambda v: 0.5 * math.erfc(v / math.sqrt(2.0)), 1, 1)
-        return np.asarray(tail(x), dtype=float)
-    dof = int(dof)
-    theta = np.arctan(np.abs(x) / math.sqrt(dof))
-    cos2, sin = np.cos(theta) ** 2, np.sin(theta)
-    term, total = np.ones_like(theta), np.ones_like(theta)
-    odd = dof % 2
-    for j in range(1, (dof - 1) // 2 if odd else dof // 2):
-        term = term * cos2 * ((2 * j) / (2 * j + 1) if odd else (2 * j - 1) / (2 * j))
-        total = total + term
-    if odd:
-        inside = 2.0 / math.pi * (theta + (sin * np.sqrt(cos2) * total if dof > 1 else 0.0))
-    else:
-        inside = sin * total
-    beyond = 0.5 * (1.0 - inside)
-    return np.where(x >= 0, beyond, 1.0 - beyond)
-
-
-def student_t_quantile(probability: float, dof: float) -> float:
-    """The quantile of Student's t law of ``dof`` degrees of freedom (whole, >= 1; infinite:
-    the standard normal) at ``probability`` in (0, 1), by bisection on
-    :func:`student_t_survival`."""
-    if math.isinf(dof):
-        return STANDARD_NORMAL.inv_cdf(probability)
-    if probability < 0.5:
-        return -student_t_quantile(1.0 - probability, dof)
-    high = 1.0
-    while student_t_survival(high, dof) > 1.0 - probability:
-        high *= 2.0
-    return _bisected(lambda x: float(student_t_survival(x, dof)), 1.0 - probability, 0.0, high)
-
-
-def _bisected(survival: Callable[[float], float], tail: float, low: float, high: float) -> float:
-    """x in [low, high] where the decreasing ``survival`` falls to ``tail``, to 1e-13 of x."""
-    while high - low > 1e-13 * high:
-        middle = 0.5 * (low + high)
-        if survival(middle) > tail:
-            low = middle
-        else:
-            high = middle
-    return 0.5 * (low + high)
 
 
 def _standard_error(
@@ -183,7 +117,7 @@ def _standard_error(
     whose pair is small in most draws (3 times too small a standard error at K = 56).
     """
     count = values.shape[0]
-    plain = values.std(axis=0, ddof=1) / np.sqrt(max(count - 1, 1))
+    plain = values.std(axis=0, ddof=1) / np.sqrt(count)
     if germ is None or count < PAIRED_FROM:
         return plain
     even = count // 2 * 2
@@ -294,8 +228,14 @@ def chi_square_quantile(dof: int, probability: float) -> float:
     ``probability``, by bisection on its closed-form survival function: scipy.special's
     ``gammaincinv`` gives the same to 1e-12 for probabilities in [0.01, 0.99], and its
     import (0.2 s) was most of the held-out check's cost."""
-    high = dof + 20.0 * math.sqrt(2.0 * dof) + 100.0
-    return _bisected(lambda x: _chi_square_survival(x, dof), 1.0 - probability, 0.0, high)
+    low, high = 0.0, dof + 20.0 * math.sqrt(2.0 * dof) + 100.0
+    while high - low > 1e-13 * high:
+        middle = 0.5 * (low + high)
+        if _chi_square_survival(middle, dof) > 1.0 - probability:
+            low = middle
+        else:
+            high = middle
+    return 0.5 * (low + high)
 
 
 def _chi_square_survival(x: float, dof: int) -> float:
@@ -366,7 +306,7 @@ def holdout_error(
     mean, std = np.asarray(mean, dtype=float), np.asarray(std, dtype=float)
     if count == 0:
         nan = np.full(observed.shape[1:], np.nan)
-        return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence, 1)
+        return HeldOutCheck(nan, nan, nan, nan, nan, nan, nan, nan, nan, 0, confidence)
     weights = np.ones(kept.size) if weights is None else np.asarray(weights, dtype=float)
     # Weighted back to the inputs' distribution: a widened draw far in a tail counts as
     # little as the distribution makes it (a moment weight below zero, as nothing).
@@ -394,5 +334,4 @@ def holdout_error(
         *corrected,
         count,
         confidence,
-        drawn_degrees_of_freedom(count),
     )
