@@ -22,10 +22,12 @@ from pcmb.analysis.diagnostics import (
     HELD_OUT_SEED,
     diagnose,
     held_out_draws,
+    holdout_error,
     more_runs,
 )
 from pcmb.analysis.diagnostics.check import STANDARD_NORMAL
 from pcmb.analysis.diagnostics.draws import unseen_region_error
+from pcmb.analysis.diagnostics.verdict import flag_margin
 from pcmb.chaos.nodes import TensorGrid, random_nodes
 from pcmb.held_out import HeldOutPlan
 
@@ -148,6 +150,32 @@ def test_error_far_below_noise_flags_at_most_the_confidence(tmp_path):
         _smooth, {"kind": "collocation", "order": 4, "validation": 0}, 0.05, tmp_path / "s.h5"
     )
     assert _flag_share(result, _smooth, 16, 1e-7) <= 1 - CONFIDENCE
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="the margin takes the standard error as known (the normal's 1.28-1.64 of it), where "
+    "one read from the same 10 runs makes (estimate - truth) / standard error Student's t of 9 "
+    "degrees of freedom: 11.5 % and 11.6 % flagged; its quantiles (1.38-1.83) give 10.1 % and "
+    "9.8 %, but flagged later on the drawn families (cosine order 7, oscillator_wide order 3, "
+    "largest: a timely flag each of 30 seeds lost): measured and not kept (docs/diagnostics.md)",
+)
+@pytest.mark.parametrize("noise", [0.2, 1.0])
+def test_a_drawn_error_at_the_tolerance_is_flagged_at_most_at_the_confidence(noise):
+    """10 independent runs whose residual is N(e, σ²), its mean e the tolerance itself and the
+    standard error σ/√10 ``noise`` times it (0.2: the one-sided margin; 1: the sign-free one):
+    over 20,000 checks (columns) the flag passes in at most 1 - confidence of them, plus 3
+    binomial standard errors (0.64 %)."""
+    runs, checks, tolerance = 10, 20_000, 0.05
+    rng = np.random.default_rng(0)
+    sigma = noise * tolerance * math.sqrt(runs)
+    residual = tolerance + sigma * rng.standard_normal((runs, checks))
+    found = holdout_error(
+        np.zeros((runs, checks)), residual, np.zeros(checks), np.ones(checks), 1.0
+    )
+    flagged = found.statistics - flag_margin(found, tolerance) > tolerance
+    binomial = math.sqrt(CONFIDENCE * (1 - CONFIDENCE) / checks)
+    assert flagged.mean() <= 1 - CONFIDENCE + 3 * binomial, flagged.mean()
 
 
 def test_two_batches_of_draws_are_not_paired_as_one_latin_hypercube(tmp_path):
