@@ -98,7 +98,7 @@ class HeldOutPlan:
         return self.design.record().grid == "tensor-gauss" and normal.size > 1 and normal.any()
 
     def line_input(self, expansions: Mapping[str, object]) -> int | None:
-        """The input along which the held-out runs are placed, all at once
+        """The input along which the first batch of held-out runs is placed, and no second
         (:func:`~pcmb.analysis.diagnostics.held_out_line`), where the tails of the fitted
         ``expansions`` lie along one normal input
         (:func:`~pcmb.analysis.diagnostics.tail_input`); ``None``: drawn."""

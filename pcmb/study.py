@@ -767,8 +767,7 @@ class Study:
                 axis = self._held_out.line_input(
                     {name: e for name, e in found.expansions.items() if name in judged}
                 )
-                # Placed along that input: all the runs at once.
-                checking = _beside(functools.partial(make, first if axis is None else most, axis=axis), False)
+                checking = _beside(functools.partial(make, first, axis=axis), False)
             analysis = None
             # A design that refits after the check (_final_fit) has its statistics drawn then.
             if self.analysis is not None and not (first and hasattr(self.design, "refit")):
@@ -787,12 +786,12 @@ class Study:
         with phase("diagnostics", stream):
             result = self._diagnosed(found, held_out, held_out_failed)
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
-            left = 0 if held_out is None else most - held_out.ok.size
-            if min(wanted, left) > 0:
+            # A placed check makes its runs at once.
+            if held_out is not None and not held_out.placed and min(wanted, most - first) > 0:
                 more, more_failed = self._run_held_out(
                     run,
                     record,
-                    min(wanted, left),
+                    min(wanted, most - first),
                     nodes.nodes,
                     batch=1,  # drawn: a placed check makes its runs at once
                     earlier=held_out,
