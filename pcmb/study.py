@@ -709,18 +709,15 @@ class Study:
                     nodes, runs = self._run_rounds(run, nodes, runs)
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size)
-            # Where they go may wait for the fit (along the input that carries the tails).
-            after_fit = self._held_out.after_fit()
             # Runs joined: made already. Else the workers make the held-out runs while this
             # process fits the expansions and draws the statistics, which do not need them;
             # not in this process's own thread (in-process runs), nor beside a nominal run sent
-            # after them (a timeout).
+            # after them (a timeout). Where they go may wait for the fit (along the input that
+            # carries the tails): then beside the statistics only.
             beside = bool(first) and not (
-                joined
-                or after_fit
-                or isinstance(pool, InProcessPool)
-                or self.execution.timeout is not None
+                joined or isinstance(pool, InProcessPool) or self.execution.timeout is not None
             )
+            after_fit = self._held_out.after_fit()
             make = functools.partial(
                 self._run_held_out,
                 # No bar beside the phases' lines.
@@ -767,7 +764,7 @@ class Study:
                 axis = self._held_out.line_input(
                     {name: e for name, e in found.expansions.items() if name in judged}
                 )
-                checking = _beside(functools.partial(make, first, axis=axis), False)
+                checking = _beside(functools.partial(make, first, axis=axis), beside)
             analysis = None
             # A design that refits after the check (_final_fit) has its statistics drawn then.
             if self.analysis is not None and not (first and hasattr(self.design, "refit")):

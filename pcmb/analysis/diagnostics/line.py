@@ -148,62 +148,50 @@ def line_check(
     distributions = expansion.distributions
     germ = np.asarray(germ, dtype=float)[kept]
     axis = line_axis(distributions, germ)
-    index = np.asarray(expansion.multi_index)
-    coefficients = expansion.coefficients.reshape(index.shape[0], -1) / scale
-    top = int(index[:, axis].max())
-    # The terms as (degree along k, the others' degrees): the layers along k.
-    others, where = np.unique(np.delete(index, axis, axis=1), axis=0, return_inverse=True)
-    layers = np.zeros((top + 1, others.shape[0], coefficients.shape[1]))
-    layers[index[:, axis], where.ravel()] = coefficients
-    on_line = np.ones(others.shape[0])
-    for column, k in enumerate(np.delete(np.arange(index.shape[1]), axis)):
-        values = distributions[k].family.evaluate(_centres(distributions)[k], others[:, column].max())
-        on_line = on_line * values[others[:, column]]
-    line = np.einsum("jbt,b->jt", layers, on_line)
-    constant = np.flatnonzero(~np.any(others, axis=1))[0]
-    profiles = []
-    for layer in (top, top - 1):  # each degree takes the profile of the top layer of its parity
-        norm = np.sqrt(np.sum(layers[max(layer, 0)] ** 2, axis=0))
-        seen = np.abs(line[max(layer, 0)]) > _UNSEEN_PROFILE * norm
-        fallback = np.zeros((others.shape[0], 1))
-        fallback[constant] = 1.0
-        ratio = layers[max(layer, 0)] / np.where(seen, line[max(layer, 0)], 1.0)
-        profiles.append(np.where(seen, ratio, fallback))
+    layers, line, constant = _layers(expansion, axis, scale)
+    top = layers.shape[0] - 1
+    # Each degree of the correction takes the profile of the top layer of its parity.
+    profiles = np.stack(
+        [_profile(layers[layer], line[layer], constant) for layer in (top, top - 1)]
+    )
     family = distributions[axis].family
     nodes = np.unique(np.asarray(node_germ, dtype=float)[:, axis])
     points = np.concatenate([nodes, germ[:, axis]])
     residual = signed_residuals(predicted[kept], observed[kept], scale)
     values = np.vstack([np.zeros((nodes.size, residual.shape[1])), residual])
 
-    def corrected(spare: int) -> tuple[NDArray, NDArray, NDArray]:
-        """(T,) mean, std and L2 distance from the expansion of the expansion corrected along
-        the line without the last ``spare`` runs, over the scale."""
+    def errors(spare: int) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
+        """(T,) errors of the mean and std, L2 distance from the expansion, mean and std of
+        the expansion corrected along the line without the last ``spare`` runs, over the
+        scale."""
         size = max(nodes.size, points.size - spare)
         correction = interpolated(family, points[:size], values[:size])
-        change = correction[:, None, :] * np.stack(profiles)[(top - np.arange(size)) % 2]
+        change = correction[:, None, :] * profiles[(top - np.arange(size)) % 2]
         total = np.zeros((max(size, top + 1), *layers.shape[1:]))
         total[: top + 1] = layers
         total[:size] += change
         rich_mean = total[0, constant].copy()
         total[0, constant] = 0.0  # the variance without it: no cancellation on a large mean
-        variance = np.sum(total**2, axis=(0, 1))
-        distance = np.sqrt(np.sum(change**2, axis=(0, 1)))
-        return rich_mean, np.sqrt(np.maximum(variance, 0.0)), distance
+        rich_std = np.sqrt(np.sum(total**2, axis=(0, 1)))
+        return (
+            np.abs(rich_mean - mean / scale),
+            np.abs(rich_std - std / scale),
+            np.sqrt(np.sum(change**2, axis=(0, 1))),
+            rich_mean,
+            rich_std,
+        )
 
-    rich_mean, rich_std, distance = corrected(0)
-    mean_error, std_error = np.abs(rich_mean - mean / scale), np.abs(rich_std - std / scale)
-    unseen = _off_line(expansion, axis, scale)
+    found = errors(0)
+    mean_error, std_error, distance, rich_mean, rich_std = found
     if count > PLACED_SPARE:
-        fewer_mean, fewer_std, fewer_distance = corrected(PLACED_SPARE)
-        mean_moved = np.abs(mean_error - np.abs(fewer_mean - mean / scale))
-        std_moved = np.abs(std_error - np.abs(fewer_std - std / scale))
+        fewer = errors(PLACED_SPARE)
+        moves = [np.abs(found[i] - fewer[i]) for i in range(3)]
         if count > 2 * PLACED_SPARE:
-            least_mean, least_std, _ = corrected(2 * PLACED_SPARE)
-            before_mean = np.abs(np.abs(fewer_mean - mean / scale) - np.abs(least_mean - mean / scale))
-            before_std = np.abs(np.abs(fewer_std - std / scale) - np.abs(least_std - std / scale))
-            mean_moved, std_moved = converging(mean_moved, before_mean), converging(std_moved, before_std)
-        mean_se, std_se = np.hypot(mean_moved, unseen), np.hypot(std_moved, unseen)
-        moved = np.abs(distance - fewer_distance)
+            least = errors(2 * PLACED_SPARE)
+            for i in range(2):
+                moves[i] = converging(moves[i], np.abs(fewer[i] - least[i]))
+        unseen = _off_line(expansion, axis, scale)
+        mean_se, std_se, moved = np.hypot(moves[0], unseen), np.hypot(moves[1], unseen), moves[2]
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return HeldOutCheck(
@@ -219,6 +207,37 @@ def line_check(
         count,
         confidence,
     )
+
+
+def _layers(
+    expansion: ChaosExpansion, axis: int, scale: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """The expansion's coefficients over the scale as layers along input ``axis``: (P + 1, B, T)
+    by degree along it (P the top one) and the B multi-indices of the other inputs; the (P + 1,
+    T) coefficients of the polynomial in ``axis`` it is on the line through the others'
+    centres; and the row of B constant in the others."""
+    index = np.asarray(expansion.multi_index)
+    coefficients = expansion.coefficients.reshape(index.shape[0], -1) / scale
+    others, where = np.unique(np.delete(index, axis, axis=1), axis=0, return_inverse=True)
+    layers = np.zeros((int(index[:, axis].max()) + 1, others.shape[0], coefficients.shape[1]))
+    layers[index[:, axis], where.ravel()] = coefficients
+    on_line = np.ones(others.shape[0])
+    centres = _centres(expansion.distributions)
+    for column, k in enumerate(np.delete(np.arange(index.shape[1]), axis)):
+        family = expansion.distributions[k].family
+        on_line = on_line * family.evaluate(centres[k], others[:, column].max())[others[:, column]]
+    constant = int(np.flatnonzero(~np.any(others, axis=1))[0])
+    return layers, np.einsum("jbt,b->jt", layers, on_line), constant
+
+
+def _profile(layer: NDArray[np.float64], on_line: NDArray[np.float64], constant: int) -> NDArray:
+    """(B, T) a layer's (B, T) coefficients in the other inputs over its (T,) value ``on_line``:
+    what a correction of its degree along the line is in the others; only the ``constant``
+    row where the layer has no value on the line (``_UNSEEN_PROFILE`` of its norm)."""
+    seen = np.abs(on_line) > _UNSEEN_PROFILE * np.sqrt(np.sum(layer**2, axis=0))
+    fallback = np.zeros((layer.shape[0], 1))
+    fallback[constant] = 1.0
+    return np.where(seen, layer / np.where(seen, on_line, 1.0), fallback)
 
 
 def _off_line(expansion: ChaosExpansion, axis: int, scale: float) -> NDArray[np.float64]:
