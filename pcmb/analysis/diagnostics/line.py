@@ -20,7 +20,12 @@ from numpy.typing import ArrayLike, NDArray
 from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
 from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies
 from pcmb.analysis.diagnostics.draws import signed_residuals, widened_inputs
-from pcmb.analysis.diagnostics.placed import PLACED_SPARE, converging, interpolated, larger_spread
+from pcmb.analysis.diagnostics.placed import (
+    PLACED_SPARE,
+    converging,
+    interpolated,
+    placed_result,
+)
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
@@ -194,16 +199,11 @@ def line_check(
         mean_se, std_se, moved = np.hypot(moves[0], unseen), np.hypot(moves[1], unseen), moves[2]
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
-    return HeldOutCheck(
-        distance,
-        distance + moved,
-        mean_error,
-        std_error,
-        larger_spread(mean_error, mean_se, std_error, std_se, confidence),
-        rich_mean * scale,
-        rich_std * scale,
-        mean_se * scale,
-        std_se * scale,
+    return placed_result(
+        (distance, mean_error, std_error),
+        (moved, mean_se, std_se, mean_se),
+        (rich_mean, rich_std),
+        scale,
         count,
         confidence,
     )

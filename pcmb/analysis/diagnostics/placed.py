@@ -235,15 +235,41 @@ def placed_check(
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
+    return placed_result(
+        (error, mean_error, std_error),
+        (moved, mean_se, std_se, mean_se + unseen),
+        (rich_mean, rich_std),
+        scale,
+        count,
+        confidence,
+    )
+
+
+def placed_result(
+    errors: tuple[NDArray, NDArray, NDArray],
+    moves: tuple[NDArray, NDArray, NDArray, NDArray],
+    corrected: tuple[NDArray, NDArray],
+    scale: float,
+    count: int,
+    confidence: float,
+) -> HeldOutCheck:
+    """The check of ``count`` placed runs from its (T,) estimates over the scale: ``errors``,
+    the richer surrogate's L2 distance from the expansion and the errors of the mean and std;
+    ``moves``, how far the distance moves and the standard errors of the two errors and of
+    the corrected mean; ``corrected``, the richer surrogate's mean and std. The surrogate
+    error's upper bound is the distance plus its move, the spread that of the larger
+    estimate (:func:`larger_spread`)."""
+    distance, mean_error, std_error = errors
+    moved, mean_se, std_se, corrected_mean_se = moves
     return HeldOutCheck(
-        error,
-        error + moved,
+        distance,
+        distance + moved,
         mean_error,
         std_error,
         larger_spread(mean_error, mean_se, std_error, std_se, confidence),
-        rich_mean * scale,
-        rich_std * scale,
-        (mean_se + unseen) * scale,
+        corrected[0] * scale,
+        corrected[1] * scale,
+        corrected_mean_se * scale,
         std_se * scale,
         count,
         confidence,
