@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
 from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies
-from pcmb.analysis.diagnostics.draws import signed_residuals, widened_inputs
+from pcmb.analysis.diagnostics.draws import LINEAR_SHARE, signed_residuals, widened_inputs
 from pcmb.analysis.diagnostics.placed import (
     PLACED_SPARE,
     converging,
@@ -66,7 +66,8 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
     placed (:func:`held_out_line`), or ``None`` (drawn): the one whose terms alone hold at
     least ``LINE_SHARE`` of the energy of the outer layers' terms curved along some input
     (over each expansion's largest std, summed over time) in every expansion that has such
-    terms, where at least one has; the same input for all of them."""
+    terms (more than ``LINEAR_SHARE`` of its variance), where at least one has; the same input
+    for all of them."""
     found = set()
     for expansion in expansions:
         scale = _scale(expansion)
@@ -76,8 +77,8 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
         energy = coefficient_energies(expansion, scale).reshape(index.shape[0], -1).sum(axis=1)
         tail = _curved_tail(expansion)
         total = float(np.sum(energy[tail]))
-        if not total > 0:
-            continue  # no tail to meet
+        if not total > LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0]):
+            continue  # no tail to meet: a polynomial of degree 1, to round-off
         normal = np.flatnonzero(widened_inputs(expansion.distributions))
         shares = [np.sum(energy[tail & _alone(index, k)]) / total for k in normal]
         if index.shape[1] < 2 or not shares or max(shares) < LINE_SHARE:
