@@ -7,7 +7,7 @@ the held-out runs are the Leja points that extend the design's nodes along that 
 others at their germ's centre (:func:`held_out_line`). :func:`line_check` compares the
 expansion's mean and std with those of the expansion corrected along that line, the
 correction carried to the other inputs by the profile of the expansion's own top layers along
-the input (``docs/diagnostics.md``, "A tail along one axis").
+the input (``docs/diagnostics.md``, "A tail along one input: placed along it").
 """
 
 from __future__ import annotations
@@ -70,10 +70,12 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
     for all of them."""
     found = set()
     for expansion in expansions:
-        scale = _scale(expansion)
-        if not isinstance(expansion, ChaosExpansion) or not scale > 0:
-            return None
         index = np.asarray(expansion.multi_index)
+        if not isinstance(expansion, ChaosExpansion) or index.shape[1] < 2:
+            return None
+        scale = _scale(expansion)
+        if not scale > 0:
+            continue  # an output that does not vary has no tail
         energy = coefficient_energies(expansion, scale).reshape(index.shape[0], -1).sum(axis=1)
         tail = _curved_tail(expansion)
         total = float(np.sum(energy[tail]))
@@ -81,7 +83,7 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
             continue  # no tail to meet: a polynomial of degree 1, to round-off
         normal = np.flatnonzero(widened_inputs(expansion.distributions))
         shares = [np.sum(energy[tail & _alone(index, k)]) / total for k in normal]
-        if index.shape[1] < 2 or not shares or max(shares) < LINE_SHARE:
+        if not shares or max(shares) < LINE_SHARE:
             return None
         found.add(int(normal[int(np.argmax(shares))]))
     return found.pop() if len(found) == 1 else None
