@@ -695,8 +695,11 @@ class Study:
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
         nominal = None
         try:
+            # Where the held-out runs go may wait for the fit (along the input that carries the
+            # tails): then they are not in the nodes' campaign.
+            after_fit = self._held_out.after_fit()
             if joined:
-                first = self.held_out_runs(nodes.size)[0]
+                first = 0 if after_fit else self.held_out_runs(nodes.size)[0]
                 runs, journal, checked, nominal = self._run_joined(run, nodes, record, first)
             elif intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
@@ -710,18 +713,17 @@ class Study:
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size)
             # Runs joined: made already. Else the workers make the held-out runs while this
-            # process fits the expansions and draws the statistics, which do not need them;
-            # not in this process's own thread (in-process runs), nor beside a nominal run sent
-            # after them (a timeout). Where they go may wait for the fit (along the input that
-            # carries the tails): then beside the statistics only.
-            beside = bool(first) and not (
-                joined or isinstance(pool, InProcessPool) or self.execution.timeout is not None
+            # process fits the expansions and draws the statistics, which do not need them
+            # (after the fit: beside the statistics only); not in this process's own thread
+            # (in-process runs), nor beside a nominal run sent after them (a timeout).
+            background = bool(first) and not (
+                isinstance(pool, InProcessPool) or self.execution.timeout is not None
             )
-            after_fit = self._held_out.after_fit()
+            beside = background and not joined
             make = functools.partial(
                 self._run_held_out,
                 # No bar beside the phases' lines.
-                dataclasses.replace(run, progress=False) if beside else run,
+                dataclasses.replace(run, progress=False) if background else run,
                 record,
                 design=nodes.nodes,
                 values=None if intrusive else runs.values,
@@ -764,7 +766,7 @@ class Study:
                 axis = self._held_out.line_input(
                     {name: e for name, e in found.expansions.items() if name in judged}
                 )
-                checking = _beside(functools.partial(make, first, axis=axis), beside)
+                checking = _beside(functools.partial(make, first, axis=axis), background)
             analysis = None
             # A design that refits after the check (_final_fit) has its statistics drawn then.
             if self.analysis is not None and not (first and hasattr(self.design, "refit")):
@@ -998,14 +1000,13 @@ class Study:
     def _joins_runs(self, streams: bool) -> bool:
         """Whether the design's runs, its first held-out runs and the nominal run go to the
         workers as one campaign (:meth:`_run_joined`): all of them known before any node runs
-        (no rounds, no intrusive solve, held-out runs not placed by the element nodes' values
-        nor by the fit), and the runs kept in memory (``streams`` False)."""
+        (no rounds, no intrusive solve, held-out runs not placed by the element nodes' values),
+        and the runs kept in memory (``streams`` False)."""
         return not (
             streams
             or hasattr(self.design, "more")
             or hasattr(self.design, "solve")
             or (self.places_held_out() and hasattr(self.design, "partition"))
-            or self._held_out.after_fit()
         )
 
     def _run_joined(
