@@ -90,8 +90,9 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
 
 
 def _centres(distributions: Sequence[Distribution]) -> NDArray[np.float64]:
-    """(n,) the germs' means, where the line check holds the other inputs."""
-    return np.array([d.family.germ.mean() for d in distributions])
+    """(n,) the germs' means, where the line check holds the other inputs: each family's
+    first monic recurrence coefficient (without importing scipy.stats)."""
+    return np.array([d.family.recurrence(1)[0][0] for d in distributions])
 
 
 def held_out_line(
