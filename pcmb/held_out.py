@@ -19,9 +19,11 @@ from pcmb.analysis.diagnostics import (
     element_importance,
     held_out_budget,
     held_out_draws,
+    held_out_line,
     held_out_placed,
     held_out_placed_elements,
     held_out_unit,
+    tail_input,
     widened_inputs,
 )
 from pcmb.chaos.inputs import Distribution
@@ -89,6 +91,21 @@ class HeldOutPlan:
         own = np.bincount(self.design.node_elements[self.design.node_elements >= 0])
         return self._most(self.design.node_elements.size) <= np.sum(ELEMENT_POINTS - own)
 
+    def after_fit(self) -> bool:
+        """Whether where the held-out runs go waits for the expansions (:meth:`line_input`): a
+        tensor Gauss grid of several inputs, some of them normal."""
+        normal = widened_inputs(tuple(self.inputs.values()))
+        return self.design.record().grid == "tensor-gauss" and normal.size > 1 and normal.any()
+
+    def line_input(self, expansions: Mapping[str, object]) -> int | None:
+        """The input along which the first batch of held-out runs is placed, and no second
+        (:func:`~pcmb.analysis.diagnostics.held_out_line`), where the tails of the fitted
+        ``expansions`` lie along one normal input
+        (:func:`~pcmb.analysis.diagnostics.tail_input`); ``None``: drawn."""
+        if not self.after_fit():
+            return None
+        return tail_input(expansions.values())
+
     def _first_batch(self, design_runs: int) -> NDArray[np.float64]:
         """The unit-cube points of the first batch of draws, whose empty slices the second
         fills (:func:`~pcmb.analysis.diagnostics.held_out_unit`)."""
@@ -107,14 +124,16 @@ class HeldOutPlan:
         design: NDArray[np.float64],
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
+        axis: int | None = None,
     ) -> HeldOutDraws:
         """Where the ``count`` held-out runs of batch ``batch`` go (seed ``seed + 7919 +
         batch``), placed to extend the design's nodes ``design`` (germ points) where
         :meth:`placed` (per element of a multi-element design, where its node ``values`` say
-        it may err most), else drawn; with the runs beyond the design's nodes and
-        ``TAIL_SIGMAS`` in a normal input marked (:attr:`HeldOutDraws.beyond`)."""
+        it may err most) or along input ``axis`` (:meth:`line_input`), else drawn; with the
+        runs beyond the design's nodes and ``TAIL_SIGMAS`` in a normal input marked
+        (:attr:`HeldOutDraws.beyond`)."""
         seed = self.seed + HELD_OUT_SEED + batch
-        placed = self.placed()
+        placed = self.placed() or axis is not None
         normal = widened_inputs(tuple(self.inputs.values()))
         # Without design runs (an intrusive solve) no range is known: no run is a tail draw.
         low, high = (design.min(axis=0), design.max(axis=0)) if design.size else (-np.inf, np.inf)
@@ -128,6 +147,9 @@ class HeldOutPlan:
             draws, weights = held_out_placed_elements(
                 partition, design, where[own], importance, count
             )
+        elif axis is not None:
+            # Leja points extending the nodes along the input that carries the tails.
+            draws, weights = held_out_line(tuple(self.inputs.values()), design, axis, count)
         elif placed:
             # Leja points extending the nodes: with them, a far richer interpolant.
             draws, weights = held_out_placed(next(iter(self.inputs.values())), design, count)

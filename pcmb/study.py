@@ -695,8 +695,11 @@ class Study:
         stream = sys.stderr if (sys.stderr.isatty() if progress is None else progress) else None
         nominal = None
         try:
+            # Where the held-out runs go may wait for the fit (along the input that carries the
+            # tails): then they are not in the nodes' campaign.
+            after_fit = self._held_out.after_fit()
             if joined:
-                first = self.held_out_runs(nodes.size)[0]
+                first = 0 if after_fit else self.held_out_runs(nodes.size)[0]
                 runs, journal, checked, nominal = self._run_joined(run, nodes, record, first)
             elif intrusive:
                 # An intrusive method: one solve in a worker, nothing to journal but the
@@ -710,26 +713,23 @@ class Study:
                     record = self.design.record()  # with the runs the rounds made
             first, most = self.held_out_runs(nodes.size)
             # Runs joined: made already. Else the workers make the held-out runs while this
-            # process fits the expansions and draws the statistics, which do not need them;
-            # not in this process's own thread (in-process runs), nor beside a nominal run sent
-            # after them (a timeout).
-            beside = bool(first) and not (
-                joined or isinstance(pool, InProcessPool) or self.execution.timeout is not None
+            # process fits the expansions and draws the statistics, which do not need them
+            # (after the fit: beside the statistics only); not in this process's own thread
+            # (in-process runs), nor beside a nominal run sent after them (a timeout).
+            background = bool(first) and not (
+                isinstance(pool, InProcessPool) or self.execution.timeout is not None
             )
-            check = (
-                (lambda: checked)
-                if joined
-                else functools.partial(
-                    self._run_held_out,
-                    # No bar beside the phases' lines.
-                    dataclasses.replace(run, progress=False) if beside else run,
-                    record,
-                    first,
-                    nodes.nodes,
-                    None if intrusive else runs.values,
-                )
+            beside = background and not joined
+            make = functools.partial(
+                self._run_held_out,
+                # No bar beside the phases' lines.
+                dataclasses.replace(run, progress=False) if background else run,
+                record,
+                design=nodes.nodes,
+                values=None if intrusive else runs.values,
             )
-            checking = _beside(check, beside)
+            check = (lambda: checked) if joined else functools.partial(make, first)
+            checking = None if after_fit else _beside(check, beside)
         except PcmbError:
             if early is not None:
                 early.result()  # the nominal run sent ahead ends too: no run is left half done
@@ -761,6 +761,12 @@ class Study:
                 with phase(f"{fitting} ({record.label})", stream):
                     found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
             found = self._with_nominal(found, nominal)
+            if checking is None:
+                judged = self.diagnostics.outputs or tuple(found.expansions)
+                axis = self._held_out.line_input(
+                    {name: e for name, e in found.expansions.items() if name in judged}
+                )
+                checking = _beside(functools.partial(make, first, axis=axis), background)
             analysis = None
             # A design that refits after the check (_final_fit) has its statistics drawn then.
             if self.analysis is not None and not (first and hasattr(self.design, "refit")):
@@ -769,7 +775,8 @@ class Study:
         except BaseException:
             # No run left going behind the error: the held-out runs beside it end first.
             with contextlib.suppress(BaseException):
-                checking.exception()
+                if checking is not None:
+                    checking.exception()
             raise
         with phase(plural(first, "held-out run"), stream if beside or (joined and first) else None):
             held_out, held_out_failed = checking.result()
@@ -778,7 +785,8 @@ class Study:
         with phase("diagnostics", stream):
             result = self._diagnosed(found, held_out, held_out_failed)
             wanted = max(map(more_runs, result.diagnostics.values()), default=0)
-            if held_out is not None and min(wanted, most - first) > 0:
+            # A placed check makes its runs at once.
+            if held_out is not None and not held_out.placed and min(wanted, most - first) > 0:
                 more, more_failed = self._run_held_out(
                     run,
                     record,
@@ -1210,10 +1218,11 @@ class Study:
         values: Mapping[str, NDArray[np.float64]] | None = None,
         batch: int = 0,
         earlier: HeldOut | None = None,
+        axis: int | None = None,
     ) -> tuple[HeldOut | None, tuple[WarningRecord, ...]]:
         """``count`` held-out runs that check a chaos expansion (none for plain sampling,
         by the design's ``record``), batch ``batch`` of the check, placed to extend the
-        design's nodes ``design`` (germ points) or drawn
+        design's nodes ``design`` (germ points; along input ``axis`` where given) or drawn
         (:meth:`~pcmb.held_out.HeldOutPlan.draws`); journaled in the journal's ``validation``
         folder (``validation-<batch>`` after the first), under the failure policy, which the
         tail draws' failures trigger only where, with the ``earlier`` batches' runs, too many
@@ -1221,7 +1230,7 @@ class Study:
         those that failed (:meth:`~pcmb.held_out.HeldOutDraws.checked`)."""
         if not count or record.basis is None:
             return None, ()
-        draws = self._held_out.draws(count, design, values, batch)
+        draws = self._held_out.draws(count, design, values, batch, axis)
         self._check_finite(draws.nodes)
         name = "validation" if batch == 0 else f"validation-{batch}"
         # Two chunks, whatever the workers: a few runs do not pay one model call each.

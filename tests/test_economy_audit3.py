@@ -265,14 +265,6 @@ def test_the_corrected_std_of_a_heavy_tailed_sum_is_within_its_standard_errors(t
     assert np.mean(beyond) <= 0.05, times[beyond]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="no flag on seeds 0-5: undecided from t = 3.75-4.4 to the end (none silent) while the "
-    "truth reaches 92 % of the largest std at t = 6; seed 4's 8 drawn runs (the budget for 25; "
-    "pcmb/analysis/diagnostics/draws.py) reach z1 = 3.13, short of z1 ≈ 2a = 4.2 that carries "
-    "the std there: 7.9 % ± 36 %, its 90 % bound half the truth, 17788 more runs asked; seed 0 "
-    "reaches 4.02 at weight 1e-3: 63 % ± 118 %",
-)
 def test_a_heavy_tailed_response_of_two_normal_inputs_is_flagged_at_its_true_crossing(tmp_path):
     """Item 4 and Done when, line 1: y = exp(0.35 z1 t) (1 + 0.2 z2), z ~ N(0, 1)², tensor
     order 4 (25 runs), to t = 6, seed 4: mean e^{a²/2} and E y² = 1.04 e^{2a²} (a = 0.35 t)

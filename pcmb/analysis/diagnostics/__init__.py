@@ -6,10 +6,11 @@ is accepted even where the spread itself is small (near a fixed initial state, o
 damped output settles), which is where a per-time normalisation raises false alarms.
 
 One concept per module: the spectral decay (:mod:`.decay`), the held-out runs
-(:mod:`.draws`), the check against drawn runs (:mod:`.check`) and against placed ones
-(:mod:`.placed`), the range checks (:mod:`.ranges`), the verdict rule (:mod:`.verdict`), the
-remedy named to the user (:mod:`.remedies`), and the diagnosis of an output that joins them
-(:mod:`.diagnose`), in the words of :mod:`.phrases`; see ``docs/diagnostics.md``.
+(:mod:`.draws`), the check against drawn runs (:mod:`.check`), against placed ones
+(:mod:`.placed`) and against runs placed along one input of several (:mod:`.line`), the
+range checks (:mod:`.ranges`), the verdict rule (:mod:`.verdict`), the remedy named to the
+user (:mod:`.remedies`), and the diagnosis of an output that joins them (:mod:`.diagnose`),
+in the words of :mod:`.phrases`; see ``docs/diagnostics.md``.
 """
 
 from pcmb.analysis.diagnostics.check import (
@@ -42,6 +43,7 @@ from pcmb.analysis.diagnostics.draws import (
     linear_in_widened,
     widened_inputs,
 )
+from pcmb.analysis.diagnostics.line import held_out_line, line_check, tail_input
 from pcmb.analysis.diagnostics.placed import placed_check
 from pcmb.analysis.diagnostics.ranges import (
     RANGE_DRAWS,
@@ -69,10 +71,12 @@ __all__ = [
     "element_importance",
     "held_out_budget",
     "held_out_draws",
+    "held_out_line",
     "held_out_placed",
     "held_out_placed_elements",
     "held_out_unit",
     "holdout_error",
+    "line_check",
     "linear_in_widened",
     "more_runs",
     "out_of_range",
@@ -81,6 +85,7 @@ __all__ = [
     "range_checks",
     "spectral_decay",
     "statistics_error",
+    "tail_input",
     "verdict",
     "widened_inputs",
 ]

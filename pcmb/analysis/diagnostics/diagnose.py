@@ -31,6 +31,7 @@ from pcmb.analysis.diagnostics.draws import (
     judging_weights,
     unseen_region_error,
 )
+from pcmb.analysis.diagnostics.line import line_check
 from pcmb.analysis.diagnostics.phrases import as_percent, time_count, time_span
 from pcmb.analysis.diagnostics.placed import placed_check
 from pcmb.analysis.diagnostics.ranges import finite_rows, out_of_range, range_checks, runs_vary
@@ -181,7 +182,9 @@ def diagnose(
         (K,) importance weights of the held-out runs (:func:`held_out_draws`; default: 1).
     placed:
         Whether the held-out runs extend the nodes of a one-input expansion
-        (:func:`held_out_placed`): judged by :func:`placed_check` instead.
+        (:func:`held_out_placed`), or of several inputs along one
+        (:func:`~pcmb.analysis.diagnostics.line.held_out_line`): judged by :func:`placed_check`
+        or :func:`~pcmb.analysis.diagnostics.line.line_check` instead.
     stratified:
         Whether the drawn held-out runs are one Latin hypercube, whose standard errors
         :func:`_standard_error` reads from neighbouring pairs; several batches joined are
@@ -220,7 +223,9 @@ def diagnose(
             scale = size * float(np.max(np.std(observed / size, axis=0)))
     decay = spectral_decay(expansion, scale)
     checked = None
-    if holdout is not None and placed:
+    if holdout is not None and placed and len(expansion.distributions) > 1:
+        checked = line_check(expansion, node_germ, germ, predicted, observed, scale)
+    elif holdout is not None and placed:
         checked = placed_check(expansion, node_germ, node_values, germ, observed, scale)
     elif holdout is not None:
         judged, paired = judging_weights(expansion, scale, weights, germ)

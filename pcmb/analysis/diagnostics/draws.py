@@ -210,14 +210,19 @@ def coverage_error(
     return np.where((sigma > 0) & ~exact, missed, 0.0)
 
 
-def _residuals(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
-    """(K, T) |model - surrogate| of the finite runs over the scale; 0 where it is round-off
+def signed_residuals(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
+    """(K, T) model - surrogate of the finite runs over the scale; 0 where it is round-off
     (``RELATIVE_NOISE`` of the run's size, at least the scale): an exact polynomial's."""
     observed = np.asarray(observed, dtype=float)
-    residual = np.abs(observed - np.asarray(predicted, dtype=float))
+    residual = observed - np.asarray(predicted, dtype=float)
     # Ranges, not squares: outputs near 1e200 must not overflow.
     size = np.fmax(np.abs(observed), scale)
-    return np.where(residual <= RELATIVE_NOISE * size, 0.0, residual / scale)
+    return np.where(np.abs(residual) <= RELATIVE_NOISE * size, 0.0, residual / scale)
+
+
+def _residuals(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
+    """(K, T) |:func:`signed_residuals`|."""
+    return np.abs(signed_residuals(predicted, observed, scale))
 
 
 def _largest_residual(predicted: ArrayLike, observed: ArrayLike, scale: float) -> NDArray:
@@ -401,8 +406,10 @@ class HeldOut:
         (K,) importance weights of the draws (:func:`held_out_draws`; 1 when placed).
     placed:
         Whether the runs extend a one-input design's nodes (:func:`held_out_placed`, per
-        element :func:`held_out_placed_elements`) rather than being drawn: the check is then
-        :func:`placed_check` (``/validation`` attribute ``placed``).
+        element :func:`held_out_placed_elements`), or a tensor grid's along one input
+        (:func:`~pcmb.analysis.diagnostics.line.held_out_line`), rather than being drawn: the
+        check is then :func:`placed_check` (:func:`~pcmb.analysis.diagnostics.line.line_check`)
+        (``/validation`` attribute ``placed``).
     batches:
         How many batches of draws the runs hold (``/validation`` attribute ``batches``): each
         is a Latin hypercube, and the second completes the first's (:func:`held_out_unit`)

@@ -154,11 +154,11 @@ def placed_check(
     means agree exactly, K <= N placed runs beside N Gauss nodes, the design mean's whole error).
     Their standard errors are how far the estimates move when the last ``PLACED_SPARE`` held-out
     runs (of each element) are left out, shrunk by the rate at which they converge
-    (:func:`_converging`; infinite with no more runs than that), plus in quadrature the next
+    (:func:`converging`; infinite with no more runs than that), plus in quadrature the next
     coefficient of each element without held-out runs (:func:`next_coefficient`: nothing checks
     it) and, for the std, the interpolant's own error from the degrees beyond it
     (:func:`_unseen_std_error`; at most each element's L2 distance); the spread is that of the
-    larger estimate (:func:`_larger_spread`; the corrected mean's adds the unseen error); the
+    larger estimate (:func:`larger_spread`; the corrected mean's adds the unseen error); the
     surrogate error is the L2 distance of the two surrogates (their coefficients' difference), its
     upper bound that plus how far it moves.
     Runs that are not finite are left out; zeros if the scale is zero.
@@ -228,29 +228,55 @@ def placed_check(
         if count > 2 * PLACED_SPARE:
             least_mean, least_std, _, least_unseen, _ = moments(2 * PLACED_SPARE)
             least_mean_error = np.abs(least_mean - mean / scale) + least_unseen
-            mean_moved = _converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
-            std_moved = _converging(std_moved, np.abs(fewer_std - least_std))
+            mean_moved = converging(mean_moved, np.abs(fewer_mean_error - least_mean_error))
+            std_moved = converging(std_moved, np.abs(fewer_std - least_std))
         mean_se = np.hypot(mean_moved, unchecked)
         std_se = np.hypot(np.hypot(std_moved, unseen_std), unchecked)
         moved = np.abs(error - fewer_error)
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
+    return placed_result(
+        (error, mean_error, std_error),
+        (moved, mean_se, std_se, mean_se + unseen),
+        (rich_mean, rich_std),
+        scale,
+        count,
+        confidence,
+    )
+
+
+def placed_result(
+    errors: tuple[NDArray, NDArray, NDArray],
+    moves: tuple[NDArray, NDArray, NDArray, NDArray],
+    corrected: tuple[NDArray, NDArray],
+    scale: float,
+    count: int,
+    confidence: float,
+) -> HeldOutCheck:
+    """The check of ``count`` placed runs from its (T,) estimates over the scale: ``errors``,
+    the richer surrogate's L2 distance from the expansion and the errors of the mean and std;
+    ``moves``, how far the distance moves and the standard errors of the two errors and of
+    the corrected mean; ``corrected``, the richer surrogate's mean and std. The surrogate
+    error's upper bound is the distance plus its move, the spread that of the larger
+    estimate (:func:`larger_spread`)."""
+    distance, mean_error, std_error = errors
+    moved, mean_se, std_se, corrected_mean_se = moves
     return HeldOutCheck(
-        error,
-        error + moved,
+        distance,
+        distance + moved,
         mean_error,
         std_error,
-        _larger_spread(mean_error, mean_se, std_error, std_se, confidence),
-        rich_mean * scale,
-        rich_std * scale,
-        (mean_se + unseen) * scale,
+        larger_spread(mean_error, mean_se, std_error, std_se, confidence),
+        corrected[0] * scale,
+        corrected[1] * scale,
+        corrected_mean_se * scale,
         std_se * scale,
         count,
         confidence,
     )
 
 
-def _larger_spread(
+def larger_spread(
     mean_error: NDArray[np.float64],
     mean_se: NDArray[np.float64],
     std_error: NDArray[np.float64],
@@ -265,7 +291,7 @@ def _larger_spread(
     return (np.fmax(mean_error, std_error) - lower) / quantile
 
 
-def _converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
+def converging(moved: NDArray[np.float64], before: NDArray[np.float64]) -> NDArray[np.float64]:
     """(T,) what is left of an estimate's error after its last move ``moved`` (without the last
     ``PLACED_SPARE`` runs), the move ``before`` it (without as many more) giving the rate ρ:
     a geometric convergence leaves ρ / (1 − ρ) of the last move; at most all of it."""
