@@ -8,6 +8,7 @@ ball's parabolas between impacts.
 
 from __future__ import annotations
 
+import math
 import runpy
 import warnings
 from pathlib import Path
@@ -128,6 +129,32 @@ def test_a_response_of_one_normal_input_beside_others_is_checked_along_it():
     assert abs(found.failing_from - crossing) <= 0.05 * times[-1]
     assert not found.undecided.any()
 
+
+
+@pcmb.batched(outputs=("y",))
+def _step_beside_a_line(params, times):
+    """1(z > 1/2) + z1/10: a jump along one normal input beside a linear one."""
+    z, z1 = np.asarray(params["z"])[:, None], np.asarray(params["z1"])[:, None]
+    return {"y": np.where(z > 0.5, 1.0, 0.0) + 0.1 * z1 + 0.0 * times}
+
+
+@pytest.mark.parametrize("order", [6, 7])
+def test_a_jump_along_the_line_is_flagged_by_its_interpolant_s_unseen_mean(order):
+    """A jump at z = 1/2 beside 0.1 z1, z, z1 ~ N(0, 1), tensor order 6 (7 Gauss-Hermite points
+    in z): the mean's error is 7.9 % of the std (P(z > 1/2) = 1 - Φ(1/2) against the rule's
+    weights beyond 1/2), and 41 % at order 7. The expansion's tail lies in z's own terms, so
+    the check is placed along z; the polynomial through the line's nodes and 8 runs errs on the
+    mean too, from the degrees beyond it, and that error is the check's as a one-input placed
+    check's (before, at order 6: "its mean and std hold there", estimated error at most 4.5 %)."""
+    times = np.linspace(0.0, 1.0, 3)
+    inputs = {"z": pcmb.Normal(0.0, 1.0), "z1": pcmb.Normal(0.0, 1.0)}
+    result = _run(_step_beside_a_line, inputs, times, order=order)
+    above = 0.5 * math.erfc(0.5 / math.sqrt(2))
+    std = math.sqrt(above * (1 - above) + 0.01)
+    mean_error = abs(result.mean("y")[0] - above) / std
+    assert mean_error == pytest.approx({6: 0.079, 7: 0.405}[order], abs=1e-3)
+    assert result.held_out.placed
+    assert result.diagnostics["y"].failing_from == 0.0
 
 # -- no run wasted -----------------------------------------------------------------------------
 

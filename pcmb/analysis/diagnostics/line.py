@@ -25,6 +25,7 @@ from pcmb.analysis.diagnostics.placed import (
     converging,
     interpolated,
     placed_result,
+    unseen_errors,
 )
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.expansion import ChaosExpansion
@@ -140,7 +141,8 @@ def line_check(
     its value on the line), which is exact where the response is a product of a function of
     k and one of the others; the corrected expansion's mean and std (exact, from its
     coefficients) are the corrected mean and std, and their differences from the expansion's
-    the estimated errors. Their standard errors are how far those move without the last
+    the estimated errors, the mean's plus the line interpolant's own error from the degrees
+    beyond it (as :func:`placed_check`'s). Their standard errors are how far those move without the last
     ``PLACED_SPARE`` runs, shrunk by their rate of convergence, and, in quadrature, what the
     line does not see: the energy of the outer layers' terms curved along some input that are
     not of k alone, over the std (ΔV / σ). Runs that are not finite are left out; zeros if the
@@ -192,6 +194,13 @@ def line_check(
 
     found = errors(0)
     mean_error, std_error, distance, rich_mean, rich_std = found
+    # The line's own interpolant errs on the mean too, from the degrees beyond it, as a placed
+    # check's (unseen_errors): a jump along the line that its rule misses.
+    on_line = np.zeros((points.size, residual.shape[1]))
+    on_line[: min(points.size, top + 1)] = line[: points.size]
+    on_line += interpolated(family, points, values)
+    unseen, _ = unseen_errors(family, points, on_line, std=False)
+    mean_error = mean_error + unseen
     if count > PLACED_SPARE:
         fewer = errors(PLACED_SPARE)
         moves = [np.abs(found[i] - fewer[i]) for i in range(3)]
@@ -199,13 +208,14 @@ def line_check(
             least = errors(2 * PLACED_SPARE)
             for i in range(2):
                 moves[i] = converging(moves[i], np.abs(fewer[i] - least[i]))
-        unseen = _off_line(expansion, axis, scale)
-        mean_se, std_se, moved = np.hypot(moves[0], unseen), np.hypot(moves[1], unseen), moves[2]
+        off = _off_line(expansion, axis, scale)
+        mean_se = np.hypot(moves[0], off)
+        std_se, moved = np.hypot(moves[1], off), moves[2]
     else:
         mean_se = std_se = moved = np.full(observed.shape[1], np.inf)
     return placed_result(
         (distance, mean_error, std_error),
-        (moved, mean_se, std_se, mean_se),
+        (moved, mean_se, std_se, mean_se + unseen),
         (rich_mean, rich_std),
         scale,
         count,

@@ -29,7 +29,7 @@ UNSEEN_DEGREES = 3
 _EXACT = 1e-8
 
 
-def _unseen_errors(
+def unseen_errors(
     family: OrthonormalFamily,
     points: NDArray[np.float64],
     coefficients: NDArray[np.float64],
@@ -360,7 +360,7 @@ def _placed_moments(
     own = own / scale
     coefficients = interpolated(family, points[:kept], values[:kept] / scale)
     missed = np.sum((coefficients - own[:kept]) ** 2, axis=0)
-    unseen, unseen_std = _unseen_errors(family, points[:kept], coefficients, std=spare == 0)
+    unseen, unseen_std = unseen_errors(family, points[:kept], coefficients, std=spare == 0)
     design = points[:nodes]
     rule_errors = interpolatory_weights(family, design) @ family.evaluate(design, kept - 1)
     if not np.allclose(rule_errors[1:], 0.0, atol=_EXACT):
