@@ -88,6 +88,17 @@ GUARDED = 3
 #: The slowest reduction per round the estimate's geometric tail assumes: a guarded change
 #: that does not fall counts 0.9² / (1 - 0.9) = 8.1 times.
 SLOWEST = 0.9
+#: A change this many times the one before it, among the last :data:`GUARDED` + 1: a part of
+#: the response the grid had not reached (a probe's find, or an interaction behind blind
+#: indices), whose decay the rounds before it cannot tell.
+FOUND = 100.0
+#: The reduction per round the estimate assumes at least while such a change is among the last
+#: :data:`GUARDED` + 1: the error after a find measured 0.012–0.94 of its change
+#: (``docs/methods.md``), and ρ² / (1 - ρ) = 1/12 lies within 10x of each.
+AFTER_FOUND = 0.25
+#: How far a predicted surplus must exceed the tolerance before a blind index is refined for it:
+#: surpluses run 10²–10⁵ times the statistics' error on smooth functions.
+SURPLUS_MARGIN = 100.0
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 #: What to do where an input's rule has no further level (the sparse and tensor grids').
@@ -397,16 +408,42 @@ class AdaptiveCollocation(GrowingGrid):
                     )
                 ):
                     probes.setdefault(_inputs(child), child)
+                behind = self._face_surplus(level, child, position) > (
+                    SURPLUS_MARGIN * self.tolerance
+                )
                 for parent in _backward(child):
                     k = position.get(parent, -1)
                     if (
                         k >= 0
                         and parent not in self._refined
                         and blind[k]
-                        and (len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null))
+                        and (
+                            behind or len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null)
+                        )
                     ):
                         found.add(k)
         return sorted(found), list(probes.values())
+
+    def _face_surplus(
+        self,
+        level: tuple[int, ...],
+        child: tuple[int, ...],
+        position: Mapping[tuple[int, ...], int],
+    ) -> float:
+        """The surplus of ``child``, a forward neighbour of ``level``, that the indices below
+        predict as a product would: the largest over the inputs j of ``level`` of g_level
+        g_(child - e_j) / g_(level - e_j), the step from level to child taken at the rate the
+        same step had one level lower in j (for j the input child raises, the last step along it
+        repeated), where both indices of that lower step have surpluses above :data:`BLIND` (0
+        where none has)."""
+        g, predicted = self._indicators, 0.0
+        for j in _inputs(level):
+            face, below = _lowered(child, j), _lowered(level, j)
+            if face in position and below in position:
+                step, base = g[position[face]], g[position[below]]
+                if step > BLIND and base > BLIND:
+                    predicted = max(predicted, g[position[level]] * step / base)
+        return predicted
 
     def _active(self) -> NDArray[np.bool_]:
         return np.array([level not in self._refined for level in self._index])
@@ -580,6 +617,10 @@ def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDE
     if not geometric or len(window) <= guarded or window[-1 - guarded] <= 0:
         return window[-1]
     rate = min(SLOWEST, (window[-1] / window[-1 - guarded]) ** (1 / guarded))
+    if any(
+        later > FOUND * earlier for earlier, later in itertools.pairwise(changes[-guarded - 1 :])
+    ):
+        rate = max(rate, AFTER_FOUND)
     aged = max(change * rate**age for age, change in enumerate(reversed(changes[-guarded:])))
     return aged * rate**ROUNDS_AHEAD / (1 - rate)
 
@@ -618,9 +659,14 @@ def _axis(k: int, inputs: int) -> tuple[int, ...]:
     return tuple(int(j == k) for j in range(inputs))
 
 
+def _lowered(level: tuple[int, ...], k: int) -> tuple[int, ...]:
+    """``level`` one level lower in input k."""
+    return (*level[:k], level[k] - 1, *level[k + 1 :])
+
+
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
     """The backward neighbours of a level multi-index."""
-    return [(*level[:k], at - 1, *level[k + 1 :]) for k, at in enumerate(level) if at > 0]
+    return [_lowered(level, k) for k, at in enumerate(level) if at > 0]
 
 
 @dataclass(frozen=True)
