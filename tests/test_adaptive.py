@@ -708,13 +708,14 @@ def test_without_held_out_runs_a_grid_exact_to_round_off_is_not_called_unreliabl
     """Rosenbrock in 3 inputs, a polynomial the grid resolves exactly (its estimate 1e-16):
     with validation 0 the verdict read the spectral decay alone, 21 % of the std in the
     sparse set's edge terms, real ones, and flagged the exact result (chaos-unreliable, with
-    multi-element chaos as the remedy)."""
+    multi-element chaos as the remedy). At tolerance 1e-2: at 1e-4 the grid now also refines
+    blind indices whose lower faces predict terms, and its larger set has no edge terms left."""
     inputs = {f"x{k}": pcmb.Uniform(-2.0, 2.0) for k in range(3)}
     study = Study(
         _model(_rosenbrock, inputs),
         inputs,
         TIMES,
-        method={"kind": "adaptive", "tolerance": 1e-4, "validation": 0},
+        method={"kind": "adaptive", "tolerance": 1e-2, "validation": 0},
         execution={"backend": "inprocess"},
     )
     result = study.run()

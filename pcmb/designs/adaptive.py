@@ -20,9 +20,10 @@ the reduction per round of the largest of the last :data:`GUARDED` changes, meas
 :data:`GUARDED` rounds, g_k the largest of the last three changes each carried to round k by ρ
 per round of its age (a lucky small change is not believed, a steady fall is; on fewer
 inputs than :data:`GUARDED`, one round per input, as a round refines every direction there
-is), and the whole
-grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is g_k ρ² / (1 - ρ)
-(:func:`estimated_error`). Chosen once on the stopping rounds of OTL circuit, Piston, Wing
+is), and the whole grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is
+g_k ρ² / (1 - ρ) (:func:`estimated_error`; while a change :data:`FOUND` times the one before it
+is among the last four, a part of the response just found, ρ is at least :data:`AFTER_FOUND`).
+Chosen once on the stopping rounds of OTL circuit, Piston, Wing
 weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adaptive.py``,
 ``docs/methods.md``: there the estimate is within 10x of the true error in 29 of 30 cases,
 OTL at 1e-2 11x careful) and checked on functions it was not chosen on. The extrapolation
@@ -387,7 +388,10 @@ class AdaptiveCollocation(GrowingGrid):
         inputs blind on their own axes, whose backward neighbours are all in the set, refined
         or blind (their product, zero on the centre planes, may multiply another input's effect:
         e^x1 x2 x3 vanishes on the planes of (1, 1, 0) and (1, 0, 1)), added alone, one per set
-        of inputs (:meth:`_refine` carries a found one on)."""
+        of inputs (:meth:`_refine` carries a found one on). Any blind index is refined that alone
+        blocks a neighbour whose surplus the indices below predict (:meth:`_face_surplus`) at
+        :data:`SURPLUS_MARGIN` times the tolerance or more: sin(x0 + x1 x2)'s (1, 1, 2) behind
+        the blind (1, 0, 2), its face (0, 1, 2) not blind."""
         position = {level: k for k, level in enumerate(self._index)}
         blind = self._indicators <= BLIND
         levels = np.array(self._index)
@@ -609,7 +613,9 @@ def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDE
     g_k ρ^ROUNDS_AHEAD / (1 - ρ), with ρ = (G_k / G_{k-GUARDED})^(1/GUARDED) the reduction per
     round of the largest of the last :data:`GUARDED` changes G_k (at most :data:`SLOWEST`),
     and g_k the largest of the last :data:`GUARDED` changes, each carried to round k by ρ per
-    round of its age (so one lucky small change is not believed, and a steady fall is). An
+    round of its age (so one lucky small change is not believed, and a steady fall is), at least
+    :data:`AFTER_FOUND` while a change :data:`FOUND` times its predecessor is among the last
+    ``guarded`` + 1 (the fall before a find says nothing of the part found). An
     algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone (as before
     GUARDED + 1 rounds, when ρ cannot be measured yet). ``guarded`` rounds in place of
     :data:`GUARDED` where fewer directions can take turns (one per input)."""
