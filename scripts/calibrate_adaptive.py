@@ -26,7 +26,8 @@ the band and those that differ from today's (``docs/methods.md``).
 
 ``--probes`` runs issue 23's probes and fresh functions that neither table holds (sin and 1 / (1 +
 c·x), which lost to chaospy at 1e-2; poly4, blind to x0 x1 x2 x3; four written to check the
-rule; the five smooth functions of issue 23's audit, ``tests/test_economy_audit3.py``). ``--rule`` sets ``method.rule`` (a rule not for a function's inputs is refused in its row).
+rule; the five smooth functions of issue 23's audit, ``tests/test_economy_audit3.py``).
+``--rule`` sets ``method.rule`` (a rule not for a function's inputs is refused in its row).
 
 ``--method tensor`` calibrates kind adaptive with ``basis: tensor`` the same way.
 ``--method regression`` calibrates LARS with ``tolerance`` the same way (its estimate from the
