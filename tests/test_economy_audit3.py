@@ -780,8 +780,9 @@ def _chaospy_runs(function: str, error: float) -> int:
             marks=pytest.mark.xfail(
                 strict=True,
                 reason="in band (true error 5.3e-3, estimate 5.2e-3) but 57 runs where "
-                "chaospy's level-2 Clenshaw-Curtis Smolyak grid (41 runs) is within 4.9e-3 "
-                "(cause not traced)",
+                "chaospy's level-2 Clenshaw-Curtis Smolyak grid (41 runs) is within 4.9e-3: "
+                "the refinement's path, not the stop (errors 9e-2, 8.8e-2, 4.4e-2, 1.8e-2 at 9, "
+                "13, 33, 49 runs; docs/methods.md, issue 23's remaining misses)",
             ),
         ),
         pytest.param(
@@ -790,8 +791,10 @@ def _chaospy_runs(function: str, error: float) -> int:
             marks=pytest.mark.xfail(
                 strict=True,
                 reason="stops at 127 runs (as at 1e-4) with an estimate of 9.2e-6 for a true "
-                "error of 1.4e-4: 14 ε, the estimate 15x over-confident "
-                "(pcmb/designs/adaptive.py, estimated_error)",
+                "error of 1.4e-4: 14 ε, the estimate 15x over-confident; the error is in the "
+                "x2-x3 interaction's second level, inadmissible behind (0,2,0) and (0,0,2), "
+                "whose surpluses (4e-4) bulk marking leaves while the changes see x1 converge "
+                "(docs/methods.md, issue 23's remaining misses: the rules tried)",
             ),
         ),
         pytest.param(
@@ -800,7 +803,8 @@ def _chaospy_runs(function: str, error: float) -> int:
             marks=pytest.mark.xfail(
                 strict=True,
                 reason="too careful: 225 runs, true error 8.6e-7 = ε/1161 (and ε/116 at "
-                "1e-4), below the band's ε/100; runs are still fewer than chaospy's 7537",
+                "1e-4, where the blind-axis check at 193 runs, error 4.5e-6, finds x3 x4's "
+                "terms), below the band's ε/100; runs are still fewer than chaospy's 7537",
             ),
         ),
         pytest.param(

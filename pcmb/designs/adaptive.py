@@ -20,9 +20,10 @@ the reduction per round of the largest of the last :data:`GUARDED` changes, meas
 :data:`GUARDED` rounds, g_k the largest of the last three changes each carried to round k by ρ
 per round of its age (a lucky small change is not believed, a steady fall is; on fewer
 inputs than :data:`GUARDED`, one round per input, as a round refines every direction there
-is), and the whole
-grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is g_k ρ² / (1 - ρ)
-(:func:`estimated_error`). Chosen once on the stopping rounds of OTL circuit, Piston, Wing
+is), and the whole grid about :data:`ROUNDS_AHEAD` rounds ahead of the refined one, it is
+g_k ρ² / (1 - ρ) (:func:`estimated_error`; while a change :data:`FOUND` times the one before it
+is among the last four, a part of the response just found, ρ is at least :data:`AFTER_FOUND`).
+Chosen once on the stopping rounds of OTL circuit, Piston, Wing
 weight, lognormal6, exp8 and genz_oscillatory together (``scripts/calibrate_adaptive.py``,
 ``docs/methods.md``: there the estimate is within 10x of the true error in 29 of 30 cases,
 OTL at 1e-2 11x careful) and checked on functions it was not chosen on. The extrapolation
@@ -88,6 +89,17 @@ GUARDED = 3
 #: The slowest reduction per round the estimate's geometric tail assumes: a guarded change
 #: that does not fall counts 0.9² / (1 - 0.9) = 8.1 times.
 SLOWEST = 0.9
+#: A change this many times the one before it, among the last :data:`GUARDED` + 1: a part of
+#: the response the grid had not reached (a probe's find, or an interaction behind blind
+#: indices), whose decay the rounds before it cannot tell.
+FOUND = 100.0
+#: The reduction per round the estimate assumes at least while such a change is among the last
+#: :data:`GUARDED` + 1: the error after a find measured 0.012–0.94 of its change
+#: (``docs/methods.md``), and ρ² / (1 - ρ) = 1/12 lies within 10x of each.
+AFTER_FOUND = 0.25
+#: How far a predicted surplus must exceed the tolerance before a blind index is refined for it:
+#: surpluses run 10²–10⁵ times the statistics' error on smooth functions.
+SURPLUS_MARGIN = 100.0
 #: ``method.max_runs`` when not given.
 DEFAULT_MAX_RUNS = 1000
 #: What to do where an input's rule has no further level (the sparse and tensor grids').
@@ -376,7 +388,10 @@ class AdaptiveCollocation(GrowingGrid):
         inputs blind on their own axes, whose backward neighbours are all in the set, refined
         or blind (their product, zero on the centre planes, may multiply another input's effect:
         e^x1 x2 x3 vanishes on the planes of (1, 1, 0) and (1, 0, 1)), added alone, one per set
-        of inputs (:meth:`_refine` carries a found one on)."""
+        of inputs (:meth:`_refine` carries a found one on). Any blind index is refined that alone
+        blocks a neighbour whose surplus the indices below predict (:meth:`_face_surplus`) at
+        :data:`SURPLUS_MARGIN` times the tolerance or more: sin(x0 + x1 x2)'s (1, 1, 2) behind
+        the blind (1, 0, 2), its face (0, 1, 2) not blind."""
         position = {level: k for k, level in enumerate(self._index)}
         blind = self._indicators <= BLIND
         levels = np.array(self._index)
@@ -397,16 +412,42 @@ class AdaptiveCollocation(GrowingGrid):
                     )
                 ):
                     probes.setdefault(_inputs(child), child)
+                behind = self._face_surplus(level, child, position) > (
+                    SURPLUS_MARGIN * self.tolerance
+                )
                 for parent in _backward(child):
                     k = position.get(parent, -1)
                     if (
                         k >= 0
                         and parent not in self._refined
                         and blind[k]
-                        and (len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null))
+                        and (
+                            behind or len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null)
+                        )
                     ):
                         found.add(k)
         return sorted(found), list(probes.values())
+
+    def _face_surplus(
+        self,
+        level: tuple[int, ...],
+        child: tuple[int, ...],
+        position: Mapping[tuple[int, ...], int],
+    ) -> float:
+        """The surplus of ``child``, a forward neighbour of ``level``, that the indices below
+        predict as a product would: the largest over the inputs j of ``level`` of g_level
+        g_(child - e_j) / g_(level - e_j), the step from level to child taken at the rate the
+        same step had one level lower in j (for j the input child raises, the last step along it
+        repeated), where both indices of that lower step have surpluses above :data:`BLIND` (0
+        where none has)."""
+        g, predicted = self._indicators, 0.0
+        for j in _inputs(level):
+            face, below = _lowered(child, j), _lowered(level, j)
+            if face in position and below in position:
+                step, base = g[position[face]], g[position[below]]
+                if step > BLIND and base > BLIND:
+                    predicted = max(predicted, g[position[level]] * step / base)
+        return predicted
 
     def _active(self) -> NDArray[np.bool_]:
         return np.array([level not in self._refined for level in self._index])
@@ -572,7 +613,9 @@ def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDE
     g_k ρ^ROUNDS_AHEAD / (1 - ρ), with ρ = (G_k / G_{k-GUARDED})^(1/GUARDED) the reduction per
     round of the largest of the last :data:`GUARDED` changes G_k (at most :data:`SLOWEST`),
     and g_k the largest of the last :data:`GUARDED` changes, each carried to round k by ρ per
-    round of its age (so one lucky small change is not believed, and a steady fall is). An
+    round of its age (so one lucky small change is not believed, and a steady fall is), at least
+    :data:`AFTER_FOUND` while a change :data:`FOUND` times its predecessor is among the last
+    ``guarded`` + 1 (the fall before a find says nothing of the part found). An
     algebraic decay, a kink's, falls too slowly for that tail to be told: G_k alone (as before
     GUARDED + 1 rounds, when ρ cannot be measured yet). ``guarded`` rounds in place of
     :data:`GUARDED` where fewer directions can take turns (one per input)."""
@@ -580,6 +623,10 @@ def estimated_error(changes: list[float], geometric: bool, guarded: int = GUARDE
     if not geometric or len(window) <= guarded or window[-1 - guarded] <= 0:
         return window[-1]
     rate = min(SLOWEST, (window[-1] / window[-1 - guarded]) ** (1 / guarded))
+    if any(
+        later > FOUND * earlier for earlier, later in itertools.pairwise(changes[-guarded - 1 :])
+    ):
+        rate = max(rate, AFTER_FOUND)
     aged = max(change * rate**age for age, change in enumerate(reversed(changes[-guarded:])))
     return aged * rate**ROUNDS_AHEAD / (1 - rate)
 
@@ -618,9 +665,14 @@ def _axis(k: int, inputs: int) -> tuple[int, ...]:
     return tuple(int(j == k) for j in range(inputs))
 
 
+def _lowered(level: tuple[int, ...], k: int) -> tuple[int, ...]:
+    """``level`` one level lower in input k."""
+    return (*level[:k], level[k] - 1, *level[k + 1 :])
+
+
 def _backward(level: tuple[int, ...]) -> list[tuple[int, ...]]:
     """The backward neighbours of a level multi-index."""
-    return [(*level[:k], at - 1, *level[k + 1 :]) for k, at in enumerate(level) if at > 0]
+    return [_lowered(level, k) for k, at in enumerate(level) if at > 0]
 
 
 @dataclass(frozen=True)
