@@ -130,7 +130,6 @@ def test_a_response_of_one_normal_input_beside_others_is_checked_along_it():
     assert not found.undecided.any()
 
 
-
 @pcmb.batched(outputs=("y",))
 def _step_beside_a_line(params, times):
     """1(z > 1/2) + z1/10: a jump along one normal input beside a linear one."""
@@ -155,6 +154,7 @@ def test_a_jump_along_the_line_is_flagged_by_its_interpolant_s_unseen_mean(order
     assert mean_error == pytest.approx({6: 0.079, 7: 0.405}[order], abs=1e-3)
     assert result.held_out.placed
     assert result.diagnostics["y"].failing_from == 0.0
+
 
 # -- no run wasted -----------------------------------------------------------------------------
 

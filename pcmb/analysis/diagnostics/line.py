@@ -142,11 +142,11 @@ def line_check(
     k and one of the others; the corrected expansion's mean and std (exact, from its
     coefficients) are the corrected mean and std, and their differences from the expansion's
     the estimated errors, the mean's plus the line interpolant's own error from the degrees
-    beyond it (as :func:`placed_check`'s). Their standard errors are how far those move without the last
-    ``PLACED_SPARE`` runs, shrunk by their rate of convergence, and, in quadrature, what the
-    line does not see: the energy of the outer layers' terms curved along some input that are
-    not of k alone, over the std (ΔV / σ). Runs that are not finite are left out; zeros if the
-    scale is zero.
+    beyond it (as :func:`placed_check`'s). Their standard errors are how far those move without
+    the last ``PLACED_SPARE`` runs, shrunk by their rate of convergence, and, in quadrature,
+    what the line does not see: the energy of the outer layers' terms curved along some input
+    that are not of k alone, over the std (ΔV / σ). Runs that are not finite are left out;
+    zeros if the scale is zero.
     """
     observed = np.atleast_2d(np.asarray(observed, dtype=float))
     predicted = np.atleast_2d(np.asarray(predicted, dtype=float))
