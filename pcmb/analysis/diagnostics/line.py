@@ -31,13 +31,20 @@ from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
 from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet
+from pcmb.chaos.nodes import NodeSet, TensorGrid
 
 #: A tail lies along one input where the terms of that input alone hold at least this share of
 #: the energy of the outer layers' terms curved along some input (:func:`tail_input`): 0.90 to
 #: 1 on the axis-aligned tails measured, at most 0.66 on tails along a direction, a factor odd
 #: in another input or a phase drifting in two, where a line through the centre misreads.
 LINE_SHARE = 0.8
+#: The largest share of an output's variance (summed over time) its terms constant along the
+#: line's input may hold (:func:`tail_input`): a part additive in the other inputs, which the
+#: line does not see and the profile does not carry (z1² + tanh(3 z2) at order 2, whose odd
+#: tanh shows as z2 alone, with no curved term to say it errs); a whole error in that share
+#: moves the std by at most half of it. 0.04 on exp(0.35 z1 t) (1 + 0.2 z2) (summed over
+#: time: its late times), 0.29 on that sum.
+OFF_LINE_SHARE = 0.05
 #: A layer's value on the line below this share of its coefficients' norm carries no profile
 #: (:func:`line_check`): the correction stays on the terms constant in the other inputs.
 _UNSEEN_PROFILE = 1e-8
@@ -68,8 +75,10 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
     least ``LINE_SHARE`` of the energy of the outer layers' terms curved along some input
     (over each expansion's largest std, summed over time) in every expansion that has such
     terms (more than ``LINEAR_SHARE`` of its variance), where at least one has; the same input
-    for all of them."""
-    found = set()
+    for all of them, where the line passes through the grid's nodes (:func:`_through_nodes`)
+    and in every expansion that varies the terms constant along that input hold at most
+    ``OFF_LINE_SHARE`` of its variance (what the line cannot see)."""
+    found, varying = set(), []
     for expansion in expansions:
         index = np.asarray(expansion.multi_index)
         if not isinstance(expansion, ChaosExpansion) or index.shape[1] < 2:
@@ -78,6 +87,7 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
         if not scale > 0:
             continue  # an output that does not vary has no tail
         energy = coefficient_energies(expansion, scale).reshape(index.shape[0], -1).sum(axis=1)
+        varying.append((expansion, index, energy))
         tail = _curved_tail(expansion)
         total = float(np.sum(energy[tail]))
         if not total > LINEAR_SHARE * np.sum(energy[index.sum(axis=1) > 0]):
@@ -87,7 +97,34 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
         if not shares or max(shares) < LINE_SHARE:
             return None
         found.add(int(normal[int(np.argmax(shares))]))
-    return found.pop() if len(found) == 1 else None
+    if len(found) != 1:
+        return None
+    axis = found.pop()
+    if not _through_nodes(varying[0][0], axis):
+        return None
+    for _, index, energy in varying:
+        varies = index.sum(axis=1) > 0
+        if np.sum(energy[varies & (index[:, axis] == 0)]) > OFF_LINE_SHARE * np.sum(energy[varies]):
+            return None
+    return axis
+
+
+def _through_nodes(expansion: ChaosExpansion, axis: int) -> bool:
+    """Whether the line along input ``axis`` through the other inputs' centres passes through
+    the tensor grid's nodes (each other input's Gauss rule of its order has a node at its
+    centre: an even order of a symmetric germ), so that the expansion interpolates the model
+    there. At an odd order the line lies between the nodes, where the expansion errs by the
+    other inputs' interpolation error, which the correction, pinned to 0 at the nodes, takes
+    for the error along the line: exp(0.3 z1 t) (1 + 0.6 cos(2.5 z2)) at order 3 was flagged
+    from t = 0 for a true crossing at 3.5."""
+    index = np.asarray(expansion.multi_index)
+    centres = _centres(expansion.distributions)
+    for k, distribution in enumerate(expansion.distributions):
+        if k != axis:
+            nodes = TensorGrid((distribution,), (int(index[:, k].max()),)).nodes[:, 0]
+            if not np.any(np.isclose(nodes, centres[k], rtol=0.0, atol=1e-12)):
+                return False
+    return True
 
 
 def _centres(distributions: Sequence[Distribution]) -> NDArray[np.float64]:
