@@ -32,6 +32,7 @@ from pcmb.designs import NodeDesign
 from pcmb.result import NodeFailure, Status, WarningRecord
 
 if TYPE_CHECKING:
+    from pcmb.analysis.diagnostics.decay import Expansion
     from pcmb.run.executor import RunResult
 
 __all__ = ["HELD_OUT_RUN", "TAIL_FAILURE_SHARE", "TAIL_SIGMAS", "HeldOutDraws", "HeldOutPlan"]
@@ -97,7 +98,7 @@ class HeldOutPlan:
         normal = widened_inputs(tuple(self.inputs.values()))
         return self.design.record().grid == "tensor-gauss" and normal.size > 1 and normal.any()
 
-    def line_input(self, expansions: Mapping[str, object]) -> int | None:
+    def line_input(self, expansions: Mapping[str, Expansion]) -> int | None:
         """The input along which the first batch of held-out runs is placed, and no second
         (:func:`~pcmb.analysis.diagnostics.held_out_line`), where the tails of the fitted
         ``expansions`` lie along one normal input

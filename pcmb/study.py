@@ -87,6 +87,7 @@ _Runs = TypeVar("_Runs", RunResult, HeldOut, None)
 _T = TypeVar("_T")
 
 if TYPE_CHECKING:
+    from pcmb.chaos.expansion import ChaosExpansion
     from pcmb.config.schema import StudyConfig
 
 __all__ = ["DEPRECATED", "Study"]
@@ -762,10 +763,7 @@ class Study:
                     found = dataclasses.replace(self._recover(nodes, runs, axes), axes=axes)
             found = self._with_nominal(found, nominal)
             if checking is None:
-                judged = self.diagnostics.outputs or tuple(found.expansions)
-                axis = self._held_out.line_input(
-                    {name: e for name, e in found.expansions.items() if name in judged}
-                )
+                axis = self._held_out.line_input(self._judged(found.expansions))
                 checking = _beside(functools.partial(make, first, axis=axis), background)
             analysis = None
             # A design that refits after the check (_final_fit) has its statistics drawn then.
@@ -1209,6 +1207,12 @@ class Study:
         drawn (:meth:`pcmb.held_out.HeldOutPlan.placed`)."""
         return self._held_out.placed()
 
+    def _judged(self, expansions: Mapping[str, ChaosExpansion]) -> dict[str, ChaosExpansion]:
+        """The ``expansions`` of the outputs the diagnostics judge (``diagnostics.outputs``;
+        all where it names none)."""
+        judged = self.diagnostics.outputs or tuple(expansions)
+        return {name: e for name, e in expansions.items() if name in judged}
+
     def _run_held_out(
         self,
         run: _RunContext,
@@ -1269,9 +1273,9 @@ class Study:
             if held_out is None or not held_out.ok.any():
                 return dataclasses.replace(result, held_out=held_out, warnings=warnings)
             germ, values, ok = held_out.germ, held_out.values, held_out.ok
-        judged = self.diagnostics.outputs or tuple(result.expansions)
+        judged = self._judged(result.expansions)
         found = diagnose_all(
-            {name: e for name, e in result.expansions.items() if name in judged},
+            judged,
             germ,
             values,
             ok,

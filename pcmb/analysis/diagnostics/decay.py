@@ -27,6 +27,13 @@ SHAPE_LAYERS = 3
 Expansion = ChaosExpansion | PiecewiseExpansion
 
 
+def largest_std(std: NDArray[np.float64]) -> float:
+    """The largest of an expansion's ``std`` over time (the scale of its diagnostics), 0 where
+    none is finite."""
+    finite = std[np.isfinite(std)]
+    return float(finite.max()) if finite.size else 0.0
+
+
 def coefficient_energies(expansion: Expansion, scale: float = 1.0) -> NDArray[np.float64]:
     """(S, T) the squared coefficients over ``scale`` (scaled before squaring: outputs near
     1e200), summed over the elements by their probability."""

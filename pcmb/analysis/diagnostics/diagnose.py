@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import HeldOutCheck, holdout_error
-from pcmb.analysis.diagnostics.decay import Expansion, spectral_decay
+from pcmb.analysis.diagnostics.decay import Expansion, largest_std, spectral_decay
 from pcmb.analysis.diagnostics.draws import (
     FIRST_BATCH,
     HeldOut,
@@ -203,8 +203,7 @@ def diagnose(
     """
     times = np.asarray(times, dtype=float)
     std = expansion.std()
-    finite = std[np.isfinite(std)]
-    scale = float(finite.max()) if finite.size else 0.0
+    scale = largest_std(std)
     runs = finite_rows(node_values)
     equal = ~runs_vary(runs, times.size)
     # Where the design's runs are all equal and the held-out runs are not, the design saw

@@ -18,8 +18,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pcmb.analysis.diagnostics.check import CONFIDENCE, HeldOutCheck
-from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies
-from pcmb.analysis.diagnostics.draws import LINEAR_SHARE, signed_residuals, widened_inputs
+from pcmb.analysis.diagnostics.decay import Expansion, coefficient_energies, largest_std
+from pcmb.analysis.diagnostics.draws import (
+    LINEAR_SHARE,
+    held_out_placed,
+    signed_residuals,
+    widened_inputs,
+)
 from pcmb.analysis.diagnostics.placed import (
     PLACED_SPARE,
     converging,
@@ -30,8 +35,7 @@ from pcmb.analysis.diagnostics.placed import (
 from pcmb.chaos.basis import tail_terms
 from pcmb.chaos.expansion import ChaosExpansion
 from pcmb.chaos.inputs import Distribution
-from pcmb.chaos.nested import leja_sequence
-from pcmb.chaos.nodes import NodeSet, TensorGrid
+from pcmb.chaos.nodes import NodeSet
 
 #: A tail lies along one input where the terms of that input alone hold at least this share of
 #: the energy of the outer layers' terms curved along some input (:func:`tail_input`): 0.90 to
@@ -62,13 +66,6 @@ def _alone(index: NDArray[np.int64], k: int) -> NDArray[np.bool_]:
     return ~np.any(np.delete(index, k, axis=1), axis=1)
 
 
-def _scale(expansion: Expansion) -> float:
-    """The expansion's largest std over time, 0 where none is finite."""
-    std = expansion.std()
-    finite = std[np.isfinite(std)]
-    return float(finite.max()) if finite.size else 0.0
-
-
 def tail_input(expansions: Iterable[Expansion]) -> int | None:
     """The normal input along which the held-out runs of a tensor grid of several inputs are
     placed (:func:`held_out_line`), or ``None`` (drawn): the one whose terms alone hold at
@@ -83,7 +80,7 @@ def tail_input(expansions: Iterable[Expansion]) -> int | None:
         index = np.asarray(expansion.multi_index)
         if not isinstance(expansion, ChaosExpansion) or index.shape[1] < 2:
             return None
-        scale = _scale(expansion)
+        scale = largest_std(expansion.std())
         if not scale > 0:
             continue  # an output that does not vary has no tail
         energy = coefficient_energies(expansion, scale).reshape(index.shape[0], -1).sum(axis=1)
@@ -121,7 +118,7 @@ def _through_nodes(expansion: ChaosExpansion, axis: int) -> bool:
     centres = _centres(expansion.distributions)
     for k, distribution in enumerate(expansion.distributions):
         if k != axis:
-            nodes = TensorGrid((distribution,), (int(index[:, k].max()),)).nodes[:, 0]
+            nodes = distribution.family.gauss_rule(int(index[:, k].max()) + 1).nodes
             if not np.any(np.isclose(nodes, centres[k], rtol=0.0, atol=1e-12)):
                 return False
     return True
@@ -140,15 +137,14 @@ def held_out_line(
     points that extend the design's nodes along it (the distinct values of the (N, n)
     ``design_germ``'s column), every other input at its germ's centre. Weights 1."""
     nodes = np.unique(np.asarray(design_germ, dtype=float)[:, axis])
-    family = distributions[axis].family
-    points = leja_sequence(family, tuple(nodes), nodes.size + count)[nodes.size :]
+    line, _ = held_out_placed(distributions[axis], nodes, count)
     germ = np.tile(_centres(distributions), (count, 1))
-    germ[:, axis] = points
+    germ[:, axis] = line.nodes[:, 0]
     params = np.column_stack([d.to_physical(germ[:, k]) for k, d in enumerate(distributions)])
     return NodeSet(tuple(distributions), germ, params), np.ones(count)
 
 
-def line_axis(distributions: Sequence[Distribution], germ: ArrayLike) -> int:
+def _line_axis(distributions: Sequence[Distribution], germ: ArrayLike) -> int:
     """The input the (K, n) ``germ`` of a line check's runs (:func:`held_out_line`) lies along:
     the one not held at its centre."""
     off = np.any(np.asarray(germ, dtype=float) != _centres(distributions), axis=0)
@@ -195,7 +191,7 @@ def line_check(
         return HeldOutCheck(*[zeros] * 5, mean, std, zeros, zeros, count, confidence)
     distributions = expansion.distributions
     germ = np.asarray(germ, dtype=float)[kept]
-    axis = line_axis(distributions, germ)
+    axis = _line_axis(distributions, germ)
     layers, line, constant = _layers(expansion, axis, scale)
     top = layers.shape[0] - 1
     # Each degree of the correction takes the profile of the top layer of its parity.
