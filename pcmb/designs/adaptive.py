@@ -412,20 +412,23 @@ class AdaptiveCollocation(GrowingGrid):
                     )
                 ):
                     probes.setdefault(_inputs(child), child)
+                blockers = [
+                    (parent, position[parent])
+                    for parent in _backward(child)
+                    if parent in position
+                    and parent not in self._refined
+                    and blind[position[parent]]
+                ]
+                if not blockers:
+                    continue
                 behind = self._face_surplus(level, child, position) > (
                     SURPLUS_MARGIN * self.tolerance
                 )
-                for parent in _backward(child):
-                    k = position.get(parent, -1)
-                    if (
-                        k >= 0
-                        and parent not in self._refined
-                        and blind[k]
-                        and (
-                            behind or len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null)
-                        )
-                    ):
-                        found.add(k)
+                found.update(
+                    k
+                    for parent, k in blockers
+                    if behind or len(_inputs(parent)) == 1 or any(parent[j] == 0 for j in null)
+                )
         return sorted(found), list(probes.values())
 
     def _face_surplus(
